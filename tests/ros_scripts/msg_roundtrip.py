@@ -1,0 +1,116 @@
+"""Publish (``pub``) or receive and check (``sub``) one message of every public vd type.
+
+Both sides fill the messages from the same seeded generator, so the subscriber can check
+that what crossed the middleware is intact, field by field. Used by test_msgs_middleware.py.
+"""
+
+from __future__ import annotations
+
+import json
+import random
+import sys
+from typing import Any
+
+import rclpy
+from geometry_msgs.msg import AccelStamped, TwistStamped
+from rclpy.node import Node
+from vd_msgs.msg import (
+    Friction,
+    Resistances,
+    Slope,
+    TireForces,
+    WheelAngles,
+    WheelStates,
+    WheelTorques,
+)
+
+TYPES = [
+    WheelAngles, WheelTorques, WheelStates, TireForces, Friction, Resistances, Slope,
+    TwistStamped, AccelStamped,
+]
+
+
+def fill(msg: Any, rng: random.Random) -> Any:
+    """Set every field of `msg` (recursively) to a random value of its type."""
+    for name, kind in msg.get_fields_and_field_types().items():
+        value = getattr(msg, name)
+        if kind.startswith('double[') or kind.startswith('float['):
+            value[:] = [rng.uniform(-1e3, 1e3) for _ in range(len(value))]
+        elif kind.startswith('boolean['):
+            setattr(msg, name, [rng.random() < 0.5 for _ in range(len(value))])
+        elif kind in ('double', 'float'):
+            setattr(msg, name, rng.uniform(-1e3, 1e3))
+        elif kind == 'int8':
+            setattr(msg, name, rng.randint(-128, 127))
+        elif kind in ('int32', 'uint32'):
+            setattr(msg, name, rng.randint(0, 2**31 - 1))
+        elif kind == 'boolean':
+            setattr(msg, name, rng.random() < 0.5)
+        elif kind == 'string':
+            setattr(msg, name, 'base_link_%d' % rng.randint(0, 999))
+        else:
+            fill(value, rng)
+    return msg
+
+
+def as_dict(msg: Any) -> Any:
+    if not hasattr(msg, 'get_fields_and_field_types'):
+        return [float(v) if not isinstance(v, bool) else v for v in msg] if hasattr(
+            msg, '__len__') and not isinstance(msg, str) else msg
+    return {n: as_dict(getattr(msg, n)) for n in msg.get_fields_and_field_types()}
+
+
+def expected(kind: type) -> Any:
+    return fill(kind(), random.Random(kind.__name__))
+
+
+def topic(kind: type) -> str:
+    return '/roundtrip/' + kind.__name__.lower()
+
+
+def main() -> int:
+    mode = sys.argv[1]
+    rclpy.init()
+    node = Node('roundtrip_' + mode)
+    if mode == 'pub':
+        pubs = [(node.create_publisher(k, topic(k), 10), expected(k)) for k in TYPES]
+
+        def publish() -> None:
+            for pub, msg in pubs:
+                pub.publish(msg)
+
+        node.create_timer(0.05, publish)
+        print('PUBLISHING', flush=True)
+    else:
+        seen: set[str] = set()
+
+        def make_cb(kind: type) -> Any:
+            want = json.dumps(as_dict(expected(kind)), sort_keys=True)
+
+            def cb(msg: Any) -> None:
+                got = json.dumps(as_dict(msg), sort_keys=True)
+                if kind.__name__ in seen:
+                    return
+                seen.add(kind.__name__)
+                status = 'INTACT' if got == want else 'MISMATCH'
+                print(f'{status} {kind.__name__} {got}', flush=True)
+                if len(seen) == len(TYPES):
+                    print('ALL RECEIVED', flush=True)
+
+            return cb
+
+        for k in TYPES:
+            node.create_subscription(k, topic(k), make_cb(k), 10)
+        print('SUBSCRIBED', flush=True)
+    try:
+        rclpy.spin(node)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,81 @@
+"""Start ROS 2 processes from tests and talk to them through their output (no launch_testing)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+__all__ = ['RosProcess', 'RosProcessGroup']
+
+
+class RosProcess:
+    """One child process whose stdout+stderr go to a log file that tests can poll."""
+
+    def __init__(self, name: str, argv: list[str], env: dict[str, str], log_dir: Path) -> None:
+        self.name = name
+        self.log_path = log_dir / f'{name}.log'
+        self._log = self.log_path.open('wb')
+        self.popen = subprocess.Popen(
+            argv, env=env, stdout=self._log, stderr=subprocess.STDOUT, start_new_session=True
+        )
+
+    def output(self) -> str:
+        return self.log_path.read_text(errors='replace')
+
+    def wait_for(self, text: str, timeout: float = 20.0) -> str:
+        """Wait until `text` appears in the output; fail with the output if it does not."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            out = self.output()
+            if text in out:
+                return out
+            if self.popen.poll() is not None:
+                break
+            time.sleep(0.05)
+        out = self.output()
+        if text in out:
+            return out
+        raise AssertionError(
+            f'{self.name}: {text!r} not seen within {timeout} s '
+            f'(exit code {self.popen.poll()}); output:\n{out[-4000:]}'
+        )
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> int:
+        """Send `sig` to the process group, wait, escalate to SIGKILL; return the exit code."""
+        if self.popen.poll() is None:
+            try:
+                os.killpg(self.popen.pid, sig)
+            except ProcessLookupError:
+                pass
+            try:
+                self.popen.wait(timeout)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.popen.pid, signal.SIGKILL)
+                self.popen.wait(5)
+        self._log.close()
+        return self.popen.returncode
+
+
+class RosProcessGroup:
+    """The processes of one test."""
+
+    def __init__(self, env: dict[str, str], log_dir: Path) -> None:
+        self.env = env
+        self.log_dir = log_dir
+        self.procs: list[RosProcess] = []
+
+    def start(self, name: str, argv: list[str], **env: str) -> RosProcess:
+        proc = RosProcess(name, argv, {**self.env, **env}, self.log_dir)
+        self.procs.append(proc)
+        return proc
+
+    def python(self, name: str, script: Path | str, *args: str, **env: str) -> RosProcess:
+        return self.start(name, [sys.executable, str(script), *args], **env)
+
+    def stop_all(self) -> None:
+        for proc in reversed(self.procs):
+            proc.stop()

@@ -1,0 +1,121 @@
+"""The ament layout is right, so `ros2 run` / `ros2 launch` find our nodes on a ROS install."""
+
+from __future__ import annotations
+
+import ast
+import importlib.util
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PYTHON_PACKAGES = ['vd_sim_node', 'vd_observer_node']
+ALL_PACKAGES = ['vd_msgs', *PYTHON_PACKAGES]
+
+
+def setup_py_kwargs(pkg: str) -> dict[str, object]:
+    """The literal keyword arguments of setup() in src/<pkg>/setup.py (without running it)."""
+    tree = ast.parse((ROOT / 'src' / pkg / 'setup.py').read_text())
+    consts = {
+        t.id: ast.literal_eval(n.value)
+        for n in tree.body
+        if isinstance(n, ast.Assign)
+        for t in n.targets
+        if isinstance(t, ast.Name) and isinstance(n.value, ast.Constant)
+    }
+    call = next(
+        n for n in ast.walk(tree)
+        if isinstance(n, ast.Call) and getattr(n.func, 'id', '') == 'setup'
+    )
+    out: dict[str, object] = {}
+    for kw in call.keywords:
+        if isinstance(kw.value, ast.Name) and kw.value.id in consts:
+            out[str(kw.arg)] = consts[kw.value.id]
+        else:
+            try:
+                out[str(kw.arg)] = ast.literal_eval(kw.value)
+            except ValueError:
+                continue
+    return out
+
+
+def console_scripts(pkg: str) -> dict[str, str]:
+    entry_points = setup_py_kwargs(pkg)['entry_points']
+    assert isinstance(entry_points, dict)
+    scripts = {}
+    for line in entry_points['console_scripts']:
+        name, target = (s.strip() for s in line.split('='))
+        scripts[name] = target
+    return scripts
+
+
+@pytest.mark.parametrize('pkg', ALL_PACKAGES)
+def test_package_xml_is_format_3_with_a_valid_maintainer(pkg: str) -> None:
+    root = ET.parse(ROOT / 'src' / pkg / 'package.xml').getroot()
+    assert root.get('format') == '3'
+    assert root.findtext('name') == pkg
+    maintainer = root.find('maintainer')
+    assert maintainer is not None and '@' in maintainer.get('email', '')
+
+
+@pytest.mark.parametrize('pkg', PYTHON_PACKAGES)
+def test_package_xml_and_setup_py_agree_on_name_and_version(pkg: str) -> None:
+    root = ET.parse(ROOT / 'src' / pkg / 'package.xml').getroot()
+    kwargs = setup_py_kwargs(pkg)
+    assert kwargs['name'] == root.findtext('name') == pkg
+    assert kwargs['version'] == root.findtext('version')
+    assert root.findtext('export/build_type') == 'ament_python'
+
+
+@pytest.mark.parametrize('pkg', PYTHON_PACKAGES)
+def test_setup_cfg_installs_scripts_where_ros2_run_looks(pkg: str) -> None:
+    text = (ROOT / 'src' / pkg / 'setup.cfg').read_text()
+    assert f'script_dir=$base/lib/{pkg}' in text
+    assert f'install_scripts=$base/lib/{pkg}' in text
+    assert (ROOT / 'src' / pkg / 'resource' / pkg).is_file()
+
+
+@pytest.mark.parametrize('pkg', ALL_PACKAGES)
+def test_package_is_registered_in_the_ament_index(pkg: str, install_dir: Path) -> None:
+    marker = install_dir / pkg / 'share' / 'ament_index' / 'resource_index' / 'packages' / pkg
+    assert marker.is_file()
+    assert (install_dir / pkg / 'share' / pkg / 'package.xml').is_file()
+
+
+@pytest.mark.parametrize(
+    ('pkg', 'exe'),
+    [(pkg, exe) for pkg in PYTHON_PACKAGES for exe in console_scripts(pkg)],
+)
+def test_console_script_is_installed_and_its_module_exists(
+    pkg: str, exe: str, install_dir: Path
+) -> None:
+    path = install_dir / pkg / 'lib' / pkg / exe
+    assert path.is_file(), f'{path} missing: `ros2 run {pkg} {exe}` would not find it'
+    assert os.access(path, os.X_OK)
+    module, _, func = console_scripts(pkg)[exe].partition(':')
+    spec = importlib.util.find_spec(module)
+    assert spec is not None and spec.origin is not None, f'{module} does not exist'
+    tree = ast.parse(Path(spec.origin).read_text())
+    assert any(isinstance(n, ast.FunctionDef) and n.name == func for n in tree.body)
+
+
+@pytest.mark.parametrize('pkg', PYTHON_PACKAGES)
+def test_config_and_launch_files_are_installed(pkg: str, install_dir: Path) -> None:
+    for sub in ('config', 'launch'):
+        src_files = sorted(
+            p.relative_to(ROOT / 'src' / pkg)
+            for p in (ROOT / 'src' / pkg / sub).rglob('*')
+            if p.is_file() and (p.suffix == '.yaml' or p.name.endswith('.launch.py'))
+        )
+        for rel in src_files:
+            assert (install_dir / pkg / 'share' / pkg / rel).is_file(), f'{rel} not installed'
+
+
+def test_vd_msgs_python_bindings_are_importable() -> None:
+    from vd_msgs.msg import WheelAngles
+
+    msg = WheelAngles()
+    assert (msg.FL, msg.FR, msg.RL, msg.RR) == (0, 1, 2, 3)
+    assert len(msg.angle) == 4
