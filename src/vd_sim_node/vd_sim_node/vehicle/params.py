@@ -1,0 +1,376 @@
+"""Vehicle parameter dataclasses and the validating loader of ``config/clio_rl_1_1.yaml``.
+
+All values are SI (angles in rad, engine speeds in rad/s). The loader refuses a missing or
+out-of-range value with one :class:`~vd_sim_node.errors.ParameterError` that names the
+parameter by its dotted YAML path, e.g. ``chassis.mass must be > 0 kg, got -3``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from vd_sim_node.errors import ParameterError
+from vd_sim_node.vehicle._yaml_reader import MappingReader, load_yaml_mapping
+
+__all__ = [
+    'AeroParams',
+    'BrakeParams',
+    'ChassisParams',
+    'ClutchParams',
+    'EngineParams',
+    'EnvironmentParams',
+    'GearboxParams',
+    'RollingResistanceParams',
+    'SuspensionParams',
+    'TireParams',
+    'VehicleParams',
+    'WheelParams',
+    'load_vehicle',
+    'parse_vehicle',
+]
+
+
+@dataclass(frozen=True)
+class ChassisParams:
+    """Whole-vehicle mass and geometry (CG refers to the whole vehicle)."""
+
+    mass: float  # [kg] total, unsprung masses included
+    unsprung_mass_front: float  # [kg] per front corner
+    unsprung_mass_rear: float  # [kg] per rear corner
+    wheelbase: float  # [m] L
+    cg_to_front_axle: float  # [m] a (whole vehicle)
+    cg_height: float  # [m] h above ground (whole vehicle)
+    pitch_inertia: float  # [kg m^2] sprung mass about y through its CG
+    track_front: float  # [m] unused in the x-z model
+    track_rear: float  # [m] unused in the x-z model
+
+
+@dataclass(frozen=True)
+class SuspensionParams:
+    """Per-corner suspension spring and damper."""
+
+    stiffness_front: float  # [N/m]
+    stiffness_rear: float  # [N/m]
+    damping_front: float  # [N s/m]
+    damping_rear: float  # [N s/m]
+
+
+@dataclass(frozen=True)
+class WheelParams:
+    """Wheel rotational inertia, radii and tyre vertical properties (per wheel)."""
+
+    inertia_front: float  # [kg m^2]
+    inertia_rear: float  # [kg m^2]
+    unloaded_radius: float  # [m]
+    effective_radius: float  # [m] R_eff
+    tyre_vertical_stiffness: float  # [N/m]
+    tyre_vertical_damping: float  # [N s/m]
+
+
+@dataclass(frozen=True)
+class AeroParams:
+    """Aerodynamic drag F = 0.5 rho Cx A v^2."""
+
+    drag_coefficient: float  # [-] Cx
+    frontal_area: float  # [m^2] A
+    air_density: float  # [kg/m^3] rho
+
+
+@dataclass(frozen=True)
+class RollingResistanceParams:
+    """Paper eq. 7: F_r = c0 (1 + c1 v / 160) Fz, v in m/s."""
+
+    c0: float  # [-]
+    c1: float  # [km/h per m/s]
+    regularisation_speed: float  # [m/s] tanh(v / v_r) replaces sign(v) near standstill
+
+
+@dataclass(frozen=True)
+class EnvironmentParams:
+    """Environment constants."""
+
+    gravity: float  # [m/s^2]
+
+
+@dataclass(frozen=True)
+class TireParams:
+    """Magic Formula (MF 5.2 style) pure longitudinal slip coefficients.
+
+    See ``docs/vehicle_model.md`` for the equations. ``low_speed_velocity`` is the floor
+    of the slip denominator that keeps the model well behaved at standstill.
+    """
+
+    nominal_load: float  # [N] Fz0
+    pCx1: float  # [-] shape factor C
+    pDx1: float  # [-] peak friction at Fz0
+    pDx2: float  # [-] variation of peak friction with load
+    pEx1: float  # [-] curvature at Fz0
+    pEx2: float  # [-] curvature variation with load
+    pEx3: float  # [-] curvature variation with load squared
+    pEx4: float  # [-] curvature asymmetry drive/brake
+    pKx1: float  # [-] slip stiffness / Fz at Fz0
+    pKx2: float  # [-] slip stiffness variation with load
+    pKx3: float  # [-] exponent of slip stiffness variation with load
+    pHx1: float  # [-] horizontal shift
+    pHx2: float  # [-] horizontal shift variation with load
+    pVx1: float  # [-] vertical shift / Fz
+    pVx2: float  # [-] vertical shift variation with load
+    low_speed_velocity: float  # [m/s] v_min in the slip denominator
+
+
+@dataclass(frozen=True)
+class EngineParams:
+    """Petrol engine: full-load curve, drag, idle governor, rev limiter."""
+
+    inertia: float  # [kg m^2] crankshaft + flywheel + clutch disc
+    full_load_speed: tuple[float, ...]  # [rad/s] breakpoints, increasing
+    full_load_torque: tuple[float, ...]  # [N m] full-load (throttle 1) torque at breakpoints
+    drag_torque_c0: float  # [N m] closed-throttle drag at zero speed
+    drag_torque_c1: float  # [N m s/rad] closed-throttle drag growth with speed
+    idle_speed: float  # [rad/s]
+    idle_gain: float  # [N m s/rad] proportional idle governor gain
+    max_speed: float  # [rad/s] rev limiter: fuel cut-off ramp ends here
+
+
+@dataclass(frozen=True)
+class ClutchParams:
+    """Automatic launch clutch, engagement scheduled on engine speed."""
+
+    capacity: float  # [N m] transmissible torque when fully engaged
+    slip_speed: float  # [rad/s] tanh regularisation of the friction sign
+    engage_start_speed: float  # [rad/s] engine speed where engagement begins
+    engage_full_speed: float  # [rad/s] engine speed of full engagement
+
+
+@dataclass(frozen=True)
+class GearboxParams:
+    """Manual gearbox driven by an automatic shift logic, and the final drive."""
+
+    ratios: tuple[float, ...]  # [-] gear 1..n, decreasing
+    final_drive: float  # [-]
+    upshift_speed_closed: float  # [rad/s] engine speed for an upshift at throttle 0
+    upshift_speed_open: float  # [rad/s] engine speed for an upshift at throttle 1
+    downshift_speed: float  # [rad/s] engine speed below which it shifts down
+    shift_time: float  # [s] torque interruption (clutch open, throttle cut)
+
+
+@dataclass(frozen=True)
+class BrakeParams:
+    """Brake torque capacity per wheel and friction-sign regularisation."""
+
+    max_torque_front: float  # [N m] per front wheel at pedal 1
+    max_torque_rear: float  # [N m] per rear wheel at pedal 1
+    lock_speed: float  # [rad/s] tanh(omega / w_b) replaces sign(omega)
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    """All parameters of the Clio model."""
+
+    name: str
+    chassis: ChassisParams
+    suspension: SuspensionParams
+    wheel: WheelParams
+    aero: AeroParams
+    rolling_resistance: RollingResistanceParams
+    environment: EnvironmentParams
+    tire: TireParams
+    engine: EngineParams
+    clutch: ClutchParams
+    gearbox: GearboxParams
+    brakes: BrakeParams
+
+
+def _chassis(r: MappingReader) -> ChassisParams:
+    mass = r.number('mass', 'kg', gt=0.0)
+    mu_f = r.number('unsprung_mass_front', 'kg', gt=0.0)
+    mu_r = r.number('unsprung_mass_rear', 'kg', gt=0.0)
+    if 2.0 * (mu_f + mu_r) >= mass:
+        raise ParameterError(
+            f'chassis.unsprung_mass_front/rear: 2*(front+rear) = {2 * (mu_f + mu_r):g} kg must '
+            f'be < chassis.mass = {mass:g} kg'
+        )
+    wheelbase = r.number('wheelbase', 'm', gt=0.0)
+    a = r.number('cg_to_front_axle', 'm', gt=0.0, lt=wheelbase)
+    return ChassisParams(
+        mass=mass,
+        unsprung_mass_front=mu_f,
+        unsprung_mass_rear=mu_r,
+        wheelbase=wheelbase,
+        cg_to_front_axle=a,
+        cg_height=r.number('cg_height', 'm', gt=0.0),
+        pitch_inertia=r.number('pitch_inertia', 'kg m^2', gt=0.0),
+        track_front=r.number('track_front', 'm', gt=0.0),
+        track_rear=r.number('track_rear', 'm', gt=0.0),
+    )
+
+
+def _suspension(r: MappingReader) -> SuspensionParams:
+    return SuspensionParams(
+        stiffness_front=r.number('stiffness_front', 'N/m', gt=0.0),
+        stiffness_rear=r.number('stiffness_rear', 'N/m', gt=0.0),
+        damping_front=r.number('damping_front', 'N s/m', ge=0.0),
+        damping_rear=r.number('damping_rear', 'N s/m', ge=0.0),
+    )
+
+
+def _wheel(r: MappingReader) -> WheelParams:
+    unloaded = r.number('unloaded_radius', 'm', gt=0.0)
+    return WheelParams(
+        inertia_front=r.number('inertia_front', 'kg m^2', gt=0.0),
+        inertia_rear=r.number('inertia_rear', 'kg m^2', gt=0.0),
+        unloaded_radius=unloaded,
+        effective_radius=r.number('effective_radius', 'm', gt=0.0, le=unloaded),
+        tyre_vertical_stiffness=r.number('tyre_vertical_stiffness', 'N/m', gt=0.0),
+        tyre_vertical_damping=r.number('tyre_vertical_damping', 'N s/m', ge=0.0),
+    )
+
+
+def _aero(r: MappingReader) -> AeroParams:
+    return AeroParams(
+        drag_coefficient=r.number('drag_coefficient', '', ge=0.0),
+        frontal_area=r.number('frontal_area', 'm^2', ge=0.0),
+        air_density=r.number('air_density', 'kg/m^3', ge=0.0),
+    )
+
+
+def _rolling(r: MappingReader) -> RollingResistanceParams:
+    return RollingResistanceParams(
+        c0=r.number('c0', '', ge=0.0),
+        c1=r.number('c1', '', ge=0.0),
+        regularisation_speed=r.number('regularisation_speed', 'm/s', gt=0.0, default=0.05),
+    )
+
+
+def _tire(r: MappingReader) -> TireParams:
+    return TireParams(
+        nominal_load=r.number('nominal_load', 'N', gt=0.0),
+        pCx1=r.number('pCx1', '', gt=0.0, lt=2.0),
+        pDx1=r.number('pDx1', '', gt=0.0),
+        pDx2=r.number('pDx2', ''),
+        pEx1=r.number('pEx1', '', le=1.0),
+        pEx2=r.number('pEx2', ''),
+        pEx3=r.number('pEx3', ''),
+        pEx4=r.number('pEx4', ''),
+        pKx1=r.number('pKx1', '', gt=0.0),
+        pKx2=r.number('pKx2', ''),
+        pKx3=r.number('pKx3', ''),
+        pHx1=r.number('pHx1', '', default=0.0),
+        pHx2=r.number('pHx2', '', default=0.0),
+        pVx1=r.number('pVx1', '', default=0.0),
+        pVx2=r.number('pVx2', '', default=0.0),
+        low_speed_velocity=r.number('low_speed_velocity', 'm/s', gt=0.0),
+    )
+
+
+def _engine(r: MappingReader) -> EngineParams:
+    speeds = r.number_list('full_load_speed', 'rad/s', min_len=2, ge=0.0, increasing=True)
+    torques = r.number_list('full_load_torque', 'N m', min_len=2, ge=0.0)
+    if len(torques) != len(speeds):
+        raise ParameterError(
+            f'engine.full_load_torque has {len(torques)} entries but engine.full_load_speed '
+            f'has {len(speeds)}'
+        )
+    idle = r.number('idle_speed', 'rad/s', gt=0.0)
+    max_speed = r.number('max_speed', 'rad/s', gt=idle)
+    return EngineParams(
+        inertia=r.number('inertia', 'kg m^2', gt=0.0),
+        full_load_speed=speeds,
+        full_load_torque=torques,
+        drag_torque_c0=r.number('drag_torque_c0', 'N m', ge=0.0),
+        drag_torque_c1=r.number('drag_torque_c1', 'N m s/rad', ge=0.0),
+        idle_speed=idle,
+        idle_gain=r.number('idle_gain', 'N m s/rad', gt=0.0),
+        max_speed=max_speed,
+    )
+
+
+def _clutch(r: MappingReader, idle_speed: float) -> ClutchParams:
+    start = r.number('engage_start_speed', 'rad/s', gt=idle_speed)
+    return ClutchParams(
+        capacity=r.number('capacity', 'N m', gt=0.0),
+        slip_speed=r.number('slip_speed', 'rad/s', gt=0.0),
+        engage_start_speed=start,
+        engage_full_speed=r.number('engage_full_speed', 'rad/s', gt=start),
+    )
+
+
+def _gearbox(r: MappingReader) -> GearboxParams:
+    ratios = r.number_list('ratios', '', min_len=1, gt=0.0, decreasing=True)
+    down = r.number('downshift_speed', 'rad/s', gt=0.0)
+    up_closed = r.number('upshift_speed_closed', 'rad/s', gt=down)
+    up_open = r.number('upshift_speed_open', 'rad/s', ge=up_closed)
+    # Hysteresis check: right after an upshift the engine must not already be below the
+    # downshift threshold, otherwise the logic would hunt between two gears.
+    for i in range(len(ratios) - 1):
+        after = up_closed * ratios[i + 1] / ratios[i]
+        if after <= down:
+            raise ParameterError(
+                f'gearbox.downshift_speed = {down:g} rad/s is too high: an upshift from gear '
+                f'{i + 1} at gearbox.upshift_speed_closed lands at {after:.1f} rad/s'
+            )
+    return GearboxParams(
+        ratios=ratios,
+        final_drive=r.number('final_drive', '', gt=0.0),
+        upshift_speed_closed=up_closed,
+        upshift_speed_open=up_open,
+        downshift_speed=down,
+        shift_time=r.number('shift_time', 's', ge=0.0),
+    )
+
+
+def _brakes(r: MappingReader) -> BrakeParams:
+    return BrakeParams(
+        max_torque_front=r.number('max_torque_front', 'N m', ge=0.0),
+        max_torque_rear=r.number('max_torque_rear', 'N m', ge=0.0),
+        lock_speed=r.number('lock_speed', 'rad/s', gt=0.0),
+    )
+
+
+def parse_vehicle(data: object) -> VehicleParams:
+    """Build :class:`VehicleParams` from an already parsed YAML document.
+
+    Args:
+        data: the top-level mapping of the parameter file.
+
+    Returns:
+        The validated parameters.
+
+    Raises:
+        ParameterError: naming the first missing or invalid parameter.
+    """
+    r = MappingReader(data, '', ParameterError)
+    engine = _engine(r.section('engine'))
+    return VehicleParams(
+        name=r.string('name', default='vehicle'),
+        chassis=_chassis(r.section('chassis')),
+        suspension=_suspension(r.section('suspension')),
+        wheel=_wheel(r.section('wheel')),
+        aero=_aero(r.section('aero')),
+        rolling_resistance=_rolling(r.section('rolling_resistance')),
+        environment=EnvironmentParams(
+            gravity=r.section('environment').number('gravity', 'm/s^2', gt=0.0)
+        ),
+        tire=_tire(r.section('tire')),
+        engine=engine,
+        clutch=_clutch(r.section('clutch'), engine.idle_speed),
+        gearbox=_gearbox(r.section('gearbox')),
+        brakes=_brakes(r.section('brakes')),
+    )
+
+
+def load_vehicle(path: str | Path) -> VehicleParams:
+    """Load and validate a vehicle parameter file.
+
+    Args:
+        path: YAML file, e.g. ``src/vd_sim_node/config/clio_rl_1_1.yaml``.
+
+    Returns:
+        The validated parameters.
+
+    Raises:
+        ParameterError: the file cannot be read, or a parameter is missing/invalid (the
+            message names it, e.g. ``chassis.mass must be > 0 kg, got -3``).
+    """
+    return parse_vehicle(load_yaml_mapping(path, ParameterError))
