@@ -1,0 +1,42 @@
+"""ROS-free rosbag2 bag core: MCAP writing, reading, repair and offline replay.
+
+Public API (see docs/bags.md):
+
+- :class:`BagWriter` writes a rosbag2 folder (``metadata.yaml`` + zstd-chunked ``.mcap``).
+- :class:`BagReader` reads ours and rosbag2's bags, strictly or with ``recover=True``.
+- :func:`repair_bag` rebuilds the summary and ``metadata.yaml`` of a killed recording.
+- :mod:`.typestore` serializes/deserializes vd_msgs and standard types to CDR.
+"""
+
+from .errors import (
+    BagCorruptError,
+    BagDiskFullError,
+    BagError,
+    BagExistsError,
+    BagFormatError,
+    BagNotFoundError,
+    BagPathError,
+    BagUsageError,
+    ReplayInputError,
+    UnknownMessageTypeError,
+)
+from .reader import BagReader, RawMessage, TopicArrays, TopicInfo
+from .writer import BagWriter
+
+__all__ = [
+    'BagCorruptError',
+    'BagDiskFullError',
+    'BagError',
+    'BagExistsError',
+    'BagFormatError',
+    'BagNotFoundError',
+    'BagPathError',
+    'BagReader',
+    'BagUsageError',
+    'BagWriter',
+    'RawMessage',
+    'ReplayInputError',
+    'TopicArrays',
+    'TopicInfo',
+    'UnknownMessageTypeError',
+]

@@ -1,0 +1,505 @@
+"""Reading rosbag2 MCAP bags (ours and rosbag2's), strictly or leniently.
+
+The data section is scanned record by record with bounds checks and chunk CRCs, so damage is
+reported as :class:`BagCorruptError` naming the file and byte offset, after every message
+before the damage has been yielded. With ``recover=True`` damage is collected in
+:attr:`BagReader.problems` instead: a damaged chunk whose framing is intact is skipped and
+reading goes on; damaged framing ends the file.
+
+Messages come in file order (chunk by chunk), which is log-time order for bags recorded live.
+The whole MCAP file is read into memory (fine for bags up to a few GB).
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import zlib
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NamedTuple
+
+import lz4.frame
+import numpy as np
+import zstandard
+
+from . import mcap_format as fmt
+from .errors import BagCorruptError, BagFormatError, BagNotFoundError
+from .metadata import read_metadata_file_paths
+from .typestore import deserialize, register_definition
+
+__all__ = [
+    'BagReader',
+    'RawMessage',
+    'TopicArrays',
+    'TopicInfo',
+    'find_mcap_files',
+]
+
+_MESSAGE_HEAD = struct.Struct('<BQHIQQ')  # opcode, length, channel, sequence, log, publish
+_PREFIX = fmt.RECORD_PREFIX
+_MAX_CHUNK = 1 << 31  # [B] refuse to inflate a chunk claiming more (damaged size field)
+_KNOWN_OPS = frozenset(int(op) for op in fmt.Op)
+
+
+class RawMessage(NamedTuple):
+    """One message as stored: CDR bytes and times [ns]."""
+
+    topic: str
+    msgtype: str
+    log_time_ns: int
+    data: bytes
+    publish_time_ns: int
+
+
+@dataclass(frozen=True)
+class TopicInfo:
+    """A topic of a bag: type, embedded definition, rosbag2 QoS metadata, message count."""
+
+    name: str
+    msgtype: str
+    message_count: int
+    definition: str
+    qos_profiles_yaml: str
+
+
+@dataclass(frozen=True)
+class TopicArrays:
+    """All messages of one topic: log times [ns], shape (N,) int64, and CDR bytes (N)."""
+
+    msgtype: str
+    log_time_ns: np.ndarray
+    datas: list[bytes]
+
+
+def find_mcap_files(path: Path) -> list[Path]:
+    """The MCAP files of a bag folder (per metadata.yaml, else ``*.mcap``) or the file itself.
+
+    Raises:
+        BagNotFoundError: nothing readable at ``path``.
+        BagFormatError: metadata.yaml names a non-MCAP storage.
+    """
+    if path.is_file():
+        return [path]
+    if not path.is_dir():
+        raise BagNotFoundError(f'{path}: no such bag')
+    listed = read_metadata_file_paths(path)
+    if listed is not None:
+        files = [path / name for name in listed]
+        missing = [f for f in files if not f.is_file()]
+        if not missing:
+            return files
+    files = sorted(path.glob('*.mcap'))
+    if not files:
+        raise BagNotFoundError(f'{path}: no .mcap file in the bag folder')
+    return files
+
+
+class _Decompressors:
+    def __init__(self) -> None:
+        self._zstd = zstandard.ZstdDecompressor()
+
+    def get(self, name: str) -> Callable[[memoryview, int], bytes] | None:
+        if name == '':
+            return lambda data, _size: bytes(data)
+        if name == 'zstd':
+            return lambda data, size: bytes(self._zstd.decompress(data, max_output_size=size))
+        if name == 'lz4':
+            return lambda data, _size: bytes(lz4.frame.decompress(bytes(data)))
+        return None
+
+
+class _FileScan:
+    """One pass over one MCAP file; yields (channel id, log ns, publish ns, data)."""
+
+    def __init__(
+        self,
+        path: Path,
+        buf: bytes,
+        *,
+        recover: bool,
+        problems: list[BagCorruptError],
+        schemas: dict[int, fmt.SchemaRecord],
+        channels: dict[int, fmt.ChannelRecord],
+    ) -> None:
+        self.path = path
+        self.buf = buf
+        self.recover = recover
+        self.problems = problems
+        self.schemas = schemas
+        self.channels = channels
+        self.message_count = 0
+        self.channel_counts: dict[int, int] = {}
+        self.reached_end = False
+        self._decompressors = _Decompressors()
+
+    def _damage(self, offset: int, reason: str) -> None:
+        """Report damage: raise in strict mode, collect in recover mode."""
+        error = BagCorruptError(self.path, offset, reason)
+        if not self.recover:
+            raise error
+        self.problems.append(error)
+
+    def _parse(self, offset: int, body_offset: int, parse: Callable[[Any], Any], body: Any) -> Any:
+        try:
+            return parse(body)
+        except fmt.MalformedRecordError as exc:
+            self._damage(body_offset + exc.offset, f'malformed record at {offset}: {exc.reason}')
+            return None
+
+    def _schema(self, record: fmt.SchemaRecord | None) -> None:
+        if record is not None and record.id != 0:
+            self.schemas[record.id] = record
+
+    def _channel(self, record: fmt.ChannelRecord | None, offset: int) -> None:
+        if record is None:
+            return
+        if record.schema_id != 0 and record.schema_id not in self.schemas:
+            self._damage(offset, f'channel {record.topic} refers to unknown schema')
+            return
+        self.channels[record.id] = record
+
+    def messages(
+        self,
+        wanted: Callable[[int], bool],
+        start_ns: int | None,
+        stop_ns: int | None,
+    ) -> Iterator[tuple[int, int, int, bytes]]:
+        buf = self.buf
+        size = len(buf)
+        if buf[:8] != fmt.MAGIC:
+            raise BagFormatError(f'{self.path}: not an MCAP file (bad magic)')
+        pos = 8
+        while True:
+            if pos + _PREFIX.size > size:
+                self._damage(pos, 'file ends before the data end record (writer killed?)')
+                return
+            op, length = _PREFIX.unpack_from(buf, pos)
+            body_at = pos + _PREFIX.size
+            end = body_at + length
+            if op not in _KNOWN_OPS and op < 0x80:
+                self._damage(pos, f'invalid record opcode 0x{op:02x}')
+                return
+            if end > size:
+                self._damage(pos, f'record of {length} bytes runs past the end of the file')
+                return
+            body = memoryview(buf)[body_at:end]
+            if op == fmt.Op.CHUNK:
+                chunk = self._parse(pos, body_at, fmt.parse_chunk, body)
+                if chunk is not None:
+                    yield from self._chunk(chunk, pos, body_at, wanted, start_ns, stop_ns)
+            elif op == fmt.Op.MESSAGE:
+                if length < 22:
+                    self._damage(pos, 'message record too short')
+                else:
+                    channel_id, _, log_ns, pub_ns = struct.unpack_from('<HIQQ', buf, body_at)
+                    if self._count(channel_id, pos) and self._in(
+                        channel_id, log_ns, wanted, start_ns, stop_ns
+                    ):
+                        yield channel_id, log_ns, pub_ns, bytes(buf[body_at + 22 : end])
+            elif op == fmt.Op.SCHEMA:
+                self._schema(self._parse(pos, body_at, fmt.parse_schema, body))
+            elif op == fmt.Op.CHANNEL:
+                self._channel(self._parse(pos, body_at, fmt.parse_channel, body), pos)
+            elif op == fmt.Op.DATA_END:
+                self._data_end(pos, body)
+                return
+            elif op == fmt.Op.FOOTER:
+                self.reached_end = True
+                return
+            pos = end
+
+    def _count(self, channel_id: int, offset: int) -> bool:
+        if channel_id not in self.channels:
+            self._damage(offset, f'message on undeclared channel {channel_id}')
+            return False
+        self.message_count += 1
+        self.channel_counts[channel_id] = self.channel_counts.get(channel_id, 0) + 1
+        return True
+
+    @staticmethod
+    def _in(
+        channel_id: int,
+        log_ns: int,
+        wanted: Callable[[int], bool],
+        start_ns: int | None,
+        stop_ns: int | None,
+    ) -> bool:
+        if start_ns is not None and log_ns < start_ns:
+            return False
+        if stop_ns is not None and log_ns >= stop_ns:
+            return False
+        return wanted(channel_id)
+
+    def _chunk(
+        self,
+        chunk: fmt.ChunkRecord,
+        offset: int,
+        body_at: int,
+        wanted: Callable[[int], bool],
+        start_ns: int | None,
+        stop_ns: int | None,
+    ) -> Iterator[tuple[int, int, int, bytes]]:
+        payload_at = body_at + chunk.payload_offset
+        inflate = self._decompressors.get(chunk.compression)
+        if inflate is None:
+            self._damage(offset, f'unknown chunk compression {chunk.compression!r}')
+            return
+        if chunk.uncompressed_size > _MAX_CHUNK:
+            self._damage(offset, f'chunk claims {chunk.uncompressed_size} bytes uncompressed')
+            return
+        try:
+            data = inflate(chunk.payload, chunk.uncompressed_size)
+        except Exception as exc:  # zstandard/lz4 raise their own error types
+            self._damage(payload_at, f'chunk does not decompress: {exc}')
+            return
+        if len(data) != chunk.uncompressed_size:
+            self._damage(payload_at, 'chunk size differs from its header')
+            return
+        if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+            self._damage(payload_at, 'chunk CRC mismatch')
+            return
+        skip_all = (start_ns is not None and chunk.end_ns < start_ns) or (
+            stop_ns is not None and chunk.start_ns >= stop_ns
+        )
+        unpack = _MESSAGE_HEAD.unpack_from
+        pos = 0
+        size = len(data)
+        counts = self.channel_counts
+        channels = self.channels
+        while pos < size:
+            if pos + 9 > size:
+                self._damage(payload_at, f'chunk record header truncated at +{pos}')
+                return
+            op, length = _PREFIX.unpack_from(data, pos)
+            end = pos + 9 + length
+            if end > size:
+                self._damage(payload_at, f'chunk record at +{pos} overruns the chunk')
+                return
+            if op == fmt.Op.MESSAGE:
+                if length < 22:
+                    self._damage(payload_at, f'message at +{pos} too short')
+                    return
+                _, _, channel_id, _, log_ns, pub_ns = unpack(data, pos)
+                if channel_id not in channels:
+                    self._damage(payload_at, f'message at +{pos} on undeclared channel')
+                    return
+                self.message_count += 1
+                counts[channel_id] = counts.get(channel_id, 0) + 1
+                if not skip_all and self._in(channel_id, log_ns, wanted, start_ns, stop_ns):
+                    yield channel_id, log_ns, pub_ns, data[pos + 31 : end]
+            elif op == fmt.Op.SCHEMA:
+                self._schema(
+                    self._parse(offset, payload_at, fmt.parse_schema, data[pos + 9 : end])
+                )
+            elif op == fmt.Op.CHANNEL:
+                record = self._parse(offset, payload_at, fmt.parse_channel, data[pos + 9 : end])
+                self._channel(record, offset)
+            pos = end
+
+    def _data_end(self, offset: int, body: memoryview) -> None:
+        if len(body) >= 4:
+            (crc,) = struct.unpack_from('<I', body)
+            if crc and zlib.crc32(memoryview(self.buf)[:offset]) != crc:
+                self._damage(offset, 'data section CRC mismatch')
+        self.reached_end = True
+        self._check_tail(offset)
+
+    def _check_tail(self, data_end_offset: int) -> None:
+        """Check the footer and, when present, the summary statistics against what was read."""
+        buf = self.buf
+        size = len(buf)
+        footer_at = size - 8 - (_PREFIX.size + 20)
+        if (
+            size < data_end_offset + 8 + _PREFIX.size + 20
+            or buf[size - 8 :] != fmt.MAGIC
+            or buf[footer_at] != fmt.Op.FOOTER
+        ):
+            self._damage(min(size, data_end_offset), 'summary/footer missing or truncated')
+            return
+        footer = fmt.parse_footer(memoryview(buf)[footer_at + _PREFIX.size : size - 8])
+        if footer.summary_start == 0:
+            return
+        if not data_end_offset < footer.summary_start <= footer_at:
+            self._damage(footer_at, 'footer points outside the summary section')
+            return
+        if footer.summary_crc:
+            crc = zlib.crc32(memoryview(buf)[footer.summary_start : footer_at + _PREFIX.size + 16])
+            if crc != footer.summary_crc:
+                self._damage(footer.summary_start, 'summary CRC mismatch')
+                return
+        stats = self._statistics(footer.summary_start, footer_at)
+        if stats is not None and stats.message_count != self.message_count:
+            self._damage(
+                footer.summary_start,
+                f'summary counts {stats.message_count} messages, data holds {self.message_count}',
+            )
+
+    def _statistics(self, start: int, stop: int) -> fmt.StatisticsRecord | None:
+        pos = start
+        while pos + _PREFIX.size <= stop:
+            op, length = _PREFIX.unpack_from(self.buf, pos)
+            end = pos + _PREFIX.size + length
+            if end > stop:
+                self._damage(pos, 'summary record overruns the summary section')
+                return None
+            if op == fmt.Op.STATISTICS:
+                body = memoryview(self.buf)[pos + _PREFIX.size : end]
+                return self._parse(pos, pos + _PREFIX.size, fmt.parse_statistics, body)  # type: ignore[no-any-return]
+            pos = end
+        return None
+
+
+class _ChannelSelector:
+    """Decides per channel id (once) whether its topic is wanted; remembers topic and type."""
+
+    def __init__(self, scan: _FileScan, selected: set[str] | None) -> None:
+        self._scan = scan
+        self._selected = selected
+        self._keep: dict[int, bool] = {}
+        self.names: dict[int, tuple[str, str]] = {}
+
+    def __call__(self, channel_id: int) -> bool:
+        keep = self._keep.get(channel_id)
+        if keep is None:
+            channel = self._scan.channels[channel_id]
+            schema = self._scan.schemas.get(channel.schema_id)
+            keep = self._selected is None or channel.topic in self._selected
+            self._keep[channel_id] = keep
+            self.names[channel_id] = (channel.topic, schema.name if schema else '')
+        return keep
+
+
+class BagReader:
+    """Read a rosbag2 MCAP bag: a bag folder (with or without metadata.yaml) or a .mcap file.
+
+    Args:
+        path: bag folder or ``.mcap`` file.
+        recover: collect damage in :attr:`problems` and read on, instead of raising
+            :class:`BagCorruptError` at the first damage.
+
+    Raises:
+        BagNotFoundError: nothing at ``path``.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], *, recover: bool = False) -> None:
+        self.path = Path(path)
+        self.files = find_mcap_files(self.path)
+        self.recover = recover
+        self.problems: list[BagCorruptError] = []
+        self._topics: dict[str, TopicInfo] | None = None
+
+    def _scans(self) -> Iterator[_FileScan]:
+        for file in self.files:
+            try:
+                buf = file.read_bytes()
+            except OSError as exc:
+                raise BagNotFoundError(f'{file}: cannot read: {exc.strerror or exc}') from exc
+            yield _FileScan(
+                file, buf, recover=self.recover, problems=self.problems, schemas={}, channels={}
+            )
+
+    def raw_messages(
+        self,
+        topics: Iterable[str] | None = None,
+        *,
+        start_ns: int | None = None,
+        stop_ns: int | None = None,
+    ) -> Iterator[RawMessage]:
+        """Iterate stored messages, optionally only some topics and log times [start, stop).
+
+        Args:
+            topics: topic names to keep; None keeps all.
+            start_ns: first log time [ns] to keep (inclusive).
+            stop_ns: log time [ns] to stop before (exclusive).
+
+        Raises:
+            BagCorruptError: damage found (strict mode), after the messages before it.
+            BagFormatError: a file is not MCAP.
+        """
+        selected = None if topics is None else set(topics)
+        self.problems.clear()
+        for scan in self._scans():
+            select = _ChannelSelector(scan, selected)
+            names = select.names
+            for channel_id, log_ns, pub_ns, data in scan.messages(select, start_ns, stop_ns):
+                topic, msgtype = names[channel_id]
+                yield RawMessage(topic, msgtype, log_ns, data, pub_ns)
+
+    def messages(
+        self,
+        topics: Iterable[str] | None = None,
+        *,
+        start_ns: int | None = None,
+        stop_ns: int | None = None,
+    ) -> Iterator[tuple[str, str, int, Any]]:
+        """Iterate decoded messages: (topic, msgtype, log_time_ns, rosbags message object).
+
+        Types unknown to the vd typestore are registered from the bag's embedded definitions.
+        """
+        registered: set[str] = set()
+        for msg in self.raw_messages(topics, start_ns=start_ns, stop_ns=stop_ns):
+            if msg.msgtype not in registered:
+                self._register(msg.msgtype)
+                registered.add(msg.msgtype)
+            yield msg.topic, msg.msgtype, msg.log_time_ns, deserialize(msg.data, msg.msgtype)
+
+    def _register(self, msgtype: str) -> None:
+        info = next((t for t in self.topics.values() if t.msgtype == msgtype), None)
+        if info is not None and info.definition:
+            register_definition(msgtype, info.definition)
+
+    def topic_arrays(self, topics: Iterable[str] | None = None) -> dict[str, TopicArrays]:
+        """All messages grouped per topic (for batch processing such as offline replay)."""
+        times: dict[str, list[int]] = {}
+        datas: dict[str, list[bytes]] = {}
+        types: dict[str, str] = {}
+        for topic, msgtype, log_ns, data, _ in self.raw_messages(topics):
+            if topic not in times:
+                times[topic], datas[topic], types[topic] = [], [], msgtype
+            times[topic].append(log_ns)
+            datas[topic].append(data)
+        return {
+            t: TopicArrays(types[t], np.asarray(times[t], dtype=np.int64), datas[t]) for t in times
+        }
+
+    @property
+    def topics(self) -> dict[str, TopicInfo]:
+        """Topics of the bag with message counts (one pass over the data if not yet read)."""
+        if self._topics is None:
+            problems = list(self.problems)
+            scans = []
+            for scan in self._scans():
+                for _ in scan.messages(lambda _c: False, None, None):
+                    pass
+                scans.append(scan)
+            self._topics = self._topic_infos(scans)
+            self.problems[:0] = problems
+        return self._topics
+
+    @staticmethod
+    def _topic_infos(scans: list[_FileScan]) -> dict[str, TopicInfo]:
+        infos: dict[str, TopicInfo] = {}
+        for scan in scans:
+            for channel in scan.channels.values():
+                schema = scan.schemas.get(channel.schema_id)
+                count = scan.channel_counts.get(channel.id, 0)
+                old = infos.get(channel.topic)
+                infos[channel.topic] = TopicInfo(
+                    channel.topic,
+                    schema.name if schema else '',
+                    count + (old.message_count if old else 0),
+                    schema.data.decode(errors='replace') if schema else '',
+                    channel.metadata.get('offered_qos_profiles', ''),
+                )
+        return infos
+
+    def time_range_ns(self) -> tuple[int, int] | None:
+        """(first, last) log time [ns] of all messages, None for an empty bag."""
+        first: int | None = None
+        last = 0
+        for msg in self.raw_messages():
+            first = msg.log_time_ns if first is None else min(first, msg.log_time_ns)
+            last = max(last, msg.log_time_ns)
+        return None if first is None else (first, last)
