@@ -1,0 +1,44 @@
+"""ROS-free bond-graph core: build a graph, assign causality (SCAP), generate the equations.
+
+See ``docs/bondgraph.md`` for a user guide.
+"""
+
+from .causality import Causality, assign_causality
+from .elements import Kind
+from .errors import (
+    AlgebraicLoopError,
+    BondGraphError,
+    CausalConflictError,
+    CausalityError,
+    DerivativeCausalityError,
+    DuplicateNameError,
+    ElementDefinitionError,
+    InvalidConnectionError,
+    MissingLawError,
+    ShapeError,
+    UnconnectedPortError,
+    UnknownNameError,
+)
+from .graph import BondGraph
+from .model import CompiledModel, compile_model
+
+__all__ = [
+    'AlgebraicLoopError',
+    'BondGraph',
+    'BondGraphError',
+    'CausalConflictError',
+    'Causality',
+    'CausalityError',
+    'CompiledModel',
+    'DerivativeCausalityError',
+    'DuplicateNameError',
+    'ElementDefinitionError',
+    'InvalidConnectionError',
+    'Kind',
+    'MissingLawError',
+    'ShapeError',
+    'UnconnectedPortError',
+    'UnknownNameError',
+    'assign_causality',
+    'compile_model',
+]
