@@ -1,0 +1,283 @@
+"""Online estimator of tire forces, loads, friction, slip, resistances and road slope.
+
+Per stamp, from the observer outputs (omega, omega_dot, speed, accel) and the measured wheel
+torques: Fx from the wheel spin balance, Fz from the whole-vehicle moment balance using the
+previous slope estimate, mu = Fx/Fz, slip, rolling and aero resistance, and the slope from
+the longitudinal force balance. See docs/estimation.md.
+
+All outputs are finite always: a non-finite input is replaced by its last finite value and
+the affected validity flags are cleared; a non-finite or non-increasing stamp returns the
+previous estimates unchanged (counted in `rejected_count`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any, Final
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from vd_observer_node import estimators as phys
+from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.filters import LowPass
+from vd_observer_node.vehicle import EstimatorVehicle
+
+__all__ = ['LOAD_TRANSFER_SOURCES', 'Estimates', 'Estimator', 'EstimatorConfig']
+
+FloatArray = NDArray[np.float64]
+
+#: How the load-transfer force G is obtained, see `EstimatorConfig.load_transfer_source`.
+LOAD_TRANSFER_SOURCES: Final = ('tire_forces', 'acceleration')
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Settings of the estimator.
+
+    Attributes:
+        load_transfer_source: 'tire_forces' uses G = sum(Fx) - sum(F_r) (needs only
+            cos(alpha)); 'acceleration' uses G = m*v_dot + m*g*sin(alpha_prev) + F_aero.
+        force_filter_tau: time constant [s] of the low-pass on Fx and G (0 = off); it delays
+            Fx, Fz and mu by filter_order * tau.
+        slope_filter_tau: time constant [s] of the low-pass on the slope force balance
+            (0 = off); it delays the slope by filter_order * tau.
+        filter_order: number of first-order stages of both filters.
+        min_load_ratio: mu is invalid where Fz < min_load_ratio * static wheel load [-].
+        min_excitation_ratio: mu is invalid where |Fx| < min_excitation_ratio * Fz [-].
+        max_slope: |alpha| above this [rad] is clamped and flagged invalid.
+        min_speed: below this |v| [m/s] the slope is flagged invalid and held (at standstill
+            the brake torque is a reaction, not the applied torque the sensor reports).
+        direction_speed_scale: v_s [m/s] of the regularised sign tanh(v / v_s) applied to
+            rolling resistance and aero drag; must match the simulator.
+        slip_eps: floor of the slip denominator [m/s].
+    """
+
+    load_transfer_source: str = 'tire_forces'
+    force_filter_tau: float = 0.0
+    slope_filter_tau: float = 0.05
+    filter_order: int = 2
+    min_load_ratio: float = 0.1
+    min_excitation_ratio: float = 0.02
+    max_slope: float = 0.5
+    min_speed: float = 0.5
+    direction_speed_scale: float = 0.1
+    slip_eps: float = 0.1
+
+    def __post_init__(self) -> None:
+        if self.load_transfer_source not in LOAD_TRANSFER_SOURCES:
+            raise ConfigurationError(
+                f'unknown load_transfer_source {self.load_transfer_source!r}; '
+                f'use one of {LOAD_TRANSFER_SOURCES}'
+            )
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, float) and not (math.isfinite(value) and value >= 0.0):
+                raise ConfigurationError(f'{f.name} must be finite and >= 0, got {value}')
+        if self.filter_order < 1:
+            raise ConfigurationError(f'filter_order must be >= 1, got {self.filter_order}')
+        if not 0.0 < self.max_slope < math.pi / 2:
+            raise ConfigurationError(f'max_slope must be in (0, pi/2), got {self.max_slope}')
+
+    @classmethod
+    def from_mapping(cls, data: dict[str, Any]) -> EstimatorConfig:
+        """Build from a flat mapping (e.g. ROS parameters).
+
+        Raises:
+            ConfigurationError: unknown key or invalid value.
+        """
+        known = {f.name for f in fields(cls)}
+        unknown = set(data) - known
+        if unknown:
+            raise ConfigurationError(f'unknown estimator settings: {sorted(unknown)}')
+        return cls(**data)
+
+
+@dataclass(frozen=True)
+class Estimates:
+    """Estimates for one stamp (per-wheel arrays shape (4,), order FL, FR, RL, RR).
+
+    Attributes:
+        t: stamp the estimates are for [s].
+        fx: [N] tire longitudinal force, road -> tire, positive forward.
+        fz: [N] wheel normal load.
+        mu: [-] utilised friction Fx/Fz where mu_valid, else 0.
+        slip: [-] longitudinal slip ratio, positive driving.
+        mu_valid: bool, mu meaningful (loaded and excited wheel, finite inputs).
+        rolling: [N] rolling resistance magnitude per wheel.
+        aero: [N] aero drag magnitude.
+        slope: [rad] road slope, positive uphill (held while invalid).
+        slope_valid: slope meaningful (moving, in range, finite inputs).
+    """
+
+    t: float
+    fx: FloatArray
+    fz: FloatArray
+    mu: FloatArray
+    slip: FloatArray
+    mu_valid: NDArray[np.bool_]
+    rolling: FloatArray
+    aero: float
+    slope: float
+    slope_valid: bool
+
+
+def _as_wheels(name: str, value: ArrayLike) -> FloatArray:
+    array = np.asarray(value, dtype=np.float64)
+    if array.shape != (4,):
+        raise InputShapeError(f'{name} must have shape (4,), got {array.shape}')
+    return array
+
+
+class Estimator:
+    """Stateful per-stamp estimator (the estimator node calls `update` per aligned stamp)."""
+
+    def __init__(self, vehicle: EstimatorVehicle, config: EstimatorConfig | None = None) -> None:
+        """Create the estimator.
+
+        Args:
+            vehicle: parameters from the shared vehicle file.
+            config: settings; defaults if None.
+        """
+        self.vehicle = vehicle
+        self.config = config or EstimatorConfig()
+        self._force_filter = LowPass(self.config.force_filter_tau, self.config.filter_order)
+        self._slope_filter = LowPass(self.config.slope_filter_tau, self.config.filter_order)
+        self._min_load = self.config.min_load_ratio * float(np.min(vehicle.static_wheel_loads))
+        self.rejected_count = 0
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the history (slope back to 0, filters empty)."""
+        self._t: float | None = None
+        self._slope = 0.0
+        self._held = {
+            'omega': np.zeros(4),
+            'omega_dot': np.zeros(4),
+            'torque': np.zeros(4),
+            'speed': np.zeros(1),
+            'accel': np.zeros(1),
+        }
+        self._force_filter.reset()
+        self._slope_filter.reset()
+        self.last: Estimates | None = None
+
+    def _sanitise(self, name: str, value: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+        ok = np.isfinite(value)
+        held = self._held[name]
+        clean = np.where(ok, value, held)
+        self._held[name] = clean
+        return clean, ok
+
+    def update(
+        self,
+        t: float,
+        omega: ArrayLike,
+        omega_dot: ArrayLike,
+        speed: float,
+        accel: float,
+        torque: ArrayLike,
+    ) -> Estimates:
+        """Estimate everything for stamp t.
+
+        Args:
+            t: stamp [s], strictly increasing.
+            omega: shape (4,), [rad/s] wheel speeds (observer).
+            omega_dot: shape (4,), [rad/s^2] wheel accelerations (observer).
+            speed: body speed [m/s] (observer or measured).
+            accel: body acceleration dv/dt [m/s^2] (observer).
+            torque: shape (4,), [N m] drive minus brake torque per wheel.
+
+        Raises:
+            InputShapeError: a per-wheel input is not of shape (4,).
+        """
+        raw = {
+            'omega': _as_wheels('omega', omega),
+            'omega_dot': _as_wheels('omega_dot', omega_dot),
+            'torque': _as_wheels('torque', torque),
+            'speed': np.atleast_1d(np.asarray(speed, dtype=np.float64)),
+            'accel': np.atleast_1d(np.asarray(accel, dtype=np.float64)),
+        }
+        if not math.isfinite(t) or (self._t is not None and t <= self._t):
+            self.rejected_count += 1
+            return self.last if self.last is not None else self._empty(t)
+        dt = 0.0 if self._t is None else t - self._t
+        self._t = t
+        clean: dict[str, FloatArray] = {}
+        ok: dict[str, NDArray[np.bool_]] = {}
+        for name, value in raw.items():
+            clean[name], ok[name] = self._sanitise(name, value)
+        wheel_ok = ok['omega'] & ok['omega_dot'] & ok['torque'] & ok['speed'][0]
+        body_ok = bool(np.all(wheel_ok) and ok['accel'][0])
+        return self._estimate(t, dt, clean, wheel_ok, body_ok)
+
+    def _estimate(
+        self,
+        t: float,
+        dt: float,
+        x: dict[str, FloatArray],
+        wheel_ok: NDArray[np.bool_],
+        body_ok: bool,
+    ) -> Estimates:
+        veh, cfg = self.vehicle, self.config
+        v = float(x['speed'][0])
+        accel = float(x['accel'][0])
+        direction = float(phys.motion_direction(v, cfg.direction_speed_scale))
+        aero = float(phys.aero_drag(v, veh))
+        c_roll = float(phys.rolling_coefficient(v, veh))
+        cos_prev, sin_prev = math.cos(self._slope), math.sin(self._slope)
+        weight = veh.mass * veh.gravity
+
+        fx_raw = phys.tire_longitudinal_force(x['torque'], x['omega_dot'], veh)
+        # Sum of the rolling resistances follows from sum(Fz) = m*g*cos(alpha) in both
+        # load-transfer forms, so it does not depend on the transfer itself.
+        rolling_sum = c_roll * weight * cos_prev
+        if cfg.load_transfer_source == 'tire_forces':
+            ground = float(np.sum(fx_raw)) - direction * rolling_sum
+        else:
+            ground = veh.mass * accel + weight * sin_prev + direction * aero
+        filtered = self._force_filter.update(dt, np.append(fx_raw, ground))
+        fx, ground_f = filtered[:4], float(filtered[4])
+
+        fz = phys.wheel_loads(ground_f, cos_prev, veh)
+        rolling = phys.rolling_resistance(v, fz, veh)
+        mu, mu_valid = phys.utilised_friction(fx, fz, self._min_load, cfg.min_excitation_ratio)
+        mu_valid &= wheel_ok
+        mu = np.where(mu_valid, mu, 0.0)
+        slip = phys.slip_ratio(x['omega'], v, veh, cfg.slip_eps)
+
+        net = float(np.sum(fx_raw)) - direction * (rolling_sum + aero) - veh.mass * accel
+        net_f = float(self._slope_filter.update(dt, net))
+        alpha, in_range = phys.slope_from_forces(net_f, veh, cfg.max_slope)
+        slope_valid = bool(in_range) and body_ok and abs(v) >= cfg.min_speed
+        if slope_valid:
+            self._slope = float(alpha)
+        self.last = Estimates(
+            t=t,
+            fx=fx,
+            fz=fz,
+            mu=mu,
+            slip=slip,
+            mu_valid=mu_valid,
+            rolling=rolling,
+            aero=aero,
+            slope=self._slope,
+            slope_valid=slope_valid,
+        )
+        return self.last
+
+    def _empty(self, t: float) -> Estimates:
+        zeros = np.zeros(4)
+        return Estimates(
+            t=t if math.isfinite(t) else 0.0,
+            fx=zeros,
+            fz=self.vehicle.static_wheel_loads,
+            mu=zeros,
+            slip=zeros,
+            mu_valid=np.zeros(4, dtype=bool),
+            rolling=zeros,
+            aero=0.0,
+            slope=0.0,
+            slope_valid=False,
+        )

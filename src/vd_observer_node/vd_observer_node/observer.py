@@ -1,0 +1,215 @@
+"""Online observers: wheel speed and acceleration from wheel angles, body acceleration.
+
+Each observer is a `LevantDifferentiator` on the measured signal: the wheel angles theta_i
+give (theta, omega, omega_dot), the body speed v gives (v, v_dot, v_ddot). Outputs at a
+stamp are the estimates FOR that stamp (exactly so with the implicit discretization; the
+explicit ones use the sample of the stamp only from the next step on).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from vd_observer_node.differentiator import (
+    DEFAULT_GAINS,
+    DISCRETIZATIONS,
+    INIT_POLICIES,
+    LevantDifferentiator,
+    LevantGains,
+)
+from vd_observer_node.errors import ConfigurationError, InputShapeError
+
+__all__ = [
+    'Observer',
+    'ObserverConfig',
+    'ObserverOutput',
+    'SpeedObserver',
+    'SpeedState',
+    'WheelObserver',
+    'WheelState',
+]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class ObserverConfig:
+    """Settings of the wheel and speed observers.
+
+    Attributes:
+        gains: Levant gains (paper order l0, l1, l2), shared by both observers.
+        wheel_lipschitz: L for the wheel angles, bound on |d^3 theta/dt^3| = |omega_ddot|
+            [rad/s^3]. Larger tracks torque steps faster, smaller rejects encoder noise.
+        speed_lipschitz: L for the body speed, bound on |d^3 v/dt^3| [m/s^4].
+        discretization: one of `differentiator.DISCRETIZATIONS`.
+        init: one of `differentiator.INIT_POLICIES`.
+        max_gap: a gap between stamps longer than this [s] re-initialises the observer.
+    """
+
+    gains: LevantGains = field(default_factory=lambda: DEFAULT_GAINS)
+    wheel_lipschitz: float = 300.0
+    speed_lipschitz: float = 20.0
+    discretization: str = 'implicit'
+    init: str = 'finite_difference'
+    max_gap: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.discretization not in DISCRETIZATIONS:
+            raise ConfigurationError(
+                f'unknown discretization {self.discretization!r}; use one of {DISCRETIZATIONS}'
+            )
+        if self.init not in INIT_POLICIES:
+            raise ConfigurationError(f'unknown init {self.init!r}; use one of {INIT_POLICIES}')
+        for name in ('wheel_lipschitz', 'speed_lipschitz', 'max_gap'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ConfigurationError(f'{name} must be finite and > 0, got {value}')
+
+    @classmethod
+    def from_mapping(cls, data: dict[str, Any]) -> ObserverConfig:
+        """Build from a flat mapping (e.g. ROS parameters); gains as l0, l1, l2 keys.
+
+        Raises:
+            ConfigurationError: unknown key or invalid value.
+        """
+        known = {f.name for f in fields(cls)} - {'gains'}
+        gain_keys = {'l0', 'l1', 'l2'}
+        unknown = set(data) - known - gain_keys
+        if unknown:
+            raise ConfigurationError(f'unknown observer settings: {sorted(unknown)}')
+        gains = LevantGains(**{k: float(v) for k, v in data.items() if k in gain_keys})
+        kwargs = {k: v for k, v in data.items() if k in known}
+        return cls(gains=gains, **kwargs)
+
+
+class WheelState(NamedTuple):
+    """Wheel observer output for one stamp (shapes (4,), order FL, FR, RL, RR).
+
+    Attributes:
+        angle: [rad], filtered unwrapped angle.
+        omega: [rad/s].
+        omega_dot: [rad/s^2].
+        valid: bool, False while initialising or when the wheel's sample was invalid.
+    """
+
+    angle: FloatArray
+    omega: FloatArray
+    omega_dot: FloatArray
+    valid: NDArray[np.bool_]
+
+
+class SpeedState(NamedTuple):
+    """Speed observer output for one stamp.
+
+    Attributes:
+        speed: [m/s], filtered body speed.
+        accel: [m/s^2], dv/dt along the road.
+        valid: False while initialising or when the sample was invalid.
+    """
+
+    speed: float
+    accel: float
+    valid: bool
+
+
+class WheelObserver:
+    """Four-wheel Levant differentiator on the unwrapped wheel angles."""
+
+    def __init__(self, config: ObserverConfig) -> None:
+        """Create the observer from its settings."""
+        self._diff = LevantDifferentiator(
+            config.wheel_lipschitz,
+            n_channels=4,
+            gains=config.gains,
+            discretization=config.discretization,
+            init=config.init,
+            max_gap=config.max_gap,
+        )
+        self.last: WheelState | None = None
+
+    @property
+    def rejected_count(self) -> int:
+        """Samples rejected for a non-increasing or non-finite stamp."""
+        return self._diff.rejected_count
+
+    def update(self, t: float, angles: ArrayLike) -> WheelState:
+        """Feed the wheel angles at stamp t.
+
+        Args:
+            t: stamp [s].
+            angles: shape (4,), [rad], unwrapped, FL, FR, RL, RR.
+
+        Raises:
+            InputShapeError: angles is not of shape (4,).
+        """
+        a = np.asarray(angles, dtype=np.float64)
+        if a.shape != (4,):
+            raise InputShapeError(f'wheel angles must have shape (4,), got {a.shape}')
+        est = self._diff.update(t, a)
+        self.last = WheelState(est.value, est.first, est.second, est.valid)
+        return self.last
+
+
+class SpeedObserver:
+    """Levant differentiator on the measured body speed."""
+
+    def __init__(self, config: ObserverConfig) -> None:
+        """Create the observer from its settings."""
+        self._diff = LevantDifferentiator(
+            config.speed_lipschitz,
+            n_channels=1,
+            gains=config.gains,
+            discretization=config.discretization,
+            init=config.init,
+            max_gap=config.max_gap,
+        )
+        self.last: SpeedState | None = None
+
+    @property
+    def rejected_count(self) -> int:
+        """Samples rejected for a non-increasing or non-finite stamp."""
+        return self._diff.rejected_count
+
+    def update(self, t: float, speed: float) -> SpeedState:
+        """Feed the measured body speed [m/s] at stamp t [s]."""
+        est = self._diff.update(t, speed)
+        self.last = SpeedState(float(est.value[0]), float(est.first[0]), bool(est.valid[0]))
+        return self.last
+
+
+class ObserverOutput(NamedTuple):
+    """Combined observer output for one stamp.
+
+    Attributes:
+        omega: shape (4,), [rad/s].
+        omega_dot: shape (4,), [rad/s^2].
+        accel: [m/s^2], body longitudinal acceleration.
+    """
+
+    omega: FloatArray
+    omega_dot: FloatArray
+    accel: float
+
+
+class Observer:
+    """Wheel and speed observers driven by common stamps (offline use, tests).
+
+    The ROS node receives the two topics separately and can use `wheels` and `speed`
+    directly.
+    """
+
+    def __init__(self, config: ObserverConfig) -> None:
+        """Create both observers from one settings object."""
+        self.wheels = WheelObserver(config)
+        self.speed = SpeedObserver(config)
+
+    def update(self, t: float, angles: ArrayLike, speed: float) -> ObserverOutput:
+        """Feed wheel angles, shape (4,) [rad], and body speed [m/s] sampled at stamp t [s]."""
+        wheel = self.wheels.update(t, angles)
+        body = self.speed.update(t, speed)
+        return ObserverOutput(wheel.omega, wheel.omega_dot, body.accel)
