@@ -83,6 +83,8 @@ class BagWriter:
         compression: 'zstd' or '' (none).
         fsync: fsync after every chunk (power-loss safety at some throughput cost).
         clock: monotonic clock [s] for the chunk age, injectable for tests.
+        file_name: MCAP file name inside the folder; default ``<folder name>_0.mcap`` like
+            rosbag2.
 
     Raises:
         BagExistsError: ``path`` exists and is not an empty folder.
@@ -98,13 +100,14 @@ class BagWriter:
         compression: str = 'zstd',
         fsync: bool = False,
         clock: Callable[[], float] = time.monotonic,
+        file_name: str | None = None,
     ) -> None:
         if compression not in ('zstd', ''):
             raise BagUsageError(f"compression must be 'zstd' or '', not {compression!r}")
         if chunk_size <= 0 or chunk_duration_s <= 0:
             raise BagUsageError('chunk_size and chunk_duration_s must be positive')
         self.path = Path(path)
-        self.mcap_path = self.path / f'{self.path.name}_0.mcap'
+        self.mcap_path = self.path / (file_name or f'{self.path.name}_0.mcap')
         self._chunk_size = chunk_size
         self._chunk_duration_s = chunk_duration_s
         self._compression = compression
@@ -203,7 +206,7 @@ class BagWriter:
             return
         parse_qos_profiles(qos_profiles_yaml)
         text = definition if definition is not None else message_definition(msgtype)
-        digest = type_hash(msgtype) if definition is None else ''
+        digest = type_hash(msgtype) if self._has_hash(msgtype) else ''
         out = b''
         if msgtype not in self._schemas:
             schema_id = len(self._schemas) + 1
