@@ -21,6 +21,7 @@ from .errors import (
 )
 from .graph import BondGraph
 from .model import CompiledModel, compile_model
+from .walker import GraphWalker
 
 __all__ = [
     'AlgebraicLoopError',
@@ -33,6 +34,7 @@ __all__ = [
     'DerivativeCausalityError',
     'DuplicateNameError',
     'ElementDefinitionError',
+    'GraphWalker',
     'InvalidConnectionError',
     'Kind',
     'MissingLawError',

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import Enum
+from typing import Any
 
 __all__ = [
     'Block',
@@ -80,7 +81,7 @@ class Element:
     name: str
     kind: Kind
     param: float | None = None
-    law: Callable[..., object] | None = None
+    law: Callable[..., Any] | None = None
     conductance_law: Callable[..., float] | None = None
     energy: Callable[[float], float] | None = None
     signals: tuple[str, ...] = ()
