@@ -98,27 +98,62 @@ class _Assigner:
         self.graph = graph
         self.setter: dict[str, str] = {}
         self.origin: dict[str, str] = {}
+        # Why each bond got its causality: the rule that forced it and the bond that
+        # triggered that rule, so errors can print the causal path back to its origin.
+        self.why: dict[str, str] = {}
+        self.trigger: dict[str, str | None] = {}
+        self.via: dict[str, str] = {}
         self.r_modes: dict[str, str] = {}
         self.pending: deque[str] = deque()
 
     # -- core operations ------------------------------------------------------------------
 
-    def force(self, bond: str, setter: str, origin: str, why: str) -> None:
+    def path(self, bond: str) -> tuple[str, list[str], list[str]]:
+        """(text, elements, bonds) of the causal path that fixed ``bond``, newest first."""
+        steps: list[str] = []
+        elements: list[str] = []
+        bonds: list[str] = []
+        current: str | None = bond
+        while current is not None and current not in bonds:
+            bonds.append(current)
+            steps.append(f'bond {current!r} set by {self.why[current]}')
+            elements.append(self.via[current])
+            current = self.trigger.get(current)
+        return ' <- '.join(steps), elements, bonds
+
+    def force(
+        self,
+        bond: str,
+        setter: str,
+        origin: str,
+        via: str,
+        why: str,
+        trigger: str | None = None,
+    ) -> None:
         """Set the effort setter of ``bond``; a contradiction is a causal conflict."""
         current = self.setter.get(bond)
         if current == setter:
             return
         if current is not None:
             b = self.graph.bonds[bond]
+            text, elements, bonds = self.path(bond)
+            if trigger is not None:
+                new_text, new_elements, new_bonds = self.path(trigger)
+                text += f'; new demand via {new_text}'
+                elements += new_elements
+                bonds += new_bonds
             raise CausalConflictError(
                 f'causal conflict on bond {bond!r} ({b.tail} -> {b.head}): {why} requires '
-                f'{setter!r} to impose its effort, but {current!r} already does '
-                f'(propagated from {self.origin[bond]!r}; new demand from {origin!r})',
-                elements=(setter, current, origin, self.origin[bond]),
-                bonds=(bond,),
+                f'{setter!r} to impose its effort, but {current!r} already does; causal '
+                f'path: {text}',
+                elements=(setter, current, origin, *elements),
+                bonds=(bond, *bonds),
             )
         self.setter[bond] = setter
         self.origin[bond] = origin
+        self.why[bond] = why
+        self.via[bond] = via
+        self.trigger[bond] = trigger
         b = self.graph.bonds[bond]
         self.pending.extend((b.tail, b.head))
 
@@ -127,7 +162,7 @@ class _Assigner:
             self.check(self.graph.elements[self.pending.popleft()])
 
     def start(self, bond: str, setter: str, origin: str, why: str) -> None:
-        self.force(bond, setter, origin, why)
+        self.force(bond, setter, origin, origin, why)
         self.propagate()
 
     # -- element rules --------------------------------------------------------------------
@@ -142,28 +177,32 @@ class _Assigner:
             if setter is None:
                 return
             origin = self.origin[bond]
+            text, path_elements, path_bonds = self.path(bond)
             if kind is Kind.SE and setter != name:
                 raise CausalConflictError(
                     f'Se {name!r} must impose the effort on bond {bond!r}, but '
-                    f'{setter!r} does (propagated from {origin!r})',
-                    elements=(name, setter, origin),
-                    bonds=(bond,),
+                    f'{setter!r} does; causal path: {text}',
+                    elements=(name, setter, *path_elements),
+                    bonds=tuple(path_bonds),
                 )
             if kind is Kind.SF and setter == name:
                 raise CausalConflictError(
                     f'Sf {name!r} must impose the flow on bond {bond!r}, but the graph '
-                    f'forces it to impose the effort (propagated from {origin!r})',
-                    elements=(name, origin),
-                    bonds=(bond,),
+                    f'forces it to impose the effort; causal path: {text}',
+                    elements=(name, *path_elements),
+                    bonds=tuple(path_bonds),
                 )
             if (kind is Kind.I and setter == name) or (kind is Kind.C and setter != name):
                 raise DerivativeCausalityError(
                     f'{kind.value} {name!r} is forced into derivative causality on bond '
-                    f'{bond!r} by the causality propagated from {origin!r}: the storage is '
-                    f'dependent; merge it with the storage it depends on',
+                    f'{bond!r} by the causality propagated from {origin!r} (causal path: '
+                    f'{text}): the storage is dependent; merge it with the storage it '
+                    f'depends on',
                     element=name,
                     bond=bond,
                     forced_by=origin,
+                    path_elements=path_elements,
+                    path_bonds=path_bonds,
                 )
             if kind is Kind.R:
                 self.set_r_mode(element, RESISTANCE if setter == name else CONDUCTANCE)
@@ -193,7 +232,9 @@ class _Assigner:
                     not element_sets_known if kind is Kind.TF else element_sets_known
                 )
                 target = name if element_sets_other else graph.bonds[other].other(name)
-                self.force(other, target, self.origin[known], f'{kind.value} {name!r}')
+                self.force(
+                    other, target, self.origin[known], name, f'{kind.value} {name!r}', known
+                )
             return
         self.check_junction(element)
 
@@ -225,13 +266,14 @@ class _Assigner:
             for bond in free:
                 # Non-special bonds: 0-junction imposes their effort, 1-junction gets it.
                 setter = name if zero else graph.bonds[bond].other(name)
-                self.force(bond, setter, origin, label)
+                self.force(bond, setter, origin, name, label, special[0])
             return
         if len(free) == 1:
             bond = free[0]
             setter = graph.bonds[bond].other(name) if zero else name
             origins = [self.origin[b] for b in known]
-            self.force(bond, setter, origins[-1] if origins else name, label)
+            trigger = known[-1] if known else None
+            self.force(bond, setter, origins[-1] if origins else name, name, label, trigger)
             return
         if not free:
             what = 'effort' if zero else 'flow'

@@ -81,10 +81,21 @@ class DerivativeCausalityError(CausalityError):
         element: the storage element forced into derivative causality.
         bond: its bond.
         forced_by: the element whose causal assignment propagated to it.
+        elements / bonds: every element and bond on the causal path between them.
     """
 
-    def __init__(self, message: str, element: str, bond: str, forced_by: str):
-        super().__init__(message, elements=(element, forced_by), bonds=(bond,))
+    def __init__(
+        self,
+        message: str,
+        element: str,
+        bond: str,
+        forced_by: str,
+        path_elements: Sequence[str] = (),
+        path_bonds: Sequence[str] = (),
+    ):
+        elements = dict.fromkeys((element, *path_elements, forced_by))
+        bonds = dict.fromkeys((bond, *path_bonds))
+        super().__init__(message, elements=tuple(elements), bonds=tuple(bonds))
         self.element = element
         self.bond = bond
         self.forced_by = forced_by
