@@ -104,7 +104,8 @@ class _Decompressors:
         if name == '':
             return lambda data, _size: bytes(data)
         if name == 'zstd':
-            return lambda data, size: bytes(self._zstd.decompress(data, max_output_size=size))
+            # Streaming: never trust a (possibly damaged) frame content size to allocate.
+            return lambda data, _size: bytes(self._zstd.decompressobj().decompress(data))
         if name == 'lz4':
             return lambda data, _size: bytes(lz4.frame.decompress(bytes(data)))
         return None
@@ -206,7 +207,8 @@ class _FileScan:
                 self._data_end(pos, body)
                 return
             elif op == fmt.Op.FOOTER:
-                self.reached_end = True
+                # A valid file always closes its data section with a data end record first.
+                self._damage(pos, 'footer before the data end record')
                 return
             pos = end
 
