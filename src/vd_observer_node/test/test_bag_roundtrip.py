@@ -196,9 +196,7 @@ def test_definitions_embed_dependencies() -> None:
 
 
 def test_qos_profiles_are_kept(tmp_path: Path) -> None:
-    qos = (
-        '- history: keep_last\n  depth: 10\n  reliability: reliable\n  durability: volatile\n'
-    )
+    qos = '- history: keep_last\n  depth: 10\n  reliability: reliable\n  durability: volatile\n'
     with BagWriter(tmp_path / 'q') as writer:
         writer.add_topic('/vd/sensors/wheel_angles', 'vd_msgs/msg/WheelAngles', qos)
     info = yaml.safe_load((tmp_path / 'q' / 'metadata.yaml').read_text())
