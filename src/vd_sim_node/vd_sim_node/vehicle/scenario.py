@@ -1,0 +1,232 @@
+"""Driving scenarios: piecewise-constant driver and road inputs over time, sensor settings.
+
+A scenario file (``config/scenarios/*.yaml``)::
+
+    name: paper_table1
+    duration: 150.0              # [s]
+    initial_gear: 1              # optional, default 1
+    hold_brake: true             # optional: automatic brake hold at standstill, throttle 0
+    signals:                     # each a list of [t_start, value], first t_start = 0
+      throttle: [[0, 0.0], [8, 1.0], [100, 0.0]]   # [0..1]
+      brake: [[0, 0.0]]                             # [0..1] pedal
+      slope_deg: [[0, 0], [10, 5]]                  # [deg] positive uphill (or slope: [rad])
+      road_mu: [[0, 1.0]]                           # [-] road friction scale
+    sensors:                     # optional, defaults shown
+      rate_hz: 1000.0
+      seed: 0
+      encoder_counts_per_rev: 0  # 0 = ideal wheel angle, N > 0 = quantised encoder
+      speed_noise_std: 0.0       # [m/s] Gaussian noise on the body speed, 0 = ideal
+      torque_noise_std: 0.0      # [N m] Gaussian noise on the wheel torques, 0 = ideal
+
+Each signal is right-continuous: the value given at ``t_start`` holds from ``t_start``
+(inclusive) to the next breakpoint. Missing signals default to throttle 0, brake 0, slope 0,
+road_mu 1.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vd_sim_node.errors import ScenarioError
+from vd_sim_node.vehicle._yaml_reader import MappingReader, load_yaml_mapping
+
+__all__ = [
+    'PiecewiseConstant',
+    'Scenario',
+    'SensorSettings',
+    'load_scenario',
+    'parse_scenario',
+]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class PiecewiseConstant:
+    """A right-continuous piecewise-constant signal of time.
+
+    Attributes:
+        times: breakpoints, shape (k,), [s], strictly increasing, ``times[0] == 0``.
+        values: value from each breakpoint on, shape (k,).
+    """
+
+    times: tuple[float, ...]
+    values: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        """Check the breakpoints."""
+        if len(self.times) != len(self.values) or not self.times:
+            raise ScenarioError('a signal needs as many values as breakpoints, at least one')
+        if self.times[0] != 0.0:
+            raise ScenarioError(f'a signal must start at t = 0, got {self.times[0]}')
+        if any(b <= a for a, b in zip(self.times, self.times[1:], strict=False)):
+            raise ScenarioError(f'signal breakpoints must increase strictly: {self.times}')
+
+    @classmethod
+    def constant(cls, value: float) -> PiecewiseConstant:
+        """A signal that keeps ``value`` for all time."""
+        return cls((0.0,), (float(value),))
+
+    def at(self, t: float) -> float:
+        """Value at time ``t`` [s] (the first value before 0)."""
+        i = int(np.searchsorted(self.times, t, side='right')) - 1
+        return self.values[max(i, 0)]
+
+    def sample(self, t: FloatArray) -> FloatArray:
+        """Values at times ``t``, any shape, [s]."""
+        idx = np.clip(np.searchsorted(self.times, t, side='right') - 1, 0, None)
+        out: FloatArray = np.asarray(self.values, dtype=float)[idx]
+        return out
+
+
+@dataclass(frozen=True)
+class SensorSettings:
+    """What the simulated sensors deliver.
+
+    Attributes:
+        rate_hz: sample rate of all sensors, [Hz].
+        seed: seed of the noise generator.
+        encoder_counts_per_rev: 0 for the exact wheel angle, N > 0 for a quantised encoder.
+        speed_noise_std: standard deviation of the body-speed noise, [m/s].
+        torque_noise_std: standard deviation of the wheel-torque noise, [N m].
+    """
+
+    rate_hz: float = 1000.0
+    seed: int = 0
+    encoder_counts_per_rev: int = 0
+    speed_noise_std: float = 0.0
+    torque_noise_std: float = 0.0
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Inputs of one simulation run.
+
+    Attributes:
+        name: scenario name.
+        duration: simulated time, [s].
+        throttle: accelerator position, [0..1].
+        brake: brake pedal, [0..1] (fraction of the per-wheel brake capacity).
+        slope: road slope alpha, [rad], positive uphill.
+        road_mu: road friction scale, [-] (1 = dry asphalt, the tyre's own peak).
+        initial_gear: gear at t = 0.
+        hold_brake: apply the hold brake automatically at standstill with throttle 0.
+        sensors: sensor settings.
+        description: free text.
+    """
+
+    name: str
+    duration: float
+    throttle: PiecewiseConstant = field(default_factory=lambda: PiecewiseConstant.constant(0))
+    brake: PiecewiseConstant = field(default_factory=lambda: PiecewiseConstant.constant(0))
+    slope: PiecewiseConstant = field(default_factory=lambda: PiecewiseConstant.constant(0))
+    road_mu: PiecewiseConstant = field(default_factory=lambda: PiecewiseConstant.constant(1))
+    initial_gear: int = 1
+    hold_brake: bool = True
+    sensors: SensorSettings = field(default_factory=SensorSettings)
+    description: str = ''
+
+    def breakpoints(self) -> tuple[float, ...]:
+        """All input discontinuities inside (0, duration), sorted, [s]."""
+        ts = set()
+        for sig in (self.throttle, self.brake, self.slope, self.road_mu):
+            ts.update(t for t in sig.times if 0.0 < t < self.duration)
+        return tuple(sorted(ts))
+
+
+def _signal(
+    r: MappingReader, key: str, default: float, lo: float, hi: float, scale: float = 1.0
+) -> PiecewiseConstant:
+    if not r.has(key):
+        return PiecewiseConstant.constant(default)
+    raw: Any = r.raw(key)
+    name = f'signals.{key}'
+    if not isinstance(raw, list) or not raw:
+        raise ScenarioError(f'{name} must be a non-empty list of [t_start, value] pairs')
+    times: list[float] = []
+    values: list[float] = []
+    for i, pair in enumerate(raw):
+        if (
+            not isinstance(pair, list)
+            or len(pair) != 2
+            or any(isinstance(x, bool) or not isinstance(x, int | float) for x in pair)
+        ):
+            raise ScenarioError(f'{name}[{i}] must be a [t_start, value] pair, got {pair!r}')
+        t, v = float(pair[0]), float(pair[1])
+        if not (math.isfinite(t) and math.isfinite(v)):
+            raise ScenarioError(f'{name}[{i}] must be finite, got {pair!r}')
+        if not lo <= v <= hi:
+            raise ScenarioError(f'{name}[{i}] value must be in [{lo:g}, {hi:g}], got {v:g}')
+        times.append(t)
+        values.append(v * scale)
+    if times[0] != 0.0:
+        raise ScenarioError(f'{name} must start at t = 0, got {times[0]:g}')
+    for i in range(1, len(times)):
+        if times[i] <= times[i - 1]:
+            raise ScenarioError(f'{name}: breakpoint times must increase strictly: {times}')
+    return PiecewiseConstant(tuple(times), tuple(values))
+
+
+def parse_scenario(data: object, default_name: str = 'scenario') -> Scenario:
+    """Build a :class:`Scenario` from a parsed YAML document.
+
+    Args:
+        data: the top-level mapping.
+        default_name: name used when the document has none.
+
+    Returns:
+        The validated scenario.
+
+    Raises:
+        ScenarioError: naming the first missing or invalid entry.
+    """
+    r = MappingReader(data, '', ScenarioError)
+    duration = r.number('duration', 's', gt=0.0)
+    sig = r.optional_section('signals') or MappingReader({}, 'signals', ScenarioError)
+    if sig.has('slope') and sig.has('slope_deg'):
+        raise ScenarioError('signals: give either slope [rad] or slope_deg [deg], not both')
+    if sig.has('slope_deg'):
+        slope = _signal(sig, 'slope_deg', 0.0, -45.0, 45.0, math.pi / 180.0)
+    else:
+        slope = _signal(sig, 'slope', 0.0, -math.pi / 4, math.pi / 4)
+    sens = r.optional_section('sensors') or MappingReader({}, 'sensors', ScenarioError)
+    sensors = SensorSettings(
+        rate_hz=sens.number('rate_hz', 'Hz', gt=0.0, default=1000.0),
+        seed=sens.integer('seed', ge=0, default=0),
+        encoder_counts_per_rev=sens.integer('encoder_counts_per_rev', ge=0, default=0),
+        speed_noise_std=sens.number('speed_noise_std', 'm/s', ge=0.0, default=0.0),
+        torque_noise_std=sens.number('torque_noise_std', 'N m', ge=0.0, default=0.0),
+    )
+    return Scenario(
+        name=r.string('name', default=default_name),
+        duration=duration,
+        throttle=_signal(sig, 'throttle', 0.0, 0.0, 1.0),
+        brake=_signal(sig, 'brake', 0.0, 0.0, 1.0),
+        slope=slope,
+        road_mu=_signal(sig, 'road_mu', 1.0, 0.0, 2.0),
+        initial_gear=r.integer('initial_gear', ge=1, default=1),
+        hold_brake=r.boolean('hold_brake', default=True),
+        sensors=sensors,
+        description=r.string('description', default=''),
+    )
+
+
+def load_scenario(path: str | Path) -> Scenario:
+    """Load and validate a scenario file.
+
+    Args:
+        path: YAML file, e.g. ``src/vd_sim_node/config/scenarios/paper_table1.yaml``.
+
+    Returns:
+        The validated scenario.
+
+    Raises:
+        ScenarioError: the file cannot be read or an entry is missing/invalid.
+    """
+    return parse_scenario(load_yaml_mapping(path, ScenarioError), Path(path).stem)
