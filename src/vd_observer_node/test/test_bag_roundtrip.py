@@ -81,7 +81,7 @@ def assert_same(ours: Any, other: Any, where: str = 'msg') -> None:
             if name == '__msgtype__' or name.isupper():
                 continue  # constants are not decoded by every reader
             assert_same(getattr(ours, name), getattr(other, name), f'{where}.{name}')
-    elif isinstance(ours, (list, tuple)) or isinstance(ours, np.ndarray):
+    elif isinstance(ours, (list, tuple, np.ndarray)):
         assert len(ours) == len(other), where
         for k, (a, b) in enumerate(zip(ours, other, strict=True)):
             assert_same(a, b, f'{where}[{k}]')
@@ -203,3 +203,26 @@ def test_qos_profiles_are_kept(tmp_path: Path) -> None:
     meta = info['rosbag2_bagfile_information']['topics_with_message_count'][0]['topic_metadata']
     assert meta['offered_qos_profiles'][0]['depth'] == 10
     assert BagReader(tmp_path / 'q').topics['/vd/sensors/wheel_angles'].qos_profiles_yaml == qos
+
+
+def test_topic_filter_time_range_and_order(tmp_path: Path) -> None:
+    rng = np.random.default_rng(5)
+    times = rng.permutation(100) * 1000  # written out of time order
+    with BagWriter(tmp_path / 'o', chunk_size=512) as writer:
+        writer.add_topic('/a', 'std_msgs/msg/Float64')
+        writer.add_topic('/b', 'std_msgs/msg/Float64')
+        for k, t in enumerate(times.tolist()):
+            msg = message_class('std_msgs/msg/Float64')(data=float(k))
+            writer.write('/a' if k % 2 else '/b', serialize(msg), t)
+    reader = BagReader(tmp_path / 'o')
+    in_file_order = [m.log_time_ns for m in reader.raw_messages()]
+    assert in_file_order == times.tolist()
+    ordered = [m.log_time_ns for m in reader.raw_messages(ordered=True)]
+    assert ordered == sorted(times.tolist())
+    window = list(reader.messages(['/a'], start_ns=20_000, stop_ns=60_000, ordered=True))
+    expected = sorted(int(t) for k, t in enumerate(times) if k % 2 and 20_000 <= t < 60_000)
+    assert [log for _, _, log, _ in window] == expected
+    assert {topic for topic, _, _, _ in window} == {'/a'}
+    for _, msgtype, log, msg in window:
+        assert msgtype == 'std_msgs/msg/Float64'
+        assert times[int(msg.data)] == log

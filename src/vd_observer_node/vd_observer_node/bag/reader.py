@@ -408,6 +408,7 @@ class BagReader:
         *,
         start_ns: int | None = None,
         stop_ns: int | None = None,
+        ordered: bool = False,
     ) -> Iterator[RawMessage]:
         """Iterate stored messages, optionally only some topics and log times [start, stop).
 
@@ -415,11 +416,18 @@ class BagReader:
             topics: topic names to keep; None keeps all.
             start_ns: first log time [ns] to keep (inclusive).
             stop_ns: log time [ns] to stop before (exclusive).
+            ordered: strictly by log time (stable). This holds the selection in memory
+                before the first message; without it messages come in file order.
 
         Raises:
             BagCorruptError: damage found (strict mode), after the messages before it.
             BagFormatError: a file is not MCAP.
         """
+        if ordered:
+            selection = list(self.raw_messages(topics, start_ns=start_ns, stop_ns=stop_ns))
+            selection.sort(key=lambda m: m.log_time_ns)
+            yield from selection
+            return
         selected = None if topics is None else set(topics)
         self.problems.clear()
         for scan in self._scans():
@@ -435,13 +443,15 @@ class BagReader:
         *,
         start_ns: int | None = None,
         stop_ns: int | None = None,
+        ordered: bool = False,
     ) -> Iterator[tuple[str, str, int, Any]]:
         """Iterate decoded messages: (topic, msgtype, log_time_ns, rosbags message object).
 
         Types unknown to the vd typestore are registered from the bag's embedded definitions.
         """
         registered: set[str] = set()
-        for msg in self.raw_messages(topics, start_ns=start_ns, stop_ns=stop_ns):
+        selection = self.raw_messages(topics, start_ns=start_ns, stop_ns=stop_ns, ordered=ordered)
+        for msg in selection:
             if msg.msgtype not in registered:
                 self._register(msg.msgtype)
                 registered.add(msg.msgtype)

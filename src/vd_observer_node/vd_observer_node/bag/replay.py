@@ -29,7 +29,7 @@ from ..estimator import EstimatorConfig
 from ..observer import ObserverConfig
 from ..vehicle import EstimatorVehicle, load_estimator_vehicle
 from .cdr_batch import decode_batch, encode_batch
-from .errors import BagNotFoundError, ReplayInputError
+from .errors import BagExistsError, BagNotFoundError, ReplayInputError
 from .reader import BagReader, TopicArrays
 from .writer import BagWriter
 
@@ -176,6 +176,10 @@ def replay_bag(
         BagError: reading or writing failed (see .errors).
     """
     started = time.perf_counter()
+    target = Path(out_bag)
+    if target.exists() and (not target.is_dir() or any(target.iterdir())):
+        # Fail before minutes of work, not when the output is finally written.
+        raise BagExistsError(f'{target}: already exists (choose a new bag name)')
     reader = BagReader(in_bag)
     topics = reader.topics
     for name, msgtype in SENSOR_TOPICS.items():

@@ -1,0 +1,83 @@
+"""The ``vd`` command: bag info, bag repair, replay, and one-line errors with exit status 2."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from vd_observer_node.bag import BagReader
+from vd_observer_node.bag.synthetic import write_synthetic_drive_bag
+from vd_observer_node.cli import main
+
+
+@pytest.fixture
+def drive_bag(tmp_path: Path) -> Path:
+    write_synthetic_drive_bag(tmp_path / 'drive', duration_s=1.0, rate_hz=100.0)
+    return tmp_path / 'drive'
+
+
+def test_bag_info(drive_bag: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(['bag', 'info', str(drive_bag)]) == 0
+    out = capsys.readouterr().out
+    assert 'Messages:  500' in out
+    assert '/vd/sensors/wheel_angles' in out and 'vd_msgs/msg/WheelAngles' in out
+    assert 'Duration:  0.990 s' in out
+
+
+def test_corrupt_bag_one_line_error_then_repair(
+    drive_bag: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    mcap = drive_bag / 'drive_0.mcap'
+    mcap.write_bytes(mcap.read_bytes()[: mcap.stat().st_size // 2])
+    assert main(['bag', 'info', str(drive_bag)]) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and err.startswith('vd: error: ')
+    assert 'drive_0.mcap' in err and 'vd bag repair' in err
+    assert main(['bag', 'info', '--recover', str(drive_bag)]) == 0
+    assert 'Damage:' in capsys.readouterr().out
+    assert main(['bag', 'repair', str(drive_bag)]) == 0
+    out = capsys.readouterr().out
+    assert 'recovered' in out and 'original kept as' in out
+    assert main(['bag', 'info', str(drive_bag)]) == 0
+
+
+def test_replay(drive_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out_bag = tmp_path / 'est'
+    assert main(['replay', '--no-progress', str(drive_bag), str(out_bag)]) == 0
+    assert 'replayed 100 samples' in capsys.readouterr().out
+    assert BagReader(out_bag).topics['/vd/estimates/tire_forces'].message_count == 100
+
+
+@pytest.mark.parametrize(
+    'argv',
+    [
+        ['bag', 'info', '/nonexistent/bag'],
+        ['bag', 'repair', '/nonexistent/bag'],
+        ['replay', '/nonexistent/in', '/tmp/vd-never-written'],
+    ],
+)
+def test_bad_paths_exit_2_without_traceback(
+    argv: list[str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith('vd: error: ') and 'Traceback' not in err
+    assert err.count('\n') == 1
+
+
+def test_existing_output_and_bad_vehicle(
+    drive_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(['replay', '--no-progress', str(drive_bag), str(drive_bag)]) == 2
+    assert 'already exists' in capsys.readouterr().err
+    bad = tmp_path / 'vehicle.yaml'
+    bad.write_text('chassis: {mass: -1}\n')
+    argv = ['replay', '--no-progress', '--vehicle', str(bad), str(drive_bag), str(tmp_path / 'o')]
+    assert main(argv) == 2
+    assert capsys.readouterr().err.startswith('vd: error: ')
+
+
+def test_usage_error_exits_2(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(['bag'])
+    assert exc.value.code == 2

@@ -1,0 +1,133 @@
+"""The ``vd`` command: bag inspection, repair and offline replay (ROS-free).
+
+    vd bag info BAG [--recover]
+    vd bag repair BAG [--no-backup]
+    vd replay IN_BAG OUT_BAG [--vehicle FILE] [--no-progress]
+
+Errors (missing paths, corrupt bags, bad vehicle files) print one line on stderr and exit
+with status 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from vd_observer_node.errors import ObserverError
+
+__all__ = ['main']
+
+EXIT_OK = 0
+EXIT_ERROR = 2
+
+
+def _format_ns(ns: int) -> str:
+    return f'{ns * 1e-9:.3f} s'
+
+
+def _info(args: argparse.Namespace) -> int:
+    from vd_observer_node.bag.reader import BagReader
+
+    reader = BagReader(args.bag, recover=args.recover)
+    counts: dict[str, int] = {}
+    first: int | None = None
+    last = 0
+    for msg in reader.raw_messages():
+        counts[msg.topic] = counts.get(msg.topic, 0) + 1
+        first = msg.log_time_ns if first is None else min(first, msg.log_time_ns)
+        last = max(last, msg.log_time_ns)
+    topics = reader.topics
+    print(f'Bag:       {reader.path}')
+    print(f'Files:     {", ".join(str(f.name) for f in reader.files)}')
+    print('Storage:   mcap (rosbag2 metadata version 9)')
+    print(f'Messages:  {sum(counts.values())}')
+    if first is not None:
+        print(f'Start:     {_format_ns(first)}')
+        print(f'Duration:  {_format_ns(last - first)}')
+    print('Topics:')
+    width = max((len(name) for name in topics), default=0)
+    for name, info in sorted(topics.items()):
+        print(f'  {name:<{width}}  {counts.get(name, 0):>9}  {info.msgtype}')
+    for problem in reader.problems:
+        print(f'Damage:    {problem}')
+    if reader.problems:
+        print(f'Run `vd bag repair {args.bag}` to rebuild a readable bag.')
+    return EXIT_OK
+
+
+def _repair(args: argparse.Namespace) -> int:
+    from vd_observer_node.bag.repair import repair_bag
+
+    report = repair_bag(args.bag, keep_backup=not args.no_backup)
+    for problem in report.problems:
+        print(f'damage: {problem}')
+    print(f'recovered {report.messages_recovered} messages into {report.mcap_file}')
+    for topic, count in sorted(report.topic_counts.items()):
+        print(f'  {topic}: {count}')
+    if report.backup is not None:
+        print(f'original kept as {report.backup}')
+    return EXIT_OK
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from vd_observer_node.bag.replay import replay_bag
+    from vd_observer_node.vehicle import load_estimator_vehicle
+
+    vehicle = load_estimator_vehicle(args.vehicle) if args.vehicle else None
+    report = replay_bag(args.in_bag, args.out_bag, vehicle=vehicle, progress=not args.no_progress)
+    print(
+        f'replayed {report.samples} samples ({report.sensor_messages} sensor messages, '
+        f'{report.unmatched} unmatched) of {report.bag_duration_s:.1f} s in '
+        f'{report.wall_time_s:.2f} s: {report.real_time_factor:.0f}x real time, '
+        f'{report.samples_per_second:.0f} sensor messages/s; wrote {report.messages_written} '
+        f'messages to {args.out_bag}'
+    )
+    return EXIT_OK
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog='vd', description='vd vehicle-dynamics tools')
+    commands = parser.add_subparsers(dest='command', required=True)
+    bag = commands.add_parser('bag', help='inspect or repair rosbag2 MCAP bags')
+    bag_commands = bag.add_subparsers(dest='bag_command', required=True)
+    info = bag_commands.add_parser('info', help='topics, counts and time span of a bag')
+    info.add_argument('bag', type=Path, help='bag folder or .mcap file')
+    info.add_argument('--recover', action='store_true', help='report damage and read on')
+    info.set_defaults(run=_info)
+    repair = bag_commands.add_parser('repair', help='rebuild summary and metadata.yaml')
+    repair.add_argument('bag', type=Path, help='bag folder or .mcap file')
+    repair.add_argument('--no-backup', action='store_true', help='delete the damaged file')
+    repair.set_defaults(run=_repair)
+    replay = commands.add_parser('replay', help='run the estimator cascade over a bag offline')
+    replay.add_argument('in_bag', type=Path, help='input bag with the /vd/sensors/* topics')
+    replay.add_argument('out_bag', type=Path, help='output bag folder to create')
+    replay.add_argument('--vehicle', type=Path, help='vehicle YAML (default: the Clio file)')
+    replay.add_argument('--no-progress', action='store_true', help='no progress bar')
+    replay.set_defaults(run=_replay)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the ``vd`` command; returns the exit status (0 ok, 2 error)."""
+    args = _parser().parse_args(argv)
+    try:
+        status: int = args.run(args)
+    except ObserverError as exc:  # every bag, vehicle and configuration error
+        hint = ''
+        if type(exc).__name__ == 'BagCorruptError':
+            hint = ' (see `vd bag info --recover`, fix with `vd bag repair`)'
+        print(f'vd: error: {exc}{hint}', file=sys.stderr)
+        return EXIT_ERROR
+    except OSError as exc:  # e.g. an unreadable vehicle file
+        print(f'vd: error: {exc}', file=sys.stderr)
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        print('vd: interrupted', file=sys.stderr)
+        return 130
+    return status
+
+
+if __name__ == '__main__':
+    sys.exit(main())
