@@ -47,9 +47,17 @@ class _Emitter:
         self.system = system
         self.graph = graph
         self.aliases: dict[str, str] = {}
+        # Constants (constant sources, empty junction sums) are substituted as literals so
+        # the hot path does not spend a statement on them.
+        self.literals: set[int] = set()
         for statement in system.statements:
             if statement.is_alias:
                 self.aliases[statement.targets[0]] = statement.args[0]
+            elif not statement.args and len(statement.targets) == 1:
+                # The template is a literal we wrote ourselves (repr of a float or its negation).
+                value = float(eval(statement.template, {}))
+                self.aliases[statement.targets[0]] = f'({value!r})' if value < 0 else repr(value)
+                self.literals.add(id(statement))
 
     def resolve(self, symbol: str) -> str:
         seen = 0
@@ -63,7 +71,7 @@ class _Emitter:
     def body(self, ordered: list[Statement]) -> list[str]:
         lines: list[str] = []
         for statement in ordered:
-            if statement.is_alias:
+            if statement.is_alias or id(statement) in self.literals:
                 continue
             expr = statement.template.format(*[self.resolve(a) for a in statement.args])
             targets = ', '.join(statement.targets)
