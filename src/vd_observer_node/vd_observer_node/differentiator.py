@@ -167,19 +167,27 @@ def implicit_step(
 ) -> FloatArray:
     """One implicit step of the non-recursive differentiator, solved exactly.
 
-    The state is propagated with the exact transition of the chain of integrators (the
-    Taylor terms of Livne & Levant 2014) and the output injections are evaluated at the
-    NEW error e = z0_{k+1} - f_{k+1} with the set-valued sign (implicit discretization,
-    Mojallizadeh, Brogliato, Acary 2021; Carvajal-Rubio et al. 2021):
+    The state is propagated with the exact transition Phi(tau) of the chain of integrators
+    (the Taylor terms of Livne & Levant 2014) and the output injections are evaluated at the
+    NEW error e = z0_{k+1} - f_{k+1}, with the set-valued sign (implicit discretization of
+    Mojallizadeh, Brogliato, Acary 2021; Brogliato, Polyakov, Efimov 2020):
 
-        z2+ = z2 - tau*k2*L*s,                               s in Sign(e)
-        z1+ = z1 + tau*z2+ - tau*k1*L^(2/3)*|e|^(1/3) sign(e)
-        z0+ = z0 + tau*z1+ - tau^2/2*z2+ - tau*k0*L^(1/3)*|e|^(2/3) sign(e)
+        z2+ = z2 - tau*k2*L*s,                                              s in Sign(e)
+        z1+ = z1 + tau*z2 - 1.5*tau^2*k2*L*s - tau*k1*L^(2/3)*|e|^(1/3) sign(e)
+        z0+ = f_{k+1} + e
 
-    Writing w = z0 + tau*z1 + tau^2/2*z2 - f_{k+1} (error of the open-loop Taylor prediction)
-    and |e| = tau^3*L*y^3, this is e + tau^3*L*(k0*y^2 + k1*y + (k2/2)*s) = w: if
-    |w| <= (k2/2)*tau^3*L then e = 0 and s = w/((k2/2)*tau^3*L), else y > 0 solves a cubic.
-    A signal with constant f'' is then reproduced exactly (zero error) once converged.
+    with the scalar equation for e, writing w = z0 + tau*z1 + tau^2/2*z2 - f_{k+1} (error
+    of the open-loop Taylor prediction) and |e| = tau^3*L*y^3:
+
+        e + tau^3*L*(k0*y^2 + k1*y + k2*s) = w.
+
+    If |w| <= k2*tau^3*L then e = 0 and s = w/(k2*tau^3*L) in [-1, 1]; else y > 0 is the
+    unique positive root of a cubic. The weights (tau^3, 1.5*tau^2, tau) with which the sign
+    term enters (z0, z1, z2) are this module's choice: they make the linear dynamics inside
+    the band dead-beat (both remaining error eigenvalues 0), so a signal with constant f''
+    is reproduced exactly two steps after the error enters the band, with no chattering.
+    (Injecting Phi(tau) times the continuous-time vector, (tau^3/2, tau^2, tau), leaves an
+    undamped period-2 oscillation in the band instead.)
 
     Args:
         z: shape (3, n), state at t_k.
@@ -192,18 +200,17 @@ def implicit_step(
         shape (3, n), state at t_{k+1} (the estimate for stamp t_{k+1}).
     """
     k0, k1, k2 = gains.nonrecursive()
-    half_k2 = 0.5 * k2
     lip = np.asarray(lipschitz, dtype=np.float64)
     target = np.asarray(f_next, dtype=np.float64)
     scale = tau**3 * lip
     w = z[0] + tau * z[1] + 0.5 * tau**2 * z[2] - target
     s = np.sign(w)
-    excess = np.maximum(np.abs(w) / scale - half_k2, 0.0)
+    excess = np.maximum(np.abs(w) / scale - k2, 0.0)
     y = _positive_cubic_root(k0, k1, excess)
     # Inside the band the multivalued sign takes the value that zeroes the error exactly.
-    sign_value = np.where(excess > 0.0, s, w / (scale * half_k2))
+    sign_value = np.where(excess > 0.0, s, w / (scale * k2))
     z2 = z[2] - tau * k2 * lip * sign_value
-    z1 = z[1] + tau * z2 - s * k1 * tau**2 * lip * y
+    z1 = z[1] + tau * z[2] - 1.5 * tau**2 * k2 * lip * sign_value - s * k1 * tau**2 * lip * y
     z0 = target + s * scale * y**3
     return np.stack(np.broadcast_arrays(z0, z1, z2))
 
