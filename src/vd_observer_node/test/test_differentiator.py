@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-
 from vd_observer_node.differentiator import (
     DEFAULT_GAINS,
     DISCRETIZATIONS,
