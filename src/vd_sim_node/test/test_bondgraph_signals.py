@@ -219,6 +219,8 @@ def test_model_helpers_validate_names_and_shapes() -> None:
         model.input_vector({'nope': 1.0})
     with pytest.raises(ShapeError):
         model.rhs_batch(0.0, np.zeros(2))
+    with pytest.raises(ShapeError, match='1 inputs'):
+        model.bind([1.0, 2.0])
     assert 'def rhs(' in model.source_code
     assert model.output_names[-3:] == ('P.sources', 'P.dissipated', 'P.stored')
     assert model.stored_energy(np.array([2.0, 0.5])) == pytest.approx(4.0 / 4.0 + 0.25 / 0.2)

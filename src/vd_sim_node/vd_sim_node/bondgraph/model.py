@@ -93,6 +93,11 @@ class CompiledModel:
         """``f(t, x)`` with the inputs frozen (for ``scipy.integrate.solve_ivp``)."""
         rhs = self._code.rhs
         frozen = np.asarray(u, dtype=float) if np.size(u) else self._defaults.copy()
+        if frozen.shape != (self.n_inputs,):
+            raise ShapeError(
+                f'{self.name!r} has {self.n_inputs} inputs {self.input_names}, got u of shape '
+                f'{frozen.shape}'
+            )
 
         def bound(t: float, x: FloatArray) -> FloatArray:
             return rhs(t, x, frozen)
