@@ -35,15 +35,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vd_sim_node.bondgraph import BondGraph, CompiledModel, compile_model
-from vd_sim_node.vehicle.params import VehicleParams
-from vd_sim_node.vehicle.powertrain import (
-    brake_torque,
-    clutch_torque,
-    combustion_torque,
-    engine_drag_torque,
+from vd_sim_node.vehicle.laws import (
+    make_aero_law,
+    make_brake_law,
+    make_clutch_law,
+    make_combustion_law,
+    make_engine_drag_law,
+    make_gravity_law,
+    make_rolling_law,
+    make_tire_law,
 )
-from vd_sim_node.vehicle.resistances import aero_drag, rolling_resistance
-from vd_sim_node.vehicle.tire import tire_force_from_slip_velocity
+from vd_sim_node.vehicle.params import VehicleParams
 
 __all__ = ['INPUTS', 'WHEELS', 'Geometry', 'VehicleModel', 'build_vehicle_graph']
 
@@ -130,9 +132,8 @@ def build_vehicle_graph(vp: VehicleParams) -> BondGraph:
     m = geo.m
     bg.add_one('x')
     bg.add_i('mass_x', m)
-    bg.add_se('grade', lambda t, a: -m * g * np.sin(a), signals=('slope',))
-    aero = vp.aero
-    bg.add_r('aero', law=lambda v: aero_drag(v, aero))
+    bg.add_se('grade', make_gravity_law(m * g, 'sin'), signals=('slope',))
+    bg.add_r('aero', law=make_aero_law(vp.aero))
     bg.connect('grade', 'x')
     bg.connect('x', 'mass_x')
     bg.connect('x', 'aero')
@@ -154,7 +155,7 @@ def build_vehicle_graph(vp: VehicleParams) -> BondGraph:
     m_s = geo.m_s
     bg.add_one('heave')
     bg.add_i('mass_sprung', m_s)
-    bg.add_se('weight_sprung', lambda t, a: -m_s * g * np.cos(a), signals=('slope',))
+    bg.add_se('weight_sprung', make_gravity_law(m_s * g, 'cos'), signals=('slope',))
     bg.connect('weight_sprung', 'heave')
     bg.connect('heave', 'mass_sprung')
     s = vp.suspension
@@ -178,7 +179,7 @@ def build_vehicle_graph(vp: VehicleParams) -> BondGraph:
         bg.add_i(f'mass_unsprung_{axle}', m_u)
         bg.add_se(
             f'weight_unsprung_{axle}',
-            (lambda mu_: lambda t, a: -mu_ * g * np.cos(a))(m_u),
+            make_gravity_law(m_u * g, 'cos'),
             signals=('slope',),
         )
         bg.connect(f'susp_{axle}', f'unsprung_{axle}')
@@ -195,16 +196,15 @@ def build_vehicle_graph(vp: VehicleParams) -> BondGraph:
         bg.add_block(
             f'fz_wheel_{axle}', lambda t, e: -0.5 * e, signals=(f'tyre_tension_{axle}',)
         )
-        rp = vp.rolling_resistance
         bg.add_r(
             f'rolling_{axle}',
-            law=lambda v, fz: rolling_resistance(v, 2.0 * fz, rp),
+            law=make_rolling_law(vp.rolling_resistance, 2.0),
             signals=(f'fz_wheel_{axle}',),
         )
         bg.connect('ground', f'rolling_{axle}')
 
     # --- wheels, tyres, brakes -------------------------------------------------------
-    tp = vp.tire
+    tire_law = make_tire_law(vp.tire)
     r_eff = w.effective_radius
     bk = vp.brakes
     for name in WHEELS:
@@ -218,7 +218,7 @@ def build_vehicle_graph(vp: VehicleParams) -> BondGraph:
         t_max = bk.max_torque_front if front else bk.max_torque_rear
         bg.add_r(
             f'brake_{name}',
-            law=(lambda tm: lambda om, pedal: brake_torque(om, pedal, tm, bk.lock_speed))(t_max),
+            law=make_brake_law(t_max, bk.lock_speed),
             signals=('brake',),
         )
         bg.connect(f'wheel_{name}', f'brake_{name}')
@@ -228,7 +228,7 @@ def build_vehicle_graph(vp: VehicleParams) -> BondGraph:
         bg.connect(f'radius_{name}', f'contact_{name}')
         bg.add_r(
             f'tyre_{name}',
-            law=lambda vs, vg, fz, mu: tire_force_from_slip_velocity(vs, vg, fz, mu, tp),
+            law=tire_law,
             signals=('v_ground', f'fz_wheel_{axle}', 'road_mu'),
         )
         bg.connect(f'contact_{name}', f'tyre_{name}')
@@ -249,21 +249,19 @@ def build_vehicle_graph(vp: VehicleParams) -> BondGraph:
     bg.connect('clutch', 'engine')
     bg.connect('engine', 'engine_inertia', name='crank')
     bg.add_flow_sensor('w_engine', 'crank')
-    ep = vp.engine
-    cp = vp.clutch
     bg.add_r(
         'clutch_friction',
-        law=lambda slip, mode, we: clutch_torque(slip, mode, we, cp),
+        law=make_clutch_law(vp.clutch),
         signals=('clutch_mode', 'w_engine'),
     )
     bg.connect('clutch', 'clutch_friction')
     bg.add_se(
         'combustion',
-        lambda t, thr, we: combustion_torque(thr, we, ep),
+        make_combustion_law(vp.engine),
         signals=('throttle', 'w_engine'),
     )
     bg.connect('combustion', 'engine')
-    bg.add_r('engine_drag', law=lambda we: engine_drag_torque(we, ep))
+    bg.add_r('engine_drag', law=make_engine_drag_law(vp.engine))
     bg.connect('engine', 'engine_drag')
     return bg
 
@@ -309,6 +307,10 @@ class VehicleModel:
         self.out_fx = np.array([oi[f'contact_{n}->tyre_{n}.e'] for n in WHEELS])
         self.out_brake = np.array([oi[f'wheel_{n}->brake_{n}.e'] for n in WHEELS])
         self.out_drive = np.array([oi['drive_FL.e'], oi['drive_FR.e']])
+        # The effort on the bond into an I element is its momentum derivative: omega_dot and
+        # the body acceleration come out of the same evaluation as every other output.
+        self.out_spin_rate = np.array([oi[f'wheel_{n}->spin_{n}.e'] for n in WHEELS])
+        self.out_momentum_rate_x = oi['x->mass_x.e']
         self.rhs: Callable[..., FloatArray] = self.compiled.rhs
 
     def input_vector(

@@ -269,14 +269,16 @@ class Simulator:
         names = self.model.compiled.state_names
         atol = np.empty(len(names))
         for k, name in enumerate(names):
+            # Chosen with scripts/check_integration_accuracy.py: tighter values cost RHS calls
+            # (the lightly damped body modes cross zero) without changing the wheel speeds.
             if name.endswith('.q') and name.startswith('angle_'):
-                atol[k] = 1e-6  # [rad]
+                atol[k] = 1e-4  # [rad]
             elif name.endswith('.q'):
-                atol[k] = 1e-9  # [m] spring / tyre deflections
+                atol[k] = 1e-7  # [m] spring / tyre deflections
             elif name.startswith('mass_x'):
-                atol[k] = 1e-5  # [kg m/s]
+                atol[k] = 1e-3  # [kg m/s]
             else:
-                atol[k] = 1e-7  # [kg m/s], [kg m^2/s]: vertical, pitch, spin, engine
+                atol[k] = 1e-5  # [kg m/s], [kg m^2/s]: vertical, pitch, spin, engine
         return atol
 
     def _scenario_events(self) -> list[tuple[float, str]]:
@@ -440,15 +442,14 @@ class Simulator:
         vp = m.params
         c = m.compiled
         out = c.output_vector(ts, X, u)
-        xdot = c.rhs_batch(ts, X, u)
         M = len(ts)
         mass = m.geometry.m
         r_eff = vp.wheel.effective_radius
         omega = (X[m.idx_p_spin] / m.inertia[:, None]).T
-        omega_dot = (xdot[m.idx_p_spin] / m.inertia[:, None]).T
+        omega_dot = (out[m.out_spin_rate] / m.inertia[:, None]).T
         angle = X[m.idx_angle].T.copy()
         v = X[m.idx_p_x] / mass
-        accel = xdot[m.idx_p_x] / mass
+        accel = out[m.out_momentum_rate_x] / mass
         fx = out[m.out_fx].T
         fz_f = out[m.out['fz_front']]
         fz_r = out[m.out['fz_rear']]
