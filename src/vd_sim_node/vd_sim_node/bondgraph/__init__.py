@@ -21,6 +21,7 @@ from .errors import (
 )
 from .graph import BondGraph
 from .model import CompiledModel, compile_model
+from .simplify import MergeResult, merge_rigid_inertias
 from .walker import GraphWalker
 
 __all__ = [
@@ -37,10 +38,12 @@ __all__ = [
     'GraphWalker',
     'InvalidConnectionError',
     'Kind',
+    'MergeResult',
     'MissingLawError',
     'ShapeError',
     'UnconnectedPortError',
     'UnknownNameError',
     'assign_causality',
     'compile_model',
+    'merge_rigid_inertias',
 ]
