@@ -206,6 +206,8 @@ def test_building_mistakes() -> None:
     with pytest.raises(ElementDefinitionError):
         bg.add_c('neither')
     with pytest.raises(ElementDefinitionError):
+        bg.add_one('two\nlines')  # names end up in generated-code comments
+    with pytest.raises(ElementDefinitionError):
         bg.add_se('const_with_signals', 1.0, signals=('u',))
     bg.add_one('j')
     bg.add_r('tyre', law=lambda f, mu: mu * f, signals=('mu_undeclared',))

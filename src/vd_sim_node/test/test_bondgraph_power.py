@@ -12,9 +12,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from vd_sim_node.bondgraph import BondGraph, GraphWalker, compile_model
+from vd_sim_node.bondgraph import BondGraph, DerivativeCausalityError, GraphWalker, compile_model
 
 POWER_RTOL = 1e-9
 
@@ -202,3 +203,27 @@ def test_power_balance_and_codegen_match_the_graph_walk(
     energies = model.stored_energy(X)
     for k in range(n_samples):
         assert energies[k] == np.float64(model.stored_energy(X[:, k]))
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(specs=junction_specs(), root_is_one=st.booleans(), data=st.data())
+def test_extra_storage_on_a_junction_is_reported_as_derivative_causality(
+    specs: list[JunctionSpec], root_is_one: bool, data: st.DataObject
+) -> None:
+    """A second I on a 1-junction (or C on a 0-junction) is always dependent storage."""
+    network = _build(specs, root_is_one)
+    bg = network.graph
+    k = data.draw(st.integers(0, len(specs) - 1))
+    junction = bg.elements[f'J{k}']
+    is_one = junction.kind.value == '1'
+    existing = f'{"I" if is_one else "C"}{k}'
+    (bg.add_i if is_one else bg.add_c)('extra', 1.0)
+    if data.draw(st.booleans()):
+        bg.connect(junction.name, 'extra')
+    else:
+        bg.connect('extra', junction.name)
+    with pytest.raises(DerivativeCausalityError) as info:
+        compile_model(bg)
+    assert info.value.element == 'extra'
+    assert info.value.forced_by == existing
+    assert junction.name in info.value.elements

@@ -46,8 +46,10 @@ class BondGraph:
     # -- namespace ------------------------------------------------------------------------
 
     def _claim(self, name: str) -> str:
-        if not isinstance(name, str) or not name:
-            raise ElementDefinitionError(f'names must be non-empty strings, got {name!r}')
+        if not isinstance(name, str) or not name or not name.isprintable():
+            raise ElementDefinitionError(
+                f'names must be non-empty printable strings, got {name!r}'
+            )
         if name in self.elements or name in self.bonds or self.is_signal(name):
             raise DuplicateNameError(f'name {name!r} is already used in bond graph {self.name!r}')
         return name
