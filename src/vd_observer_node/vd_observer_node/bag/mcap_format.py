@@ -144,9 +144,18 @@ def encode_chunk(
     return record(Op.CHUNK, body)
 
 
-def encode_message_index(channel_id: int, entries: list[tuple[int, int]]) -> bytes:
-    """Message index of one channel in the preceding chunk: (log_time_ns, offset_in_chunk)."""
-    packed = b''.join(_U64.pack(t) + _U64.pack(o) for t, o in entries)
+def encode_message_index(channel_id: int, entries: list[tuple[int, int]] | bytes) -> bytes:
+    """Message index of one channel in the preceding chunk.
+
+    Args:
+        channel_id: the channel.
+        entries: (log_time_ns, offset_in_chunk) pairs, or those already packed as
+            little-endian uint64 pairs.
+    """
+    if isinstance(entries, bytes):
+        packed = entries
+    else:
+        packed = b''.join(_U64.pack(t) + _U64.pack(o) for t, o in entries)
     return record(Op.MESSAGE_INDEX, _U16.pack(channel_id) + _U32.pack(len(packed)) + packed)
 
 

@@ -96,6 +96,30 @@ def find_mcap_files(path: Path) -> list[Path]:
     return files
 
 
+_MESSAGE_FIELDS = np.dtype(
+    [('channel', '<u2'), ('sequence', '<u4'), ('log', '<u8'), ('publish', '<u8')]
+)  # message record body after opcode and length, unaligned (22 bytes)
+
+
+@dataclass
+class _Batch:
+    """Messages of one chunk: channel ids, log and publish times [ns] (shape (N,)), data."""
+
+    channel: np.ndarray
+    log: np.ndarray
+    publish: np.ndarray
+    datas: list[bytes]
+
+    def tuples(self) -> Iterator[tuple[int, int, int, bytes]]:
+        return zip(
+            self.channel.tolist(),
+            self.log.tolist(),
+            self.publish.tolist(),
+            self.datas,
+            strict=True,
+        )
+
+
 class _Decompressors:
     def __init__(self) -> None:
         self._zstd = zstandard.ZstdDecompressor()
@@ -167,6 +191,17 @@ class _FileScan:
         start_ns: int | None,
         stop_ns: int | None,
     ) -> Iterator[tuple[int, int, int, bytes]]:
+        """Selected messages as (channel id, log ns, publish ns, data), in file order."""
+        for batch in self.batches(wanted, start_ns, stop_ns):
+            yield from batch.tuples()
+
+    def batches(
+        self,
+        wanted: Callable[[int], bool],
+        start_ns: int | None,
+        stop_ns: int | None,
+    ) -> Iterator[_Batch]:
+        """Selected messages chunk by chunk (one batch per chunk): less per-message overhead."""
         buf = self.buf
         size = len(buf)
         if buf[:8] != fmt.MAGIC:
@@ -189,7 +224,9 @@ class _FileScan:
             if op == fmt.Op.CHUNK:
                 chunk = self._parse(pos, body_at, fmt.parse_chunk, body)
                 if chunk is not None:
-                    yield from self._chunk(chunk, pos, body_at, wanted, start_ns, stop_ns)
+                    batch = self._chunk(chunk, pos, body_at, wanted, start_ns, stop_ns)
+                    if batch is not None and batch.datas:
+                        yield batch
             elif op == fmt.Op.MESSAGE:
                 if length < 22:
                     self._damage(pos, 'message record too short')
@@ -198,7 +235,12 @@ class _FileScan:
                     if self._count(channel_id, pos) and self._in(
                         channel_id, log_ns, wanted, start_ns, stop_ns
                     ):
-                        yield channel_id, log_ns, pub_ns, bytes(buf[body_at + 22 : end])
+                        yield _Batch(
+                            np.array([channel_id], dtype=np.uint16),
+                            np.array([log_ns], dtype=np.int64),
+                            np.array([pub_ns], dtype=np.int64),
+                            [bytes(buf[body_at + 22 : end])],
+                        )
             elif op == fmt.Op.SCHEMA:
                 self._schema(self._parse(pos, body_at, fmt.parse_schema, body))
             elif op == fmt.Op.CHANNEL:
@@ -242,63 +284,97 @@ class _FileScan:
         wanted: Callable[[int], bool],
         start_ns: int | None,
         stop_ns: int | None,
-    ) -> Iterator[tuple[int, int, int, bytes]]:
+    ) -> _Batch | None:
+        """The selected messages of one chunk; None (and damage reported) if it is damaged."""
         payload_at = body_at + chunk.payload_offset
+        data = self._inflate(chunk, offset, payload_at)
+        if data is None:
+            return None
+        # Walk the record lengths (inherently sequential), then decode headers with numpy.
+        unpack_prefix = _PREFIX.unpack_from
+        positions: list[int] = []
+        lengths: list[int] = []
+        pos = 0
+        size = len(data)
+        while pos < size:
+            if pos + 9 > size:
+                self._damage(payload_at, f'chunk record header truncated at +{pos}')
+                return None
+            length = unpack_prefix(data, pos)[1]
+            positions.append(pos)
+            lengths.append(length)
+            pos += 9 + length
+        if pos > size:
+            self._damage(payload_at, f'last chunk record at +{positions[-1]} overruns the chunk')
+            return None
+        raw = np.frombuffer(data, dtype=np.uint8)
+        at = np.asarray(positions, dtype=np.int64)
+        ops = raw[at]
+        is_message = ops == fmt.Op.MESSAGE
+        if not is_message.all():
+            for k in np.flatnonzero(~is_message).tolist():
+                body = data[positions[k] + 9 : positions[k] + 9 + lengths[k]]
+                if ops[k] == fmt.Op.SCHEMA:
+                    self._schema(self._parse(offset, payload_at, fmt.parse_schema, body))
+                elif ops[k] == fmt.Op.CHANNEL:
+                    self._channel(self._parse(offset, payload_at, fmt.parse_channel, body), offset)
+            at = at[is_message]
+        sizes = np.asarray(lengths, dtype=np.int64)[is_message]
+        if sizes.size and int(sizes.min()) < 22:
+            self._damage(payload_at, 'message record too short')
+            return None
+        heads = np.ascontiguousarray(raw[at[:, None] + np.arange(9, 31)]).view(_MESSAGE_FIELDS)
+        channel = heads['channel'][:, 0]
+        log = heads['log'][:, 0].astype(np.int64)
+        ids, counts = np.unique(channel, return_counts=True)
+        keep = []
+        for channel_id, count in zip(ids.tolist(), counts.tolist(), strict=True):
+            if channel_id not in self.channels:
+                self._damage(payload_at, f'message on undeclared channel {channel_id}')
+                return None
+            self.channel_counts[channel_id] = self.channel_counts.get(channel_id, 0) + count
+            if not (
+                (start_ns is not None and chunk.end_ns < start_ns)
+                or (stop_ns is not None and chunk.start_ns >= stop_ns)
+            ) and wanted(channel_id):
+                keep.append(channel_id)
+        self.message_count += int(at.size)
+        mask = np.isin(channel, keep) if len(keep) < ids.size else np.ones(at.size, dtype=bool)
+        if start_ns is not None:
+            mask &= log >= start_ns
+        if stop_ns is not None:
+            mask &= log < stop_ns
+        chosen = np.flatnonzero(mask)
+        if chosen.size != at.size:
+            at, sizes = at[chosen], sizes[chosen]
+        datas = [
+            data[p + 31 : p + 9 + n] for p, n in zip(at.tolist(), sizes.tolist(), strict=True)
+        ]
+        return _Batch(
+            channel[chosen], log[chosen], heads['publish'][chosen, 0].astype(np.int64), datas
+        )
+
+    def _inflate(self, chunk: fmt.ChunkRecord, offset: int, payload_at: int) -> bytes | None:
+        """Decompressed, size- and CRC-checked chunk records; None if damaged."""
         inflate = self._decompressors.get(chunk.compression)
         if inflate is None:
             self._damage(offset, f'unknown chunk compression {chunk.compression!r}')
-            return
+            return None
         if chunk.uncompressed_size > _MAX_CHUNK:
             self._damage(offset, f'chunk claims {chunk.uncompressed_size} bytes uncompressed')
-            return
+            return None
         try:
             data = inflate(chunk.payload, chunk.uncompressed_size)
         except Exception as exc:  # zstandard/lz4 raise their own error types
             self._damage(payload_at, f'chunk does not decompress: {exc}')
-            return
+            return None
         if len(data) != chunk.uncompressed_size:
             self._damage(payload_at, 'chunk size differs from its header')
-            return
+            return None
         if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
             self._damage(payload_at, 'chunk CRC mismatch')
-            return
-        skip_all = (start_ns is not None and chunk.end_ns < start_ns) or (
-            stop_ns is not None and chunk.start_ns >= stop_ns
-        )
-        unpack = _MESSAGE_HEAD.unpack_from
-        pos = 0
-        size = len(data)
-        counts = self.channel_counts
-        channels = self.channels
-        while pos < size:
-            if pos + 9 > size:
-                self._damage(payload_at, f'chunk record header truncated at +{pos}')
-                return
-            op, length = _PREFIX.unpack_from(data, pos)
-            end = pos + 9 + length
-            if end > size:
-                self._damage(payload_at, f'chunk record at +{pos} overruns the chunk')
-                return
-            if op == fmt.Op.MESSAGE:
-                if length < 22:
-                    self._damage(payload_at, f'message at +{pos} too short')
-                    return
-                _, _, channel_id, _, log_ns, pub_ns = unpack(data, pos)
-                if channel_id not in channels:
-                    self._damage(payload_at, f'message at +{pos} on undeclared channel')
-                    return
-                self.message_count += 1
-                counts[channel_id] = counts.get(channel_id, 0) + 1
-                if not skip_all and self._in(channel_id, log_ns, wanted, start_ns, stop_ns):
-                    yield channel_id, log_ns, pub_ns, data[pos + 31 : end]
-            elif op == fmt.Op.SCHEMA:
-                self._schema(
-                    self._parse(offset, payload_at, fmt.parse_schema, data[pos + 9 : end])
-                )
-            elif op == fmt.Op.CHANNEL:
-                record = self._parse(offset, payload_at, fmt.parse_channel, data[pos + 9 : end])
-                self._channel(record, offset)
-            pos = end
+            return None
+        return data
 
     def _data_end(self, offset: int, body: memoryview) -> None:
         if len(body) >= 4:
@@ -337,6 +413,55 @@ class _FileScan:
                 footer.summary_start,
                 f'summary counts {stats.message_count} messages, data holds {self.message_count}',
             )
+
+    def load_summary(self) -> bool:
+        """Fill schemas, channels and counts from an intact summary; False if unusable.
+
+        Used for topic listings so an intact bag is not scanned; any doubt (no footer, CRC
+        mismatch, no statistics, a record that does not parse) answers False.
+        """
+        buf = self.buf
+        size = len(buf)
+        footer_at = size - 8 - (_PREFIX.size + 20)
+        if footer_at < 8 or buf[:8] != fmt.MAGIC or buf[size - 8 :] != fmt.MAGIC:
+            return False
+        if buf[footer_at] != fmt.Op.FOOTER:
+            return False
+        footer = fmt.parse_footer(memoryview(buf)[footer_at + _PREFIX.size : size - 8])
+        if not 8 < footer.summary_start <= footer_at or not footer.summary_crc:
+            return False
+        end_crc = footer_at + _PREFIX.size + 16
+        if zlib.crc32(memoryview(buf)[footer.summary_start : end_crc]) != footer.summary_crc:
+            return False
+        schemas: dict[int, fmt.SchemaRecord] = {}
+        channels: dict[int, fmt.ChannelRecord] = {}
+        stats: fmt.StatisticsRecord | None = None
+        pos = footer.summary_start
+        try:
+            while pos + _PREFIX.size <= footer_at:
+                op, length = _PREFIX.unpack_from(buf, pos)
+                end = pos + _PREFIX.size + length
+                if end > footer_at:
+                    return False
+                body = memoryview(buf)[pos + _PREFIX.size : end]
+                if op == fmt.Op.SCHEMA:
+                    schema = fmt.parse_schema(body)
+                    schemas[schema.id] = schema
+                elif op == fmt.Op.CHANNEL:
+                    channel = fmt.parse_channel(body)
+                    channels[channel.id] = channel
+                elif op == fmt.Op.STATISTICS:
+                    stats = fmt.parse_statistics(body)
+                pos = end
+        except fmt.MalformedRecordError:
+            return False
+        if stats is None or not channels:
+            return False
+        self.schemas.update(schemas)
+        self.channels.update(channels)
+        self.channel_counts.update(stats.channel_message_counts)
+        self.message_count = stats.message_count
+        return True
 
     def _statistics(self, start: int, stop: int) -> fmt.StatisticsRecord | None:
         pos = start
@@ -464,16 +589,29 @@ class BagReader:
 
     def topic_arrays(self, topics: Iterable[str] | None = None) -> dict[str, TopicArrays]:
         """All messages grouped per topic (for batch processing such as offline replay)."""
-        times: dict[str, list[int]] = {}
+        selected = None if topics is None else set(topics)
+        times: dict[str, list[np.ndarray]] = {}
         datas: dict[str, list[bytes]] = {}
         types: dict[str, str] = {}
-        for topic, msgtype, log_ns, data, _ in self.raw_messages(topics):
-            if topic not in times:
-                times[topic], datas[topic], types[topic] = [], [], msgtype
-            times[topic].append(log_ns)
-            datas[topic].append(data)
+        self.problems.clear()
+        for scan in self._scans():
+            select = _ChannelSelector(scan, selected)
+            for batch in scan.batches(select, None, None):
+                channels = np.unique(batch.channel).tolist()
+                for channel_id in channels:
+                    topic, msgtype = select.names[channel_id]
+                    if topic not in times:
+                        times[topic], datas[topic], types[topic] = [], [], msgtype
+                    if len(channels) == 1:
+                        times[topic].append(batch.log)
+                        datas[topic].extend(batch.datas)
+                    else:
+                        members = np.flatnonzero(batch.channel == channel_id)
+                        times[topic].append(batch.log[members])
+                        datas[topic].extend([batch.datas[k] for k in members.tolist()])
         return {
-            t: TopicArrays(types[t], np.asarray(times[t], dtype=np.int64), datas[t]) for t in times
+            t: TopicArrays(types[t], np.concatenate(times[t]).astype(np.int64), datas[t])
+            for t in times
         }
 
     @property
@@ -483,8 +621,9 @@ class BagReader:
             problems = list(self.problems)
             scans = []
             for scan in self._scans():
-                for _ in scan.messages(lambda _c: False, None, None):
-                    pass
+                if not scan.load_summary():
+                    for _ in scan.batches(lambda _c: False, None, None):
+                        pass
                 scans.append(scan)
             self._topics = self._topic_infos(scans)
             self.problems[:0] = problems

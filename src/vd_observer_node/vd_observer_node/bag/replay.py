@@ -56,7 +56,7 @@ ESTIMATE_TOPICS = {
     '/vd/estimates/resistances': 'vd_msgs/msg/Resistances',
     '/vd/estimates/slope': 'vd_msgs/msg/Slope',
 }
-_WRITE_BLOCK = 8192  # messages between progress-bar updates
+_WRITE_BLOCK = 65536  # messages per vectorized write (and progress-bar update)
 
 
 @dataclass(frozen=True)
@@ -260,28 +260,21 @@ def _write_merged(
     """Write all topics interleaved in log-time order (stable: input order within a time)."""
     log = np.concatenate([o[2] for o in outputs])
     which = np.concatenate([np.full(len(o[3]), k, dtype=np.int64) for k, o in enumerate(outputs)])
-    index = np.concatenate([np.arange(len(o[3]), dtype=np.int64) for o in outputs])
     order = np.argsort(log, kind='stable')
     topics = reader.topics
     total = len(order)
-    step = _WRITE_BLOCK
     with BagWriter(out_bag) as writer:
         for name, msgtype, _, _ in outputs:
             info = topics.get(name)
             qos = info.qos_profiles_yaml if info is not None else ''
             writer.add_topic(name, msgtype, qos)
         names = [o[0] for o in outputs]
-        datas = [o[3] for o in outputs]
-        log_list = log[order].tolist()
-        which_list = which[order].tolist()
-        index_list = index[order].tolist()
-        write = writer.write
+        datas = [d for o in outputs for d in o[3]]
         done = 0
-        for start in range(0, total, step):
-            stop = min(total, start + step)
-            for k in range(start, stop):
-                w = which_list[k]
-                write(names[w], datas[w][index_list[k]], log_list[k])
+        for start in range(0, total, _WRITE_BLOCK):
+            sel = order[start : start + _WRITE_BLOCK]
+            writer.write_interleaved(names, which[sel], [datas[k] for k in sel.tolist()], log[sel])
+            stop = start + len(sel)
             bar.update(stop * progress_budget // total - done * progress_budget // total)
             done = stop
     return total

@@ -1,0 +1,166 @@
+#!/usr/bin/env python3
+"""Benchmark of the bag core and offline replay; prints figures, asserts nothing.
+
+    python scripts/bench_replay.py [--duration 20] [--rate 1000]
+
+1. Writer at the demo data rate: 3 sensor + 2 truth + 6 estimate topics at ``--rate`` Hz.
+   Prints write throughput, compression and the log-time span of the chunks: a SIGKILL loses
+   at most the open chunk, i.e. at most the largest span (and never more than the writer's
+   chunk_duration_s of wall time).
+2. Reader: raw messages/s and batch decoding messages/s.
+3. Offline replay of a synthetic drive: full (real cascade) and bag pipeline only (a null
+   cascade), as real-time factor and sensor messages per second (goal: >= 100x, >= 100 k/s).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_observer_node'))
+
+from vd_observer_node.bag import BagReader, BagWriter
+from vd_observer_node.bag.cdr_batch import decode_batch, encode_batch, flat_fields
+from vd_observer_node.bag.replay import ESTIMATE_TOPICS, replay_bag
+from vd_observer_node.bag.synthetic import write_synthetic_drive_bag
+from vd_observer_node.bag.writer import DEFAULT_CHUNK_DURATION_S, DEFAULT_CHUNK_SIZE
+from vd_observer_node.cascade import CascadeResult
+
+
+def _null_cascade(t: np.ndarray, angle: np.ndarray, *_: object) -> CascadeResult:
+    """Zero estimates of the right shapes: isolates the bag pipeline's own cost."""
+    n = len(t)
+    w = np.zeros((n, 4))
+    s = np.zeros(n)
+    b4 = np.zeros((n, 4), dtype=bool)
+    return CascadeResult(t, w, w, s, s, w, w, w, b4, w, w, s, s, s.astype(bool), b4)
+
+
+def _demo_stream(n: int) -> dict[str, tuple[str, list[bytes]]]:
+    rng = np.random.default_rng(0)
+    stamps = np.arange(n, dtype=np.int64) * 1_000_000
+    topics = {
+        '/vd/sensors/wheel_angles': 'vd_msgs/msg/WheelAngles',
+        '/vd/sensors/body_velocity': 'geometry_msgs/msg/TwistStamped',
+        '/vd/sensors/wheel_torques': 'vd_msgs/msg/WheelTorques',
+        '/vd/truth/wheel_states': 'vd_msgs/msg/WheelStates',
+        '/vd/truth/body_accel': 'geometry_msgs/msg/AccelStamped',
+        **ESTIMATE_TOPICS,
+    }
+    stream = {}
+    for topic, msgtype in topics.items():
+        values = {}
+        for f in flat_fields(msgtype):
+            shape = (n, f.count) if f.count > 1 else (n,)
+            if np.dtype(f.dtype).kind == 'f':
+                # Smooth signals with noise, like real data (compresses like real data).
+                base = np.cumsum(rng.normal(0, 0.01, size=shape), axis=0)
+                values[f.name] = base + rng.normal(0, 1e-3, size=shape)
+            else:
+                values[f.name] = np.ones(shape, dtype=f.dtype)
+        stream[topic] = (msgtype, encode_batch(msgtype, stamps, 'base_link', values))
+    return stream
+
+
+def bench_writer(folder: Path, seconds: float, rate: float) -> Path:
+    n = int(seconds * rate)
+    stream = _demo_stream(n)
+    period = int(1e9 / rate)
+    path = folder / 'demo'
+    started = time.perf_counter()
+    with BagWriter(path) as writer:
+        for topic, (msgtype, _) in stream.items():
+            writer.add_topic(topic, msgtype)
+        items = list(stream.items())
+        for k in range(n):
+            for topic, (_, datas) in items:
+                writer.write(topic, datas[k], k * period)
+    elapsed = time.perf_counter() - started
+    count = n * len(stream)
+    raw = sum(len(d) for _, datas in stream.values() for d in datas)
+    size = (path / 'demo_0.mcap').stat().st_size
+    from mcap.reader import make_reader
+
+    with (path / 'demo_0.mcap').open('rb') as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    spans = [(c.message_end_time - c.message_start_time) * 1e-9 for c in summary.chunk_indexes]
+    print('== writer (demo data rate)')
+    print(
+        f'  {len(stream)} topics at {rate:.0f} Hz = {len(stream) * rate:.0f} msg/s, '
+        f'{raw / seconds / 1e6:.2f} MB/s of CDR'
+    )
+    print(
+        f'  wrote {count} messages in {elapsed:.2f} s: {count / elapsed:,.0f} msg/s '
+        f'({count / elapsed / (len(stream) * rate):.0f}x the demo rate)'
+    )
+    print(f'  file {size / 1e6:.2f} MB for {raw / 1e6:.2f} MB CDR: zstd ratio {raw / size:.1f}')
+    print(
+        f'  {len(spans)} chunks (chunk_size {DEFAULT_CHUNK_SIZE // 1024} KiB, '
+        f'chunk_duration_s {DEFAULT_CHUNK_DURATION_S}); chunk log-time span '
+        f'mean {np.mean(spans):.3f} s, max {np.max(spans):.3f} s'
+    )
+    print(
+        f'  => SIGKILL loses at most {min(np.max(spans) + 1 / rate, DEFAULT_CHUNK_DURATION_S):.3f}'
+        f' s of data at this rate (bound: chunk_duration_s = {DEFAULT_CHUNK_DURATION_S} s)'
+    )
+    return path
+
+
+def bench_reader(path: Path) -> None:
+    reader = BagReader(path)
+    started = time.perf_counter()
+    count = sum(1 for _ in reader.raw_messages())
+    elapsed = time.perf_counter() - started
+    arrays = reader.topic_arrays(['/vd/sensors/wheel_torques'])['/vd/sensors/wheel_torques']
+    started = time.perf_counter()
+    decode_batch(arrays.msgtype, arrays.datas)
+    decode = time.perf_counter() - started
+    print('== reader')
+    print(f'  raw: {count} messages in {elapsed:.2f} s: {count / elapsed:,.0f} msg/s')
+    print(f'  batch decode WheelTorques: {len(arrays.datas) / decode:,.0f} msg/s')
+
+
+def bench_replay(folder: Path, seconds: float, rate: float) -> None:
+    drive = folder / 'drive'
+    write_synthetic_drive_bag(drive, seconds, rate)
+    print(
+        f'== offline replay of a {seconds:.0f} s drive at {rate:.0f} Hz '
+        '(3 sensor + 2 truth topics)'
+    )
+    for label, cascade in (('bag pipeline only (null cascade)', _null_cascade), ('full', None)):
+        out = folder / f'out_{len(label)}'
+        kwargs = {'cascade': cascade} if cascade is not None else {}
+        report = replay_bag(drive, out, progress=False, **kwargs)  # type: ignore[arg-type]
+        other = report.wall_time_s - report.cascade_time_s
+        print(
+            f'  {label}: {report.wall_time_s:.2f} s wall '
+            f'(cascade {report.cascade_time_s:.2f} s, rest {other:.2f} s): '
+            f'{report.real_time_factor:.0f}x real time, '
+            f'{report.samples_per_second:,.0f} sensor msg/s'
+        )
+        if cascade is None:
+            per_sample = report.cascade_time_s / report.samples * 1e6
+            print(f'  cascade cost: {per_sample:.0f} us per sample (3 sensor messages)')
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--duration', type=float, default=20.0, help='data seconds')
+    parser.add_argument('--rate', type=float, default=1000.0, help='sensor rate [Hz]')
+    args = parser.parse_args()
+    with tempfile.TemporaryDirectory(prefix='vd-bench-') as tmp:
+        folder = Path(tmp)
+        demo = bench_writer(folder, args.duration, args.rate)
+        bench_reader(demo)
+        bench_replay(folder, args.duration, args.rate)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
