@@ -224,3 +224,35 @@ def test_model_helpers_validate_names_and_shapes() -> None:
     assert 'def rhs(' in model.source_code
     assert model.output_names[-3:] == ('P.sources', 'P.dissipated', 'P.stored')
     assert model.stored_energy(np.array([2.0, 0.5])) == pytest.approx(4.0 / 4.0 + 0.25 / 0.2)
+
+
+def test_scalar_calls_hand_plain_python_floats_to_every_callable() -> None:
+    """Laws may dispatch on ``arg.__class__ is float`` for a fast scalar path."""
+    seen: list[type] = []
+
+    def record(*args: float) -> float:
+        seen.extend(type(a) for a in args)
+        return 0.1 * args[0]
+
+    bg = BondGraph('types')
+    bg.add_input('k', default=2.0)
+    bg.add_se('F', lambda t, k: record(t, k), signals=('k',))
+    bg.add_one('j')
+    bg.add_i('m', law=lambda p: record(p), energy=lambda p: 0.05 * p * p)
+    bg.add_r('d', law=lambda f, v: record(f, v), signals=('v',))
+    bg.connect('F', 'j')
+    bg.connect('j', 'm', name='mb')
+    bg.connect('j', 'd')
+    bg.add_flow_sensor('v', 'mb')
+    model = compile_model(bg)
+    x = np.array([1.5])
+    for call in (
+        lambda: model.rhs(0.5, x, np.array([3.0])),
+        lambda: model.rhs(0.5, x),
+        lambda: model.bind([3.0])(0.5, x),
+        lambda: model.output_vector(0.5, x, np.array([3.0])),
+        lambda: model.source_power(0.5, x, np.array([3.0])),
+    ):
+        seen.clear()
+        call()
+        assert seen and all(kind is float for kind in seen), seen
