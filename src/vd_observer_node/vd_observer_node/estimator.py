@@ -49,8 +49,6 @@ class EstimatorConfig:
         max_slope: |alpha| above this [rad] is clamped and flagged invalid.
         min_speed: below this |v| [m/s] the slope is flagged invalid and held (at standstill
             the brake torque is a reaction, not the applied torque the sensor reports).
-        direction_speed_scale: v_s [m/s] of the regularised sign tanh(v / v_s) applied to
-            rolling resistance and aero drag; must match the simulator.
         slip_eps: floor of the slip denominator [m/s].
     """
 
@@ -62,7 +60,6 @@ class EstimatorConfig:
     min_excitation_ratio: float = 0.02
     max_slope: float = 0.5
     min_speed: float = 0.5
-    direction_speed_scale: float = 0.1
     slip_eps: float = 0.1
 
     def __post_init__(self) -> None:
@@ -223,8 +220,10 @@ class Estimator:
         veh, cfg = self.vehicle, self.config
         v = float(x['speed'][0])
         accel = float(x['accel'][0])
-        direction = float(phys.motion_direction(v, cfg.direction_speed_scale))
+        # Same smooth sign as the simulator's rolling resistance; drag is exactly k*v*|v|.
+        direction = float(phys.motion_direction(v, veh.rolling_regularisation_speed))
         aero = float(phys.aero_drag(v, veh))
+        aero_signed = math.copysign(aero, v)
         c_roll = float(phys.rolling_coefficient(v, veh))
         cos_prev, sin_prev = math.cos(self._slope), math.sin(self._slope)
         weight = veh.mass * veh.gravity
@@ -236,7 +235,7 @@ class Estimator:
         if cfg.load_transfer_source == 'tire_forces':
             ground = float(np.sum(fx_raw)) - direction * rolling_sum
         else:
-            ground = veh.mass * accel + weight * sin_prev + direction * aero
+            ground = veh.mass * accel + weight * sin_prev + aero_signed
         filtered = self._force_filter.update(dt, np.append(fx_raw, ground))
         fx, ground_f = filtered[:4], float(filtered[4])
 
@@ -247,7 +246,7 @@ class Estimator:
         mu = np.where(mu_valid, mu, 0.0)
         slip = phys.slip_ratio(x['omega'], v, veh, cfg.slip_eps)
 
-        net = float(np.sum(fx_raw)) - direction * (rolling_sum + aero) - veh.mass * accel
+        net = float(np.sum(fx_raw)) - direction * rolling_sum - aero_signed - veh.mass * accel
         net_f = float(self._slope_filter.update(dt, net))
         alpha, in_range = phys.slope_from_forces(net_f, veh, cfg.max_slope)
         slope_valid = bool(in_range) and body_ok and abs(v) >= cfg.min_speed

@@ -38,6 +38,8 @@ class EstimatorVehicle:
         rolling_c0: c0 of paper eq. 7 [-].
         rolling_c1: c1 of paper eq. 7 [km/h per m/s].
         gravity: g [m/s^2].
+        rolling_regularisation_speed: v_r [m/s] of tanh(v / v_r), the smooth sign the
+            simulator applies to rolling resistance (optional key, default 0.05).
         name: free text.
     """
 
@@ -54,6 +56,7 @@ class EstimatorVehicle:
     rolling_c0: float
     rolling_c1: float
     gravity: float
+    rolling_regularisation_speed: float = 0.05
     name: str = ''
 
     def __post_init__(self) -> None:
@@ -132,6 +135,12 @@ def vehicle_from_mapping(data: Any) -> EstimatorVehicle:
         if isinstance(raw, bool) or not isinstance(raw, int | float):
             raise VehicleParameterError(f'{section}.{key} must be a number, got {raw!r}')
         values[field] = float(raw)
+    rolling = data.get('rolling_resistance')
+    if isinstance(rolling, dict) and 'regularisation_speed' in rolling:
+        raw = rolling['regularisation_speed']
+        if isinstance(raw, bool) or not isinstance(raw, int | float):
+            raise VehicleParameterError(f'rolling_resistance.regularisation_speed: {raw!r}')
+        values['rolling_regularisation_speed'] = float(raw)
     return EstimatorVehicle(**values, name=str(data.get('name', '')))
 
 
