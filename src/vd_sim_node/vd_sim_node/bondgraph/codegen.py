@@ -14,6 +14,7 @@ so nothing is looked up in a dict per call.
 
 from __future__ import annotations
 
+import ast
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -54,8 +55,8 @@ class _Emitter:
             if statement.is_alias:
                 self.aliases[statement.targets[0]] = statement.args[0]
             elif not statement.args and len(statement.targets) == 1:
-                # The template is a literal we wrote ourselves (repr of a float or its negation).
-                value = float(eval(statement.template, {}))
+                # The template is a float literal or its negation, e.g. '-(9.81)'.
+                value = float(ast.literal_eval(statement.template))
                 self.aliases[statement.targets[0]] = f'({value!r})' if value < 0 else repr(value)
                 self.literals.add(id(statement))
 

@@ -62,14 +62,18 @@ class CompiledModel:
         self.rhs: Callable[..., FloatArray] = code.rhs
         self._missing_energy = [
             e
-            for e, name in zip(state_elements, state_names, strict=True)
+            for e in state_elements
             if graph.elements[e].param is None and graph.elements[e].energy is None
         ]
 
     # -- vectors --------------------------------------------------------------------------
 
     def initial_state(self, values: Mapping[str, float] | None = None) -> FloatArray:
-        """State vector from {state or storage element name: value}; missing -> 0.0."""
+        """State vector from {state or storage element name: value}; missing -> 0.0.
+
+        Values are energy variables: momentum p of an I (e.g. [kg m/s], [N m s]), displacement
+        q of a C (e.g. [m], [rad]). Returns shape (n_states,).
+        """
         x = np.zeros(self.n_states)
         for key, value in (values or {}).items():
             if key in self.state_index:
