@@ -15,6 +15,8 @@ so nothing is looked up in a dict per call.
 from __future__ import annotations
 
 import ast
+import itertools
+import linecache
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -27,6 +29,7 @@ from .graph import BondGraph
 __all__ = ['GeneratedCode', 'generate_code']
 
 _INDENT = '    '
+_COMPILED = itertools.count(1)
 
 
 @dataclass(frozen=True)
@@ -225,8 +228,12 @@ def generate_code(system: EquationSystem, graph: BondGraph) -> GeneratedCode:
         _columns=_columns,
         _U0=tuple(inp.default for inp in graph.inputs.values()),
     )
-    code = compile(source, f'<bondgraph {graph.name}>', 'exec')
-    exec(code, namespace)
+    filename = f'<bondgraph {graph.name} #{next(_COMPILED)}>'
+    # Registering the source lets tracebacks through a failing user law show the generated
+    # line that called it.
+    linecache.cache[filename] = (len(source), None, source.splitlines(True), filename)
+    code = compile(source, filename, 'exec')
+    exec(code, namespace)  # the source is generated above from our own templates
     return GeneratedCode(
         source=source,
         rhs=namespace['rhs'],  # type: ignore[arg-type]
