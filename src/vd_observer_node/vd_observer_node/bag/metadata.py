@@ -7,6 +7,7 @@ string; rosbag2 of Jazzy, Kilted and Rolling read it (Humble and Iron do not).
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ __all__ = [
     'METADATA_VERSION',
     'BagSummary',
     'TopicSummary',
+    'format_qos_profiles',
     'parse_qos_profiles',
     'read_metadata_file_paths',
     'render_metadata',
@@ -58,6 +60,44 @@ class BagSummary:
     def message_count(self) -> int:
         """Total number of messages of all topics."""
         return sum(t.message_count for t in self.topics)
+
+
+# rmw's "infinite" duration, as rosbag2 writes it for unset deadline/lifespan/lease.
+_INFINITE = {'sec': 9223372036, 'nsec': 854775807}
+_QOS_DEFAULTS: dict[str, Any] = {
+    'history': 'keep_last',
+    'depth': 10,
+    'reliability': 'reliable',
+    'durability': 'volatile',
+    'deadline': _INFINITE,
+    'lifespan': _INFINITE,
+    'liveliness': 'automatic',
+    'liveliness_lease_duration': _INFINITE,
+    'avoid_ros_namespace_conventions': False,
+}
+
+
+def format_qos_profiles(profiles: Sequence[Mapping[str, Any]]) -> str:
+    """The QoS YAML string rosbag2 (Jazzy+) stores per topic, from profile mappings.
+
+    Args:
+        profiles: one mapping per publisher, keys as in rosbag2 metadata version 9:
+            history ('keep_last'/'keep_all'), depth, reliability ('reliable'/'best_effort'),
+            durability ('volatile'/'transient_local'), deadline/lifespan/
+            liveliness_lease_duration ({'sec', 'nsec'}), liveliness ('automatic'/
+            'manual_by_topic'), avoid_ros_namespace_conventions. Missing keys take rclpy's
+            defaults (reliable, volatile, keep_last 10, infinite durations).
+
+    Raises:
+        BagUsageError: an unknown key.
+    """
+    out = []
+    for profile in profiles:
+        unknown = set(profile) - set(_QOS_DEFAULTS)
+        if unknown:
+            raise BagUsageError(f'unknown QoS keys {sorted(unknown)}')
+        out.append({**_QOS_DEFAULTS, **profile})
+    return str(yaml.safe_dump(out, sort_keys=False, default_flow_style=False)).strip()
 
 
 def parse_qos_profiles(qos_profiles_yaml: str) -> list[dict[str, Any]]:

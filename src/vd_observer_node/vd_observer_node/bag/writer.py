@@ -201,7 +201,8 @@ class BagWriter:
             name: topic name, e.g. '/vd/sensors/wheel_angles'.
             msgtype: ROS 2 type name 'pkg/msg/Type'.
             qos_profiles_yaml: offered QoS profiles as rosbag2 stores them in MCAP channel
-                metadata (a YAML list of profile mappings); '' for none.
+                metadata (a YAML list of profile mappings, see
+                :func:`.metadata.format_qos_profiles`); '' for none (player defaults).
             definition: full ``ros2msg`` definition; default: from the vd typestore.
 
         Raises:
@@ -226,7 +227,10 @@ class BagWriter:
             self._schemas[msgtype] = (schema_id, record)
             out += record
         channel_id = len(self._topics) + 1
-        metadata = {'offered_qos_profiles': qos_profiles_yaml}
+        # '[]' rather than '': an empty YAML document is not a list for rosbag2's parser.
+        metadata = {
+            'offered_qos_profiles': qos_profiles_yaml if qos_profiles_yaml.strip() else '[]'
+        }
         if digest:
             metadata['topic_type_hash'] = digest
         channel = fmt.encode_channel(channel_id, self._schemas[msgtype][0], name, 'cdr', metadata)
