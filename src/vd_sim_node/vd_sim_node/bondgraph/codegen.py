@@ -81,7 +81,7 @@ class _Emitter:
             targets = ', '.join(statement.targets)
             if len(statement.targets) > 1:
                 targets += ','
-            lines.append(f'{_INDENT}{targets} = {expr}')
+            lines.append(f'{_INDENT}{targets} = {expr}  # {statement.origin}')
         return lines
 
     def power_exprs(self) -> tuple[str, str, str]:
