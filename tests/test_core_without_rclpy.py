@@ -7,7 +7,8 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-NODE_FILE_SUFFIXES = ('_node.py', 'launcher.py')
+NODE_FILE_SUFFIXES = ('_node.py',)
+SOURCE_DIRS = [str(ROOT / 'src' / p) for p in ('vd_sim_node', 'vd_observer_node')]
 
 
 def core_modules() -> list[str]:
@@ -32,7 +33,7 @@ def test_core_modules_import_without_rclpy() -> None:
         'import sys\n'
         "for name in ('rclpy', 'rclpy.node', 'rosidl_runtime_py'):\n"
         '    sys.modules[name] = None  # any import of them now raises ImportError\n'
-        f'sys.path[:0] = {[str(ROOT / "src" / p) for p in ("vd_sim_node", "vd_observer_node")]!r}\n'
+        f'sys.path[:0] = {SOURCE_DIRS!r}\n'
         'import importlib\n'
         f'for mod in {core_modules()!r}:\n'
         '    importlib.import_module(mod)\n'

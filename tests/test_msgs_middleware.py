@@ -9,8 +9,15 @@ from rosproc import RosProcessGroup
 
 SCRIPT = Path(__file__).parent / 'ros_scripts' / 'msg_roundtrip.py'
 TYPES = [
-    'WheelAngles', 'WheelTorques', 'WheelStates', 'TireForces', 'Friction', 'Resistances',
-    'Slope', 'TwistStamped', 'AccelStamped',
+    'WheelAngles',
+    'WheelTorques',
+    'WheelStates',
+    'TireForces',
+    'Friction',
+    'Resistances',
+    'Slope',
+    'TwistStamped',
+    'AccelStamped',
 ]
 
 

@@ -26,7 +26,8 @@ def setup_py_kwargs(pkg: str) -> dict[str, object]:
         if isinstance(t, ast.Name) and isinstance(n.value, ast.Constant)
     }
     call = next(
-        n for n in ast.walk(tree)
+        n
+        for n in ast.walk(tree)
         if isinstance(n, ast.Call) and getattr(n.func, 'id', '') == 'setup'
     )
     out: dict[str, object] = {}

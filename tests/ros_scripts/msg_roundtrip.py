@@ -14,6 +14,7 @@ from typing import Any
 import rclpy
 from geometry_msgs.msg import AccelStamped, TwistStamped
 from rclpy.node import Node
+
 from vd_msgs.msg import (
     Friction,
     Resistances,
@@ -25,8 +26,15 @@ from vd_msgs.msg import (
 )
 
 TYPES = [
-    WheelAngles, WheelTorques, WheelStates, TireForces, Friction, Resistances, Slope,
-    TwistStamped, AccelStamped,
+    WheelAngles,
+    WheelTorques,
+    WheelStates,
+    TireForces,
+    Friction,
+    Resistances,
+    Slope,
+    TwistStamped,
+    AccelStamped,
 ]
 
 
@@ -47,7 +55,7 @@ def fill(msg: Any, rng: random.Random) -> Any:
         elif kind == 'boolean':
             setattr(msg, name, rng.random() < 0.5)
         elif kind == 'string':
-            setattr(msg, name, 'base_link_%d' % rng.randint(0, 999))
+            setattr(msg, name, f'base_link_{rng.randint(0, 999)}')
         else:
             fill(value, rng)
     return msg
@@ -55,8 +63,11 @@ def fill(msg: Any, rng: random.Random) -> Any:
 
 def as_dict(msg: Any) -> Any:
     if not hasattr(msg, 'get_fields_and_field_types'):
-        return [float(v) if not isinstance(v, bool) else v for v in msg] if hasattr(
-            msg, '__len__') and not isinstance(msg, str) else msg
+        return (
+            [float(v) if not isinstance(v, bool) else v for v in msg]
+            if hasattr(msg, '__len__') and not isinstance(msg, str)
+            else msg
+        )
     return {n: as_dict(getattr(msg, n)) for n in msg.get_fields_and_field_types()}
 
 

@@ -1,0 +1,201 @@
+"""ROS 2 node: records every ``/vd/**`` topic, as raw CDR, to a rosbag2 MCAP bag.
+
+Topics are discovered as they appear (checked every ``discovery_period`` seconds); messages
+are taken serialized (``raw=True``: no decode/encode) and written by
+:class:`vd_observer_node.bag.BagWriter` (zstd chunks, embedded ``ros2msg`` definitions,
+``metadata.yaml``). Log time = the recorder clock at reception (the system clock, or
+``/clock`` with ``use_sim_time``), as ``ros2 bag record`` does.
+
+SIGINT/SIGTERM close the bag completely. After SIGKILL or power loss, ``vd bag repair BAG``
+recovers every chunk already written: at most ``chunk_duration`` seconds are lost (the writer
+writes a chunk when it is that old, and this node checks every 0.1 s).
+"""
+
+from __future__ import annotations
+
+import importlib
+import re
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from vd_sim_node.ros_common import (
+    CLOCK_QOS,
+    DIAGNOSTICS_QOS,
+    STREAM_QOS,
+    ParamSpec,
+    declare_parameters,
+    diagnostic_array,
+    run_node,
+)
+
+from vd_observer_node.bag import BagWriter
+from vd_observer_node.bag.errors import BagError, UnknownMessageTypeError
+
+__all__ = ['RecorderNode', 'main']
+
+PARAMS = [
+    ParamSpec('output', '', "bag folder to create ('' = vd_<date>_<time> in the working dir)"),
+    ParamSpec('topic_regex', '^/vd/', 'record topics whose name matches this regex'),
+    ParamSpec('include_clock', False, 'also record /clock'),
+    ParamSpec('include_diagnostics', False, 'also record /diagnostics'),
+    ParamSpec(
+        'discovery_period', 0.5, 'how often to look for new topics [s]', low=0.01, high=60.0
+    ),
+    ParamSpec(
+        'chunk_duration',
+        0.5,
+        'max age of buffered data before it is written [s]: the most a SIGKILL can lose',
+        low=0.01,
+        high=60.0,
+    ),
+    ParamSpec(
+        'chunk_size', 262144, 'chunk size before compression [bytes]', low=1024, high=1 << 30
+    ),
+]
+
+# rosbag2 stores the offered QoS per topic; all vd streams are offered like this.
+_STREAM_QOS_YAML = (
+    '- history: 1\n  depth: 100\n  reliability: 1\n  durability: 2\n'
+    '  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n'
+    '  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n'
+    '  liveliness: 1\n  liveliness_lease_duration:\n    sec: 2147483647\n'
+    '    nsec: 4294967295\n  avoid_ros_namespace_conventions: false\n'
+)
+
+
+def message_class(type_name: str) -> Any:
+    """The Python class of 'pkg/msg/Type' (what rosidl_runtime_py.get_message does)."""
+    package, _, name = type_name.rpartition('/')
+    module = importlib.import_module(package.replace('/', '.'))
+    return getattr(module, name)
+
+
+class RecorderNode(Node):  # type: ignore[misc]
+    """Discovers topics, subscribes with raw=True, hands the bytes to the bag writer."""
+
+    def __init__(self) -> None:
+        super().__init__('recorder_node')
+        v = declare_parameters(self, PARAMS)
+        output = v['output'] or time.strftime('vd_%Y%m%d_%H%M%S')
+        self.pattern = re.compile(v['topic_regex'])
+        self.extra = {
+            '/clock': v['include_clock'],
+            '/diagnostics': v['include_diagnostics'],
+        }
+        self.writer = BagWriter(
+            Path(output), chunk_size=v['chunk_size'], chunk_duration_s=v['chunk_duration']
+        )
+        self.subscriptions_by_topic: dict[str, Any] = {}
+        self.skipped: set[str] = set()
+        self.write_errors = 0
+        self.closed = False
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(v['discovery_period'], self.discover, clock=steady)
+        self.create_timer(0.1, self.flush, clock=steady)
+        self.create_timer(1.0, self.publish_diagnostics, clock=steady)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.get_logger().info(f'recording to {self.writer.path}')
+        self.discover()
+
+    def wanted(self, topic: str) -> bool:
+        if topic in self.extra:
+            return self.extra[topic]
+        return bool(self.pattern.search(topic))
+
+    def discover(self) -> None:
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self.subscriptions_by_topic or topic in self.skipped:
+                continue
+            if not self.wanted(topic):
+                continue
+            type_name = types[0]
+            try:
+                self.writer.add_topic(topic, type_name, _STREAM_QOS_YAML)
+                kind = message_class(type_name)
+            except (UnknownMessageTypeError, ImportError, AttributeError) as exc:
+                self.skipped.add(topic)
+                self.get_logger().warning(f'not recording {topic} ({type_name}): {exc}')
+                continue
+            qos = (
+                CLOCK_QOS
+                if topic == '/clock'
+                else (DIAGNOSTICS_QOS if topic == '/diagnostics' else STREAM_QOS)
+            )
+            self.subscriptions_by_topic[topic] = self.create_subscription(
+                kind, topic, self._make_callback(topic), qos, raw=True
+            )
+            self.get_logger().info(f'recording {topic} ({type_name})')
+
+    def _make_callback(self, topic: str) -> Any:
+        clock = self.get_clock()
+
+        def callback(data: bytes) -> None:
+            if self.closed:
+                return
+            try:
+                self.writer.write(topic, data, clock.now().nanoseconds)
+            except BagError as exc:
+                self.write_errors += 1
+                if self.write_errors == 1:
+                    self.get_logger().error(f'cannot write {topic}: {exc}')
+
+        return callback
+
+    def flush(self) -> None:
+        if self.closed:
+            return
+        try:
+            self.writer.flush_if_due()
+        except BagError as exc:
+            self.write_errors += 1
+            self.get_logger().error(f'cannot flush the bag: {exc}')
+
+    def publish_diagnostics(self) -> None:
+        level = DiagnosticStatus.OK if self.write_errors == 0 else DiagnosticStatus.ERROR
+        message = 'ok' if self.write_errors == 0 else f'{self.write_errors} write errors'
+        values = {
+            'bag': str(self.writer.path),
+            'topics': len(self.subscriptions_by_topic),
+            'messages': self.writer.message_count,
+            'write_errors': self.write_errors,
+        }
+        self.pub_diag.publish(
+            diagnostic_array(
+                self.get_clock().now().to_msg(),
+                'vd: recorder',
+                'recorder_node',
+                level,
+                message,
+                values,
+            )
+        )
+
+    def close(self) -> None:
+        """Write the last chunk, the summary and metadata.yaml (called on shutdown)."""
+        if self.closed:
+            return
+        self.closed = True
+        # stderr, not the ROS logger: on SIGINT the rclpy context is already shut down here
+        try:
+            self.writer.close()
+            print(
+                f'bag closed: {self.writer.path} ({self.writer.message_count} messages)',
+                file=sys.stderr,
+                flush=True,
+            )
+        except BagError as exc:
+            print(f'error: could not close the bag cleanly: {exc}', file=sys.stderr, flush=True)
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``ros2 run vd_observer_node recorder_node``."""
+    return run_node(RecorderNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,276 @@
+"""ROS 2 plumbing shared by every vd node: QoS, stamps, declared parameters, diagnostics.
+
+vd_sim_node is the base package of the stack (the vehicle file lives here too), so the node
+helpers of vd_observer_node import this module rather than repeating it. Nothing here
+computes anything physical: that stays in the ROS-free core.
+
+QoS choices (see the README's topic contract):
+
+* Sensor, observer, estimate and truth streams: RELIABLE, KEEP_LAST, depth 100. Reliable
+  publishers also serve best-effort subscribers (``qos_profile_sensor_data``), so users may
+  pick either; our own subscribers ask for reliable delivery with room for a 100 ms burst at
+  1 kHz because a lost wheel-angle sample is a corrupted derivative.
+* ``/clock``: RELIABLE, depth 1, like ``ros2 bag play``.
+* ``/diagnostics``: RELIABLE, depth 10 (the diagnostic_aggregator default).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+import sys
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import ParameterException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from vd_sim_node.errors import VehicleSimError
+
+try:  # vd_observer_node depends on this package, not the other way round
+    from vd_observer_node.bag.errors import BagError
+    from vd_observer_node.errors import ObserverError
+except ImportError:  # pragma: no cover - simulator installed alone
+
+    class ObserverError(Exception):  # type: ignore[no-redef]
+        """Placeholder: vd_observer_node is not installed."""
+
+    class BagError(Exception):  # type: ignore[no-redef]
+        """Placeholder: vd_observer_node is not installed."""
+
+
+__all__ = [
+    'CLOCK_QOS',
+    'DIAGNOSTICS_QOS',
+    'STREAM_QOS',
+    'InvalidParameterError',
+    'NodeFinished',
+    'ParamSpec',
+    'dataclass_param_specs',
+    'declare_parameters',
+    'diagnostic_array',
+    'ns_to_time',
+    'run_node',
+    'time_to_ns',
+]
+
+STREAM_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=100,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+CLOCK_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE
+)
+DIAGNOSTICS_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE
+)
+
+_NS = 1_000_000_000
+
+
+def ns_to_time(ns: int) -> Time:
+    """Convert integer nanoseconds to a builtin_interfaces/Time (floor division, sec >= 0)."""
+    sec, nanosec = divmod(int(ns), _NS)
+    return Time(sec=sec, nanosec=nanosec)
+
+
+def time_to_ns(stamp: Time) -> int:
+    """Convert a builtin_interfaces/Time to integer nanoseconds."""
+    return int(stamp.sec) * _NS + int(stamp.nanosec)
+
+
+class NodeFinished(Exception):  # noqa: N818 (a signal, not an error)
+    """Raised from a callback when the node's work is done: `run_node` exits with code 0."""
+
+
+class InvalidParameterError(Exception):
+    """A parameter value was refused; the message names it and the allowed values."""
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One declared parameter.
+
+    Attributes:
+        name: parameter name.
+        default: default value; its Python type fixes the parameter type.
+        description: shown by ``ros2 param describe``; give the unit in brackets.
+        low: inclusive lower bound for numbers (None: unbounded).
+        high: inclusive upper bound for numbers (None: unbounded).
+        choices: allowed values for strings (empty: any).
+        read_only: the node reads it once at start.
+    """
+
+    name: str
+    default: Any
+    description: str
+    low: float | None = None
+    high: float | None = None
+    choices: Sequence[str] = ()
+    read_only: bool = True
+
+    def allowed(self) -> str:
+        if self.choices:
+            return 'one of ' + ', '.join(repr(c) for c in self.choices)
+        if self.low is not None or self.high is not None:
+            lo = '-inf' if self.low is None else f'{self.low:g}'
+            hi = 'inf' if self.high is None else f'{self.high:g}'
+            return f'in [{lo}, {hi}]'
+        return f'a {type(self.default).__name__}'
+
+
+def _attribute_docs(cls: type) -> dict[str, str]:
+    """Descriptions of the 'Attributes:' section of a Google-style class docstring."""
+    doc = cls.__doc__ or ''
+    section = doc.split('Attributes:', 1)[1] if 'Attributes:' in doc else ''
+    docs: dict[str, str] = {}
+    name = None
+    for line in section.splitlines():
+        match = re.match(r'^\s{4,8}(\w+):\s*(.*)$', line)
+        if match and (name is None or len(line) - len(line.lstrip()) <= 8):
+            name, text = match.groups()
+            docs[name] = text.strip()
+        elif name and line.strip():
+            docs[name] += ' ' + line.strip()
+    return docs
+
+
+def dataclass_param_specs(
+    cls: type,
+    *,
+    skip: Sequence[str] = (),
+    choices: Mapping[str, Sequence[str]] | None = None,
+) -> list[ParamSpec]:
+    """One ParamSpec per field of the configuration dataclass `cls` (defaults from `cls()`).
+
+    Descriptions come from the class docstring's 'Attributes:' section, so parameters cannot
+    drift from the core's configuration; values are validated by the dataclass itself.
+    """
+    defaults = cls()
+    docs = _attribute_docs(cls)
+    return [
+        ParamSpec(
+            f.name,
+            getattr(defaults, f.name),
+            docs.get(f.name, f.name),
+            choices=tuple((choices or {}).get(f.name, ())),
+        )
+        for f in dataclasses.fields(cls)
+        if f.name not in skip
+    ]
+
+
+def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
+    desc = ParameterDescriptor(
+        description=spec.description,
+        read_only=spec.read_only,
+        additional_constraints=('allowed: ' + spec.allowed()) if spec.choices else '',
+    )
+    if spec.low is not None and spec.high is not None and not isinstance(spec.default, bool):
+        if isinstance(spec.default, int):
+            desc.integer_range = [
+                IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=0)
+            ]
+        elif isinstance(spec.default, float):
+            desc.floating_point_range = [
+                FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)
+            ]
+    return desc
+
+
+def declare_parameters(node: Node, specs: Sequence[ParamSpec]) -> dict[str, Any]:
+    """Declare `specs` on `node` and return their values, checked against the specs.
+
+    Raises:
+        InvalidParameterError: a value has the wrong type or lies outside its range/choices; the
+            message names the parameter, the value and what is allowed.
+    """
+    values: dict[str, Any] = {}
+    for spec in specs:
+        try:
+            param = node.declare_parameter(spec.name, spec.default, _descriptor(spec))
+        except ParameterException as exc:
+            raise InvalidParameterError(
+                f'parameter {spec.name!r} refused ({exc}); allowed: {spec.allowed()}'
+            ) from None
+        value = param.value
+        if isinstance(spec.default, float) and isinstance(value, int):
+            value = float(value)
+        if type(value) is not type(spec.default):
+            raise InvalidParameterError(
+                f'parameter {spec.name!r} must be {type(spec.default).__name__}, got {value!r}'
+            )
+        bad_choice = spec.choices and value not in spec.choices
+        below = spec.low is not None and isinstance(value, int | float) and value < spec.low
+        above = spec.high is not None and isinstance(value, int | float) and value > spec.high
+        if bad_choice or below or above:
+            raise InvalidParameterError(
+                f'parameter {spec.name!r} = {value!r} refused; allowed: {spec.allowed()}'
+            )
+        values[spec.name] = value
+    return values
+
+
+def diagnostic_array(
+    stamp: Time,
+    name: str,
+    hardware_id: str,
+    level: bytes | int,
+    message: str,
+    values: Mapping[str, object],
+) -> DiagnosticArray:
+    """One-status DiagnosticArray; `level` is DiagnosticStatus.OK/WARN/ERROR/STALE (bytes)."""
+    status = DiagnosticStatus(
+        level=level if isinstance(level, bytes) else bytes([level]),
+        name=name,
+        message=message,
+        hardware_id=hardware_id,
+        values=[KeyValue(key=str(k), value=str(v)) for k, v in values.items()],
+    )
+    return DiagnosticArray(header=_header(stamp), status=[status])
+
+
+def _header(stamp: Time) -> Any:
+    from std_msgs.msg import Header
+
+    return Header(stamp=stamp)
+
+
+def run_node(factory: Any, args: Sequence[str] | None = None) -> int:
+    """Init rclpy, build the node with `factory()`, spin until shutdown; return the exit code.
+
+    A refused parameter or a bad configuration file ends the process with ONE line on stderr
+    naming the problem (exit code 2), not a traceback. SIGINT/SIGTERM end it cleanly (0).
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = factory()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException, NodeFinished):
+        pass
+    except InvalidParameterError as exc:
+        print(f'error: {exc}', file=sys.stderr, flush=True)
+        return 2
+    except (VehicleSimError, ObserverError, BagError) as exc:
+        # configuration/file problems: one line naming the parameter, not a traceback
+        print(f'error: {exc}', file=sys.stderr, flush=True)
+        return 2
+    finally:
+        if node is not None:
+            close = getattr(node, 'close', None)
+            if callable(close):
+                close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0

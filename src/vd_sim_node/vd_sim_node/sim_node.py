@@ -1,0 +1,287 @@
+"""ROS 2 node: runs a scenario on the bond-graph Clio model and publishes sensors and truth.
+
+Publishes (stamps = simulation time of the sample, starting at 0):
+
+* sensors: ``/vd/sensors/wheel_angles`` (WheelAngles), ``/vd/sensors/body_velocity``
+  (TwistStamped), ``/vd/sensors/wheel_torques`` (WheelTorques);
+* truth: ``/vd/truth/{wheel_states, body_accel, body_velocity, tire_forces, friction,
+  resistances, slope}``;
+* ``/clock`` once per publishing batch (so nodes with ``use_sim_time`` follow the simulation),
+  and ``/diagnostics`` once per wall second.
+
+Pacing runs on the steady wall clock (the node ignores ``use_sim_time``: it *is* the clock):
+``real_time_factor`` 1.0 follows the wall clock, 5.0 runs five times faster, 0 runs as fast as
+the machine can. The node exits by itself (code 0) at the end of the scenario.
+All physics is in :mod:`vd_sim_node.vehicle`; this file only maps parameters and messages.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import AccelStamped, TwistStamped
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock as ClockMsg
+from std_msgs.msg import Header
+
+from vd_msgs.msg import (
+    Friction,
+    Resistances,
+    Slope,
+    TireForces,
+    WheelAngles,
+    WheelStates,
+    WheelTorques,
+)
+from vd_sim_node.errors import ScenarioError
+from vd_sim_node.ros_common import (
+    CLOCK_QOS,
+    DIAGNOSTICS_QOS,
+    STREAM_QOS,
+    NodeFinished,
+    ParamSpec,
+    declare_parameters,
+    diagnostic_array,
+    ns_to_time,
+    run_node,
+)
+from vd_sim_node.vehicle.params import load_vehicle
+from vd_sim_node.vehicle.scenario import Scenario, load_scenario
+from vd_sim_node.vehicle.simulation import SampleFrame, Simulator
+
+__all__ = ['SimNode', 'main', 'resolve_config_file']
+
+PARAMS = [
+    ParamSpec('vehicle_file', '', "vehicle parameter YAML ('' = the installed Clio RL 1.1)"),
+    ParamSpec(
+        'scenario_file',
+        'paper_table1',
+        'scenario YAML path, or the name of an installed scenario (config/scenarios)',
+    ),
+    ParamSpec('rate_hz', 1000.0, 'sensor sample rate [Hz]', low=1.0, high=100000.0),
+    ParamSpec(
+        'real_time_factor',
+        1.0,
+        'simulated seconds per wall second (0 = as fast as possible)',
+        low=0.0,
+        high=1e6,
+    ),
+    ParamSpec(
+        'encoder_counts_per_rev',
+        -1,
+        'wheel encoder counts per revolution (0 = ideal angle, -1 = scenario setting)',
+        low=-1,
+        high=1_000_000,
+    ),
+    ParamSpec(
+        'speed_noise_std',
+        -1.0,
+        'body-speed noise standard deviation [m/s] (-1 = scenario setting)',
+        low=-1.0,
+        high=100.0,
+    ),
+    ParamSpec('seed', -1, 'noise seed (-1 = scenario setting)', low=-1, high=2**31 - 1),
+    ParamSpec('publish_truth', True, 'publish the /vd/truth/* topics'),
+    ParamSpec('frame_id', 'base_link', 'frame_id of every header'),
+    ParamSpec(
+        'progress_period',
+        10.0,
+        'log progress every this much simulated time [s]',
+        low=0.0,
+        high=1e6,
+    ),
+]
+
+_BATCH_PERIOD = 0.01  # [s] wall time between publishing batches
+_BATCH_BUDGET = 0.05  # [s] wall time one batch may take before yielding to the executor
+
+
+def resolve_config_file(value: str, kind: str, default: str) -> Path:
+    """A parameter file from a path or an installed name (``config/<kind>/<name>.yaml``).
+
+    Raises:
+        ScenarioError: no such file.
+    """
+    from ament_index_python.packages import get_package_share_directory
+
+    name = value or default
+    path = Path(name).expanduser()
+    if path.is_file():
+        return path
+    share = Path(get_package_share_directory('vd_sim_node')) / 'config'
+    candidates = [share / kind / f'{name}.yaml', share / kind / name, share / name]
+    for candidate in candidates:
+        if candidate.is_file():
+            return candidate
+    installed = sorted(p.stem for p in (share / kind).glob('*.yaml')) if kind else []
+    hint = f'; installed: {", ".join(installed)}' if installed else ''
+    raise ScenarioError(f'{kind or "config"} file {name!r} not found{hint}')
+
+
+def _with_sensor_overrides(scenario: Scenario, values: dict[str, Any]) -> Scenario:
+    sensors = scenario.sensors
+    changes: dict[str, Any] = {'rate_hz': values['rate_hz']}
+    if values['encoder_counts_per_rev'] >= 0:
+        changes['encoder_counts_per_rev'] = values['encoder_counts_per_rev']
+    if values['speed_noise_std'] >= 0.0:
+        changes['speed_noise_std'] = values['speed_noise_std']
+    if values['seed'] >= 0:
+        changes['seed'] = values['seed']
+    return dataclasses.replace(scenario, sensors=dataclasses.replace(sensors, **changes))
+
+
+class SimNode(Node):  # type: ignore[misc]
+    """Steps :class:`Simulator` against the wall clock and publishes each sample."""
+
+    def __init__(self) -> None:
+        super().__init__('sim_node')
+        v = declare_parameters(self, PARAMS)
+        vehicle_path = resolve_config_file(v['vehicle_file'], '', 'clio_rl_1_1.yaml')
+        scenario_path = resolve_config_file(v['scenario_file'], 'scenarios', 'paper_table1')
+        self.scenario = _with_sensor_overrides(load_scenario(scenario_path), v)
+        self.sim = Simulator(load_vehicle(vehicle_path), self.scenario)
+        self.rtf = v['real_time_factor']
+        self.publish_truth = v['publish_truth']
+        self.frame_id = v['frame_id']
+        self.progress_period = v['progress_period']
+        self._next_progress = 0.0
+
+        def pub(kind: Any, topic: str) -> Any:
+            return self.create_publisher(kind, topic, STREAM_QOS)
+
+        self.p_angles = pub(WheelAngles, '/vd/sensors/wheel_angles')
+        self.p_speed = pub(TwistStamped, '/vd/sensors/body_velocity')
+        self.p_torques = pub(WheelTorques, '/vd/sensors/wheel_torques')
+        if self.publish_truth:
+            self.t_states = pub(WheelStates, '/vd/truth/wheel_states')
+            self.t_accel = pub(AccelStamped, '/vd/truth/body_accel')
+            self.t_speed = pub(TwistStamped, '/vd/truth/body_velocity')
+            self.t_forces = pub(TireForces, '/vd/truth/tire_forces')
+            self.t_friction = pub(Friction, '/vd/truth/friction')
+            self.t_resist = pub(Resistances, '/vd/truth/resistances')
+            self.t_slope = pub(Slope, '/vd/truth/slope')
+        self.p_clock = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
+        self.p_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+
+        self.published = 0
+        self.wall_start: float | None = None
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(_BATCH_PERIOD, self.publish_batch, clock=steady)
+        self.create_timer(1.0, self.publish_diagnostics, clock=steady)
+        self.get_logger().info(
+            f'scenario {self.scenario.name!r} ({self.scenario.duration:g} s) at '
+            f'{self.sim.rate_hz:g} Hz, real-time factor {self.rtf:g}; vehicle {vehicle_path}'
+        )
+
+    # -- publishing --------------------------------------------------------------------------
+
+    def publish_batch(self) -> None:
+        now = time.monotonic()
+        if self.wall_start is None:
+            self.wall_start = now
+        target = (now - self.wall_start) * self.rtf if self.rtf > 0 else float('inf')
+        deadline = now + _BATCH_BUDGET
+        last: SampleFrame | None = None
+        while not self.sim.done and self.sim.t <= target and time.monotonic() < deadline:
+            last = self.sim.step()
+            self.publish_frame(last)
+        if last is not None:
+            self.p_clock.publish(ClockMsg(clock=self._stamp(last.t)))
+            self._log_progress(last)
+        if self.sim.done:
+            self.get_logger().info(
+                f'scenario finished: {self.published} samples, '
+                f'{self.sim.t:.3f} s simulated in {time.monotonic() - self.wall_start:.1f} s'
+            )
+            raise NodeFinished()
+
+    def _stamp(self, t: float) -> Any:
+        return ns_to_time(round(t * 1e9))
+
+    def publish_frame(self, f: SampleFrame) -> None:
+        header = Header(stamp=self._stamp(f.t), frame_id=self.frame_id)
+        self.p_angles.publish(WheelAngles(header=header, angle=f.wheel_angle.tolist()))
+        speed = TwistStamped(header=header)
+        speed.twist.linear.x = float(f.body_speed)
+        self.p_speed.publish(speed)
+        self.p_torques.publish(
+            WheelTorques(
+                header=header,
+                torque=f.wheel_torque.tolist(),
+                engine_torque=float(f.engine_torque),
+                engine_speed=float(f.engine_speed),
+                gear=int(f.gear),
+            )
+        )
+        if self.publish_truth:
+            self.t_states.publish(
+                WheelStates(
+                    header=header,
+                    angle=f.angle_true.tolist(),
+                    omega=f.omega.tolist(),
+                    omega_dot=f.omega_dot.tolist(),
+                )
+            )
+            accel = AccelStamped(header=header)
+            accel.accel.linear.x = float(f.accel_true)
+            self.t_accel.publish(accel)
+            true_speed = TwistStamped(header=header)
+            true_speed.twist.linear.x = float(f.speed_true)
+            self.t_speed.publish(true_speed)
+            self.t_forces.publish(TireForces(header=header, fx=f.fx.tolist(), fz=f.fz.tolist()))
+            self.t_friction.publish(
+                Friction(
+                    header=header,
+                    mu=f.mu.tolist(),
+                    slip=f.slip.tolist(),
+                    valid=[bool(fz > 0.0) for fz in f.fz],
+                )
+            )
+            self.t_resist.publish(
+                Resistances(header=header, rolling=f.rolling.tolist(), aero=float(f.aero))
+            )
+            self.t_slope.publish(Slope(header=header, angle=float(f.slope), valid=True))
+        self.published += 1
+
+    def _log_progress(self, f: SampleFrame) -> None:
+        if self.progress_period <= 0 or f.t + 1e-9 < self._next_progress:
+            return
+        self._next_progress = f.t + self.progress_period
+        self.get_logger().info(
+            f'progress t={f.t:.1f}/{self.scenario.duration:g} s, gear {f.gear}, '
+            f'v={f.speed_true * 3.6:.1f} km/h'
+        )
+
+    def publish_diagnostics(self) -> None:
+        elapsed = time.monotonic() - (self.wall_start or time.monotonic())
+        achieved = self.sim.t / elapsed if elapsed > 0 else 0.0
+        lagging = self.rtf > 0 and elapsed > 2.0 and achieved < 0.9 * self.rtf
+        level = DiagnosticStatus.WARN if lagging else DiagnosticStatus.OK
+        message = (
+            f'behind real-time factor {self.rtf:g} (achieved {achieved:.2f})' if lagging else 'ok'
+        )
+        values = {
+            'sim_time_s': f'{self.sim.t:.3f}',
+            'samples_published': self.published,
+            'achieved_real_time_factor': f'{achieved:.2f}',
+            'requested_real_time_factor': self.rtf,
+        }
+        self.p_diag.publish(
+            diagnostic_array(
+                self._stamp(self.sim.t), 'vd: simulator', 'sim_node', level, message, values
+            )
+        )
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``ros2 run vd_sim_node sim_node``."""
+    return run_node(SimNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
