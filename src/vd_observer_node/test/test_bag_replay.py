@@ -72,6 +72,9 @@ def test_estimates_equal_run_cascade_on_the_same_arrays(
         est['/vd/observer/wheel_states']['omega_dot'], expected.omega_dot
     )
     np.testing.assert_array_equal(est['/vd/observer/body_accel']['accel.linear.x'], expected.accel)
+    np.testing.assert_array_equal(
+        est['/vd/observer/body_velocity']['twist.linear.x'], expected.speed
+    )
     np.testing.assert_array_equal(est['/vd/estimates/tire_forces']['fx'], expected.fx)
     np.testing.assert_array_equal(est['/vd/estimates/tire_forces']['fz'], expected.fz)
     np.testing.assert_array_equal(est['/vd/estimates/friction']['mu'], expected.mu)

@@ -202,7 +202,22 @@ def test_qos_profiles_are_kept(tmp_path: Path) -> None:
     info = yaml.safe_load((tmp_path / 'q' / 'metadata.yaml').read_text())
     meta = info['rosbag2_bagfile_information']['topics_with_message_count'][0]['topic_metadata']
     assert meta['offered_qos_profiles'][0]['depth'] == 10
-    assert BagReader(tmp_path / 'q').topics['/vd/sensors/wheel_angles'].qos_profiles_yaml == qos
+    stored = BagReader(tmp_path / 'q').topics['/vd/sensors/wheel_angles'].qos_profiles_yaml
+    assert yaml.safe_load(stored)[0].items() >= yaml.safe_load(qos)[0].items()
+
+
+def test_integer_qos_policies_become_version_9_names(tmp_path: Path) -> None:
+    qos = '- history: 1\n  depth: 100\n  reliability: 2\n  durability: 1\n  liveliness: 1\n'
+    with BagWriter(tmp_path / 'iq') as writer:
+        writer.add_topic('/vd/sensors/wheel_angles', 'vd_msgs/msg/WheelAngles', qos)
+    info = yaml.safe_load((tmp_path / 'iq' / 'metadata.yaml').read_text())
+    meta = info['rosbag2_bagfile_information']['topics_with_message_count'][0]['topic_metadata']
+    (profile,) = meta['offered_qos_profiles']
+    assert profile['history'] == 'keep_last' and profile['depth'] == 100
+    assert profile['reliability'] == 'best_effort'
+    assert profile['durability'] == 'transient_local'
+    assert profile['liveliness'] == 'automatic'
+    assert profile['deadline'] == {'sec': 9223372036, 'nsec': 854775807}
 
 
 def test_topic_filter_time_range_and_order(tmp_path: Path) -> None:

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReliability
 
 from .errors import BagFormatError, BagUsageError
 
@@ -22,6 +23,7 @@ __all__ = [
     'BagSummary',
     'TopicSummary',
     'format_qos_profiles',
+    'normalize_qos_profiles',
     'parse_qos_profiles',
     'read_metadata_file_paths',
     'render_metadata',
@@ -98,6 +100,38 @@ def format_qos_profiles(profiles: Sequence[Mapping[str, Any]]) -> str:
             raise BagUsageError(f'unknown QoS keys {sorted(unknown)}')
         out.append({**_QOS_DEFAULTS, **profile})
     return str(yaml.safe_dump(out, sort_keys=False, default_flow_style=False)).strip()
+
+
+_QOS_ENUMS: dict[str, Any] = {
+    'history': QosHistory,
+    'reliability': QosReliability,
+    'durability': QosDurability,
+    'liveliness': QosLiveliness,
+}
+
+
+def normalize_qos_profiles(qos_profiles_yaml: str) -> str:
+    """QoS YAML in the version-9 form: policy names as strings, all keys present.
+
+    Older rosbag2 (metadata <= 8) and some tools write the policies as rmw enum integers
+    (``reliability: 1``); version-9 readers expect names (``reliability: reliable``).
+
+    Raises:
+        BagUsageError: not a YAML list of mappings, or an unknown enum value or key.
+    """
+    profiles = parse_qos_profiles(qos_profiles_yaml)
+    out = []
+    for profile in profiles:
+        fixed = dict(profile)
+        for key, enum in _QOS_ENUMS.items():
+            value = fixed.get(key)
+            if isinstance(value, int) and not isinstance(value, bool):
+                try:
+                    fixed[key] = enum(value).name.lower()
+                except ValueError as exc:
+                    raise BagUsageError(f'QoS {key}: unknown value {value}') from exc
+        out.append(fixed)
+    return format_qos_profiles(out)
 
 
 def parse_qos_profiles(qos_profiles_yaml: str) -> list[dict[str, Any]]:

@@ -71,10 +71,14 @@ def repair_bag(path: str | os.PathLike[str], *, keep_backup: bool = True) -> Rep
     counts: dict[str, int] = {}
     with BagWriter(work, file_name=damaged.name) as writer:
         for info in topics.values():
-            if info.msgtype:
+            if not info.msgtype:
+                continue
+            try:
                 writer.add_topic(
                     info.name, info.msgtype, info.qos_profiles_yaml, definition=info.definition
                 )
+            except BagUsageError:  # unreadable QoS text: keep the data, lose the QoS
+                writer.add_topic(info.name, info.msgtype, '', definition=info.definition)
         for msg in reader.raw_messages():
             if msg.topic not in writer.topics:  # schema-less channel: nothing to decode it by
                 continue

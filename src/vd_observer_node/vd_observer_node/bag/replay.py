@@ -6,7 +6,8 @@ Pipeline (whole arrays, no per-message decoding in Python):
 2. batch-decode the sensors to numpy (:mod:`.cdr_batch`);
 3. align them on exact header stamps (a stamp present on all three topics, as the live
    estimator node's ``StampAligner`` does) and call :func:`vd_observer_node.cascade.run_cascade`;
-4. batch-encode the estimates, stamped with the wheel-angle header stamp they derive from and
+4. batch-encode the estimates (and the observer's filtered speed on
+   ``/vd/observer/body_velocity``, as the live observer node publishes it), stamped with the wheel-angle header stamp they derive from and
    logged at that wheel-angle message's log time;
 5. write inputs (raw), truth (raw) and estimates, merged in log-time order, to OUT_BAG.
 """
@@ -51,6 +52,7 @@ TRUTH_PREFIX = '/vd/truth/'
 ESTIMATE_TOPICS = {
     '/vd/observer/wheel_states': 'vd_msgs/msg/WheelStates',
     '/vd/observer/body_accel': 'geometry_msgs/msg/AccelStamped',
+    '/vd/observer/body_velocity': 'geometry_msgs/msg/TwistStamped',
     '/vd/estimates/tire_forces': 'vd_msgs/msg/TireForces',
     '/vd/estimates/friction': 'vd_msgs/msg/Friction',
     '/vd/estimates/resistances': 'vd_msgs/msg/Resistances',
@@ -138,6 +140,14 @@ def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str,
             'accel.angular.x': zeros,
             'accel.angular.y': zeros,
             'accel.angular.z': zeros,
+        },
+        '/vd/observer/body_velocity': {
+            'twist.linear.x': result.speed,
+            'twist.linear.y': zeros,
+            'twist.linear.z': zeros,
+            'twist.angular.x': zeros,
+            'twist.angular.y': zeros,
+            'twist.angular.z': zeros,
         },
         '/vd/estimates/tire_forces': {'fx': result.fx, 'fz': result.fz},
         '/vd/estimates/friction': {

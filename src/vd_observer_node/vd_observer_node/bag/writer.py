@@ -34,7 +34,13 @@ from .errors import (
     BagPathError,
     BagUsageError,
 )
-from .metadata import BagSummary, TopicSummary, parse_qos_profiles, render_metadata, write_metadata
+from .metadata import (
+    BagSummary,
+    TopicSummary,
+    normalize_qos_profiles,
+    render_metadata,
+    write_metadata,
+)
 from .typestore import message_definition, type_hash
 
 __all__ = [
@@ -203,6 +209,7 @@ class BagWriter:
             qos_profiles_yaml: offered QoS profiles as rosbag2 stores them in MCAP channel
                 metadata (a YAML list of profile mappings, see
                 :func:`.metadata.format_qos_profiles`); '' for none (player defaults).
+                Integer policies (metadata <= 8 style) are converted to version-9 names.
             definition: full ``ros2msg`` definition; default: from the vd typestore.
 
         Raises:
@@ -217,7 +224,8 @@ class BagWriter:
                     f'topic {name} already has type {known.msgtype}, cannot add {msgtype}'
                 )
             return
-        parse_qos_profiles(qos_profiles_yaml)
+        # '[]' rather than '': an empty YAML document is not a list for rosbag2's parser.
+        qos = normalize_qos_profiles(qos_profiles_yaml) if qos_profiles_yaml.strip() else '[]'
         text = definition if definition is not None else message_definition(msgtype)
         digest = type_hash(msgtype) if self._has_hash(msgtype) else ''
         out = b''
@@ -227,15 +235,12 @@ class BagWriter:
             self._schemas[msgtype] = (schema_id, record)
             out += record
         channel_id = len(self._topics) + 1
-        # '[]' rather than '': an empty YAML document is not a list for rosbag2's parser.
-        metadata = {
-            'offered_qos_profiles': qos_profiles_yaml if qos_profiles_yaml.strip() else '[]'
-        }
+        metadata = {'offered_qos_profiles': qos}
         if digest:
             metadata['topic_type_hash'] = digest
         channel = fmt.encode_channel(channel_id, self._schemas[msgtype][0], name, 'cdr', metadata)
         self._channel_records.append(channel)
-        self._topics[name] = _Topic(channel_id, name, msgtype, qos_profiles_yaml)
+        self._topics[name] = _Topic(channel_id, name, msgtype, qos)
         # Straight to the file, outside chunks, so a repair finds every topic declared so far.
         self._write_out(out + channel)
         self._sync()
