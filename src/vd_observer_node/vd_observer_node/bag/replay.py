@@ -7,8 +7,8 @@ Pipeline (whole arrays, no per-message decoding in Python):
 3. align them on exact header stamps (a stamp present on all three topics, as the live
    estimator node's ``StampAligner`` does) and call :func:`vd_observer_node.cascade.run_cascade`;
 4. batch-encode the estimates (and the observer's filtered speed on
-   ``/vd/observer/body_velocity``, as the live observer node publishes it), stamped with the wheel-angle header stamp they derive from and
-   logged at that wheel-angle message's log time;
+   ``/vd/observer/body_velocity``, as the live observer node publishes it), stamped with the
+   wheel-angle header stamp they derive from and logged at that message's log time;
 5. write inputs (raw), truth (raw) and estimates, merged in log-time order, to OUT_BAG.
 """
 
