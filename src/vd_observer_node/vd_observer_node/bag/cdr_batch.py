@@ -201,16 +201,21 @@ def encode_batch(
         N CDR byte strings, identical to rosbags' ``serialize_cdr`` output.
 
     Raises:
-        BagUsageError: a field is missing or has the wrong shape.
+        BagUsageError: a field is missing or has the wrong shape, or a stamp does not fit
+            builtin_interfaces/Time (int32 seconds).
     """
     fields = flat_fields(msgtype)
     stamp = np.asarray(stamp_ns, dtype=np.int64)
     n = stamp.shape[0]
     frame = frame_id.encode() + b'\x00'
     dtype = _layout(msgtype, len(frame), 0)
+    seconds = stamp // 1_000_000_000
+    if n and (seconds.min() < -(2**31) or seconds.max() >= 2**31):
+        # builtin_interfaces/Time.sec is int32: refuse rather than wrap around silently.
+        raise BagUsageError(f'{msgtype}: header stamps beyond the int32 seconds range')
     rows = np.zeros(n, dtype=dtype)
     rows['enc'] = _ENCAPSULATION_LE
-    rows['sec'] = stamp // 1_000_000_000
+    rows['sec'] = seconds
     rows['nanosec'] = stamp % 1_000_000_000
     rows['frame_len'] = len(frame)
     rows['frame_id'] = frame
