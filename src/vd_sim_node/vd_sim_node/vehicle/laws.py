@@ -45,7 +45,11 @@ _F = float
 
 
 def make_tire_law(tp: TireParams) -> Law:
-    """``law(v_slip, v_ground, fz, mu) -> Fx`` [N], the modulated tyre R."""
+    """``law(v_slip_ground, v_ground, v_body, fz, mu) -> Fx`` [N], the modulated tyre R.
+
+    The R's own flow is ``omega R - v_ground``; the slip is taken relative to the body
+    speed (``omega R - v``, the wheel hub moves with the body), as in the shared definition.
+    """
     fz0 = tp.nominal_load
     c = tp.pCx1
     dx1, dx2 = tp.pDx1, tp.pDx2
@@ -55,11 +59,12 @@ def make_tire_law(tp: TireParams) -> Law:
     v_min = tp.low_speed_velocity
     sin, atan, exp = math.sin, math.atan, math.exp
 
-    def law(vs: Any, vg: Any, fz: Any, mu: Any) -> Any:
-        if vs.__class__ is _F and fz.__class__ is _F:
+    def law(vsg: Any, vgr: Any, vg: Any, fz: Any, mu: Any) -> Any:
+        if vsg.__class__ is _F and fz.__class__ is _F:
             if fz <= 0.0:
                 return 0.0
-            wr = vs + vg
+            wr = vsg + vgr
+            vs = wr - vg
             den = wr if wr > 0.0 else -wr
             avg = vg if vg > 0.0 else -vg
             if avg > den:
@@ -79,7 +84,7 @@ def make_tire_law(tp: TireParams) -> Law:
                 ex = 1.0
             bk = fz * (kx1 + kx2 * dfz) * exp(kx3 * dfz) / (c * dx) * kx
             return dx * sin(c * atan(bk - ex * (bk - atan(bk)))) + sv
-        return tire_force_from_slip_velocity(vs, vg, fz, mu, tp)
+        return tire_force_from_slip_velocity(vsg + vgr - vg, vg, fz, mu, tp)
 
     return law
 
@@ -100,13 +105,16 @@ def make_brake_law(max_torque: float, lock_speed: float) -> Law:
 
 
 def make_rolling_law(rp: RollingResistanceParams, wheels: float) -> Law:
-    """``law(v, fz_wheel) -> force`` [N] for ``wheels`` wheels of equal load."""
+    """``law(v_ground, v_body, fz_wheel) -> force`` [N] for ``wheels`` wheels of equal load.
+
+    The force depends on the body speed (paper eq. 7); it acts at the ground point.
+    """
     k0 = rp.c0 * wheels
     k1 = rp.c1 / 160.0
     inv = 1.0 / rp.regularisation_speed
     tanh = math.tanh
 
-    def law(v: Any, fz: Any) -> Any:
+    def law(vgr: Any, v: Any, fz: Any) -> Any:
         if v.__class__ is _F:
             av = v if v > 0.0 else -v
             return k0 * (1.0 + k1 * av) * fz * tanh(v * inv)

@@ -23,6 +23,10 @@ Vertical dynamics are per axle (left = right, no roll), each wheel carries half 
 axle's tyre force. The ground forces act at ground level under the CG through the
 power-conserving gp0 junction, so the pitch equation sees ``-h (sum Fx - sum F_r)`` exactly
 as the shared convention demands, and ``m v' = sum Fx - sum F_r - F_aero - m g sin(alpha)``.
+The tyre and rolling-resistance laws are modulated by the body speed v (the wheel hubs move
+with the body), so the tyre sees exactly the shared slip definition; the small difference
+``h * pitch_rate`` between v and the ground-point flow only moves power between the pitch
+motion and those R elements (the total power balance stays exact).
 """
 
 from __future__ import annotations
@@ -135,7 +139,8 @@ def build_vehicle_graph(vp: VehicleParams) -> BondGraph:
     bg.add_se('grade', make_gravity_law(m * g, 'sin'), signals=('slope',))
     bg.add_r('aero', law=make_aero_law(vp.aero))
     bg.connect('grade', 'x')
-    bg.connect('x', 'mass_x')
+    bg.connect('x', 'mass_x', name='body')
+    bg.add_flow_sensor('v_body', 'body')
     bg.connect('x', 'aero')
 
     bg.add_one('pitch')
@@ -193,13 +198,11 @@ def build_vehicle_graph(vp: VehicleParams) -> BondGraph:
         bg.connect(f'tyre_{axle}', f'tyre_r_{axle}')
         bg.add_effort_sensor(f'tyre_tension_{axle}', f'tyre_force_{axle}')
         # Tyre load per wheel: half the axle's compression (the bond carries tension).
-        bg.add_block(
-            f'fz_wheel_{axle}', lambda t, e: -0.5 * e, signals=(f'tyre_tension_{axle}',)
-        )
+        bg.add_block(f'fz_wheel_{axle}', lambda t, e: -0.5 * e, signals=(f'tyre_tension_{axle}',))
         bg.add_r(
             f'rolling_{axle}',
             law=make_rolling_law(vp.rolling_resistance, 2.0),
-            signals=(f'fz_wheel_{axle}',),
+            signals=('v_body', f'fz_wheel_{axle}'),
         )
         bg.connect('ground', f'rolling_{axle}')
 
@@ -229,7 +232,7 @@ def build_vehicle_graph(vp: VehicleParams) -> BondGraph:
         bg.add_r(
             f'tyre_{name}',
             law=tire_law,
-            signals=('v_ground', f'fz_wheel_{axle}', 'road_mu'),
+            signals=('v_ground', 'v_body', f'fz_wheel_{axle}', 'road_mu'),
         )
         bg.connect(f'contact_{name}', f'tyre_{name}')
         bg.connect(f'contact_{name}', 'ground')
@@ -310,7 +313,7 @@ class VehicleModel:
         # The effort on the bond into an I element is its momentum derivative: omega_dot and
         # the body acceleration come out of the same evaluation as every other output.
         self.out_spin_rate = np.array([oi[f'wheel_{n}->spin_{n}.e'] for n in WHEELS])
-        self.out_momentum_rate_x = oi['x->mass_x.e']
+        self.out_momentum_rate_x = oi['body.e']
         self.rhs: Callable[..., FloatArray] = self.compiled.rhs
 
     def input_vector(

@@ -102,20 +102,20 @@ class TireParams:
     """
 
     nominal_load: float  # [N] Fz0
-    pCx1: float  # [-] shape factor C
-    pDx1: float  # [-] peak friction at Fz0
-    pDx2: float  # [-] variation of peak friction with load
-    pEx1: float  # [-] curvature at Fz0
-    pEx2: float  # [-] curvature variation with load
-    pEx3: float  # [-] curvature variation with load squared
-    pEx4: float  # [-] curvature asymmetry drive/brake
-    pKx1: float  # [-] slip stiffness / Fz at Fz0
-    pKx2: float  # [-] slip stiffness variation with load
-    pKx3: float  # [-] exponent of slip stiffness variation with load
-    pHx1: float  # [-] horizontal shift
-    pHx2: float  # [-] horizontal shift variation with load
-    pVx1: float  # [-] vertical shift / Fz
-    pVx2: float  # [-] vertical shift variation with load
+    pCx1: float  # [-] shape factor C  # noqa: N815 (MF 5.2 name)
+    pDx1: float  # [-] peak friction at Fz0  # noqa: N815 (MF 5.2 name)
+    pDx2: float  # [-] variation of peak friction with load  # noqa: N815 (MF 5.2 name)
+    pEx1: float  # [-] curvature at Fz0  # noqa: N815 (MF 5.2 name)
+    pEx2: float  # [-] curvature variation with load  # noqa: N815 (MF 5.2 name)
+    pEx3: float  # [-] curvature variation with load squared  # noqa: N815 (MF 5.2 name)
+    pEx4: float  # [-] curvature asymmetry drive/brake  # noqa: N815 (MF 5.2 name)
+    pKx1: float  # [-] slip stiffness / Fz at Fz0  # noqa: N815 (MF 5.2 name)
+    pKx2: float  # [-] slip stiffness variation with load  # noqa: N815 (MF 5.2 name)
+    pKx3: float  # [-] exponent of slip stiffness variation with load  # noqa: N815 (MF 5.2 name)
+    pHx1: float  # [-] horizontal shift  # noqa: N815 (MF 5.2 name)
+    pHx2: float  # [-] horizontal shift variation with load  # noqa: N815 (MF 5.2 name)
+    pVx1: float  # [-] vertical shift / Fz  # noqa: N815 (MF 5.2 name)
+    pVx2: float  # [-] vertical shift variation with load  # noqa: N815 (MF 5.2 name)
     low_speed_velocity: float  # [m/s] v_min in the slip denominator
 
 
@@ -193,6 +193,12 @@ def _chassis(r: MappingReader) -> ChassisParams:
         )
     wheelbase = r.number('wheelbase', 'm', gt=0.0)
     a = r.number('cg_to_front_axle', 'm', gt=0.0, lt=wheelbase)
+    a_sprung = (mass * a - 2.0 * mu_r * wheelbase) / (mass - 2.0 * (mu_f + mu_r))
+    if not 0.0 < a_sprung < wheelbase:
+        raise ParameterError(
+            f'chassis.cg_to_front_axle = {a:g} m with these unsprung masses puts the sprung '
+            f'mass CG at {a_sprung:.3f} m from the front axle, outside the wheelbase'
+        )
     return ChassisParams(
         mass=mass,
         unsprung_mass_front=mu_f,

@@ -18,7 +18,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vd_sim_node.vehicle.params import (
-    BrakeParams,
     ClutchParams,
     EngineParams,
     GearboxParams,
@@ -269,7 +268,8 @@ def decide_shift(
     1. a shift in progress ends at ``shift_end``: clutch LOCKED, new gear carries torque;
     2. LOCKED and ``w_e < engage_start_speed``: open into LAUNCH (the car is stopping);
     3. LAUNCH and ``w_e >= engage_full_speed`` and throttle > 0: LOCK;
-    4. up/down-shift with hysteresis on the gearbox input speed of the current gear:
+    4. (not when the clutch is held OPEN, i.e. coasting in neutral) up/down-shift with
+       hysteresis on the gearbox input speed of the current gear:
        up when above :func:`upshift_speed` (throttle dependent), down when below
        ``downshift_speed``; a shift opens the clutch and cuts the throttle for
        ``shift_time`` (instant when ``shift_time`` is 0 or the clutch is not LOCKED);
@@ -304,7 +304,9 @@ def decide_shift(
         return ShiftDecision(new, 'clutch locked after launch')
     w_gb = float(w_gb_per_gear[state.gear - 1])
     target = state.gear
-    if state.gear < n and w_gb > upshift_speed(throttle, gp):
+    if state.clutch == ClutchMode.OPEN:
+        pass  # held in neutral (coast-down): the driver does not shift
+    elif state.gear < n and w_gb > upshift_speed(throttle, gp):
         target = state.gear + 1
     elif state.gear > 1 and w_gb < gp.downshift_speed:
         target = state.gear - 1

@@ -30,9 +30,7 @@ def rolling_resistance(v: Scalar, fz: Scalar, rp: RollingResistanceParams) -> Sc
         Force opposing motion, [N] (same sign as v).
     """
     if isinstance(v, float) and isinstance(fz, float):
-        return (
-            rp.c0 * (1.0 + rp.c1 * abs(v) / 160.0) * fz * math.tanh(v / rp.regularisation_speed)
-        )
+        return rp.c0 * (1.0 + rp.c1 * abs(v) / 160.0) * fz * math.tanh(v / rp.regularisation_speed)
     va = np.asarray(v, dtype=float)
     out: FloatArray = (
         rp.c0

@@ -5,6 +5,8 @@ A scenario file (``config/scenarios/*.yaml``)::
     name: paper_table1
     duration: 150.0              # [s]
     initial_gear: 1              # optional, default 1
+    initial_speed: 0.0           # optional [m/s]: start rolling freely at this speed
+    neutral: false               # optional: clutch held open all run (coast-down test)
     hold_brake: true             # optional: automatic brake hold at standstill, throttle 0
     signals:                     # each a list of [t_start, value], first t_start = 0
       throttle: [[0, 0.0], [8, 1.0], [100, 0.0]]   # [0..1]
@@ -116,6 +118,8 @@ class Scenario:
         slope: road slope alpha, [rad], positive uphill.
         road_mu: road friction scale, [-] (1 = dry asphalt, the tyre's own peak).
         initial_gear: gear at t = 0.
+        initial_speed: speed at t = 0, [m/s]; wheels roll freely, engine follows the gear.
+        neutral: hold the clutch open for the whole run (no drive, no engine braking).
         hold_brake: apply the hold brake automatically at standstill with throttle 0.
         sensors: sensor settings.
         description: free text.
@@ -128,13 +132,15 @@ class Scenario:
     slope: PiecewiseConstant = field(default_factory=lambda: PiecewiseConstant.constant(0))
     road_mu: PiecewiseConstant = field(default_factory=lambda: PiecewiseConstant.constant(1))
     initial_gear: int = 1
+    initial_speed: float = 0.0
+    neutral: bool = False
     hold_brake: bool = True
     sensors: SensorSettings = field(default_factory=SensorSettings)
     description: str = ''
 
     def breakpoints(self) -> tuple[float, ...]:
         """All input discontinuities inside (0, duration), sorted, [s]."""
-        ts = set()
+        ts: set[float] = set()
         for sig in (self.throttle, self.brake, self.slope, self.road_mu):
             ts.update(t for t in sig.times if 0.0 < t < self.duration)
         return tuple(sorted(ts))
@@ -211,6 +217,8 @@ def parse_scenario(data: object, default_name: str = 'scenario') -> Scenario:
         slope=slope,
         road_mu=_signal(sig, 'road_mu', 1.0, 0.0, 2.0),
         initial_gear=r.integer('initial_gear', ge=1, default=1),
+        initial_speed=r.number('initial_speed', 'm/s', ge=0.0, le=100.0, default=0.0),
+        neutral=r.boolean('neutral', default=False),
         hold_brake=r.boolean('hold_brake', default=True),
         sensors=sensors,
         description=r.string('description', default=''),
