@@ -160,6 +160,10 @@ def test_unknown_topic_and_closed_writer(tmp_path: Path) -> None:
     writer.add_topic(TOPIC, MSGTYPE)
     with pytest.raises(BagUsageError, match='already has type'):
         writer.add_topic(TOPIC, 'vd_msgs/msg/Slope')
+    with pytest.raises(BagUsageError, match='times must be'):
+        writer.write(TOPIC, b'\x00\x01\x00\x00', -1)
+    with pytest.raises(BagUsageError, match='times must be'):
+        writer.write_interleaved([TOPIC], np.zeros(1, dtype=int), [b''], np.array([-5]))
     writer.close()
     with pytest.raises(BagUsageError, match='closed'):
         writer.write(TOPIC, b'', 0)

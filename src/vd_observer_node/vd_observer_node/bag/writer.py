@@ -285,14 +285,20 @@ class BagWriter:
             chunk.opened_at = self._clock()
         publish = log_time_ns if publish_time_ns is None else publish_time_ns
         offset = len(chunk.data)
-        chunk.data += _MESSAGE_HEAD.pack(
-            fmt.Op.MESSAGE,
-            _MESSAGE_FIXED + len(data),
-            entry.channel_id,
-            entry.count & 0xFFFFFFFF,
-            log_time_ns,
-            publish,
-        )
+        try:
+            head = _MESSAGE_HEAD.pack(
+                fmt.Op.MESSAGE,
+                _MESSAGE_FIXED + len(data),
+                entry.channel_id,
+                entry.count & 0xFFFFFFFF,
+                log_time_ns,
+                publish,
+            )
+        except struct.error as exc:
+            raise BagUsageError(
+                f'{topic}: times must be integers in [0, 2**64) ns, got {log_time_ns}, {publish}'
+            ) from exc
+        chunk.data += head
         chunk.data += data
         chunk.index.setdefault(entry.channel_id, []).append((log_time_ns, offset))
         entry.count += 1
@@ -324,33 +330,9 @@ class BagWriter:
             publish_times_ns is not None and len(publish_times_ns) != len(datas)
         ):
             raise BagUsageError('write_batch: datas and times must have the same length')
-        entry = self._topic(topic)
-        pack = _MESSAGE_HEAD.pack
         publish = log_times_ns if publish_times_ns is None else publish_times_ns
-        chunk = self._chunk
         for data, log_ns, pub_ns in zip(datas, log_times_ns, publish, strict=True):
-            if not chunk.data:
-                chunk.opened_at = self._clock()
-            log_i = int(log_ns)
-            offset = len(chunk.data)
-            chunk.data += pack(
-                fmt.Op.MESSAGE,
-                _MESSAGE_FIXED + len(data),
-                entry.channel_id,
-                entry.count & 0xFFFFFFFF,
-                log_i,
-                int(pub_ns),
-            )
-            chunk.data += data
-            chunk.index.setdefault(entry.channel_id, []).append((log_i, offset))
-            entry.count += 1
-            if log_i < chunk.start_ns:
-                chunk.start_ns = log_i
-            if log_i > chunk.end_ns:
-                chunk.end_ns = log_i
-            if len(chunk.data) >= self._chunk_size:
-                self.flush()
-                chunk = self._chunk
+            self.write(topic, data, int(log_ns), int(pub_ns))
         self.flush_if_due()
 
     def flush_if_due(self) -> bool:
@@ -435,8 +417,12 @@ class BagWriter:
         self._check_open()
         n = len(datas)
         which = np.asarray(which, dtype=np.int64)
-        log = np.asarray(log_times_ns, dtype=np.uint64)
-        pub = log if publish_times_ns is None else np.asarray(publish_times_ns, np.uint64)
+        log_signed = np.asarray(log_times_ns, dtype=np.int64)
+        pub_signed = log_signed if publish_times_ns is None else np.asarray(publish_times_ns)
+        if (log_signed < 0).any() or (pub_signed < 0).any():
+            raise BagUsageError('write_interleaved: times must be >= 0 ns')
+        log = log_signed.astype(np.uint64)
+        pub = pub_signed.astype(np.uint64)
         if which.shape != (n,) or log.shape != (n,) or pub.shape != (n,):
             raise BagUsageError('write_interleaved: which, datas and times differ in length')
         if n == 0:
