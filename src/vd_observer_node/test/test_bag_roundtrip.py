@@ -168,6 +168,36 @@ def test_mcap_ros2_decodes_with_embedded_definitions(
             assert_same(a, b, topic)
 
 
+def test_mcap_stream_reader_validates_our_crcs(
+    written: tuple[Path, dict[str, list[Any]]],
+) -> None:
+    from mcap.records import Chunk, DataEnd, Footer, Message
+    from mcap.stream_reader import StreamReader
+
+    path, _ = written
+    kinds = []
+    for record in StreamReader(str(path / 'bag_0.mcap'), validate_crcs=True).records:
+        kinds.append(type(record))
+        if isinstance(record, DataEnd):
+            assert record.data_section_crc != 0
+    assert kinds.count(Message) == 20 * len(ALL_TYPES)  # chunks are broken up, CRC-checked
+    assert Chunk not in kinds
+    assert kinds[-1] is Footer
+
+
+@pytest.mark.filterwarnings('ignore::DeprecationWarning')
+def test_mcap_ros2_reader_module_decodes(written: tuple[Path, dict[str, list[Any]]]) -> None:
+    from mcap_ros2.reader import read_ros2_messages
+
+    path, sent = written
+    got: dict[str, list[Any]] = {}
+    for item in read_ros2_messages(str(path / 'bag_0.mcap')):
+        got.setdefault(item.channel.topic, []).append(item.ros_msg)
+    for topic, msgs in sent.items():
+        for a, b in zip(msgs, got[topic], strict=True):
+            assert_same(a, b, topic)
+
+
 def test_metadata_yaml_is_rosbag2_version_9(written: tuple[Path, dict[str, list[Any]]]) -> None:
     path, sent = written
     info = yaml.safe_load((path / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
