@@ -1,0 +1,38 @@
+"""Accuracy report of a bag: estimates vs simulator truth, metrics (JSON/Markdown) and PNGs.
+
+ROS-free. Pipeline: :func:`load_bag_series` (batch-decoded topics) -> :func:`evaluate`
+(metrics, comparisons) -> :func:`report_json` / :func:`report_markdown` /
+:func:`report_text` and :func:`~.figures.write_figures`. The ``vd report`` sub-command is
+in :mod:`.cli`. See docs/report.md.
+"""
+
+from .errors import ReportError, ReportInputError
+from .evaluate import (
+    AccuracyReport,
+    Comparison,
+    EvaluationSettings,
+    QuantityMetrics,
+    SlopeConvergence,
+    evaluate,
+)
+from .format import report_json, report_markdown, report_text
+from .load import BagSeries, TopicSeries, load_bag_series
+from .metrics import ErrorStats
+
+__all__ = [
+    'AccuracyReport',
+    'BagSeries',
+    'Comparison',
+    'ErrorStats',
+    'EvaluationSettings',
+    'QuantityMetrics',
+    'ReportError',
+    'ReportInputError',
+    'SlopeConvergence',
+    'TopicSeries',
+    'evaluate',
+    'load_bag_series',
+    'report_json',
+    'report_markdown',
+    'report_text',
+]

@@ -1,0 +1,86 @@
+"""``vd report BAG [--out DIR]``: argparse wiring for the ``vd`` command (ROS-free).
+
+The ``vd`` command adds the sub-command with :func:`add_report_parser`; the parsed
+arguments carry ``run=run_report``. Errors print one line on stderr and give exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from ..errors import ObserverError
+
+__all__ = ['add_report_parser', 'default_out_dir', 'run_report']
+
+EXIT_OK = 0
+EXIT_ERROR = 2
+
+
+def default_out_dir(bag: Path) -> Path:
+    """``<bag>_report`` next to the bag (for a .mcap file: next to the file, without suffix)."""
+    bag = Path(bag)
+    base = bag.with_suffix('') if bag.suffix == '.mcap' else bag
+    return base.parent / f'{base.name.rstrip("/")}_report'
+
+
+def add_report_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add the ``report`` sub-command to the ``vd`` command's sub-parsers."""
+    parser = subparsers.add_parser(
+        'report',
+        help='accuracy of the estimates against the truth in a bag (metrics + figures)',
+        description='Compare /vd/observer/* and /vd/estimates/* with /vd/truth/* (paired by '
+        'header stamp); write metrics.json, metrics.md and PNG figures.',
+    )
+    parser.add_argument('bag', type=Path, help='bag folder or .mcap file with truth topics')
+    parser.add_argument('--out', type=Path, default=None,
+                        help='output directory (default: <bag>_report next to the bag)')
+    parser.add_argument('--vehicle', type=Path, default=None,
+                        help='vehicle YAML: static wheel loads for the Fz percentage (default: '
+                        'median true Fz over the first second)')
+    parser.add_argument('--no-figures', action='store_true', help='metrics only')
+    parser.add_argument('--no-progress', action='store_true', help='no progress bar')
+    parser.set_defaults(run=run_report)
+
+
+def run_report(args: argparse.Namespace) -> int:
+    """Run ``vd report`` with parsed arguments; returns the exit status (0 ok, 2 error)."""
+    try:
+        return _run(args)
+    except ObserverError as exc:  # bag, vehicle and report input errors: one line
+        print(f'vd: error: {exc}', file=sys.stderr)
+        return EXIT_ERROR
+    except OSError as exc:
+        print(f'vd: error: {exc}', file=sys.stderr)
+        return EXIT_ERROR
+
+
+def _run(args: argparse.Namespace) -> int:
+    from .evaluate import evaluate
+    from .format import report_json, report_markdown, report_text
+    from .load import load_bag_series
+
+    started = time.perf_counter()
+    static = None
+    if getattr(args, 'vehicle', None):
+        from ..vehicle import load_estimator_vehicle
+
+        static = load_estimator_vehicle(args.vehicle).static_wheel_loads
+    series = load_bag_series(args.bag, progress=not getattr(args, 'no_progress', False))
+    report, comparisons = evaluate(series, static_loads=static)
+    out = args.out if args.out is not None else default_out_dir(args.bag)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / 'metrics.json').write_text(report_json(report))
+    (out / 'metrics.md').write_text(report_markdown(report))
+    figures: list[Path] = []
+    if not getattr(args, 'no_figures', False):
+        from .figures import write_figures
+
+        figures = write_figures(comparisons, report, out)
+    sys.stdout.write(report_text(report))
+    print(f'wrote metrics.json, metrics.md and {len(figures)} figures to {out} '
+          f'(read {series.message_count} messages in {series.read_time_s:.1f} s, '
+          f'total {time.perf_counter() - started:.1f} s)')
+    return EXIT_OK

@@ -1,0 +1,15 @@
+"""Exception types of the accuracy report."""
+
+from __future__ import annotations
+
+from ..errors import ObserverError
+
+__all__ = ['ReportError', 'ReportInputError']
+
+
+class ReportError(ObserverError):
+    """Base class of every error raised by :mod:`vd_observer_node.report`."""
+
+
+class ReportInputError(ReportError):
+    """The bag lacks what a report needs (no truth topics, or no estimate to compare)."""

@@ -1,0 +1,477 @@
+"""Estimate-vs-truth comparisons and accuracy metrics of a decoded bag.
+
+Estimates and truth are paired by identical ``header.stamp`` (both derive from the same
+measurement), never by log time. Evaluation window (the project's accuracy targets): from
+1 s after the first stamp, excluding +-0.5 s around slope steps (found in the true slope)
+and gear changes (found in ``/vd/sensors/wheel_torques.gear``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .errors import ReportInputError
+from .load import BagSeries, TopicSeries
+from .metrics import (
+    ErrorStats,
+    change_times,
+    convergence_times,
+    error_stats,
+    evaluation_mask,
+    relative_error_stats,
+    step_times,
+)
+from .topics import GEAR_TOPIC, TRUTH_TOPICS
+
+__all__ = [
+    'TARGETS',
+    'AccuracyReport',
+    'Comparison',
+    'EvaluationSettings',
+    'QuantityMetrics',
+    'SlopeConvergence',
+    'build_comparisons',
+    'evaluate',
+]
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+#: The issue's accuracy targets with ideal sensors: metric key -> (quantity key, limit).
+TARGETS: dict[str, tuple[str, str, float]] = {
+    'slope RMS [deg]': ('slope', 'rms', 0.2),
+    'mu RMS [-]': ('mu', 'rms', 0.01),
+    'Fx RMS [% of max |Fx|]': ('fx', 'rms_pct_of_max_truth', 2.0),
+    'Fz RMS [% of static load]': ('fz', 'rms_pct_of_static', 1.0),
+    'omega relative RMS [%]': ('omega', 'rel_rms_pct', 0.1),
+}
+
+
+@dataclass(frozen=True)
+class EvaluationSettings:
+    """How the metrics are taken.
+
+    Attributes:
+        settle_s: [s] after the first stamp not evaluated (start-up of the differentiators).
+        exclusion_half_width_s: [s] excluded either side of slope steps and gear changes.
+        slope_step_min_deg: [deg] smallest sample-to-sample change of the true slope that
+            counts as a step.
+        convergence_threshold_deg: [deg] |slope error| bound for convergence.
+        convergence_hold_s: [s] the error must stay below the bound this long.
+        mu_excitation: mu is evaluated only where |Fx_true| > mu_excitation * Fz_true.
+        omega_min: [rad/s] omega relative error only where |omega_true| exceeds this.
+    """
+
+    settle_s: float = 1.0
+    exclusion_half_width_s: float = 0.5
+    slope_step_min_deg: float = 0.1
+    convergence_threshold_deg: float = 0.5
+    convergence_hold_s: float = 1.0
+    mu_excitation: float = 0.05
+    omega_min: float = 5.0
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """One quantity: estimate and truth on common stamps (either may be absent).
+
+    Attributes:
+        key: short name ('omega', 'fx', 'slope', ...).
+        title: human name for tables and figures.
+        unit: unit of ``estimate`` and ``truth`` (already converted, e.g. slope in deg).
+        t: shape (M,), [s] since the bag's first stamp.
+        estimate: shape (M,) or (M, 4) (wheel order FL, FR, RL, RR), or None.
+        truth: same shape, or None.
+        mask: shape (M,) or (M, 4), bool: samples that count in the metrics.
+        estimate_label: legend text of the estimate.
+        truth_label: legend text of the truth.
+    """
+
+    key: str
+    title: str
+    unit: str
+    t: FloatArray
+    estimate: FloatArray | None
+    truth: FloatArray | None
+    mask: BoolArray
+    estimate_label: str
+    truth_label: str
+
+    @property
+    def per_wheel(self) -> bool:
+        """True for 4-wheel quantities (arrays of shape (M, 4))."""
+        data = self.estimate if self.estimate is not None else self.truth
+        return data is not None and data.ndim == 2
+
+
+@dataclass(frozen=True)
+class QuantityMetrics:
+    """Accuracy of one estimated quantity.
+
+    Attributes:
+        key: short name (see :class:`Comparison`).
+        title: human name.
+        unit: unit of the error statistics.
+        overall: statistics over all wheels (or the scalar quantity).
+        wheels: per wheel FL, FR, RL, RR; empty for scalar quantities.
+        extras: further figures by name (e.g. 'rms_pct_of_max_truth' [%]).
+        note: caveats (e.g. 'no truth').
+    """
+
+    key: str
+    title: str
+    unit: str
+    overall: ErrorStats
+    wheels: tuple[ErrorStats, ...]
+    extras: dict[str, float]
+    note: str = ''
+
+
+@dataclass(frozen=True)
+class SlopeConvergence:
+    """Slope estimate convergence after one true slope step.
+
+    Attributes:
+        step_s: [s] since the first stamp.
+        from_deg: true slope before the step [deg].
+        to_deg: true slope after the step [deg].
+        delay_s: [s] until |error| stays below the threshold for the hold time; None if it
+            never did before the next step or the end.
+    """
+
+    step_s: float
+    from_deg: float
+    to_deg: float
+    delay_s: float | None
+
+
+@dataclass(frozen=True)
+class AccuracyReport:
+    """Everything the report prints and writes.
+
+    Attributes:
+        bag: path of the bag.
+        first_stamp_s: [s] absolute header stamp taken as t = 0.
+        duration_s: [s] covered by the stamps.
+        settings: how the metrics were taken.
+        slope_steps_s: [s] detected true slope steps.
+        gear_changes_s: [s] detected gear changes.
+        evaluated_fraction: share of the truth samples inside the evaluation window.
+        quantities: metrics per estimated quantity with truth.
+        convergence: slope convergence after each step.
+        targets: target name -> (value, limit, met) for the issue's targets found.
+        notes: what is missing from the bag and other caveats.
+    """
+
+    bag: str
+    first_stamp_s: float
+    duration_s: float
+    settings: EvaluationSettings
+    slope_steps_s: tuple[float, ...]
+    gear_changes_s: tuple[float, ...]
+    evaluated_fraction: float
+    quantities: tuple[QuantityMetrics, ...]
+    convergence: tuple[SlopeConvergence, ...]
+    targets: dict[str, tuple[float, float, bool]]
+    notes: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class _Spec:
+    key: str
+    title: str
+    unit: str
+    est_topic: str
+    truth_topic: str
+    field: str
+    factor: float
+    estimate_label: str
+    truth_label: str
+
+
+_SPECS = (
+    _Spec('omega', 'Wheel speed ω', 'rad/s', '/vd/observer/wheel_states', '/vd/truth/wheel_states',
+          'omega', 1.0, 'estimated (differentiator)', 'true (simulator)'),
+    _Spec('omega_dot', 'Wheel acceleration ω̇', 'rad/s²', '/vd/observer/wheel_states',
+          '/vd/truth/wheel_states', 'omega_dot', 1.0, 'estimated', 'true (simulator)'),
+    _Spec('accel', 'Body acceleration', 'm/s²', '/vd/observer/body_accel', '/vd/truth/body_accel',
+          'accel.linear.x', 1.0, 'estimated', 'true (simulator)'),
+    _Spec('speed', 'Body speed', 'm/s', '/vd/observer/body_velocity', '/vd/truth/body_velocity',
+          'twist.linear.x', 1.0, 'estimated', 'true (simulator)'),
+    _Spec('fx', 'Longitudinal tyre force Fx', 'N', '/vd/estimates/tire_forces',
+          '/vd/truth/tire_forces', 'fx', 1.0, 'estimated', 'simulated'),
+    _Spec('fz', 'Normal tyre load Fz', 'N', '/vd/estimates/tire_forces', '/vd/truth/tire_forces',
+          'fz', 1.0, 'estimated', 'simulated'),
+    _Spec('mu', 'Utilised friction μ', '-', '/vd/estimates/friction', '/vd/truth/friction', 'mu',
+          1.0, 'estimated (valid)', 'Pacejka (simulator)'),
+    _Spec('slip', 'Longitudinal slip', '-', '/vd/estimates/friction', '/vd/truth/friction',
+          'slip', 1.0, 'estimated', 'simulated'),
+    _Spec('rolling', 'Rolling resistance', 'N', '/vd/estimates/resistances',
+          '/vd/truth/resistances', 'rolling', 1.0, 'estimated', 'simulated'),
+    _Spec('aero', 'Aerodynamic drag', 'N', '/vd/estimates/resistances', '/vd/truth/resistances',
+          'aero', 1.0, 'estimated', 'simulated'),
+    _Spec('slope', 'Road slope', 'deg', '/vd/estimates/slope', '/vd/truth/slope', 'angle',
+          float(np.degrees(1.0)), 'estimated', 'true (scenario, Table 1)'),
+)
+
+
+def _common(a: TopicSeries, b: TopicSeries) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stamps present in both topics and their indices (first occurrence of duplicates)."""
+    common, ia, ib = np.intersect1d(a.stamp_ns, b.stamp_ns, assume_unique=False,
+                                    return_indices=True)
+    return common, ia, ib
+
+
+def _first_stamp(series: BagSeries) -> int:
+    return min(int(s.stamp_ns[0]) for s in series.topics.values())
+
+
+def _events(series: BagSeries, settings: EvaluationSettings, t0: int) -> tuple[
+    FloatArray, FloatArray, FloatArray | None, FloatArray | None
+]:
+    """Slope steps [s], gear changes [s], and the true slope (t [s], deg) if present."""
+    steps = np.zeros(0)
+    slope_t: FloatArray | None = None
+    slope_deg: FloatArray | None = None
+    truth_slope = series.topics.get('/vd/truth/slope')
+    if truth_slope is not None:
+        slope_t = (truth_slope.stamp_ns - t0) * 1e-9
+        slope_deg = np.degrees(truth_slope.values['angle'].astype(np.float64))
+        steps = step_times(slope_t, slope_deg, settings.slope_step_min_deg)
+    gears = np.zeros(0)
+    torques = series.topics.get(GEAR_TOPIC)
+    if torques is not None:
+        gears = change_times((torques.stamp_ns - t0) * 1e-9, torques.values['gear'])
+    return steps, gears, slope_t, slope_deg
+
+
+def build_comparisons(
+    series: BagSeries, settings: EvaluationSettings | None = None
+) -> tuple[list[Comparison], FloatArray, FloatArray, list[str]]:
+    """Pair every estimated quantity with its truth on common stamps.
+
+    Args:
+        series: the decoded bag.
+        settings: evaluation settings; default :class:`EvaluationSettings`.
+
+    Returns:
+        (comparisons, slope steps [s], gear changes [s], notes on what is missing).
+    """
+    cfg = settings or EvaluationSettings()
+    t0 = _first_stamp(series)
+    steps, gears, _, _ = _events(series, cfg, t0)
+    events = np.concatenate([steps, gears])
+    notes: list[str] = []
+    out: list[Comparison] = []
+    for spec in _SPECS:
+        est = series.topics.get(spec.est_topic)
+        truth = series.topics.get(spec.truth_topic)
+        if est is None and truth is None:
+            continue
+        if est is not None and truth is not None:
+            stamps, ie, it = _common(est, truth)
+            if stamps.size == 0:
+                notes.append(f'{spec.title}: no common stamps between {spec.est_topic} and '
+                             f'{spec.truth_topic} (estimates must carry the measurement stamp)')
+            estimate = est.values[spec.field][ie].astype(np.float64) * spec.factor
+            true = truth.values[spec.field][it].astype(np.float64) * spec.factor
+        elif est is not None:
+            notes.append(f'{spec.title}: no truth ({spec.truth_topic} missing), plotted only')
+            stamps = est.stamp_ns
+            estimate, true = est.values[spec.field].astype(np.float64) * spec.factor, None
+        else:
+            assert truth is not None
+            notes.append(f'{spec.title}: no estimate ({spec.est_topic} missing)')
+            stamps = truth.stamp_ns
+            estimate, true = None, truth.values[spec.field].astype(np.float64) * spec.factor
+        t = (stamps - t0) * 1e-9
+        mask = evaluation_mask(t, start=cfg.settle_s, events=events,
+                               half_width=cfg.exclusion_half_width_s)
+        if spec.key == 'mu' and estimate is not None and true is not None:
+            mask = _mu_mask(series, stamps, mask, cfg, notes)
+        elif spec.key == 'slope' and est is not None and true is not None:
+            mask = mask & est.values['valid'][ie].astype(bool)
+        out.append(Comparison(spec.key, spec.title, spec.unit, t, estimate, true, mask,
+                              spec.estimate_label, spec.truth_label))
+    return out, steps, gears, notes
+
+
+def _mu_mask(series: BagSeries, stamps: np.ndarray, mask: BoolArray,
+             cfg: EvaluationSettings, notes: list[str]) -> BoolArray:
+    """mu counts where the wheel is excited (|Fx| > k Fz, true forces) and the estimate valid."""
+    est = series.topics['/vd/estimates/friction']
+    valid = est.values['valid'][np.searchsorted(est.stamp_ns, stamps)].astype(bool)
+    forces = series.topics.get('/vd/truth/tire_forces')
+    excited = np.zeros(valid.shape, dtype=bool)
+    if forces is None:
+        notes.append('μ: /vd/truth/tire_forces missing, cannot select excited samples')
+    else:
+        _, ia, ib = np.intersect1d(stamps, forces.stamp_ns, return_indices=True)
+        fx, fz = forces.values['fx'][ib], forces.values['fz'][ib]
+        excited[ia] = np.abs(fx) > cfg.mu_excitation * fz
+    return mask[:, None] & excited & valid
+
+
+def _wheel_stats(c: Comparison) -> tuple[ErrorStats, tuple[ErrorStats, ...]]:
+    assert c.estimate is not None and c.truth is not None
+    overall = error_stats(c.estimate, c.truth, c.mask)
+    if not c.per_wheel:
+        return overall, ()
+    wheels = tuple(
+        error_stats(c.estimate[:, k], c.truth[:, k], c.mask if c.mask.ndim == 1 else c.mask[:, k])
+        for k in range(4)
+    )
+    return overall, wheels
+
+
+def _row_mask(c: Comparison) -> BoolArray:
+    """shape like the data: the mask broadcast to per-wheel columns."""
+    assert c.truth is not None
+    return np.broadcast_to(c.mask if c.mask.ndim == c.truth.ndim else c.mask[:, None],
+                           c.truth.shape)
+
+
+def _extras(c: Comparison, static_loads: FloatArray | None, cfg: EvaluationSettings
+            ) -> dict[str, float]:
+    assert c.estimate is not None and c.truth is not None
+    mask = _row_mask(c)
+    extras: dict[str, float] = {}
+    if c.key == 'omega':
+        spinning = mask & (np.abs(c.truth) > cfg.omega_min)
+        rel = relative_error_stats(np.abs(c.estimate - c.truth), 0.0, np.abs(c.truth), spinning)
+        extras['rel_rms_pct'] = 100.0 * rel.rms
+        extras['rel_max_pct'] = 100.0 * rel.max_abs
+    elif c.key == 'fx':
+        peak = float(np.abs(c.truth[mask]).max()) if mask.any() else float('nan')
+        extras['max_abs_truth'] = peak
+        extras['rms_pct_of_max_truth'] = 100.0 * error_stats(c.estimate, c.truth, mask).rms / peak
+    elif c.key == 'fz' and static_loads is not None:
+        rel = relative_error_stats(c.estimate, c.truth, static_loads[None, :], mask)
+        extras['rms_pct_of_static'] = 100.0 * rel.rms
+        extras['max_pct_of_static'] = 100.0 * rel.max_abs
+        for name, load in zip(('FL', 'FR', 'RL', 'RR'), static_loads.tolist(), strict=True):
+            extras[f'static_load_{name}'] = load
+    return extras
+
+
+def _static_loads(series: BagSeries, settle_s: float) -> FloatArray | None:
+    """Median true Fz over the first ``settle_s`` seconds, per wheel [N]."""
+    forces = series.topics.get('/vd/truth/tire_forces')
+    if forces is None:
+        return None
+    first = forces.stamp_ns <= forces.stamp_ns[0] + round(settle_s * 1e9)
+    return np.median(forces.values['fz'][first].astype(np.float64), axis=0)
+
+
+def evaluate(
+    series: BagSeries,
+    *,
+    settings: EvaluationSettings | None = None,
+    static_loads: FloatArray | None = None,
+) -> tuple[AccuracyReport, list[Comparison]]:
+    """Metrics of every estimated quantity against the truth in the bag.
+
+    Args:
+        series: the decoded bag.
+        settings: evaluation settings; default :class:`EvaluationSettings`.
+        static_loads: shape (4,), [N], static wheel loads for the Fz percentage; default the
+            median true Fz over the first ``settle_s`` seconds.
+
+    Returns:
+        (report, comparisons for the figures).
+
+    Raises:
+        ReportInputError: the bag holds no truth topic, or no topic at all.
+    """
+    cfg = settings or EvaluationSettings()
+    if not series.topics:
+        raise ReportInputError(f'{series.path}: none of the vd topics found in the bag')
+    present_truth = [t for t in TRUTH_TOPICS if t in series.topics]
+    if not present_truth:
+        raise ReportInputError(
+            f'{series.path}: no truth topics (need at least one of /vd/truth/*: '
+            + ', '.join(name.rsplit('/', 1)[1] for name in TRUTH_TOPICS) + ')'
+        )
+    comparisons, steps, gears, notes = build_comparisons(series, cfg)
+    loads = static_loads if static_loads is not None else _static_loads(series, cfg.settle_s)
+    t0 = _first_stamp(series)
+    last = max(int(s.stamp_ns[-1]) for s in series.topics.values())
+    quantities: list[QuantityMetrics] = []
+    for c in comparisons:
+        if c.estimate is None or c.truth is None:
+            continue
+        overall, wheels = _wheel_stats(c)
+        extras = _extras(c, loads, cfg)
+        note = ''
+        if c.key == 'mu':
+            excited_valid = int(c.mask.sum())
+            extras['evaluated_samples'] = float(excited_valid)
+            note = f'|Fx_true| > {cfg.mu_excitation:g} Fz_true and estimate valid'
+        elif c.key == 'slope':
+            note = 'where the estimate is valid'
+            base = evaluation_mask(c.t, start=cfg.settle_s, events=np.concatenate([steps, gears]),
+                                   half_width=cfg.exclusion_half_width_s)
+            extras['valid_pct'] = 100.0 * float(c.mask.sum()) / max(int(base.sum()), 1)
+            extras['rms_incl_invalid'] = error_stats(c.estimate, c.truth, base).rms
+        if overall.samples == 0:
+            note = (note + '; ' if note else '') + 'no sample in the evaluation window'
+        quantities.append(QuantityMetrics(c.key, c.title, c.unit, overall, wheels, extras, note))
+    convergence = _convergence(comparisons, steps, cfg, notes)
+    truth_t = (series.topics[present_truth[0]].stamp_ns - t0) * 1e-9
+    window = evaluation_mask(truth_t, start=cfg.settle_s, events=np.concatenate([steps, gears]),
+                             half_width=cfg.exclusion_half_width_s)
+    if GEAR_TOPIC not in series.topics:
+        notes.append(f'{GEAR_TOPIC} missing: gear shifts not excluded')
+    if '/vd/truth/slope' not in series.topics:
+        notes.append('/vd/truth/slope missing: slope steps not excluded, no convergence times')
+    missing_truth = [t for t in TRUTH_TOPICS if t not in series.topics]
+    if missing_truth:
+        notes.append('truth topics missing: ' + ', '.join(missing_truth))
+    notes.extend(f'{name} skipped: {why}' for name, why in series.skipped.items())
+    report = AccuracyReport(
+        bag=str(series.path),
+        first_stamp_s=t0 * 1e-9,
+        duration_s=(last - t0) * 1e-9,
+        settings=cfg,
+        slope_steps_s=tuple(steps.tolist()),
+        gear_changes_s=tuple(gears.tolist()),
+        evaluated_fraction=float(window.mean()) if window.size else 0.0,
+        quantities=tuple(quantities),
+        convergence=tuple(convergence),
+        targets=_targets(quantities),
+        notes=tuple(notes),
+    )
+    return report, comparisons
+
+
+def _convergence(comparisons: list[Comparison], steps: FloatArray, cfg: EvaluationSettings,
+                 notes: list[str]) -> list[SlopeConvergence]:
+    slope = next((c for c in comparisons if c.key == 'slope'), None)
+    if slope is None or slope.estimate is None or slope.truth is None or steps.size == 0:
+        return []
+    error = slope.estimate - slope.truth
+    delays = convergence_times(slope.t, error, steps, cfg.convergence_threshold_deg,
+                               cfg.convergence_hold_s)
+    out = []
+    for step, delay in zip(steps.tolist(), delays, strict=True):
+        k = int(np.searchsorted(slope.t, step))
+        before = float(slope.truth[max(k - 1, 0)])
+        after = float(slope.truth[min(k, slope.t.size - 1)])
+        out.append(SlopeConvergence(step, before, after, delay))
+    return out
+
+
+def _targets(quantities: list[QuantityMetrics]) -> dict[str, tuple[float, float, bool]]:
+    by_key = {q.key: q for q in quantities}
+    out: dict[str, tuple[float, float, bool]] = {}
+    for name, (key, metric, limit) in TARGETS.items():
+        q = by_key.get(key)
+        if q is None:
+            continue
+        value = q.overall.rms if metric == 'rms' else q.extras.get(metric, float('nan'))
+        if np.isfinite(value):
+            out[name] = (float(value), limit, bool(value <= limit))
+    return out

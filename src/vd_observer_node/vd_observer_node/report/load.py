@@ -1,0 +1,114 @@
+"""Read the report's topics from a bag and batch-decode them to numpy (no per-message Python).
+
+Reuses the bag core: :meth:`BagReader.topic_arrays` for the raw CDR and
+:func:`~vd_observer_node.bag.cdr_batch.decode_batch` for the fields, so a 150 s, 1 kHz drive
+with ~16 topics (2.4 M messages) loads in seconds.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from ..bag.cdr_batch import BatchFields, decode_batch
+from ..bag.reader import BagReader
+from .topics import ESTIMATE_TOPICS, SENSOR_TOPICS, TRUTH_TOPICS
+
+__all__ = ['BagSeries', 'TopicSeries', 'load_bag_series']
+
+_WANTED = {**SENSOR_TOPICS, **ESTIMATE_TOPICS, **TRUTH_TOPICS}
+_PROGRESS_AFTER_S = 1.0  # [s] show a bar only when reading is slow enough to need one
+
+
+@dataclass(frozen=True)
+class TopicSeries:
+    """One topic decoded: header stamps [ns], shape (N,) int64, and fields by dotted name.
+
+    Fields have shape (N,) (scalars) or (N, K) (fixed arrays such as ``fx``, K = 4).
+    Messages are sorted by stamp.
+    """
+
+    stamp_ns: np.ndarray
+    values: dict[str, np.ndarray]
+
+
+@dataclass
+class BagSeries:
+    """The report's topics found in one bag.
+
+    Attributes:
+        path: the bag.
+        topics: decoded topics by name (only those present with the expected type).
+        skipped: topic -> why it was not used (wrong type, no messages).
+        read_time_s: wall time to read and decode [s].
+        message_count: messages decoded.
+    """
+
+    path: Path
+    topics: dict[str, TopicSeries] = field(default_factory=dict)
+    skipped: dict[str, str] = field(default_factory=dict)
+    read_time_s: float = 0.0
+    message_count: int = 0
+
+
+def _sorted(fields: BatchFields) -> TopicSeries:
+    stamp = fields.stamp_ns
+    if stamp.size > 1 and np.any(np.diff(stamp) < 0):
+        order = np.argsort(stamp, kind='stable')
+        return TopicSeries(stamp[order], {k: v[order] for k, v in fields.values.items()})
+    return TopicSeries(stamp, dict(fields.values))
+
+
+def load_bag_series(path: str | os.PathLike[str], *, progress: bool = True) -> BagSeries:
+    """Read and decode the vd sensor, observer, estimate and truth topics of a bag.
+
+    Args:
+        path: bag folder or .mcap file.
+        progress: allow a tqdm bar on stderr (shown only if reading takes over a second).
+
+    Raises:
+        BagError: the bag cannot be read (see :mod:`vd_observer_node.bag.errors`).
+    """
+    started = time.perf_counter()
+    reader = BagReader(path)
+    infos = reader.topics
+    series = BagSeries(Path(path))
+    selected: list[str] = []
+    for name, msgtype in _WANTED.items():
+        info = infos.get(name)
+        if info is None:
+            continue
+        if info.msgtype != msgtype:
+            series.skipped[name] = f'type {info.msgtype}, expected {msgtype}'
+        elif info.message_count == 0:
+            series.skipped[name] = 'no messages'
+        else:
+            selected.append(name)
+    total = sum(infos[name].message_count for name in selected)
+    bar = tqdm(
+        total=total,
+        unit='msg',
+        unit_scale=True,
+        desc='report: decode',
+        disable=not progress,
+        file=sys.stderr,
+        delay=_PROGRESS_AFTER_S,
+    )
+    with bar:
+        arrays = reader.topic_arrays(selected)
+        for name in selected:
+            arr = arrays.get(name)
+            if arr is None or not arr.datas:
+                series.skipped[name] = 'no messages'
+                continue
+            series.topics[name] = _sorted(decode_batch(arr.msgtype, arr.datas))
+            series.message_count += len(arr.datas)
+            bar.update(len(arr.datas))
+    series.read_time_s = time.perf_counter() - started
+    return series

@@ -1,0 +1,247 @@
+"""Pure accuracy metrics: numpy arrays in, small frozen dataclasses out.
+
+Conventions: ``t`` is time [s], shape (N,), non-decreasing. Errors are ``estimate - truth``.
+Statistics over an empty selection are ``nan`` with ``samples == 0`` (a report shows "n/a"
+rather than failing when, say, a drive never excites the tyres enough for mu).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    'ErrorStats',
+    'change_times',
+    'convergence_time',
+    'convergence_times',
+    'error_stats',
+    'evaluation_mask',
+    'relative_error_stats',
+    'step_times',
+]
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class ErrorStats:
+    """Error statistics of an estimate against the truth over the selected samples.
+
+    Attributes:
+        rms: root mean square of the error, unit of the quantity.
+        max_abs: largest absolute error, unit of the quantity.
+        mean: mean error (bias, estimate minus truth), unit of the quantity.
+        samples: number of samples (elements) the statistics are taken over.
+    """
+
+    rms: float
+    max_abs: float
+    mean: float
+    samples: int
+
+
+_EMPTY = ErrorStats(float('nan'), float('nan'), float('nan'), 0)
+
+
+def error_stats(
+    estimate: ArrayLike, truth: ArrayLike, mask: ArrayLike | None = None
+) -> ErrorStats:
+    """RMS, max and mean of ``estimate - truth`` over the elements where ``mask`` is true.
+
+    Args:
+        estimate: any shape, e.g. (N,) or (N, 4).
+        truth: same shape as ``estimate``.
+        mask: bool, broadcastable to that shape ((N,) masks rows of an (N, 4) array);
+            None selects everything. Non-finite errors are always left out.
+    """
+    error = np.asarray(estimate, dtype=np.float64) - np.asarray(truth, dtype=np.float64)
+    return _stats(error, mask)
+
+
+def relative_error_stats(
+    estimate: ArrayLike,
+    truth: ArrayLike,
+    scale: ArrayLike,
+    mask: ArrayLike | None = None,
+) -> ErrorStats:
+    """Statistics of ``(estimate - truth) / scale`` (e.g. scale = |truth| or a static load).
+
+    Args:
+        estimate: any shape.
+        truth: same shape.
+        scale: broadcastable to that shape, same unit; must be nonzero where selected.
+        mask: as in :func:`error_stats`.
+
+    Returns:
+        Dimensionless statistics (multiply by 100 for percent).
+    """
+    error = np.asarray(estimate, dtype=np.float64) - np.asarray(truth, dtype=np.float64)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        ratio = error / np.asarray(scale, dtype=np.float64)
+    return _stats(ratio, mask)
+
+
+def _stats(error: FloatArray, mask: ArrayLike | None) -> ErrorStats:
+    select = np.isfinite(error)
+    if mask is not None:
+        m = np.asarray(mask, dtype=bool)
+        if m.ndim < error.ndim:  # a per-row mask for a per-wheel array
+            m = m.reshape(m.shape + (1,) * (error.ndim - m.ndim))
+        select &= np.broadcast_to(m, error.shape)
+    values = error[select]
+    if values.size == 0:
+        return _EMPTY
+    return ErrorStats(
+        rms=float(np.sqrt(np.mean(np.square(values)))),
+        max_abs=float(np.max(np.abs(values))),
+        mean=float(np.mean(values)),
+        samples=int(values.size),
+    )
+
+
+def step_times(t: ArrayLike, signal: ArrayLike, min_jump: float, merge_s: float = 0.5) -> FloatArray:
+    """Times of steps in a piecewise-constant signal (e.g. the true road slope).
+
+    A step is a sample-to-sample change larger than ``min_jump``; changes closer together
+    than ``merge_s`` count as one step (a step spread over a few samples).
+
+    Args:
+        t: shape (N,), [s].
+        signal: shape (N,), any unit.
+        min_jump: smallest change counted as a step, unit of ``signal``.
+        merge_s: [s], changes within this time of the previous one belong to its step.
+
+    Returns:
+        shape (K,), [s], the time of the first sample after each step.
+    """
+    times = np.asarray(t, dtype=np.float64)
+    values = np.asarray(signal, dtype=np.float64)
+    jumps = np.flatnonzero(np.abs(np.diff(values)) > min_jump) + 1
+    return _merge(times[jumps], merge_s)
+
+
+def change_times(t: ArrayLike, values: ArrayLike, merge_s: float = 0.0) -> FloatArray:
+    """Times where a discrete signal (e.g. the engaged gear) changes value.
+
+    Args:
+        t: shape (N,), [s].
+        values: shape (N,), integers or other exactly comparable values.
+        merge_s: [s], changes within this time of the previous one are merged (0: none).
+
+    Returns:
+        shape (K,), [s], the time of the first sample with the new value.
+    """
+    times = np.asarray(t, dtype=np.float64)
+    v = np.asarray(values)
+    changes = np.flatnonzero(v[1:] != v[:-1]) + 1
+    return _merge(times[changes], merge_s)
+
+
+def _merge(times: FloatArray, merge_s: float) -> FloatArray:
+    if times.size == 0 or merge_s <= 0.0:
+        return times
+    keep = np.ones(times.size, dtype=bool)
+    keep[1:] = np.diff(times) > merge_s
+    return times[keep]
+
+
+def evaluation_mask(
+    t: ArrayLike,
+    *,
+    start: float,
+    events: Sequence[float] | ArrayLike = (),
+    half_width: float = 0.5,
+) -> BoolArray:
+    """Samples that count in the metrics: from ``start`` on, away from transient events.
+
+    Args:
+        t: shape (N,), [s].
+        start: [s], first time evaluated (e.g. the first stamp + 1 s of start-up).
+        events: [s], times of slope steps and gear shifts.
+        half_width: [s], samples with |t - event| <= half_width are excluded.
+
+    Returns:
+        shape (N,), bool.
+    """
+    times = np.asarray(t, dtype=np.float64)
+    mask = times >= start
+    for event in np.asarray(events, dtype=np.float64).ravel().tolist():
+        mask &= np.abs(times - event) > half_width
+    return mask
+
+
+def convergence_time(
+    t: ArrayLike,
+    error: ArrayLike,
+    start: float,
+    stop: float,
+    threshold: float,
+    hold: float,
+) -> float | None:
+    """Delay after ``start`` until ``|error|`` stays below ``threshold`` for ``hold`` seconds.
+
+    Only samples with ``start <= t < stop`` are looked at (``stop``: the next step or the end
+    of the data). The error must stay below the threshold on every sample of a stretch
+    spanning at least ``hold``; a non-finite error breaks a stretch.
+
+    Args:
+        t: shape (N,), [s].
+        error: shape (N,), estimate - truth.
+        start: [s], the step time.
+        stop: [s], end of the search window (exclusive).
+        threshold: same unit as ``error``.
+        hold: [s].
+
+    Returns:
+        [s] from ``start`` to the first sample of the first long-enough stretch, or None if
+        there is none inside the window.
+    """
+    times = np.asarray(t, dtype=np.float64)
+    err = np.asarray(error, dtype=np.float64)
+    window = (times >= start) & (times < stop)
+    tw = times[window]
+    ok = np.abs(err[window]) < threshold  # nan compares False: breaks the stretch
+    if tw.size == 0:
+        return None
+    # Stretches of consecutive good samples: their first and last indices.
+    edges = np.diff(np.concatenate(([0], ok.astype(np.int8), [0])))
+    firsts = np.flatnonzero(edges == 1)
+    lasts = np.flatnonzero(edges == -1) - 1
+    long_enough = tw[lasts] - tw[firsts] >= hold - 1e-9
+    if not long_enough.any():
+        return None
+    return float(tw[firsts[np.argmax(long_enough)]] - start)
+
+
+def convergence_times(
+    t: ArrayLike,
+    error: ArrayLike,
+    steps: Sequence[float] | ArrayLike,
+    threshold: float,
+    hold: float,
+) -> list[float | None]:
+    """:func:`convergence_time` after each step, searching up to the next step (or the end).
+
+    Args:
+        t: shape (N,), [s].
+        error: shape (N,).
+        steps: shape (K,), [s], increasing step times.
+        threshold: same unit as ``error``.
+        hold: [s].
+
+    Returns:
+        K delays [s] (None: not converged before the next step or the end of the data).
+    """
+    times = np.asarray(t, dtype=np.float64)
+    starts = np.asarray(steps, dtype=np.float64).ravel().tolist()
+    end = float(times[-1]) + 1.0 if times.size else 0.0
+    stops = starts[1:] + [end]
+    return [
+        convergence_time(times, error, start, stop, threshold, hold)
+        for start, stop in zip(starts, stops, strict=True)
+    ]
