@@ -224,7 +224,8 @@ class _FileScan:
             if op == fmt.Op.CHUNK:
                 chunk = self._parse(pos, body_at, fmt.parse_chunk, body)
                 if chunk is not None:
-                    batch = self._chunk(chunk, pos, body_at, wanted, start_ns, stop_ns)
+                    hint = self._indexed_offsets(end)
+                    batch = self._chunk(chunk, pos, body_at, wanted, start_ns, stop_ns, hint)
                     if batch is not None and batch.datas:
                         yield batch
             elif op == fmt.Op.MESSAGE:
@@ -284,12 +285,24 @@ class _FileScan:
         wanted: Callable[[int], bool],
         start_ns: int | None,
         stop_ns: int | None,
+        hint: np.ndarray | None = None,
     ) -> _Batch | None:
-        """The selected messages of one chunk; None (and damage reported) if it is damaged."""
+        """The selected messages of one chunk; None (and damage reported) if it is damaged.
+
+        ``hint``: record offsets from the message indexes after the chunk. Used only if they
+        tile the chunk exactly with message records, which makes them the walk's result.
+        """
         payload_at = body_at + chunk.payload_offset
         data = self._inflate(chunk, offset, payload_at)
         if data is None:
             return None
+        raw = np.frombuffer(data, dtype=np.uint8)
+        tiled = _tile(raw, hint)
+        if tiled is not None:
+            at, sizes = tiled
+            return self._messages_at(
+                data, raw, at, sizes, chunk, payload_at, wanted, start_ns, stop_ns
+            )
         # Walk the record lengths (inherently sequential), then decode headers with numpy.
         unpack_prefix = _PREFIX.unpack_from
         positions: list[int] = []
@@ -307,7 +320,6 @@ class _FileScan:
         if pos > size:
             self._damage(payload_at, f'last chunk record at +{positions[-1]} overruns the chunk')
             return None
-        raw = np.frombuffer(data, dtype=np.uint8)
         at = np.asarray(positions, dtype=np.int64)
         ops = raw[at]
         is_message = ops == fmt.Op.MESSAGE
@@ -320,6 +332,23 @@ class _FileScan:
                     self._channel(self._parse(offset, payload_at, fmt.parse_channel, body), offset)
             at = at[is_message]
         sizes = np.asarray(lengths, dtype=np.int64)[is_message]
+        return self._messages_at(
+            data, raw, at, sizes, chunk, payload_at, wanted, start_ns, stop_ns
+        )
+
+    def _messages_at(
+        self,
+        data: bytes,
+        raw: np.ndarray,
+        at: np.ndarray,
+        sizes: np.ndarray,
+        chunk: fmt.ChunkRecord,
+        payload_at: int,
+        wanted: Callable[[int], bool],
+        start_ns: int | None,
+        stop_ns: int | None,
+    ) -> _Batch | None:
+        """Decode the message records at offsets ``at`` (record lengths ``sizes``) at once."""
         if sizes.size and int(sizes.min()) < 22:
             self._damage(payload_at, 'message record too short')
             return None
@@ -353,6 +382,27 @@ class _FileScan:
         return _Batch(
             channel[chosen], log[chosen], heads['publish'][chosen, 0].astype(np.int64), datas
         )
+
+    def _indexed_offsets(self, pos: int) -> np.ndarray | None:
+        """Message offsets listed by the message index records starting at ``pos``, sorted.
+
+        None when there are none or they do not parse; they are only a hint (see _tile).
+        """
+        buf = self.buf
+        size = len(buf)
+        parts = []
+        while pos + 15 <= size and buf[pos] == fmt.Op.MESSAGE_INDEX:
+            length = _PREFIX.unpack_from(buf, pos)[1]
+            count = struct.unpack_from('<I', buf, pos + 11)[0]
+            end = pos + 9 + length
+            if end > size or length != 6 + count or count % 16:
+                return None
+            pairs = np.frombuffer(buf, dtype='<u8', count=count // 8, offset=pos + 15)
+            parts.append(pairs[1::2])
+            pos = end
+        if not parts:
+            return None
+        return np.sort(np.concatenate(parts))
 
     def _inflate(self, chunk: fmt.ChunkRecord, offset: int, payload_at: int) -> bytes | None:
         """Decompressed, size- and CRC-checked chunk records; None if damaged."""
@@ -476,6 +526,24 @@ class _FileScan:
                 return self._parse(pos, pos + _PREFIX.size, fmt.parse_statistics, body)  # type: ignore[no-any-return]
             pos = end
         return None
+
+
+def _tile(raw: np.ndarray, hint: np.ndarray | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """(offsets, record lengths) if ``hint`` tiles ``raw`` exactly with message records."""
+    size = raw.size
+    if hint is None or not hint.size or hint[0] != 0 or int(hint[-1]) + 9 > size:
+        return None
+    at = hint.astype(np.int64)
+    if not (raw[at] == fmt.Op.MESSAGE).all():
+        return None
+    lengths = np.ascontiguousarray(raw[at[:, None] + np.arange(1, 9)]).view('<u8')[:, 0]
+    if int(lengths.max()) > size:
+        return None
+    sizes = lengths.astype(np.int64)
+    ends = at + 9 + sizes
+    if int(ends[-1]) != size or not np.array_equal(ends[:-1], at[1:]):
+        return None
+    return at, sizes
 
 
 class _ChannelSelector:
