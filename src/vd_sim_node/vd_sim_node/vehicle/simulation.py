@@ -176,7 +176,7 @@ class Simulator:
         seed: int | None = None,
         rtol: float = 1e-7,
         atol_scale: float = 1.0,
-        max_chunk: float = 2.0,
+        max_chunk: float = 8.0,
     ) -> None:
         """Prepare a run.
 
@@ -583,7 +583,7 @@ def simulate(
     progress: Callable[[float, float], None] | None = None,
     rtol: float = 1e-7,
     atol_scale: float = 1.0,
-    max_chunk: float = 2.0,
+    max_chunk: float = 8.0,
 ) -> SimResult:
     """Simulate a whole scenario.
 
