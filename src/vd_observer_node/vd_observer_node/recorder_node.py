@@ -32,6 +32,7 @@ from vd_sim_node.ros_common import (
     diagnostic_array,
     run_node,
 )
+from vd_sim_node.topics import CONTRACT
 
 from vd_observer_node.bag import BagWriter
 from vd_observer_node.bag.errors import BagError, UnknownMessageTypeError
@@ -41,6 +42,9 @@ __all__ = ['RecorderNode', 'main']
 PARAMS = [
     ParamSpec('output', '', "bag folder to create ('' = vd_<date>_<time> in the working dir)"),
     ParamSpec('topic_regex', '^/vd/', 'record topics whose name matches this regex'),
+    ParamSpec('contract_topics', True,
+              'subscribe to every topic of the vd contract at start, before it is published, '
+              'so the first messages are not lost to discovery'),
     ParamSpec('include_clock', False, 'also record /clock'),
     ParamSpec('include_diagnostics', False, 'also record /diagnostics'),
     ParamSpec(
@@ -100,6 +104,10 @@ class RecorderNode(Node):  # type: ignore[misc]
         self.create_timer(1.0, self.publish_diagnostics, clock=steady)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self.get_logger().info(f'recording to {self.writer.path}')
+        if v['contract_topics']:
+            for topic, type_name in CONTRACT.items():
+                if self.wanted(topic):
+                    self.subscribe(topic, type_name)
         self.discover()
 
     def wanted(self, topic: str) -> bool:
@@ -111,25 +119,27 @@ class RecorderNode(Node):  # type: ignore[misc]
         for topic, types in self.get_topic_names_and_types():
             if topic in self.subscriptions_by_topic or topic in self.skipped:
                 continue
-            if not self.wanted(topic):
-                continue
-            type_name = types[0]
-            try:
-                self.writer.add_topic(topic, type_name, _STREAM_QOS_YAML)
-                kind = message_class(type_name)
-            except (UnknownMessageTypeError, ImportError, AttributeError) as exc:
-                self.skipped.add(topic)
-                self.get_logger().warning(f'not recording {topic} ({type_name}): {exc}')
-                continue
-            qos = (
-                CLOCK_QOS
-                if topic == '/clock'
-                else (DIAGNOSTICS_QOS if topic == '/diagnostics' else STREAM_QOS)
-            )
-            self.subscriptions_by_topic[topic] = self.create_subscription(
-                kind, topic, self._make_callback(topic), qos, raw=True
-            )
-            self.get_logger().info(f'recording {topic} ({type_name})')
+            if self.wanted(topic):
+                self.subscribe(topic, types[0])
+
+    def subscribe(self, topic: str, type_name: str) -> None:
+        """Declare `topic` in the bag and subscribe to it, serialized."""
+        try:
+            self.writer.add_topic(topic, type_name, _STREAM_QOS_YAML)
+            kind = message_class(type_name)
+        except (UnknownMessageTypeError, ImportError, AttributeError) as exc:
+            self.skipped.add(topic)
+            self.get_logger().warning(f'not recording {topic} ({type_name}): {exc}')
+            return
+        qos = (
+            CLOCK_QOS
+            if topic == '/clock'
+            else (DIAGNOSTICS_QOS if topic == '/diagnostics' else STREAM_QOS)
+        )
+        self.subscriptions_by_topic[topic] = self.create_subscription(
+            kind, topic, self._make_callback(topic), qos, raw=True
+        )
+        self.get_logger().info(f'recording {topic} ({type_name})')
 
     def _make_callback(self, topic: str) -> Any:
         clock = self.get_clock()

@@ -89,6 +89,14 @@ PARAMS = [
     ParamSpec('publish_truth', True, 'publish the /vd/truth/* topics'),
     ParamSpec('frame_id', 'base_link', 'frame_id of every header'),
     ParamSpec(
+        'start_delay',
+        1.0,
+        'wall time between start-up and the first sample, so that subscribers started at '
+        'the same time are matched and miss nothing [s]',
+        low=0.0,
+        high=600.0,
+    ),
+    ParamSpec(
         'progress_period',
         10.0,
         'log progress every this much simulated time [s]',
@@ -170,6 +178,7 @@ class SimNode(Node):  # type: ignore[misc]
 
         self.published = 0
         self.wall_start: float | None = None
+        self.first_sample_at = time.monotonic() + v['start_delay']
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(_BATCH_PERIOD, self.publish_batch, clock=steady)
         self.create_timer(1.0, self.publish_diagnostics, clock=steady)
@@ -182,6 +191,8 @@ class SimNode(Node):  # type: ignore[misc]
 
     def publish_batch(self) -> None:
         now = time.monotonic()
+        if now < self.first_sample_at:
+            return
         if self.wall_start is None:
             self.wall_start = now
         target = (now - self.wall_start) * self.rtf if self.rtf > 0 else float('inf')

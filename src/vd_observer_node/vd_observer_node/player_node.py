@@ -1,0 +1,133 @@
+"""ROS 2 node: plays topics of a bag with their original timing (live replay).
+
+Publishes the selected topics of an MCAP bag as stored (serialized CDR, no decode), spaced
+by their log times divided by ``rate``, and ``/clock`` with the bag's log time, like
+``ros2 bag play --clock``. Observer and estimator nodes started with ``use_sim_time:=true``
+then recompute the estimates, and the recorder can record them. With ``loop`` the bag starts
+over at its end (time jumps backwards; the observers re-initialise); otherwise the node exits
+with code 0 when everything has been played.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock as ClockMsg
+
+from vd_observer_node.bag import BagReader
+from vd_observer_node.bag.errors import ReplayInputError
+from vd_observer_node.recorder_node import message_class
+from vd_sim_node.ros_common import (
+    CLOCK_QOS,
+    STREAM_QOS,
+    NodeFinished,
+    ParamSpec,
+    declare_parameters,
+    ns_to_time,
+    run_node,
+)
+
+__all__ = ['SENSOR_TOPICS', 'PlayerNode', 'main']
+
+SENSOR_TOPICS = [
+    '/vd/sensors/wheel_angles',
+    '/vd/sensors/body_velocity',
+    '/vd/sensors/wheel_torques',
+]
+
+PARAMS = [
+    ParamSpec('bag', '', 'bag folder or .mcap file to play (required)'),
+    ParamSpec('topics', SENSOR_TOPICS, "topics to play (['all'] = every topic of the bag)"),
+    ParamSpec('rate', 1.0, 'playback speed factor (2.0 = twice as fast)', low=1e-3, high=1e4),
+    ParamSpec('loop', False, 'start over at the end of the bag'),
+    ParamSpec('clock', True, 'publish /clock with the bag log time'),
+    ParamSpec('start_delay', 0.5, 'wall time to wait before playing [s]', low=0.0, high=60.0),
+    ParamSpec('wait_for_subscribers', 10.0,
+              'wait up to this long [s] until every played topic has a subscriber, so that '
+              'nodes started together with the player miss nothing (0 = do not wait)',
+              low=0.0, high=600.0),
+]
+
+_PERIOD = 0.002  # [s] publishing timer period
+
+
+class PlayerNode(Node):  # type: ignore[misc]
+    """Holds the selected messages in memory and publishes each when its time has come."""
+
+    def __init__(self) -> None:
+        super().__init__('player_node')
+        v = declare_parameters(self, PARAMS)
+        if not v['bag']:
+            raise ReplayInputError("parameter 'bag' is required: -p bag:=PATH")
+        reader = BagReader(v['bag'])
+        available = reader.topics
+        wanted = list(available) if v['topics'] == ['all'] else list(v['topics'])
+        missing = [t for t in wanted if t not in available]
+        if missing:
+            raise ReplayInputError(
+                f'{v["bag"]}: no topic {", ".join(missing)}; it has {", ".join(sorted(available))}'
+            )
+        self.messages = list(reader.raw_messages(wanted, ordered=True))
+        if not self.messages:
+            raise ReplayInputError(f'{v["bag"]}: the selected topics hold no message')
+        self.publishers_by_topic = {
+            t: self.create_publisher(message_class(available[t].msgtype), t, STREAM_QOS)
+            for t in wanted
+        }
+        self.p_clock = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS) if v['clock'] else None
+        self.rate = v['rate']
+        self.loop = v['loop']
+        self.index = 0
+        self.loops = 0
+        self.t0_bag = self.messages[0].log_time_ns
+        self.t0_wall: float | None = None
+        self.start_at = time.monotonic() + v['start_delay']
+        self.wait_until = self.start_at + v['wait_for_subscribers']
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(_PERIOD, self.play, clock=steady)
+        span = (self.messages[-1].log_time_ns - self.t0_bag) * 1e-9
+        self.get_logger().info(
+            f'playing {len(self.messages)} messages ({span:.1f} s) of {len(wanted)} topics '
+            f'from {v["bag"]} at rate {self.rate:g}' + (' in a loop' if self.loop else '')
+        )
+
+    def play(self) -> None:
+        now = time.monotonic()
+        if now < self.start_at:
+            return
+        if self.t0_wall is None:
+            unmatched = [
+                t for t, p in self.publishers_by_topic.items() if p.get_subscription_count() == 0
+            ]
+            if unmatched and now < self.wait_until:
+                return
+            if unmatched and self.loops == 0:
+                self.get_logger().warning(f'no subscriber yet on {", ".join(unmatched)}')
+            self.t0_wall = now
+        due_ns = self.t0_bag + int((now - self.t0_wall) * self.rate * 1e9)
+        last: Any = None
+        while self.index < len(self.messages) and self.messages[self.index].log_time_ns <= due_ns:
+            last = self.messages[self.index]
+            self.publishers_by_topic[last.topic].publish(last.data)
+            self.index += 1
+        if last is not None and self.p_clock is not None:
+            self.p_clock.publish(ClockMsg(clock=ns_to_time(last.log_time_ns)))
+        if self.index >= len(self.messages):
+            if not self.loop:
+                self.get_logger().info(f'played {len(self.messages)} messages')
+                raise NodeFinished()
+            self.loops += 1
+            self.index = 0
+            self.t0_wall = None
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``ros2 run vd_observer_node player_node``."""
+    return run_node(PlayerNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
