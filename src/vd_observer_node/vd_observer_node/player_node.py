@@ -16,10 +16,6 @@ from typing import Any
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
-
-from vd_observer_node.bag import BagReader
-from vd_observer_node.bag.errors import ReplayInputError
-from vd_observer_node.recorder_node import message_class
 from vd_sim_node.ros_common import (
     CLOCK_QOS,
     STREAM_QOS,
@@ -29,6 +25,10 @@ from vd_sim_node.ros_common import (
     ns_to_time,
     run_node,
 )
+
+from vd_observer_node.bag import BagReader
+from vd_observer_node.bag.errors import ReplayInputError
+from vd_observer_node.recorder_node import message_class
 
 __all__ = ['SENSOR_TOPICS', 'PlayerNode', 'main']
 
