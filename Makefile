@@ -1,7 +1,7 @@
 # vd — two commands for a fresh clone: `make demo` and `make test`.
 # Every target sets the workspace up first if needed (idempotent, seconds when nothing changed).
 SHELL := /bin/bash
-.SHELLFLAGS := -eu -o pipefail -c
+.SHELLFLAGS := -e -o pipefail -c
 RUN := . ./env.sh &&
 CORE := src/vd_sim_node/vd_sim_node src/vd_observer_node/vd_observer_node
 NODES := $(wildcard src/*/vd_*/*_node.py src/*/vd_*/launcher.py)

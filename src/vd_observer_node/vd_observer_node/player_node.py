@@ -45,10 +45,14 @@ PARAMS = [
     ParamSpec('loop', False, 'start over at the end of the bag'),
     ParamSpec('clock', True, 'publish /clock with the bag log time'),
     ParamSpec('start_delay', 0.5, 'wall time to wait before playing [s]', low=0.0, high=60.0),
-    ParamSpec('wait_for_subscribers', 10.0,
-              'wait up to this long [s] until every played topic has a subscriber, so that '
-              'nodes started together with the player miss nothing (0 = do not wait)',
-              low=0.0, high=600.0),
+    ParamSpec(
+        'wait_for_subscribers',
+        10.0,
+        'wait up to this long [s] until every played topic has a subscriber, so that '
+        'nodes started together with the player miss nothing (0 = do not wait)',
+        low=0.0,
+        high=600.0,
+    ),
 ]
 
 _PERIOD = 0.002  # [s] publishing timer period

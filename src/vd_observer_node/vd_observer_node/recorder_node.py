@@ -42,9 +42,12 @@ __all__ = ['RecorderNode', 'main']
 PARAMS = [
     ParamSpec('output', '', "bag folder to create ('' = vd_<date>_<time> in the working dir)"),
     ParamSpec('topic_regex', '^/vd/', 'record topics whose name matches this regex'),
-    ParamSpec('contract_topics', True,
-              'subscribe to every topic of the vd contract at start, before it is published, '
-              'so the first messages are not lost to discovery'),
+    ParamSpec(
+        'contract_topics',
+        True,
+        'subscribe to every topic of the vd contract at start, before it is published, '
+        'so the first messages are not lost to discovery',
+    ),
     ParamSpec('include_clock', False, 'also record /clock'),
     ParamSpec('include_diagnostics', False, 'also record /diagnostics'),
     ParamSpec(
