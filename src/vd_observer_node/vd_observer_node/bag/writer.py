@@ -447,12 +447,13 @@ class BagWriter:
         heads['sequence'] = sequence & 0xFFFFFFFF
         heads['log'] = log
         heads['publish'] = pub
-        records = np.empty(int(ends[-1]), dtype=np.uint8)
-        head_at = (starts[:, None] + np.arange(_MESSAGE_HEAD.size)).ravel()
-        is_head = np.zeros(records.size, dtype=bool)
-        is_head[head_at] = True
-        records[head_at] = np.frombuffer(heads.tobytes(), dtype=np.uint8)
-        records[~is_head] = np.frombuffer(b''.join(datas), dtype=np.uint8)
+        # Interleave 31-byte record heads and message bytes with one join (no per-byte masks).
+        packed = heads.tobytes()
+        step = _MESSAGE_HEAD.size
+        parts: list[bytes] = [b''] * (2 * n)
+        parts[0::2] = [packed[i : i + step] for i in range(0, n * step, step)]
+        parts[1::2] = datas
+        records = b''.join(parts)
         # A new chunk starts at the first message beginning past each chunk_size multiple.
         bucket = starts // self._chunk_size
         cuts = [0, *(np.flatnonzero(np.diff(bucket)) + 1).tolist(), n]
@@ -464,7 +465,7 @@ class BagWriter:
                 sel = np.flatnonzero(channel[a:b] == c)
                 pairs = np.stack([log[a:b][sel], offsets[sel]], axis=1).astype('<u8')
                 index[int(c)] = pairs.tobytes()
-            raw = records[base : int(ends[b - 1])].tobytes()
+            raw = records[base : int(ends[b - 1])]
             self._emit_chunk(raw, int(log[a:b].min()), int(log[a:b].max()), index)
 
     # -- closing -----------------------------------------------------------------------------
