@@ -243,7 +243,7 @@ def _header(stamp: Time) -> Any:
     return Header(stamp=stamp)
 
 
-def run_node(factory: Any, args: Sequence[str] | None = None) -> int:
+def run_node(factory: Any, args: list[str] | None = None) -> int:
     """Init rclpy, build the node with `factory()`, spin until shutdown; return the exit code.
 
     A refused parameter or a bad configuration file ends the process with ONE line on stderr
