@@ -1,10 +1,10 @@
 """Reading rosbag2 MCAP bags (ours and rosbag2's), strictly or leniently.
 
 The data section is scanned record by record with bounds checks and chunk CRCs, so damage is
-reported as :class:`BagCorruptError` naming the file and byte offset, after every message
-before the damage has been yielded. With ``recover=True`` damage is collected in
-:attr:`BagReader.problems` instead: a damaged chunk whose framing is intact is skipped and
-reading goes on; damaged framing ends the file.
+reported as :class:`BagCorruptError` naming the file and byte offset, after the messages of
+every intact chunk before the damage have been yielded. With ``recover=True`` damage is
+collected in :attr:`BagReader.problems` instead: a damaged chunk whose framing is intact is
+skipped and reading goes on; damaged framing ends the file.
 
 Messages come in file order (chunk by chunk), which is log-time order for bags recorded live.
 The whole MCAP file is read into memory (fine for bags up to a few GB).
@@ -37,7 +37,6 @@ __all__ = [
     'find_mcap_files',
 ]
 
-_MESSAGE_HEAD = struct.Struct('<BQHIQQ')  # opcode, length, channel, sequence, log, publish
 _PREFIX = fmt.RECORD_PREFIX
 _MAX_CHUNK = 1 << 31  # [B] refuse to inflate a chunk claiming more (damaged size field)
 _KNOWN_OPS = frozenset(int(op) for op in fmt.Op)
@@ -238,8 +237,9 @@ class _FileScan:
                     ):
                         yield _Batch(
                             np.array([channel_id], dtype=np.uint16),
-                            np.array([log_ns], dtype=np.int64),
-                            np.array([pub_ns], dtype=np.int64),
+                            # via uint64: a damaged time must not raise OverflowError
+                            np.array([log_ns], dtype=np.uint64).astype(np.int64),
+                            np.array([pub_ns], dtype=np.uint64).astype(np.int64),
                             [bytes(buf[body_at + 22 : end])],
                         )
             elif op == fmt.Op.SCHEMA:
