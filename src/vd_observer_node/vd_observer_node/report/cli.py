@@ -35,11 +35,19 @@ def add_report_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentPa
         'header stamp); write metrics.json, metrics.md and PNG figures.',
     )
     parser.add_argument('bag', type=Path, help='bag folder or .mcap file with truth topics')
-    parser.add_argument('--out', type=Path, default=None,
-                        help='output directory (default: <bag>_report next to the bag)')
-    parser.add_argument('--vehicle', type=Path, default=None,
-                        help='vehicle YAML: static wheel loads for the Fz percentage (default: '
-                        'median true Fz over the first second)')
+    parser.add_argument(
+        '--out',
+        type=Path,
+        default=None,
+        help='output directory (default: <bag>_report next to the bag)',
+    )
+    parser.add_argument(
+        '--vehicle',
+        type=Path,
+        default=None,
+        help='vehicle YAML: static wheel loads for the Fz percentage (default: '
+        'median true Fz over the first second)',
+    )
     parser.add_argument('--no-figures', action='store_true', help='metrics only')
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
     parser.set_defaults(run=run_report)
@@ -80,7 +88,9 @@ def _run(args: argparse.Namespace) -> int:
 
         figures = write_figures(comparisons, report, out)
     sys.stdout.write(report_text(report))
-    print(f'wrote metrics.json, metrics.md and {len(figures)} figures to {out} '
-          f'(read {series.message_count} messages in {series.read_time_s:.1f} s, '
-          f'total {time.perf_counter() - started:.1f} s)')
+    print(
+        f'wrote metrics.json, metrics.md and {len(figures)} figures to {out} '
+        f'(read {series.message_count} messages in {series.read_time_s:.1f} s, '
+        f'total {time.perf_counter() - started:.1f} s)'
+    )
     return EXIT_OK

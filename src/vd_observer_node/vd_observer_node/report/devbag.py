@@ -73,7 +73,9 @@ def write_topic_arrays_bag(
     with BagWriter(path) as writer:
         for name in names:
             writer.add_topic(name, _TYPES[name])
-        writer.write_interleaved(names, index[order], [datas[k] for k in order.tolist()], log[order])
+        writer.write_interleaved(
+            names, index[order], [datas[k] for k in order.tolist()], log[order]
+        )
 
 
 def sim_topics(sim: Any, *, truth: bool = True) -> dict[str, dict[str, np.ndarray]]:

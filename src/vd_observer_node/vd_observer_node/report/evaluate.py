@@ -88,6 +88,9 @@ class Comparison:
         mask: shape (M,) or (M, 4), bool: samples that count in the metrics.
         estimate_label: legend text of the estimate.
         truth_label: legend text of the truth.
+        symbol: axis label of the quantity without its unit (e.g. 'Fx').
+        estimate_valid: same shape as ``estimate``: the estimator's own validity flags
+            (mu, slope), or None where its message has none.
     """
 
     key: str
@@ -99,6 +102,8 @@ class Comparison:
     mask: BoolArray
     estimate_label: str
     truth_label: str
+    symbol: str = ''
+    estimate_valid: BoolArray | None = None
 
     @property
     def per_wheel(self) -> bool:
@@ -190,38 +195,45 @@ class _Spec:
     factor: float
     estimate_label: str
     truth_label: str
+    symbol: str
 
 
-_SPECS = (
-    _Spec('omega', 'Wheel speed ω', 'rad/s', '/vd/observer/wheel_states', '/vd/truth/wheel_states',
-          'omega', 1.0, 'estimated (differentiator)', 'true (simulator)'),
-    _Spec('omega_dot', 'Wheel acceleration ω̇', 'rad/s²', '/vd/observer/wheel_states',
-          '/vd/truth/wheel_states', 'omega_dot', 1.0, 'estimated', 'true (simulator)'),
-    _Spec('accel', 'Body acceleration', 'm/s²', '/vd/observer/body_accel', '/vd/truth/body_accel',
-          'accel.linear.x', 1.0, 'estimated', 'true (simulator)'),
-    _Spec('speed', 'Body speed', 'm/s', '/vd/observer/body_velocity', '/vd/truth/body_velocity',
-          'twist.linear.x', 1.0, 'estimated', 'true (simulator)'),
-    _Spec('fx', 'Longitudinal tyre force Fx', 'N', '/vd/estimates/tire_forces',
-          '/vd/truth/tire_forces', 'fx', 1.0, 'estimated', 'simulated'),
-    _Spec('fz', 'Normal tyre load Fz', 'N', '/vd/estimates/tire_forces', '/vd/truth/tire_forces',
-          'fz', 1.0, 'estimated', 'simulated'),
-    _Spec('mu', 'Utilised friction μ', '-', '/vd/estimates/friction', '/vd/truth/friction', 'mu',
-          1.0, 'estimated (valid)', 'Pacejka (simulator)'),
-    _Spec('slip', 'Longitudinal slip', '-', '/vd/estimates/friction', '/vd/truth/friction',
-          'slip', 1.0, 'estimated', 'simulated'),
-    _Spec('rolling', 'Rolling resistance', 'N', '/vd/estimates/resistances',
-          '/vd/truth/resistances', 'rolling', 1.0, 'estimated', 'simulated'),
-    _Spec('aero', 'Aerodynamic drag', 'N', '/vd/estimates/resistances', '/vd/truth/resistances',
-          'aero', 1.0, 'estimated', 'simulated'),
-    _Spec('slope', 'Road slope', 'deg', '/vd/estimates/slope', '/vd/truth/slope', 'angle',
-          float(np.degrees(1.0)), 'estimated', 'true (scenario, Table 1)'),
-)
+_OBS, _EST, _TRUTH = '/vd/observer/', '/vd/estimates/', '/vd/truth/'
+# fmt: off
+_SPECS = tuple(_Spec(*row) for row in (
+    # key, title, unit, estimate topic, truth topic, field, factor, legends, axis symbol
+    ('omega', 'Wheel speed ω', 'rad/s', _OBS + 'wheel_states', _TRUTH + 'wheel_states',
+     'omega', 1.0, 'estimated (differentiator)', 'true (simulator)', 'ω'),
+    ('omega_dot', 'Wheel acceleration ω̇', 'rad/s²', _OBS + 'wheel_states',
+     _TRUTH + 'wheel_states', 'omega_dot', 1.0, 'estimated (differentiator)',
+     'true (simulator)', 'dω/dt'),
+    ('accel', 'Body acceleration', 'm/s²', _OBS + 'body_accel', _TRUTH + 'body_accel',
+     'accel.linear.x', 1.0, 'estimated', 'true (simulator)', 'acceleration'),
+    ('speed', 'Body speed', 'm/s', _OBS + 'body_velocity', _TRUTH + 'body_velocity',
+     'twist.linear.x', 1.0, 'estimated', 'true (simulator)', 'speed'),
+    ('fx', 'Longitudinal tyre force Fx', 'N', _EST + 'tire_forces', _TRUTH + 'tire_forces',
+     'fx', 1.0, 'estimated', 'simulated', 'Fx'),
+    ('fz', 'Normal tyre load Fz', 'N', _EST + 'tire_forces', _TRUTH + 'tire_forces',
+     'fz', 1.0, 'estimated', 'simulated', 'Fz'),
+    ('mu', 'Utilised friction μ', '-', _EST + 'friction', _TRUTH + 'friction',
+     'mu', 1.0, 'estimated (where valid)', 'Pacejka (simulator)', 'μ = Fx/Fz'),
+    ('slip', 'Longitudinal slip', '-', _EST + 'friction', _TRUTH + 'friction',
+     'slip', 1.0, 'estimated', 'simulated', 'slip'),
+    ('rolling', 'Rolling resistance', 'N', _EST + 'resistances', _TRUTH + 'resistances',
+     'rolling', 1.0, 'estimated', 'simulated', 'rolling resistance'),
+    ('aero', 'Aerodynamic drag', 'N', _EST + 'resistances', _TRUTH + 'resistances',
+     'aero', 1.0, 'estimated', 'simulated', 'drag force'),
+    ('slope', 'Road slope', 'deg', _EST + 'slope', _TRUTH + 'slope',
+     'angle', float(np.degrees(1.0)), 'estimated', 'true (scenario, Table 1)', 'slope'),
+))
+# fmt: on
 
 
 def _common(a: TopicSeries, b: TopicSeries) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Stamps present in both topics and their indices (first occurrence of duplicates)."""
-    common, ia, ib = np.intersect1d(a.stamp_ns, b.stamp_ns, assume_unique=False,
-                                    return_indices=True)
+    common, ia, ib = np.intersect1d(
+        a.stamp_ns, b.stamp_ns, assume_unique=False, return_indices=True
+    )
     return common, ia, ib
 
 
@@ -229,9 +241,9 @@ def _first_stamp(series: BagSeries) -> int:
     return min(int(s.stamp_ns[0]) for s in series.topics.values())
 
 
-def _events(series: BagSeries, settings: EvaluationSettings, t0: int) -> tuple[
-    FloatArray, FloatArray, FloatArray | None, FloatArray | None
-]:
+def _events(
+    series: BagSeries, settings: EvaluationSettings, t0: int
+) -> tuple[FloatArray, FloatArray, FloatArray | None, FloatArray | None]:
     """Slope steps [s], gear changes [s], and the true slope (t [s], deg) if present."""
     steps = np.zeros(0)
     slope_t: FloatArray | None = None
@@ -271,11 +283,14 @@ def build_comparisons(
         truth = series.topics.get(spec.truth_topic)
         if est is None and truth is None:
             continue
+        ie: np.ndarray | None = None
         if est is not None and truth is not None:
             stamps, ie, it = _common(est, truth)
             if stamps.size == 0:
-                notes.append(f'{spec.title}: no common stamps between {spec.est_topic} and '
-                             f'{spec.truth_topic} (estimates must carry the measurement stamp)')
+                notes.append(
+                    f'{spec.title}: no common stamps between {spec.est_topic} and '
+                    f'{spec.truth_topic} (estimates must carry the measurement stamp)'
+                )
             estimate = est.values[spec.field][ie].astype(np.float64) * spec.factor
             true = truth.values[spec.field][it].astype(np.float64) * spec.factor
         elif est is not None:
@@ -288,19 +303,46 @@ def build_comparisons(
             stamps = truth.stamp_ns
             estimate, true = None, truth.values[spec.field].astype(np.float64) * spec.factor
         t = (stamps - t0) * 1e-9
-        mask = evaluation_mask(t, start=cfg.settle_s, events=events,
-                               half_width=cfg.exclusion_half_width_s)
+        mask = evaluation_mask(
+            t, start=cfg.settle_s, events=events, half_width=cfg.exclusion_half_width_s
+        )
         if spec.key == 'mu' and estimate is not None and true is not None:
             mask = _mu_mask(series, stamps, mask, cfg, notes)
         elif spec.key == 'slope' and est is not None and true is not None:
             mask = mask & est.values['valid'][ie].astype(bool)
-        out.append(Comparison(spec.key, spec.title, spec.unit, t, estimate, true, mask,
-                              spec.estimate_label, spec.truth_label))
+        out.append(
+            Comparison(
+                spec.key,
+                spec.title,
+                spec.unit,
+                t,
+                estimate,
+                true,
+                mask,
+                spec.estimate_label,
+                spec.truth_label,
+                spec.symbol,
+                _validity(est, ie),
+            )
+        )
     return out, steps, gears, notes
 
 
-def _mu_mask(series: BagSeries, stamps: np.ndarray, mask: BoolArray,
-             cfg: EvaluationSettings, notes: list[str]) -> BoolArray:
+def _validity(est: TopicSeries | None, rows: np.ndarray | None) -> BoolArray | None:
+    """The estimate's own ``valid`` flags on the compared rows (None: no such field)."""
+    if est is None or 'valid' not in est.values:
+        return None
+    flags = est.values['valid'].astype(bool)
+    return flags if rows is None else flags[rows]
+
+
+def _mu_mask(
+    series: BagSeries,
+    stamps: np.ndarray,
+    mask: BoolArray,
+    cfg: EvaluationSettings,
+    notes: list[str],
+) -> BoolArray:
     """mu counts where the wheel is excited (|Fx| > k Fz, true forces) and the estimate valid."""
     est = series.topics['/vd/estimates/friction']
     valid = est.values['valid'][np.searchsorted(est.stamp_ns, stamps)].astype(bool)
@@ -312,7 +354,8 @@ def _mu_mask(series: BagSeries, stamps: np.ndarray, mask: BoolArray,
         _, ia, ib = np.intersect1d(stamps, forces.stamp_ns, return_indices=True)
         fx, fz = forces.values['fx'][ib], forces.values['fz'][ib]
         excited[ia] = np.abs(fx) > cfg.mu_excitation * fz
-    return mask[:, None] & excited & valid
+    selected: BoolArray = mask[:, None] & excited & valid
+    return selected
 
 
 def _wheel_stats(c: Comparison) -> tuple[ErrorStats, tuple[ErrorStats, ...]]:
@@ -330,12 +373,14 @@ def _wheel_stats(c: Comparison) -> tuple[ErrorStats, tuple[ErrorStats, ...]]:
 def _row_mask(c: Comparison) -> BoolArray:
     """shape like the data: the mask broadcast to per-wheel columns."""
     assert c.truth is not None
-    return np.broadcast_to(c.mask if c.mask.ndim == c.truth.ndim else c.mask[:, None],
-                           c.truth.shape)
+    return np.broadcast_to(
+        c.mask if c.mask.ndim == c.truth.ndim else c.mask[:, None], c.truth.shape
+    )
 
 
-def _extras(c: Comparison, static_loads: FloatArray | None, cfg: EvaluationSettings
-            ) -> dict[str, float]:
+def _extras(
+    c: Comparison, static_loads: FloatArray | None, cfg: EvaluationSettings
+) -> dict[str, float]:
     assert c.estimate is not None and c.truth is not None
     mask = _row_mask(c)
     extras: dict[str, float] = {}
@@ -363,7 +408,8 @@ def _static_loads(series: BagSeries, settle_s: float) -> FloatArray | None:
     if forces is None:
         return None
     first = forces.stamp_ns <= forces.stamp_ns[0] + round(settle_s * 1e9)
-    return np.median(forces.values['fz'][first].astype(np.float64), axis=0)
+    loads: FloatArray = np.median(forces.values['fz'][first].astype(np.float64), axis=0)
+    return loads
 
 
 def evaluate(
@@ -393,7 +439,8 @@ def evaluate(
     if not present_truth:
         raise ReportInputError(
             f'{series.path}: no truth topics (need at least one of /vd/truth/*: '
-            + ', '.join(name.rsplit('/', 1)[1] for name in TRUTH_TOPICS) + ')'
+            + ', '.join(name.rsplit('/', 1)[1] for name in TRUTH_TOPICS)
+            + ')'
         )
     comparisons, steps, gears, notes = build_comparisons(series, cfg)
     loads = static_loads if static_loads is not None else _static_loads(series, cfg.settle_s)
@@ -407,13 +454,15 @@ def evaluate(
         extras = _extras(c, loads, cfg)
         note = ''
         if c.key == 'mu':
-            excited_valid = int(c.mask.sum())
-            extras['evaluated_samples'] = float(excited_valid)
             note = f'|Fx_true| > {cfg.mu_excitation:g} Fz_true and estimate valid'
         elif c.key == 'slope':
             note = 'where the estimate is valid'
-            base = evaluation_mask(c.t, start=cfg.settle_s, events=np.concatenate([steps, gears]),
-                                   half_width=cfg.exclusion_half_width_s)
+            base = evaluation_mask(
+                c.t,
+                start=cfg.settle_s,
+                events=np.concatenate([steps, gears]),
+                half_width=cfg.exclusion_half_width_s,
+            )
             extras['valid_pct'] = 100.0 * float(c.mask.sum()) / max(int(base.sum()), 1)
             extras['rms_incl_invalid'] = error_stats(c.estimate, c.truth, base).rms
         if overall.samples == 0:
@@ -421,8 +470,12 @@ def evaluate(
         quantities.append(QuantityMetrics(c.key, c.title, c.unit, overall, wheels, extras, note))
     convergence = _convergence(comparisons, steps, cfg, notes)
     truth_t = (series.topics[present_truth[0]].stamp_ns - t0) * 1e-9
-    window = evaluation_mask(truth_t, start=cfg.settle_s, events=np.concatenate([steps, gears]),
-                             half_width=cfg.exclusion_half_width_s)
+    window = evaluation_mask(
+        truth_t,
+        start=cfg.settle_s,
+        events=np.concatenate([steps, gears]),
+        half_width=cfg.exclusion_half_width_s,
+    )
     if GEAR_TOPIC not in series.topics:
         notes.append(f'{GEAR_TOPIC} missing: gear shifts not excluded')
     if '/vd/truth/slope' not in series.topics:
@@ -447,14 +500,16 @@ def evaluate(
     return report, comparisons
 
 
-def _convergence(comparisons: list[Comparison], steps: FloatArray, cfg: EvaluationSettings,
-                 notes: list[str]) -> list[SlopeConvergence]:
+def _convergence(
+    comparisons: list[Comparison], steps: FloatArray, cfg: EvaluationSettings, notes: list[str]
+) -> list[SlopeConvergence]:
     slope = next((c for c in comparisons if c.key == 'slope'), None)
     if slope is None or slope.estimate is None or slope.truth is None or steps.size == 0:
         return []
     error = slope.estimate - slope.truth
-    delays = convergence_times(slope.t, error, steps, cfg.convergence_threshold_deg,
-                               cfg.convergence_hold_s)
+    delays = convergence_times(
+        slope.t, error, steps, cfg.convergence_threshold_deg, cfg.convergence_hold_s
+    )
     out = []
     for step, delay in zip(steps.tolist(), delays, strict=True):
         k = int(np.searchsorted(slope.t, step))

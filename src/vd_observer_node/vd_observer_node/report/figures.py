@@ -9,6 +9,7 @@ second. Grey bands mark what the metrics leave out (start-up, slope steps, gear 
 from __future__ import annotations
 
 import os
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -16,21 +17,22 @@ import matplotlib
 
 matplotlib.use('Agg')  # before pyplot: files only, never a window
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.axes import Axes  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-from numpy.typing import NDArray  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from numpy.typing import NDArray
 
-from .evaluate import AccuracyReport, Comparison  # noqa: E402
-from .metrics import error_stats  # noqa: E402
-from .topics import WHEEL_NAMES  # noqa: E402
+from .evaluate import AccuracyReport, Comparison
+from .metrics import error_stats
+from .topics import WHEEL_NAMES
 
 __all__ = ['DPI', 'envelope', 'write_figures']
 
 FloatArray = NDArray[np.float64]
 
 DPI = 110
+_ESTIMATE_PERCENTILES = (0.5, 99.5)  # [%] of the estimate kept inside the y range
 _BUCKETS = 1500  # min/max pairs per line: finer than the ~800 px wide axes
 _EST_COLOR = 'tab:blue'
 _TRUTH_COLOR = 'black'
@@ -49,7 +51,9 @@ _FILES = {
 }
 
 
-def envelope(t: FloatArray, y: FloatArray, buckets: int = _BUCKETS) -> tuple[FloatArray, FloatArray]:
+def envelope(
+    t: FloatArray, y: FloatArray, buckets: int = _BUCKETS
+) -> tuple[FloatArray, FloatArray]:
     """Min/max envelope of a long series for plotting.
 
     Args:
@@ -68,23 +72,11 @@ def envelope(t: FloatArray, y: FloatArray, buckets: int = _BUCKETS) -> tuple[Flo
     pad = size * count - n
     yp = np.concatenate([y, np.full(pad, np.nan)]).reshape(count, size)
     tb = t[::size]
-    with np.errstate(invalid='ignore'), _quiet():
+    with warnings.catch_warnings():
+        # An all-nan bucket is an expected gap (e.g. invalid mu), not a problem.
+        warnings.simplefilter('ignore', RuntimeWarning)
         lo, hi = np.nanmin(yp, axis=1), np.nanmax(yp, axis=1)
     return np.repeat(tb, 2), np.column_stack([lo, hi]).ravel()
-
-
-class _quiet:  # noqa: N801 (used like a function)
-    """Silence numpy's all-nan slice warnings (a gap is expected, e.g. invalid mu)."""
-
-    def __enter__(self) -> None:
-        import warnings
-
-        self._ctx = warnings.catch_warnings()
-        self._ctx.__enter__()
-        warnings.simplefilter('ignore', RuntimeWarning)
-
-    def __exit__(self, *exc: object) -> None:
-        self._ctx.__exit__(*exc)
 
 
 def _shade(ax: Axes, report: AccuracyReport, t_end: float) -> None:
@@ -97,38 +89,54 @@ def _shade(ax: Axes, report: AccuracyReport, t_end: float) -> None:
 
 
 def _series(c: Comparison, column: int | None) -> tuple[FloatArray | None, FloatArray | None]:
-    def pick(a: FloatArray | None) -> FloatArray | None:
+    def pick(a: np.ndarray | None) -> np.ndarray | None:
         if a is None:
             return None
-        return a[:, column] if column is not None else a
+        return a[:, column] if column is not None and a.ndim == 2 else a
 
     est = pick(c.estimate)
-    if c.key == 'mu' and est is not None:
+    valid = pick(c.estimate_valid)
+    if c.key == 'mu' and est is not None and valid is not None:
         # An invalid mu is a placeholder 0, not an estimate: leave a gap instead.
-        valid = c.mask if c.mask.ndim == 1 else c.mask[:, column]
         est = np.where(valid, est, np.nan)
     return est, pick(c.truth)
 
 
-def _plot_axis(ax: Axes, c: Comparison, report: AccuracyReport, column: int | None,
-               title: str) -> None:
+def _robust_ylim(ax: Axes, est: FloatArray | None, truth: FloatArray | None) -> None:
+    """Show all of the truth and 99 % of the estimate: rare transient spikes of an estimate
+    (launch, gear shifts) would otherwise flatten the whole record into a line."""
+    parts = []
+    if truth is not None and np.isfinite(truth).any():
+        parts += [float(np.nanmin(truth)), float(np.nanmax(truth))]
+    if est is not None and np.isfinite(est).any():
+        parts += [float(v) for v in np.nanpercentile(est, _ESTIMATE_PERCENTILES)]
+    if not parts:
+        return
+    lo, hi = min(parts), max(parts)
+    pad = 0.08 * (hi - lo) if hi > lo else max(abs(hi), 1.0) * 0.1
+    ax.set_ylim(lo - pad, hi + pad)
+
+
+def _plot_axis(
+    ax: Axes, c: Comparison, report: AccuracyReport, column: int | None, title: str
+) -> None:
     est, truth = _series(c, column)
     t_end = float(c.t[-1]) if c.t.size else 1.0
     _shade(ax, report, t_end)
     if truth is not None:
         ax.plot(*envelope(c.t, truth), color=_TRUTH_COLOR, lw=1.0, label=c.truth_label)
     if est is not None:
-        ax.plot(*envelope(c.t, est), color=_EST_COLOR, lw=0.8, alpha=0.85,
-                label=c.estimate_label)
+        ax.plot(*envelope(c.t, est), color=_EST_COLOR, lw=0.8, alpha=0.85, label=c.estimate_label)
     if est is not None and truth is not None:
         mask = c.mask if c.mask.ndim == 1 else c.mask[:, column]
         stats = error_stats(est, truth, mask)
         if stats.samples:
-            title += f'  (RMS error {stats.rms:.3g} {c.unit})'
+            unit = '' if c.unit == '-' else f' {c.unit}'
+            title += f'  (RMS error {stats.rms:.3g}{unit})'
+    _robust_ylim(ax, est, truth)
     ax.set_title(title, fontsize=10)
     ax.set_xlabel('time [s]')
-    ax.set_ylabel(f'{c.title.split(" ", 1)[-1] if c.per_wheel else c.title} [{c.unit}]'
-                  if c.unit != '-' else f'{c.title} [-]')
+    ax.set_ylabel(f'{c.symbol or c.title} [{c.unit}]')
     ax.grid(True, lw=0.3)
 
 
@@ -141,9 +149,9 @@ def _quantity_figure(c: Comparison, report: AccuracyReport) -> Figure:
                 ax.set_xlabel('')
         axes[0, 0].legend(loc='best', fontsize=9)
         fig.suptitle(f'{c.title} per wheel: estimate vs truth', fontsize=12)
+        fig.subplots_adjust(left=0.07, right=0.98, bottom=0.07, top=0.91, hspace=0.18, wspace=0.15)
     elif c.key == 'slope' and c.estimate is not None and c.truth is not None:
-        fig, (ax, ax_err) = plt.subplots(2, 1, figsize=(11, 7), sharex=True,
-                                         height_ratios=(2, 1))
+        fig, (ax, ax_err) = plt.subplots(2, 1, figsize=(11, 7), sharex=True, height_ratios=(2, 1))
         _plot_axis(ax, c, report, None, c.title)
         ax.set_xlabel('')
         ax.legend(loc='best', fontsize=9)
@@ -156,35 +164,45 @@ def _quantity_figure(c: Comparison, report: AccuracyReport) -> Figure:
         ax_err.set_ylabel('error [deg]')
         ax_err.set_xlabel('time [s]')
         ax_err.grid(True, lw=0.3)
-        ax_err.set_title(f'estimate - truth (dashed: ±{limit:g} deg convergence band)',
-                         fontsize=10)
+        ax_err.set_title(
+            f'estimate - truth (dashed: ±{limit:g} deg convergence band)', fontsize=10
+        )
         fig.suptitle('Road slope: estimate vs true slope', fontsize=12)
+        fig.subplots_adjust(left=0.08, right=0.98, bottom=0.08, top=0.91, hspace=0.2)
     else:
         fig, ax = plt.subplots(figsize=(11, 4.5))
         _plot_axis(ax, c, report, None, c.title)
         ax.legend(loc='best', fontsize=9)
-    fig.tight_layout()
+        fig.subplots_adjust(left=0.08, right=0.98, bottom=0.12, top=0.92)
     return fig
 
 
 def _summary_figure(comparisons: Sequence[Comparison], report: AccuracyReport) -> Figure:
     by_key = {c.key: c for c in comparisons}
     panels = [('speed', None), ('slope', None), ('omega', 0), ('fx', 0), ('fz', 0), ('mu', 0)]
+    if 'speed' not in by_key:
+        panels[0] = ('accel', None)
     present = [(by_key[k], col) for k, col in panels if k in by_key]
-    fig, axes = plt.subplots(3, 2, figsize=(13, 10), sharex=True)
+    fig, axes = plt.subplots(3, 2, figsize=(13, 10.5), sharex=True)
     flat = axes.ravel()
-    for ax, (c, col) in zip(flat, present, strict=False):
+    for k, (ax, (c, col)) in enumerate(zip(flat, present, strict=False)):
         title = c.title + (f' ({WHEEL_NAMES[col]})' if c.per_wheel and col is not None else '')
         _plot_axis(ax, c, report, col if c.per_wheel else None, title)
         ax.legend(loc='best', fontsize=8)
-    for ax in flat[len(present):]:
+        if k < len(flat) - 2:
+            ax.set_xlabel('')
+    for ax in flat[len(present) :]:
         ax.axis('off')
-    lines = [f'{name}: {value:.3g} (target {limit:g}) {"met" if met else "MISSED"}'
-             for name, (value, limit, met) in report.targets.items()]
+    lines = [
+        f'{name}: {value:.3g} (limit {limit:g}, {"met" if met else "MISSED"})'
+        for name, (value, limit, met) in report.targets.items()
+    ]
     if lines:
-        fig.text(0.5, 0.005, '   |   '.join(lines), ha='center', va='bottom', fontsize=8.5)
+        half = (len(lines) + 1) // 2
+        text = '   |   '.join(lines[:half]) + '\n' + '   |   '.join(lines[half:])
+        fig.text(0.5, 0.008, 'targets: ' + text, ha='center', va='bottom', fontsize=9)
     fig.suptitle(f'Summary: {Path(report.bag).name} (grey: not evaluated)', fontsize=12)
-    fig.tight_layout(rect=(0, 0.03, 1, 1))
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.1, top=0.94, hspace=0.22, wspace=0.15)
     return fig
 
 

@@ -69,10 +69,17 @@ def _extras_text(q: QuantityMetrics) -> str:
 def _rows(report: AccuracyReport) -> list[list[str]]:
     rows = []
     for q in report.quantities:
-        rows.append([
-            q.title, q.unit, _num(q.overall.rms), _num(q.overall.max_abs), _num(q.overall.mean),
-            str(q.overall.samples), _extras_text(q),
-        ])
+        rows.append(
+            [
+                q.title,
+                q.unit,
+                _num(q.overall.rms),
+                _num(q.overall.max_abs),
+                _num(q.overall.mean),
+                str(q.overall.samples),
+                _extras_text(q),
+            ]
+        )
     return rows
 
 
@@ -84,11 +91,13 @@ def _convergence_lines(report: AccuracyReport) -> list[str]:
     lines = []
     for c in report.convergence:
         delay = 'not converged' if c.delay_s is None else f'{c.delay_s:.3f} s'
-        lines.append(f'step at {c.step_s:.2f} s ({c.from_deg:.2f} -> {c.to_deg:.2f} deg): '
-                     f'{delay}')
+        lines.append(f'step at {c.step_s:.2f} s ({c.from_deg:.2f} -> {c.to_deg:.2f} deg): {delay}')
     if lines:
-        lines.insert(0, f'slope convergence (|error| < {cfg.convergence_threshold_deg:g} deg '
-                        f'for {cfg.convergence_hold_s:g} s):')
+        lines.insert(
+            0,
+            f'slope convergence (|error| < {cfg.convergence_threshold_deg:g} deg '
+            f'for {cfg.convergence_hold_s:g} s):',
+        )
     return lines
 
 
@@ -105,8 +114,9 @@ def report_text(report: AccuracyReport) -> str:
     """A concise fixed-width table for the terminal."""
     rows = _rows(report)
     widths = [max(len(r[k]) for r in [_HEAD, *rows]) for k in range(len(_HEAD) - 1)]
-    lines = [f'accuracy of {report.bag} ({report.duration_s:.1f} s); window: '
-             f'{_window_text(report)}']
+    lines = [
+        f'accuracy of {report.bag} ({report.duration_s:.1f} s); window: {_window_text(report)}'
+    ]
     fmt_row = '  '.join(f'{{:{"<" if k < 2 else ">"}{w}}}' for k, w in enumerate(widths))
     lines.append(fmt_row.format(*_HEAD[:-1]) + '  ' + _HEAD[-1])
     for r in rows:
@@ -118,40 +128,66 @@ def report_text(report: AccuracyReport) -> str:
     return '\n'.join(lines) + '\n'
 
 
+def _md(cells: list[str]) -> str:
+    """One Markdown table row; a literal '|' (as in |err|) is escaped."""
+    return '| ' + ' | '.join(c.replace('|', '\\|') for c in cells) + ' |'
+
+
 def report_markdown(report: AccuracyReport) -> str:
     """The report as Markdown: window, metrics table, per-wheel table, convergence, targets."""
-    out = [f'# Accuracy report: `{report.bag}`', '',
-           f'- Duration: {report.duration_s:.2f} s (t = 0 at stamp {report.first_stamp_s:.3f} s)',
-           f'- Evaluation window: {_window_text(report)}',
-           '- Slope steps at: ' + (', '.join(f'{s:.2f} s' for s in report.slope_steps_s) or '-'),
-           '- Gear changes at: '
-           + (', '.join(f'{s:.2f} s' for s in report.gear_changes_s) or '-'),
-           '', '## Estimate vs truth', '',
-           '| ' + ' | '.join(_HEAD) + ' |', '|' + '---|' * len(_HEAD)]
+    out = [
+        f'# Accuracy report: `{report.bag}`',
+        '',
+        f'- Duration: {report.duration_s:.2f} s (t = 0 at stamp {report.first_stamp_s:.3f} s)',
+        f'- Evaluation window: {_window_text(report)}',
+        '- Slope steps at: ' + (', '.join(f'{s:.2f} s' for s in report.slope_steps_s) or '-'),
+        '- Gear changes at: ' + (', '.join(f'{s:.2f} s' for s in report.gear_changes_s) or '-'),
+        '',
+        '## Estimate vs truth',
+        '',
+        _md(_HEAD),
+        '|' + '---|' * len(_HEAD),
+    ]
     for q, r in zip(report.quantities, _rows(report), strict=True):
         if q.note:
             r[-1] = (r[-1] + '; ' if r[-1] else '') + q.note
-        out.append('| ' + ' | '.join(r) + ' |')
+        out.append(_md(r))
     wheel_rows = [q for q in report.quantities if q.wheels]
     if wheel_rows:
-        out += ['', '## RMS error per wheel', '',
-                '| quantity | unit | ' + ' | '.join(WHEEL_NAMES) + ' |', '|---|---|---|---|---|---|']
+        out += [
+            '',
+            '## RMS error per wheel',
+            '',
+            '| quantity | unit | ' + ' | '.join(WHEEL_NAMES) + ' |',
+            '|---|---|---|---|---|---|',
+        ]
         for q in wheel_rows:
-            out.append(f'| {q.title} | {q.unit} | '
-                       + ' | '.join(_num(w.rms) for w in q.wheels) + ' |')
+            out.append(
+                f'| {q.title} | {q.unit} | ' + ' | '.join(_num(w.rms) for w in q.wheels) + ' |'
+            )
     if report.convergence:
         cfg = report.settings
-        out += ['', f'## Slope convergence (|error| < {cfg.convergence_threshold_deg:g} deg '
-                    f'for {cfg.convergence_hold_s:g} s)', '',
-                '| step at [s] | true slope [deg] | convergence time [s] |', '|---|---|---|']
+        out += [
+            '',
+            f'## Slope convergence (|error| < {cfg.convergence_threshold_deg:g} deg '
+            f'for {cfg.convergence_hold_s:g} s)',
+            '',
+            '| step at [s] | true slope [deg] | convergence time [s] |',
+            '|---|---|---|',
+        ]
         for c in report.convergence:
             delay = 'not converged' if c.delay_s is None else f'{c.delay_s:.3f}'
             out.append(f'| {c.step_s:.2f} | {c.from_deg:.2f} -> {c.to_deg:.2f} | {delay} |')
     if report.targets:
-        out += ['', '## Accuracy targets (issue, ideal sensors)', '',
-                '| target | value | limit | met |', '|---|---|---|---|']
+        out += [
+            '',
+            '## Accuracy targets (issue, ideal sensors)',
+            '',
+            '| target | value | limit | met |',
+            '|---|---|---|---|',
+        ]
         for name, (value, limit, met) in report.targets.items():
-            out.append(f'| {name} | {_num(value)} | {limit:g} | {"yes" if met else "**no**"} |')
+            out.append(_md([name, _num(value), f'{limit:g}', 'yes' if met else '**no**']))
     if report.notes:
         out += ['', '## Notes', ''] + [f'- {n}' for n in report.notes]
     return '\n'.join(out) + '\n'

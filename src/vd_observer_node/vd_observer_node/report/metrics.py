@@ -104,7 +104,9 @@ def _stats(error: FloatArray, mask: ArrayLike | None) -> ErrorStats:
     )
 
 
-def step_times(t: ArrayLike, signal: ArrayLike, min_jump: float, merge_s: float = 0.5) -> FloatArray:
+def step_times(
+    t: ArrayLike, signal: ArrayLike, min_jump: float, merge_s: float = 0.5
+) -> FloatArray:
     """Times of steps in a piecewise-constant signal (e.g. the true road slope).
 
     A step is a sample-to-sample change larger than ``min_jump``; changes closer together
@@ -240,7 +242,7 @@ def convergence_times(
     times = np.asarray(t, dtype=np.float64)
     starts = np.asarray(steps, dtype=np.float64).ravel().tolist()
     end = float(times[-1]) + 1.0 if times.size else 0.0
-    stops = starts[1:] + [end]
+    stops = [*starts[1:], end]
     return [
         convergence_time(times, error, start, stop, threshold, hold)
         for start, stop in zip(starts, stops, strict=True)
