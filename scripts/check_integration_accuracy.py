@@ -2,8 +2,8 @@
 """Accuracy of the simulator's default integration against a tight-tolerance reference.
 
 For each scenario the default settings (LSODA, rtol 1e-7, per-state absolute tolerances)
-are compared with a reference run at rtol 1e-11 and absolute tolerances 10^4 times
-tighter. Printed per scenario: the largest wheel-speed error relative to max(|omega|,
+are compared with a reference run at rtol 1e-10 and absolute tolerances 100 times
+tighter (tighter still and LSODA refuses: the wheel angles reach 1e4 rad). Printed per scenario: the largest wheel-speed error relative to max(|omega|,
 1 rad/s) (target 1e-4), body-speed, wheel-angle and omega_dot errors, and whether both runs
 took the same discrete decisions (gear shifts happen at the same samples).
 
@@ -41,7 +41,7 @@ def main() -> None:
         fast = simulate(model, scenario)
         t_fast = time.perf_counter() - t0
         t0 = time.perf_counter()
-        ref = simulate(model, scenario, rtol=1e-11, atol_scale=1e-4)
+        ref = simulate(model, scenario, rtol=1e-10, atol_scale=1e-2)
         t_ref = time.perf_counter() - t0
         omega_err = np.abs(fast.omega - ref.omega) / np.maximum(np.abs(ref.omega), 1.0)
         speed_err = np.abs(fast.speed_true - ref.speed_true)

@@ -71,6 +71,19 @@ def test_clutch_modes() -> None:
     assert abs(clutch_torque(1e3, 2.0, 300.0, CP)) <= CP.capacity
 
 
+def test_clutch_engagement_ramp_after_a_shift() -> None:
+    block = laws.make_clutch_ramp(CP)
+    assert block(10.0, 10.0) == 0.0
+    assert block(10.0 + 0.5 * CP.engage_time, 10.0) == pytest.approx(0.5)
+    assert block(10.0 + 2.0 * CP.engage_time, 10.0) == 1.0
+    assert block(0.0, -1e9) == 1.0
+    t = np.array([9.0, 10.0 + 0.25 * CP.engage_time, 20.0])
+    np.testing.assert_allclose(block(t, 10.0), [0.0, 0.25, 1.0])
+    assert clutch_torque(5.0, 2.0, 300.0, CP, 0.5) == pytest.approx(
+        0.5 * clutch_torque(5.0, 2.0, 300.0, CP)
+    )
+
+
 def test_brake_holds_like_stiff_damper_and_saturates() -> None:
     assert brake_torque(0.0, 1.0, 1000.0, 0.5) == 0.0
     assert brake_torque(100.0, 0.5, 1000.0, 0.5) == pytest.approx(500.0)
@@ -114,7 +127,7 @@ def test_shift_completes_and_clutch_events() -> None:
     shifting = DrivelineState(gear=2, clutch=ClutchMode.OPEN, shift_end=5.0)
     assert decide_shift(4.9, shifting, 300.0, _w_gb(300.0), 1.0, 10.0, True, GP, CP) is None
     d = decide_shift(5.0, shifting, 300.0, _w_gb(300.0), 1.0, 10.0, True, GP, CP)
-    assert d is not None and d.state == DrivelineState(2, ClutchMode.LOCKED)
+    assert d is not None and d.state == DrivelineState(2, ClutchMode.LOCKED, ramp_start=5.0)
     launch = DrivelineState(gear=1, clutch=ClutchMode.LAUNCH)
     d = decide_shift(0.0, launch, CP.engage_full_speed, _w_gb(200.0), 1.0, 3.0, True, GP, CP)
     assert d is not None and d.state.clutch == ClutchMode.LOCKED
@@ -139,12 +152,20 @@ def test_hold_brake_applies_at_standstill_and_releases_on_throttle() -> None:
     we=st.floats(-50.0, 800.0),
     slip=st.floats(-100.0, 100.0),
     mode=st.sampled_from([0.0, 1.0, 2.0]),
+    ramp=st.floats(0.0, 1.0),
     v=st.floats(-60.0, 60.0),
     fz=st.floats(0.0, 5000.0),
     pedal=st.floats(0.0, 1.0),
 )
 def test_fast_laws_match_reference_functions(
-    thr: float, we: float, slip: float, mode: float, v: float, fz: float, pedal: float
+    thr: float,
+    we: float,
+    slip: float,
+    mode: float,
+    ramp: float,
+    v: float,
+    fz: float,
+    pedal: float,
 ) -> None:
     def both(law: laws.Law, *args: float) -> tuple[float, float]:
         fast = law(*[float(a) for a in args])
@@ -152,9 +173,15 @@ def test_fast_laws_match_reference_functions(
         return fast, slow
 
     pairs = [
-        (both(laws.make_combustion_law(EP), 0.0, thr, we), combustion_torque(thr, we, EP)),
+        (
+            both(laws.make_combustion_law(EP), 0.0, thr, we, 3.0 * ramp * EP.idle_speed),
+            combustion_torque(thr, we, EP, 3.0 * ramp * EP.idle_speed),
+        ),
         (both(laws.make_engine_drag_law(EP), we), engine_drag_torque(we, EP)),
-        (both(laws.make_clutch_law(CP), slip, mode, we), clutch_torque(slip, mode, we, CP)),
+        (
+            both(laws.make_clutch_law(CP), slip, mode, we, ramp),
+            clutch_torque(slip, mode, we, CP, ramp),
+        ),
         (both(laws.make_brake_law(1000.0, 0.5), slip, pedal), brake_torque(slip, pedal, 1e3, 0.5)),
         (
             both(laws.make_rolling_law(VP.rolling_resistance, 2.0), v + 0.01, v, fz),

@@ -31,6 +31,7 @@ from vd_sim_node.vehicle.tire import tire_force_from_slip_velocity
 
 __all__ = [
     'make_aero_law',
+    'make_clutch_ramp',
     'make_brake_law',
     'make_clutch_law',
     'make_combustion_law',
@@ -151,17 +152,17 @@ def make_gravity_law(weight: float, component: str) -> Law:
 
 
 def make_clutch_law(cp: ClutchParams) -> Law:
-    """``law(slip, mode, w_engine) -> torque`` [N m], the clutch R (see powertrain)."""
+    """``law(slip, mode, w_engine, ramp) -> torque`` [N m], the clutch R (see powertrain)."""
     cap = cp.capacity
     inv_slip = 1.0 / cp.slip_speed
     start = cp.engage_start_speed
     inv_span = 1.0 / (cp.engage_full_speed - cp.engage_start_speed)
     tanh = math.tanh
 
-    def law(slip: Any, mode: Any, we: Any) -> Any:
+    def law(slip: Any, mode: Any, we: Any, ramp: Any) -> Any:
         if slip.__class__ is _F:
             if mode >= 2.0:
-                return cap * tanh(slip * inv_slip)
+                return ramp * cap * tanh(slip * inv_slip)
             if mode >= 1.0:
                 x = (we - start) * inv_span
                 if x <= 0.0:
@@ -170,13 +171,29 @@ def make_clutch_law(cp: ClutchParams) -> Law:
                     x = 1.0
                 return x * x * (3.0 - 2.0 * x) * cap * tanh(slip * inv_slip)
             return 0.0
-        return clutch_torque(slip, mode, we, cp)
+        return clutch_torque(slip, mode, we, cp, ramp)
 
     return law
 
 
+def make_clutch_ramp(cp: ClutchParams) -> Law:
+    """``block(t, ramp_start) -> [0..1]``: clutch engagement ramp after a shift."""
+    import numpy as np
+
+    inv = 1.0 / cp.engage_time if cp.engage_time > 0.0 else math.inf
+
+    def block(t: Any, start: Any) -> Any:
+        if t.__class__ is _F:
+            x = (t - start) * inv
+            return 1.0 if x >= 1.0 else (x if x > 0.0 else 0.0)
+        with np.errstate(invalid='ignore'):
+            return np.clip((np.asarray(t) - start) * inv, 0.0, 1.0)
+
+    return block
+
+
 def make_combustion_law(ep: EngineParams) -> Law:
-    """``law(t, throttle, w_engine) -> torque`` [N m], the engine's modulated Se."""
+    """``law(t, throttle, w_engine, governor_speed) -> torque`` [N m], the engine's MSe."""
     xs = ep.full_load_speed
     ys = ep.full_load_torque
     slopes = [(ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i]) for i in range(len(xs) - 1)]
@@ -188,7 +205,7 @@ def make_combustion_law(ep: EngineParams) -> Law:
     inv_sign = 1.0 / 5.0
     tanh = math.tanh
 
-    def law(t: Any, thr: Any, we: Any) -> Any:
+    def law(t: Any, thr: Any, we: Any, gov_speed: Any) -> Any:
         if we.__class__ is _F:
             if we <= xs[0]:
                 tf = ys[0]
@@ -201,7 +218,7 @@ def make_combustion_law(ep: EngineParams) -> Law:
                 tf = ys[i - 1] + slopes[i - 1] * (we - xs[i - 1])
             tot = tf + (c0 + c1 * (we if we > 0.0 else -we)) * tanh(we * inv_sign)
             demand = thr * tot
-            gov = gain * (idle - we)
+            gov = gain * ((idle if idle > gov_speed else gov_speed) - we)
             if gov > tot:
                 gov = tot
             if gov > demand:
@@ -210,7 +227,7 @@ def make_combustion_law(ep: EngineParams) -> Law:
             if cut >= 1.0:
                 return demand
             return demand * cut if cut > 0.0 else 0.0
-        return combustion_torque(thr, we, ep)
+        return combustion_torque(thr, we, ep, gov_speed)
 
     return law
 

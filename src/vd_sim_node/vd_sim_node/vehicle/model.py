@@ -43,6 +43,7 @@ from vd_sim_node.vehicle.laws import (
     make_aero_law,
     make_brake_law,
     make_clutch_law,
+    make_clutch_ramp,
     make_combustion_law,
     make_engine_drag_law,
     make_gravity_law,
@@ -56,8 +57,19 @@ __all__ = ['INPUTS', 'WHEELS', 'Geometry', 'VehicleModel', 'build_vehicle_graph'
 FloatArray = NDArray[np.float64]
 WHEELS = ('FL', 'FR', 'RL', 'RR')
 #: Model inputs in order: driver throttle actually applied [0..1], brake pedal [0..1], road
-#: slope [rad], road friction scale [-], overall ratio gear*final [-], clutch mode (float).
-INPUTS = ('throttle', 'brake', 'slope', 'road_mu', 'ratio', 'clutch_mode')
+#: slope [rad], road friction scale [-], overall ratio gear*final [-], clutch mode (float),
+#: start time of the clutch engagement ramp after a shift [s], governor (rev-matching)
+#: target speed [rad/s] (0: idle).
+INPUTS = (
+    'throttle',
+    'brake',
+    'slope',
+    'road_mu',
+    'ratio',
+    'clutch_mode',
+    'clutch_ramp_start',
+    'governor_speed',
+)
 
 
 @dataclass(frozen=True)
@@ -131,6 +143,8 @@ def build_vehicle_graph(vp: VehicleParams) -> BondGraph:
     bg.add_input('road_mu', 1.0)
     bg.add_input('ratio', vp.gearbox.ratios[0] * vp.gearbox.final_drive)
     bg.add_input('clutch_mode', 1.0)
+    bg.add_input('clutch_ramp_start', -1e9)
+    bg.add_input('governor_speed', 0.0)
 
     # --- longitudinal body motion, ground point and pitch -----------------------------
     m = geo.m
@@ -252,16 +266,17 @@ def build_vehicle_graph(vp: VehicleParams) -> BondGraph:
     bg.connect('clutch', 'engine')
     bg.connect('engine', 'engine_inertia', name='crank')
     bg.add_flow_sensor('w_engine', 'crank')
+    bg.add_block('clutch_ramp', make_clutch_ramp(vp.clutch), signals=('clutch_ramp_start',))
     bg.add_r(
         'clutch_friction',
         law=make_clutch_law(vp.clutch),
-        signals=('clutch_mode', 'w_engine'),
+        signals=('clutch_mode', 'w_engine', 'clutch_ramp'),
     )
     bg.connect('clutch', 'clutch_friction')
     bg.add_se(
         'combustion',
         make_combustion_law(vp.engine),
-        signals=('throttle', 'w_engine'),
+        signals=('throttle', 'w_engine', 'governor_speed'),
     )
     bg.connect('combustion', 'engine')
     bg.add_r('engine_drag', law=make_engine_drag_law(vp.engine))
@@ -324,9 +339,23 @@ class VehicleModel:
         road_mu: float,
         ratio: float,
         clutch_mode: float,
+        clutch_ramp_start: float = -1e9,
+        governor_speed: float = 0.0,
     ) -> FloatArray:
-        """Input vector in :data:`INPUTS` order, shape (6,)."""
-        return np.array([throttle, brake, slope, road_mu, ratio, clutch_mode], dtype=float)
+        """Input vector in :data:`INPUTS` order, shape (8,)."""
+        return np.array(
+            [
+                throttle,
+                brake,
+                slope,
+                road_mu,
+                ratio,
+                clutch_mode,
+                clutch_ramp_start,
+                governor_speed,
+            ],
+            dtype=float,
+        )
 
     def static_state(self, slope: float, engine_speed: float) -> FloatArray:
         """State at rest in static equilibrium on a road of ``slope``.

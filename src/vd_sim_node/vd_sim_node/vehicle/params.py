@@ -141,6 +141,7 @@ class ClutchParams:
     slip_speed: float  # [rad/s] tanh regularisation of the friction sign
     engage_start_speed: float  # [rad/s] engine speed where engagement begins
     engage_full_speed: float  # [rad/s] engine speed of full engagement
+    engage_time: float  # [s] engagement ramp 0 -> 1 when the clutch closes after a shift
 
 
 @dataclass(frozen=True)
@@ -299,6 +300,7 @@ def _clutch(r: MappingReader, idle_speed: float) -> ClutchParams:
         slip_speed=r.number('slip_speed', 'rad/s', gt=0.0),
         engage_start_speed=start,
         engage_full_speed=r.number('engage_full_speed', 'rad/s', gt=start),
+        engage_time=r.number('engage_time', 's', ge=0.0),
     )
 
 

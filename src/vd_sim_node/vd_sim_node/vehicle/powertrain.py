@@ -107,17 +107,21 @@ def engine_drag_torque(w_e: Scalar, ep: EngineParams) -> Scalar:
     return out
 
 
-def combustion_torque(throttle: Scalar, w_e: Scalar, ep: EngineParams) -> Scalar:
+def combustion_torque(
+    throttle: Scalar, w_e: Scalar, ep: EngineParams, governor_speed: Scalar = 0.0
+) -> Scalar:
     """Indicated (combustion) torque: the modulated effort source of the engine.
 
     ``throttle * (T_full(w) + T_drag(w))`` so that the net torque at full load is the
-    published curve, plus a proportional idle governor that adds torque below idle speed,
-    times a fuel cut-off ramp at the rev limit.
+    published curve, plus a proportional governor that adds torque below its target speed
+    (the idle speed, or a higher rev-matching target while the driver shifts down), times a
+    fuel cut-off ramp at the rev limit.
 
     Args:
         throttle: accelerator position, [0..1].
         w_e: engine speed, [rad/s].
         ep: engine parameters.
+        governor_speed: rev-matching target, [rad/s]; the idle speed if higher.
 
     Returns:
         Torque, [N m] (>= 0).
@@ -129,7 +133,8 @@ def combustion_torque(throttle: Scalar, w_e: Scalar, ep: EngineParams) -> Scalar
             w_e / _ENGINE_DRAG_SIGN_SPEED
         )
         demand = throttle * (t_full + drag)
-        idle = min(max(ep.idle_gain * (ep.idle_speed - w_e), 0.0), t_full + drag)
+        target = max(ep.idle_speed, governor_speed)
+        idle = min(max(ep.idle_gain * (target - w_e), 0.0), t_full + drag)
         cut = min(max((ep.max_speed - w_e) / band, 0.0), 1.0)
         return max(demand, idle) * cut
     thr = np.asarray(throttle, dtype=float)
@@ -138,7 +143,8 @@ def combustion_torque(throttle: Scalar, w_e: Scalar, ep: EngineParams) -> Scalar
     drag_a = (ep.drag_torque_c0 + ep.drag_torque_c1 * np.abs(w)) * np.tanh(
         w / _ENGINE_DRAG_SIGN_SPEED
     )
-    idle_a = np.clip(ep.idle_gain * (ep.idle_speed - w), 0.0, t_full_a + drag_a)
+    target_a = np.maximum(ep.idle_speed, np.asarray(governor_speed, dtype=float))
+    idle_a = np.clip(ep.idle_gain * (target_a - w), 0.0, t_full_a + drag_a)
     cut_a = np.clip((ep.max_speed - w) / band, 0.0, 1.0)
     out: FloatArray = np.maximum(thr * (t_full_a + drag_a), idle_a) * cut_a
     return out
@@ -149,16 +155,18 @@ def _smoothstep(x: float) -> float:
     return x * x * (3.0 - 2.0 * x)
 
 
-def clutch_engagement(mode: Scalar, w_e: Scalar, cp: ClutchParams) -> Scalar:
+def clutch_engagement(mode: Scalar, w_e: Scalar, cp: ClutchParams, ramp: Scalar = 1.0) -> Scalar:
     """Clutch engagement in [0, 1].
 
-    OPEN -> 0, LOCKED -> 1, LAUNCH -> smoothstep of the engine speed between
-    ``engage_start_speed`` and ``engage_full_speed`` (a centrifugal-clutch-like launch).
+    OPEN -> 0, LOCKED -> ``ramp`` (1 once the post-shift engagement ramp is over),
+    LAUNCH -> smoothstep of the engine speed between ``engage_start_speed`` and
+    ``engage_full_speed`` (a centrifugal-clutch-like launch).
 
     Args:
         mode: :class:`ClutchMode` value(s) as float.
         w_e: engine speed, [rad/s].
         cp: clutch parameters.
+        ramp: engagement ramp after a shift, [0..1].
 
     Returns:
         Engagement, [-].
@@ -166,7 +174,7 @@ def clutch_engagement(mode: Scalar, w_e: Scalar, cp: ClutchParams) -> Scalar:
     span = cp.engage_full_speed - cp.engage_start_speed
     if isinstance(mode, float) and isinstance(w_e, float):
         if mode >= ClutchMode.LOCKED:
-            return 1.0
+            return float(ramp)
         if mode >= ClutchMode.LAUNCH:
             return _smoothstep((w_e - cp.engage_start_speed) / span)
         return 0.0
@@ -174,12 +182,16 @@ def clutch_engagement(mode: Scalar, w_e: Scalar, cp: ClutchParams) -> Scalar:
     x = np.clip((np.asarray(w_e, dtype=float) - cp.engage_start_speed) / span, 0.0, 1.0)
     launch = x * x * (3.0 - 2.0 * x)
     out: FloatArray = np.where(
-        m >= ClutchMode.LOCKED, 1.0, np.where(m >= ClutchMode.LAUNCH, launch, 0.0)
+        m >= ClutchMode.LOCKED,
+        np.asarray(ramp, dtype=float),
+        np.where(m >= ClutchMode.LAUNCH, launch, 0.0),
     )
     return out
 
 
-def clutch_torque(slip: Scalar, mode: Scalar, w_e: Scalar, cp: ClutchParams) -> Scalar:
+def clutch_torque(
+    slip: Scalar, mode: Scalar, w_e: Scalar, cp: ClutchParams, ramp: Scalar = 1.0
+) -> Scalar:
     """Friction torque of the clutch (a modulated R law on the slip speed).
 
     Args:
@@ -187,14 +199,15 @@ def clutch_torque(slip: Scalar, mode: Scalar, w_e: Scalar, cp: ClutchParams) -> 
         mode: :class:`ClutchMode` value(s) as float.
         w_e: engine speed, [rad/s] (schedules the launch engagement).
         cp: clutch parameters.
+        ramp: engagement ramp after a shift, [0..1].
 
     Returns:
         Torque, [N m], same sign as ``slip`` (dissipative).
     """
     if isinstance(slip, float) and isinstance(mode, float) and isinstance(w_e, float):
-        c = clutch_engagement(mode, w_e, cp)
+        c = clutch_engagement(mode, w_e, cp, ramp)
         return c * cp.capacity * math.tanh(slip / cp.slip_speed)
-    c_a = clutch_engagement(np.asarray(mode, dtype=float), np.asarray(w_e, dtype=float), cp)
+    c_a = clutch_engagement(np.asarray(mode, dtype=float), np.asarray(w_e, dtype=float), cp, ramp)
     out: FloatArray = c_a * cp.capacity * np.tanh(np.asarray(slip, dtype=float) / cp.slip_speed)
     return out
 
@@ -234,12 +247,18 @@ class DrivelineState:
         clutch: clutch mode.
         shift_end: time [s] when the current shift ends, or None when not shifting.
         hold_brake: whether the standstill hold brake is applied.
+        ramp_start: time [s] the clutch started closing after a shift (engagement ramps
+            from 0 to 1 over ``clutch.engage_time``); far in the past otherwise.
+        rev_match: engine speed target [rad/s] of the governor during a downshift (the
+            driver blips the throttle), 0 otherwise.
     """
 
     gear: int
     clutch: ClutchMode
     shift_end: float | None = None
     hold_brake: bool = False
+    ramp_start: float = -1e9
+    rev_match: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -265,11 +284,13 @@ def decide_shift(
 
     Rules (first match wins):
 
-    1. a shift in progress ends at ``shift_end``: clutch LOCKED, new gear carries torque;
+    1. a shift in progress ends at ``shift_end``: clutch LOCKED on the new gear, its
+       engagement ramping from 0 to 1 over ``clutch.engage_time``;
     2. LOCKED and ``w_e < engage_start_speed``: open into LAUNCH (the car is stopping);
     3. LAUNCH and ``w_e >= engage_full_speed`` and throttle > 0: LOCK;
     4. (not when the clutch is held OPEN, i.e. coasting in neutral) up/down-shift with
-       hysteresis on the gearbox input speed of the current gear:
+       hysteresis on the gearbox input speed of the current gear (a downshift also sets
+       the rev-matching target to the new gear's input speed):
        up when above :func:`upshift_speed` (throttle dependent), down when below
        ``downshift_speed``; a shift opens the clutch and cuts the throttle for
        ``shift_time`` (instant when ``shift_time`` is 0 or the clutch is not LOCKED);
@@ -292,7 +313,7 @@ def decide_shift(
     """
     if state.shift_end is not None:
         if t >= state.shift_end - 1e-12:
-            new = DrivelineState(state.gear, ClutchMode.LOCKED, None, state.hold_brake)
+            new = DrivelineState(state.gear, ClutchMode.LOCKED, None, state.hold_brake, t)
             return ShiftDecision(new, f'shift to gear {state.gear} completed')
         return None
     n = len(gp.ratios)
@@ -313,15 +334,18 @@ def decide_shift(
     if target != state.gear:
         kind = 'up' if target > state.gear else 'down'
         if state.clutch == ClutchMode.LOCKED and gp.shift_time > 0.0:
-            new = DrivelineState(target, ClutchMode.OPEN, t + gp.shift_time, state.hold_brake)
+            match = float(w_gb_per_gear[target - 1]) if target < state.gear else 0.0
+            new = DrivelineState(
+                target, ClutchMode.OPEN, t + gp.shift_time, state.hold_brake, rev_match=match
+            )
         else:
-            new = DrivelineState(target, state.clutch, None, state.hold_brake)
+            new = DrivelineState(target, state.clutch, None, state.hold_brake, state.ramp_start)
         return ShiftDecision(new, f'{kind}shift {state.gear}->{target}')
     if hold_brake_enabled:
         if not state.hold_brake and throttle <= 0.0 and abs(speed) < 0.1:
-            new = DrivelineState(state.gear, state.clutch, None, True)
+            new = DrivelineState(state.gear, state.clutch, None, True, state.ramp_start)
             return ShiftDecision(new, 'hold brake applied at standstill')
         if state.hold_brake and throttle > 0.0:
-            new = DrivelineState(state.gear, state.clutch, None, False)
+            new = DrivelineState(state.gear, state.clutch, None, False, state.ramp_start)
             return ShiftDecision(new, 'hold brake released')
     return None

@@ -306,8 +306,11 @@ class Simulator:
                 atol[k] = 1e-7  # [m] spring / tyre deflections
             elif name.startswith('mass_x'):
                 atol[k] = 1e-3  # [kg m/s]
+            elif name.startswith(('spin_', 'engine_')):
+                # [kg m^2/s]: ~1e-6 rad/s, so a locked wheel (omega ~ 0) stays accurate too
+                atol[k] = 1e-6
             else:
-                atol[k] = 1e-5  # [kg m/s], [kg m^2/s]: vertical, pitch, spin, engine
+                atol[k] = 1e-5  # [kg m/s], [kg m^2/s]: vertical and pitch momenta
         return atol
 
     def _scenario_events(self) -> list[tuple[float, str]]:
@@ -341,6 +344,8 @@ class Simulator:
             s.road_mu.at(t),
             float(self._total_ratios[drv.gear - 1]),
             float(drv.clutch),
+            drv.ramp_start,
+            drv.rev_match if drv.clutch == ClutchMode.OPEN else 0.0,
         )
 
     def _decide(self, k: int, x: FloatArray) -> ShiftDecision | None:
@@ -406,6 +411,10 @@ class Simulator:
         ends += [b for b in self.scenario.breakpoints() if b > t + 1e-12]
         if self._drv.shift_end is not None and self._drv.shift_end > t + 1e-12:
             ends.append(self._drv.shift_end)
+        # the end of the clutch engagement ramp is a kink in the inputs: end a chunk there
+        ramp_end = self._drv.ramp_start + self.model.params.clutch.engage_time
+        if ramp_end > t + 1e-12:
+            ends.append(ramp_end)
         return min(ends)
 
     def _next_block(self) -> dict[str, Any]:
