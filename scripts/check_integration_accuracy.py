@@ -1,11 +1,11 @@
-#!/usr/bin/env python3
 """Accuracy of the simulator's default integration against a tight-tolerance reference.
 
 For each scenario the default settings (LSODA, rtol 1e-7, per-state absolute tolerances)
-are compared with a reference run at rtol 1e-10 and absolute tolerances 100 times
-tighter (tighter still and LSODA refuses: the wheel angles reach 1e4 rad). Printed per scenario: the largest wheel-speed error relative to max(|omega|,
-1 rad/s) (target 1e-4), body-speed, wheel-angle and omega_dot errors, and whether both runs
-took the same discrete decisions (gear shifts happen at the same samples).
+are compared with a reference run at rtol 1e-10 and absolute tolerances 100 times tighter
+(tighter still and LSODA refuses: the wheel angles reach 1e4 rad). Printed per scenario:
+the largest wheel-speed error relative to max(|omega|, 1 rad/s) (target 1e-4), body-speed,
+wheel-angle and omega_dot errors, and whether both runs took the same discrete decisions
+(gear shifts happen at the same samples).
 
 Usage::
 

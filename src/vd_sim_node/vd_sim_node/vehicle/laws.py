@@ -31,9 +31,9 @@ from vd_sim_node.vehicle.tire import tire_force_from_slip_velocity
 
 __all__ = [
     'make_aero_law',
-    'make_clutch_ramp',
     'make_brake_law',
     'make_clutch_law',
+    'make_clutch_ramp',
     'make_combustion_law',
     'make_engine_drag_law',
     'make_gravity_law',
