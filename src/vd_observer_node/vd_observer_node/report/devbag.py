@@ -45,6 +45,7 @@ def write_topic_arrays_bag(
     topics: TopicValues,
     *,
     stamps: Mapping[str, np.ndarray] | None = None,
+    log_delay_ns: Mapping[str, int] | None = None,
     frame_id: str = 'base_link',
 ) -> None:
     """Write a bag holding the given topics, one message per stamp.
@@ -54,6 +55,8 @@ def write_topic_arrays_bag(
         stamp_ns: shape (N,), int64 [ns], header stamp (and log time) of every topic.
         topics: values per topic (vd topic names; types from :mod:`.topics`).
         stamps: per-topic stamps [ns] overriding ``stamp_ns`` (topics of other lengths).
+        log_delay_ns: per-topic log time minus header stamp [ns] (default 0), e.g. to mimic
+            an estimator that publishes late.
         frame_id: header.frame_id of every message.
     """
     names = list(topics)
@@ -65,7 +68,7 @@ def write_topic_arrays_bag(
         n = topic_stamps.shape[0]
         values = _full_fields(_TYPES[name], n, topics[name])
         datas.extend(encode_batch(_TYPES[name], topic_stamps, frame_id, values))
-        logs.append(topic_stamps)
+        logs.append(topic_stamps + int((log_delay_ns or {}).get(name, 0)))
         which.append(np.full(n, k, dtype=np.int64))
     log = np.concatenate(logs)
     index = np.concatenate(which)

@@ -1,0 +1,210 @@
+"""`vd report` end to end on small bags with known answers (metrics, files, errors)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from vd_observer_node.report.cli import add_report_parser, default_out_dir, run_report
+from vd_observer_node.report.devbag import write_topic_arrays_bag
+from vd_observer_node.report.evaluate import evaluate
+from vd_observer_node.report.load import load_bag_series
+
+RATE = 100.0  # [Hz]
+DURATION = 20.0  # [s]
+T0_NS = 1_700_000_000_000_000_000  # an epoch-like first stamp: times are relative to it
+STEP_S = 5.0  # true slope 0 -> 2 deg
+SHIFT_S = (12.0, 12.25)  # gear 3 -> 0 -> 4
+STATIC = np.array([3000.0, 3000.0, 2000.0, 2000.0])  # [N]
+SLOPE_SETTLE_S = 0.7  # slope error 3 deg for 0.7 s after the step, then 0.1 deg
+
+
+def _known_topics(t: np.ndarray, rng: np.random.Generator) -> dict[str, dict[str, np.ndarray]]:
+    """Estimates = truth + known errors inside the window, wild errors outside it."""
+    n = t.size
+    excluded = (t < 1.0) | (np.abs(t - STEP_S) <= 0.5)
+    for shift in SHIFT_S:
+        excluded |= np.abs(t - shift) <= 0.5
+    wild = np.where(excluded, rng.uniform(1e3, 1e4, n), 0.0)[:, None]
+
+    omega = np.tile(40.0 + t[:, None], (1, 4))
+    fx_true = np.column_stack([1000.0 * np.sin(0.3 * t)] * 2 + [np.zeros(n)] * 2)
+    fz_true = np.tile(STATIC, (n, 1))
+    # Rear wheels unexcited: |Fx| = 50 N < 0.05 Fz = 100 N, so their mu must not count.
+    fx_true[:, 2:] = -50.0
+    mu_true = fx_true / fz_true
+    # mu: +0.01 where valid; the placeholder 0 of invalid samples must not count either.
+    valid = np.tile(np.arange(n) % 2 == 0, (4, 1)).T
+    mu_est = np.where(valid, mu_true + 0.01, 0.0)
+    mu_est[:, 2:] += 0.5
+    slope_true = np.radians(np.where(t < STEP_S, 0.0, 2.0))
+    slope_err = np.where((t >= STEP_S) & (t < STEP_S + SLOPE_SETTLE_S), 3.0, 0.1)
+    gear = np.select([t < SHIFT_S[0], t < SHIFT_S[1]], [3, 0], 4).astype(np.int8)
+    return {
+        '/vd/sensors/wheel_torques': {'gear': gear},
+        '/vd/truth/wheel_states': {'omega': omega, 'omega_dot': np.zeros((n, 4))},
+        '/vd/observer/wheel_states': {
+            'omega': omega * 1.001 + wild,
+            'omega_dot': np.full((n, 4), 0.5) + wild,
+        },
+        '/vd/truth/tire_forces': {'fx': fx_true, 'fz': fz_true},
+        '/vd/estimates/tire_forces': {'fx': fx_true + 10.0 + wild, 'fz': fz_true + 30.0 + wild},
+        '/vd/truth/friction': {'mu': mu_true, 'valid': np.ones((n, 4), bool)},
+        '/vd/estimates/friction': {'mu': mu_est + wild, 'valid': valid},
+        '/vd/truth/slope': {'angle': slope_true, 'valid': np.ones(n, bool)},
+        '/vd/estimates/slope': {
+            'angle': slope_true + np.radians(slope_err) + np.where(excluded, 1.0, 0.0),
+            'valid': np.ones(n, bool),
+        },
+    }
+
+
+@pytest.fixture(scope='module')
+def known_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    t = np.arange(round(DURATION * RATE) + 1) / RATE
+    stamp = T0_NS + np.round(t * 1e9).astype(np.int64)
+    path = tmp_path_factory.mktemp('report') / 'known'
+    topics = _known_topics(t, np.random.default_rng(7))
+    # Estimates logged 30 ms late (an estimator publishes after the measurement): pairing
+    # must use the header stamp, not the log time.
+    late = {name: 30_000_000 for name in topics if not name.startswith('/vd/truth/')}
+    write_topic_arrays_bag(path, stamp, topics, log_delay_ns=late)
+    return path
+
+
+def _vd(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(prog='vd')
+    add_report_parser(parser.add_subparsers(dest='command', required=True))
+    args = parser.parse_args(argv)
+    status: int = args.run(args)
+    return status
+
+
+def _quantity(report: dict[str, object], key: str) -> dict[str, object]:
+    for q in report['quantities']:  # type: ignore[attr-defined]
+        if q['key'] == key:
+            return q  # type: ignore[no-any-return]
+    raise AssertionError(f'{key} missing')
+
+
+def test_known_answers_through_the_command(
+    known_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / 'out'
+    assert _vd(['report', str(known_bag), '--out', str(out), '--no-progress']) == 0
+    data = json.loads((out / 'metrics.json').read_text())
+    assert data['slope_steps_s'] == pytest.approx([STEP_S])
+    assert data['gear_changes_s'] == pytest.approx(list(SHIFT_S))
+
+    fx = _quantity(data, 'fx')
+    assert fx['overall']['rms'] == pytest.approx(10.0, rel=1e-9)  # type: ignore[index]
+    assert fx['overall']['max_abs'] == pytest.approx(10.0, rel=1e-9)  # type: ignore[index]
+    peak = fx['extras']['max_abs_truth']  # type: ignore[index]
+    assert 990.0 < peak <= 1000.0
+    assert fx['extras']['rms_pct_of_max_truth'] == pytest.approx(1000.0 / peak)  # type: ignore[index]
+
+    fz = _quantity(data, 'fz')
+    assert fz['overall']['rms'] == pytest.approx(30.0, rel=1e-9)  # type: ignore[index]
+    # Static loads from the median true Fz of the first second: 30 N / 3000 N and / 2000 N.
+    expected_pct = 100.0 * math.sqrt((0.01**2 + 0.015**2) / 2)
+    assert fz['extras']['rms_pct_of_static'] == pytest.approx(expected_pct, rel=1e-9)  # type: ignore[index]
+
+    omega = _quantity(data, 'omega')
+    assert omega['extras']['rel_rms_pct'] == pytest.approx(0.1, rel=1e-9)  # type: ignore[index]
+    omega_dot = _quantity(data, 'omega_dot')
+    assert omega_dot['overall']['rms'] == pytest.approx(0.5, rel=1e-9)  # type: ignore[index]
+    assert omega_dot['wheels']['RR']['mean'] == pytest.approx(0.5, rel=1e-9)  # type: ignore[index]
+
+    mu = _quantity(data, 'mu')
+    assert mu['overall']['rms'] == pytest.approx(0.01, rel=1e-6)  # type: ignore[index]
+    assert mu['wheels']['RL']['samples'] == 0  # type: ignore[index]
+    assert mu['wheels']['RL']['rms'] is None  # type: ignore[index]
+
+    slope = _quantity(data, 'slope')
+    # Inside the window the error is 3 deg from 5.5 s to 5.7 s (20 samples), else 0.1 deg.
+    t = np.arange(round(DURATION * RATE) + 1) / RATE
+    window = (t >= 1.0) & (np.abs(t - STEP_S) > 0.5)
+    for shift in SHIFT_S:
+        window &= np.abs(t - shift) > 0.5
+    err = np.where((t >= STEP_S) & (t < STEP_S + SLOPE_SETTLE_S), 3.0, 0.1)[window]
+    rms = float(np.sqrt(np.mean(err**2)))
+    assert slope['overall']['rms'] == pytest.approx(rms, rel=1e-6)  # type: ignore[index]
+    assert slope['overall']['max_abs'] == pytest.approx(3.0, rel=1e-6)  # type: ignore[index]
+    (conv,) = data['convergence']
+    assert conv['step_s'] == pytest.approx(STEP_S)
+    assert conv['delay_s'] == pytest.approx(SLOPE_SETTLE_S, abs=1e-6)
+    assert (conv['from_deg'], conv['to_deg']) == pytest.approx((0.0, 2.0))
+    assert data['targets']['Fx RMS [% of max |Fx|]']['met'] is True
+    assert data['targets']['slope RMS [deg]']['met'] is False
+
+    pngs = sorted(p.name for p in out.glob('*.png'))
+    assert {'summary.png', 'slope.png', 'tire_fx.png', 'friction_mu.png'} <= set(pngs)
+    assert all((out / name).stat().st_size > 10_000 for name in pngs)
+    markdown = (out / 'metrics.md').read_text()
+    assert '| Longitudinal tyre force Fx | N | 10 | 10 |' in markdown
+    assert 'max \\|err\\|' in markdown  # a literal pipe would split the table cell
+    printed = capsys.readouterr().out
+    assert 'Longitudinal tyre force Fx' in printed and 'step at 5.00 s' in printed
+
+
+def test_default_output_dir_is_next_to_the_bag(known_bag: Path, tmp_path: Path) -> None:
+    assert default_out_dir(tmp_path / 'drive') == tmp_path / 'drive_report'
+    assert (
+        default_out_dir(tmp_path / 'drive' / 'drive_0.mcap')
+        == tmp_path / 'drive' / 'drive_0_report'
+    )
+
+
+def test_bag_without_truth_is_a_one_line_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    t = np.arange(200) / RATE
+    bag = tmp_path / 'no_truth'
+    write_topic_arrays_bag(
+        bag,
+        np.round(t * 1e9).astype(np.int64),
+        {'/vd/estimates/slope': {'angle': np.zeros(t.size), 'valid': np.ones(t.size, bool)}},
+    )
+    assert _vd(['report', str(bag), '--out', str(tmp_path / 'out')]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1
+    assert err[0].startswith('vd: error: ') and 'no truth topics' in err[0]
+    assert 'slope' in err[0] and 'tire_forces' in err[0]
+    assert not (tmp_path / 'out').exists()
+
+
+def test_missing_bag_is_a_one_line_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    args = argparse.Namespace(bag=tmp_path / 'nope', out=None, vehicle=None)
+    assert run_report(args) == 2
+    assert capsys.readouterr().err.count('\n') == 1
+
+
+def test_partial_truth_reports_what_exists_and_says_what_is_missing(tmp_path: Path) -> None:
+    t = np.arange(round(4 * RATE) + 1) / RATE
+    slope = np.radians(np.where(t < 2.0, 0.0, 1.0))
+    bag = tmp_path / 'partial'
+    write_topic_arrays_bag(
+        bag,
+        np.round(t * 1e9).astype(np.int64),
+        {
+            '/vd/truth/slope': {'angle': slope, 'valid': np.ones(t.size, bool)},
+            '/vd/estimates/slope': {
+                'angle': slope + np.radians(0.2),
+                'valid': np.ones(t.size, bool),
+            },
+            '/vd/estimates/tire_forces': {'fx': np.ones((t.size, 4)), 'fz': np.ones((t.size, 4))},
+        },
+    )
+    report, comparisons = evaluate(load_bag_series(bag, progress=False))
+    assert [q.key for q in report.quantities] == ['slope']
+    assert report.quantities[0].overall.rms == pytest.approx(0.2, rel=1e-9)
+    notes = ' '.join(report.notes)
+    assert '/vd/truth/tire_forces missing' in notes and 'gear shifts not excluded' in notes
+    forces = [c for c in comparisons if c.key == 'fx']
+    assert forces and forces[0].truth is None  # still plotted, without truth
