@@ -34,7 +34,7 @@ def test_corrupt_bag_one_line_error_then_repair(
     assert err.count('\n') == 1 and err.startswith('vd: error: ')
     assert 'drive_0.mcap' in err and 'vd bag repair' in err
     assert main(['bag', 'info', '--recover', str(drive_bag)]) == 0
-    assert 'Damage:' in capsys.readouterr().out
+    assert capsys.readouterr().out.count('Damage:') == 1  # one truncation, reported once
     assert main(['bag', 'repair', str(drive_bag)]) == 0
     out = capsys.readouterr().out
     assert 'recovered' in out and 'original kept as' in out

@@ -585,14 +585,19 @@ class BagReader:
         self.problems: list[BagCorruptError] = []
         self._topics: dict[str, TopicInfo] | None = None
 
-    def _scans(self) -> Iterator[_FileScan]:
+    def _scans(self, problems: list[BagCorruptError] | None = None) -> Iterator[_FileScan]:
         for file in self.files:
             try:
                 buf = file.read_bytes()
             except OSError as exc:
                 raise BagNotFoundError(f'{file}: cannot read: {exc.strerror or exc}') from exc
             yield _FileScan(
-                file, buf, recover=self.recover, problems=self.problems, schemas={}, channels={}
+                file,
+                buf,
+                recover=self.recover,
+                problems=self.problems if problems is None else problems,
+                schemas={},
+                channels={},
             )
 
     def raw_messages(
@@ -686,15 +691,18 @@ class BagReader:
     def topics(self) -> dict[str, TopicInfo]:
         """Topics of the bag with message counts (one pass over the data if not yet read)."""
         if self._topics is None:
-            problems = list(self.problems)
+            found: list[BagCorruptError] = []
             scans = []
-            for scan in self._scans():
+            for scan in self._scans(found):
                 if not scan.load_summary():
                     for _ in scan.batches(lambda _c: False, None, None):
                         pass
                 scans.append(scan)
             self._topics = self._topic_infos(scans)
-            self.problems[:0] = problems
+            known = {(str(p.path), p.offset, p.reason) for p in self.problems}
+            self.problems.extend(
+                p for p in found if (str(p.path), p.offset, p.reason) not in known
+            )
         return self._topics
 
     @staticmethod
