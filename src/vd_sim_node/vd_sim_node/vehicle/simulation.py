@@ -19,7 +19,6 @@ samples of the current chunk one by one and integrates the next chunk when neede
 from __future__ import annotations
 
 import math
-from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Any
@@ -211,7 +210,10 @@ class Simulator:
         self._drv, self._x = self._initial_conditions()
         self.events: list[tuple[float, str]] = self._scenario_events()
         self.nfev = 0
-        self._buffer: deque[SampleFrame] = deque()
+        # Samples integrated but not yet handed out by step(): one block and a cursor; the
+        # frames are built lazily so a step costs ~10 us, not a whole block's worth.
+        self._block: dict[str, Any] | None = None
+        self._cursor = 0
         self._emitted = 0
 
     # -- public ----------------------------------------------------------------------
@@ -234,11 +236,13 @@ class Simulator:
         """
         if self.done:
             raise SimulationError('the scenario is finished; check Simulator.done')
-        if not self._buffer:
-            block = self._next_block()
-            self._buffer.extend(_frames(block))
+        while self._block is None or self._cursor >= len(self._block['t']):
+            self._block = self._next_block()
+            self._cursor = 0
+        frame = _frame(self._block, self._cursor)
+        self._cursor += 1
         self._emitted += 1
-        return self._buffer.popleft()
+        return frame
 
     def run(self, progress: Callable[[float, float], None] | None = None) -> SimResult:
         """Simulate the remaining samples and return the whole series.
@@ -566,21 +570,18 @@ _WHEEL_SERIES = frozenset(
 )
 
 
-def _frames(block: dict[str, Any]) -> list[SampleFrame]:
-    n = len(block['t'])
-    frames = []
-    for i in range(n):
-        kw: dict[str, Any] = {}
-        for name in _SERIES:
-            val = block[name][i]
-            if name in _WHEEL_SERIES:
-                kw[name] = np.array(val, dtype=float)
-            elif name == 'gear':
-                kw[name] = int(val)
-            else:
-                kw[name] = float(val)
-        frames.append(SampleFrame(**kw))
-    return frames
+def _frame(block: dict[str, Any], i: int) -> SampleFrame:
+    """Sample ``i`` of a block as a :class:`SampleFrame` (per-wheel rows copied)."""
+    kw: dict[str, Any] = {}
+    for name in _SERIES:
+        val = block[name][i]
+        if name in _WHEEL_SERIES:
+            kw[name] = val.copy()
+        elif name == 'gear':
+            kw[name] = int(val)
+        else:
+            kw[name] = float(val)
+    return SampleFrame(**kw)
 
 
 def simulate(
