@@ -22,6 +22,7 @@ from vd_sim_node.ros_common import (
     NodeFinished,
     ParamSpec,
     declare_parameters,
+    deliver_pending,
     ns_to_time,
     run_node,
 )
@@ -122,6 +123,7 @@ class PlayerNode(Node):  # type: ignore[misc]
         if self.index >= len(self.messages):
             if not self.loop:
                 self.get_logger().info(f'played {len(self.messages)} messages')
+                deliver_pending(self)
                 raise NodeFinished()
             self.loops += 1
             self.index = 0

@@ -53,6 +53,7 @@ __all__ = [
     'ParamSpec',
     'dataclass_param_specs',
     'declare_parameters',
+    'deliver_pending',
     'diagnostic_array',
     'ns_to_time',
     'run_node',
@@ -241,6 +242,21 @@ def _header(stamp: Time) -> Any:
     from std_msgs.msg import Header
 
     return Header(stamp=stamp)
+
+
+def deliver_pending(node: Node, timeout_s: float = 2.0) -> bool:
+    """Wait until every reliable subscriber has acknowledged what `node` published.
+
+    Call before a node exits on its own: a process that ends right after its last publish
+    would otherwise take messages still in flight with it.
+    Returns True if everything was acknowledged within `timeout_s` (per publisher).
+    """
+    from rclpy.duration import Duration
+
+    acked = True
+    for publisher in node.publishers:
+        acked = publisher.wait_for_all_acked(Duration(seconds=timeout_s)) and acked
+    return acked
 
 
 def run_node(factory: Any, args: list[str] | None = None) -> int:

@@ -46,6 +46,7 @@ from vd_sim_node.ros_common import (
     NodeFinished,
     ParamSpec,
     declare_parameters,
+    deliver_pending,
     diagnostic_array,
     ns_to_time,
     run_node,
@@ -209,6 +210,7 @@ class SimNode(Node):  # type: ignore[misc]
                 f'scenario finished: {self.published} samples, '
                 f'{self.sim.t:.3f} s simulated in {time.monotonic() - self.wall_start:.1f} s'
             )
+            deliver_pending(self)
             raise NodeFinished()
 
     def _stamp(self, t: float) -> Any:
