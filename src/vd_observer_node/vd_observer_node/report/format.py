@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import unicodedata
 from typing import Any
 
 from .evaluate import AccuracyReport, QuantityMetrics
@@ -66,6 +67,16 @@ def _extras_text(q: QuantityMetrics) -> str:
     return ', '.join(parts)
 
 
+def _width(text: str) -> int:
+    """Terminal columns of a string: combining marks (the dot of ω̇) take none."""
+    return sum(0 if unicodedata.combining(ch) else 1 for ch in text)
+
+
+def _pad(text: str, width: int, right: bool) -> str:
+    fill = ' ' * max(width - _width(text), 0)
+    return fill + text if right else text + fill
+
+
 def _rows(report: AccuracyReport) -> list[list[str]]:
     rows = []
     for q in report.quantities:
@@ -113,14 +124,20 @@ def _window_text(report: AccuracyReport) -> str:
 def report_text(report: AccuracyReport) -> str:
     """A concise fixed-width table for the terminal."""
     rows = _rows(report)
-    widths = [max(len(r[k]) for r in [_HEAD, *rows]) for k in range(len(_HEAD) - 1)]
+    widths = [max(_width(r[k]) for r in [_HEAD, *rows]) for k in range(len(_HEAD) - 1)]
     lines = [
         f'accuracy of {report.bag} ({report.duration_s:.1f} s); window: {_window_text(report)}'
     ]
-    fmt_row = '  '.join(f'{{:{"<" if k < 2 else ">"}{w}}}' for k, w in enumerate(widths))
-    lines.append(fmt_row.format(*_HEAD[:-1]) + '  ' + _HEAD[-1])
-    for r in rows:
-        lines.append(fmt_row.format(*r[:-1]) + '  ' + r[-1])
+
+    def line(cells: list[str]) -> str:
+        padded = [
+            _pad(c, w, right=k >= 2)
+            for k, (c, w) in enumerate(zip(cells[:-1], widths, strict=True))
+        ]
+        return ('  '.join(padded) + '  ' + cells[-1]).rstrip()
+
+    lines.append(line(_HEAD))
+    lines.extend(line(r) for r in rows)
     lines.extend(_convergence_lines(report))
     for name, (value, limit, met) in report.targets.items():
         lines.append(f'target {name}: {_num(value)} <= {limit:g}: {"met" if met else "MISSED"}')
