@@ -117,3 +117,38 @@ def test_missing_sensor_topic(tmp_path: Path) -> None:
         writer.add_topic('/vd/sensors/wheel_angles', 'vd_msgs/msg/WheelAngles')
     with pytest.raises(ReplayInputError, match='no messages on sensor topic'):
         replay_bag(tmp_path / 'empty', tmp_path / 'out', progress=False)
+
+
+def test_replay_config_reaches_the_cascade(tmp_path: Path) -> None:
+    from vd_observer_node.bag.replay import load_replay_config
+    from vd_observer_node.errors import ConfigurationError
+    from vd_observer_node.observer import ObserverConfig
+
+    write_synthetic_drive_bag(tmp_path / 'in', duration_s=1.0, rate_hz=100.0, with_truth=False)
+    settings = tmp_path / 'settings.yaml'
+    settings.write_text('observer:\n  speed_lipschitz: 55.0\n')
+    config = load_replay_config(settings)
+    assert config.observer == ObserverConfig.from_mapping({'speed_lipschitz': 55.0})
+    assert config.estimator is None
+    calls: list[tuple[object, ...]] = []
+
+    def spy(*args: object, **kwargs: object) -> object:
+        calls.append((*args, kwargs))
+        return run_cascade(*args, **kwargs)  # type: ignore[arg-type]
+
+    replay_bag(
+        tmp_path / 'in',
+        tmp_path / 'out',
+        observer_config=config.observer,
+        cascade_kwargs={},
+        progress=False,
+        cascade=spy,  # type: ignore[arg-type]
+    )
+    assert calls[0][5] == config.observer
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('observer:\n  no_such_setting: 1\n')
+    with pytest.raises(ConfigurationError):
+        load_replay_config(bad)
+    bad.write_text('something: else\n')
+    with pytest.raises(ConfigurationError, match='mapping'):
+        load_replay_config(bad)

@@ -81,3 +81,18 @@ def test_usage_error_exits_2(capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exc:
         main(['bag'])
     assert exc.value.code == 2
+
+
+def test_replay_with_config_file(
+    drive_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    good = tmp_path / 'good.yaml'
+    good.write_text('observer:\n  speed_lipschitz: 40.0\n')
+    argv = ['replay', '--no-progress', '--config', str(good), str(drive_bag), str(tmp_path / 'a')]
+    assert main(argv) == 0
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('observer: [1, 2]\n')
+    argv = ['replay', '--no-progress', '--config', str(bad), str(drive_bag), str(tmp_path / 'b')]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith('vd: error: ') and 'must be a mapping' in err

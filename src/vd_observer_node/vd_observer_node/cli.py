@@ -2,7 +2,7 @@
 
     vd bag info BAG [--recover]
     vd bag repair BAG [--no-backup]
-    vd replay IN_BAG OUT_BAG [--vehicle FILE] [--no-progress]
+    vd replay IN_BAG OUT_BAG [--vehicle FILE] [--config FILE] [--no-progress]
 
 Errors (missing paths, corrupt bags, bad vehicle files) print one line on stderr and exit
 with status 2; no traceback.
@@ -72,11 +72,20 @@ def _repair(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from vd_observer_node.bag.replay import replay_bag
+    from vd_observer_node.bag.replay import ReplayConfig, load_replay_config, replay_bag
     from vd_observer_node.vehicle import load_estimator_vehicle
 
     vehicle = load_estimator_vehicle(args.vehicle) if args.vehicle else None
-    report = replay_bag(args.in_bag, args.out_bag, vehicle=vehicle, progress=not args.no_progress)
+    config = load_replay_config(args.config) if args.config else ReplayConfig()
+    report = replay_bag(
+        args.in_bag,
+        args.out_bag,
+        vehicle=vehicle,
+        observer_config=config.observer,
+        estimator_config=config.estimator,
+        cascade_kwargs=config.cascade_kwargs,
+        progress=not args.no_progress,
+    )
     print(
         f'replayed {report.samples} samples ({report.sensor_messages} sensor messages, '
         f'{report.unmatched} unmatched) of {report.bag_duration_s:.1f} s in '
@@ -104,6 +113,11 @@ def _parser() -> argparse.ArgumentParser:
     replay.add_argument('in_bag', type=Path, help='input bag with the /vd/sensors/* topics')
     replay.add_argument('out_bag', type=Path, help='output bag folder to create')
     replay.add_argument('--vehicle', type=Path, help='vehicle YAML (default: the Clio file)')
+    replay.add_argument(
+        '--config',
+        type=Path,
+        help='YAML with observer / estimator / cascade settings (default: the defaults)',
+    )
     replay.add_argument('--no-progress', action='store_true', help='no progress bar')
     replay.set_defaults(run=_replay)
     return parser

@@ -17,15 +17,17 @@ from __future__ import annotations
 import os
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 from tqdm import tqdm
 
 from ..cascade import CascadeResult, run_cascade
+from ..errors import ConfigurationError
 from ..estimator import EstimatorConfig
 from ..observer import ObserverConfig
 from ..vehicle import EstimatorVehicle, load_estimator_vehicle
@@ -38,8 +40,10 @@ __all__ = [
     'ESTIMATE_TOPICS',
     'SENSOR_TOPICS',
     'TRUTH_PREFIX',
+    'ReplayConfig',
     'ReplayReport',
     'default_vehicle_file',
+    'load_replay_config',
     'replay_bag',
 ]
 
@@ -91,6 +95,48 @@ class ReplayReport:
     def samples_per_second(self) -> float:
         """Sensor messages processed per wall-clock second."""
         return self.sensor_messages / self.wall_time_s if self.wall_time_s > 0 else float('inf')
+
+
+@dataclass(frozen=True)
+class ReplayConfig:
+    """Cascade settings of an offline replay (None: the defaults)."""
+
+    observer: ObserverConfig | None = None
+    estimator: EstimatorConfig | None = None
+    cascade_kwargs: dict[str, Any] | None = None
+
+
+def load_replay_config(path: str | os.PathLike[str]) -> ReplayConfig:
+    """Read cascade settings from YAML: optional ``observer``, ``estimator`` and ``cascade``
+    mappings (flat, the keys of ``ObserverConfig.from_mapping`` /
+    ``EstimatorConfig.from_mapping`` / extra ``run_cascade`` keyword arguments).
+
+    Raises:
+        ConfigurationError: unreadable file, not a mapping, or unknown keys.
+    """
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding='utf-8')) or {}
+    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise ConfigurationError(f'{path}: cannot read replay settings: {exc}') from exc
+    if not isinstance(data, dict) or set(data) - {'observer', 'estimator', 'cascade'}:
+        raise ConfigurationError(
+            f'{path}: expected a mapping with observer / estimator / cascade sections'
+        )
+    sections = {}
+    for key in ('observer', 'estimator', 'cascade'):
+        value = data.get(key)
+        if value is not None and not isinstance(value, dict):
+            raise ConfigurationError(f'{path}: {key} must be a mapping')
+        sections[key] = value
+    return ReplayConfig(
+        observer=ObserverConfig.from_mapping(sections['observer'])
+        if sections['observer'] is not None
+        else None,
+        estimator=EstimatorConfig.from_mapping(sections['estimator'])
+        if sections['estimator'] is not None
+        else None,
+        cascade_kwargs=sections['cascade'],
+    )
 
 
 def default_vehicle_file() -> Path:
@@ -169,6 +215,7 @@ def replay_bag(
     estimator_config: EstimatorConfig | None = None,
     progress: bool = True,
     cascade: Callable[..., CascadeResult] = run_cascade,
+    cascade_kwargs: Mapping[str, Any] | None = None,
 ) -> ReplayReport:
     """Replay a bag's sensor topics through the cascade and write inputs, truth and estimates.
 
@@ -180,6 +227,8 @@ def replay_bag(
         estimator_config: estimator settings; default EstimatorConfig().
         progress: show a tqdm progress bar on stderr.
         cascade: the array cascade (injectable for tests); signature of ``run_cascade``.
+        cascade_kwargs: further keyword arguments of the cascade (settings added to
+            ``run_cascade`` later, so the replay can match the live nodes' parameters).
 
     Raises:
         ReplayInputError: a sensor topic is missing or has the wrong type.
@@ -234,6 +283,7 @@ def replay_bag(
             vehicle or load_estimator_vehicle(default_vehicle_file()),
             observer_config,
             estimator_config,
+            **dict(cascade_kwargs or {}),
         )
         cascade_time = time.perf_counter() - cascade_start
         frames = angles.frame_id[ia]
