@@ -208,3 +208,25 @@ def test_partial_truth_reports_what_exists_and_says_what_is_missing(tmp_path: Pa
     assert '/vd/truth/tire_forces missing' in notes and 'gear shifts not excluded' in notes
     forces = [c for c in comparisons if c.key == 'fx']
     assert forces and forces[0].truth is None  # still plotted, without truth
+
+
+def test_estimates_with_foreign_stamps_are_reported_not_crashed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # An estimator stamping with its own clock: no stamp in common with the truth.
+    t = np.arange(300) / RATE
+    stamp = np.round(t * 1e9).astype(np.int64)
+    forces = {'fx': np.ones((t.size, 4)), 'fz': np.full((t.size, 4), 3000.0)}
+    bag = tmp_path / 'foreign'
+    write_topic_arrays_bag(
+        bag,
+        stamp,
+        {'/vd/truth/tire_forces': forces, '/vd/estimates/tire_forces': forces},
+        stamps={'/vd/estimates/tire_forces': stamp + 1_234_567},
+    )
+    out = tmp_path / 'out'
+    assert _vd(['report', str(bag), '--out', str(out), '--no-progress']) == 0
+    data = json.loads((out / 'metrics.json').read_text())
+    assert _quantity(data, 'fx')['overall']['samples'] == 0  # type: ignore[index]
+    assert any('no common stamps' in note for note in data['notes'])
+    assert 'no common stamps' in capsys.readouterr().out
