@@ -5,6 +5,8 @@ from __future__ import annotations
 import ast
 import importlib.util
 import os
+import subprocess
+import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -120,3 +122,13 @@ def test_vd_msgs_python_bindings_are_importable() -> None:
     msg = WheelAngles()
     assert (msg.FL, msg.FR, msg.RL, msg.RR) == (0, 1, 2, 3)
     assert len(msg.angle) == 4
+
+
+def test_parameter_files_match_the_declared_parameters() -> None:
+    """config/<node>.yaml are generated from the nodes' declarations and must be current."""
+    result = subprocess.run(
+        [sys.executable, str(ROOT / 'scripts' / 'gen_param_files.py'), '--check'],
+        capture_output=True,
+        text=True,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
