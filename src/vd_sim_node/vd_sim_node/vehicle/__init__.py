@@ -6,6 +6,7 @@ Sub-modules, one concept each:
 * :mod:`.tire` -- Pacejka Magic Formula (MF 5.2 style) pure longitudinal slip,
 * :mod:`.powertrain` -- engine map, idle governor, launch clutch, shift logic, brakes,
 * :mod:`.resistances` -- rolling resistance (paper eq. 7) and aerodynamic drag,
+* :mod:`.laws` -- the same laws specialised as fast bond-graph callables,
 * :mod:`.scenario` -- piecewise-in-time driver and road inputs, sensor settings,
 * :mod:`.sensors` -- quantised encoders and noisy speed sensor,
 * :mod:`.model` -- the assembly of all of the above as a bond graph,
