@@ -230,3 +230,19 @@ def test_estimates_with_foreign_stamps_are_reported_not_crashed(
     assert _quantity(data, 'fx')['overall']['samples'] == 0  # type: ignore[index]
     assert any('no common stamps' in note for note in data['notes'])
     assert 'no common stamps' in capsys.readouterr().out
+
+
+def test_static_loads_from_the_vehicle_file(known_bag: Path, tmp_path: Path) -> None:
+    from vd_observer_node.vehicle import load_estimator_vehicle
+
+    vehicle_file = Path(__file__).resolve().parents[2] / 'vd_sim_node/config/clio_rl_1_1.yaml'
+    static = load_estimator_vehicle(vehicle_file).static_wheel_loads
+    out = tmp_path / 'out'
+    argv = ['report', str(known_bag), '--out', str(out), '--vehicle', str(vehicle_file)]
+    assert _vd([*argv, '--no-figures', '--no-progress']) == 0
+    data = json.loads((out / 'metrics.json').read_text())
+    fz = _quantity(data, 'fz')['extras']
+    expected = 100.0 * float(np.sqrt(np.mean((30.0 / static) ** 2)))
+    assert fz['rms_pct_of_static'] == pytest.approx(expected, rel=1e-9)  # type: ignore[index]
+    assert fz['static_load_RR'] == pytest.approx(float(static[3]))  # type: ignore[index]
+    assert not list(out.glob('*.png'))
