@@ -333,3 +333,33 @@ def test_format_qos_profiles_round_trips_through_rosbags(tmp_path: Path) -> None
     assert profile.depth == 5
     assert profile.reliability.name == 'BEST_EFFORT'
     assert profile.durability.name == 'VOLATILE'
+
+
+def _rosidl_hash(msgtype: str) -> str | None:
+    """The RIHS01 hash rosidl generated for ``msgtype`` (its share/<pkg>/msg/<T>.json)."""
+    import json
+    import sys
+
+    package, _, name = msgtype.split('/')
+    candidates = [Path(sys.prefix) / 'share' / package / 'msg' / f'{name}.json']
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        candidates.append(Path(get_package_share_directory(package)) / 'msg' / f'{name}.json')
+    except Exception:  # not installed / no ROS environment
+        pass
+    for path in candidates:
+        if path.is_file():
+            hashes = json.loads(path.read_text())['type_hashes']
+            return next(h['hash_string'] for h in hashes if h['type_name'] == msgtype)
+    return None
+
+
+@pytest.mark.parametrize('msgtype', ALL_TYPES)
+def test_type_hashes_match_rosidl(msgtype: str) -> None:
+    from vd_observer_node.bag.typestore import type_hash
+
+    expected = _rosidl_hash(msgtype)
+    if expected is None:
+        pytest.skip(f'no rosidl-generated description of {msgtype} installed here')
+    assert type_hash(msgtype) == expected
