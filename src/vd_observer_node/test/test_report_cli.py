@@ -210,6 +210,19 @@ def test_partial_truth_reports_what_exists_and_says_what_is_missing(tmp_path: Pa
     assert forces and forces[0].truth is None  # still plotted, without truth
 
 
+def test_truth_only_bag_says_there_is_nothing_to_compare(tmp_path: Path) -> None:
+    t = np.arange(100) / RATE
+    bag = tmp_path / 'truth_only'
+    write_topic_arrays_bag(
+        bag,
+        np.round(t * 1e9).astype(np.int64),
+        {'/vd/truth/slope': {'angle': np.zeros(t.size), 'valid': np.ones(t.size, bool)}},
+    )
+    report, _ = evaluate(load_bag_series(bag, progress=False))
+    assert report.quantities == ()
+    assert any('nothing to compare' in note for note in report.notes)
+
+
 def test_estimates_with_foreign_stamps_are_reported_not_crashed(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

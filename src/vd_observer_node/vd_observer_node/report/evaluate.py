@@ -24,7 +24,7 @@ from .metrics import (
     relative_error_stats,
     step_times,
 )
-from .topics import GEAR_TOPIC, TRUTH_TOPICS
+from .topics import ESTIMATE_TOPICS, GEAR_TOPIC, TRUTH_TOPICS
 
 __all__ = [
     'TARGETS',
@@ -480,6 +480,11 @@ def evaluate(
         notes.append(f'{GEAR_TOPIC} missing: gear shifts not excluded')
     if '/vd/truth/slope' not in series.topics:
         notes.append('/vd/truth/slope missing: slope steps not excluded, no convergence times')
+    if not any(t in series.topics for t in ESTIMATE_TOPICS):
+        notes.append(
+            'no /vd/observer/* or /vd/estimates/* topic: nothing to compare '
+            '(compute them offline with `vd replay IN OUT`)'
+        )
     missing_truth = [t for t in TRUTH_TOPICS if t not in series.topics]
     if missing_truth:
         notes.append('truth topics missing: ' + ', '.join(missing_truth))
