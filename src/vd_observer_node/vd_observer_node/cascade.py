@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node.errors import InputShapeError
+from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimator import Estimator, EstimatorConfig
 from vd_observer_node.observer import Observer, ObserverConfig
 from vd_observer_node.vehicle import EstimatorVehicle
@@ -69,6 +69,7 @@ def run_cascade(
     vehicle: EstimatorVehicle,
     observer_config: ObserverConfig | None = None,
     estimator_config: EstimatorConfig | None = None,
+    estimator_speed: str = 'measured',
 ) -> CascadeResult:
     """Run observers and estimator over a record sampled at common stamps.
 
@@ -80,10 +81,18 @@ def run_cascade(
         vehicle: estimator parameters.
         observer_config: observer settings (defaults if None).
         estimator_config: estimator settings (defaults if None).
+        estimator_speed: 'measured' feeds the estimator the measured body speed (its slope
+            low-pass does the smoothing, no observer lag), 'observer' the observer's
+            filtered speed.
 
     Raises:
         InputShapeError: inconsistent shapes.
+        ConfigurationError: unknown estimator_speed.
     """
+    if estimator_speed not in ('measured', 'observer'):
+        raise ConfigurationError(
+            f'estimator_speed must be measured or observer: {estimator_speed}'
+        )
     stamps = np.asarray(t, dtype=np.float64)
     angles = np.asarray(wheel_angle, dtype=np.float64)
     speeds = np.asarray(body_speed, dtype=np.float64)
@@ -107,13 +116,13 @@ def run_cascade(
     mu_valid = np.zeros((n, 4), dtype=bool)
     wheel_valid = np.zeros((n, 4), dtype=bool)
     slope_valid = np.zeros(n, dtype=bool)
+    use_measured = estimator_speed == 'measured'
     for k in range(n):
         tk = float(stamps[k])
         wheel = observer.wheels.update(tk, angles[k])
         body = observer.speed.update(tk, float(speeds[k]))
-        est = estimator.update(
-            tk, wheel.omega, wheel.omega_dot, body.speed, body.accel, torques[k]
-        )
+        speed = float(speeds[k]) if use_measured else body.speed
+        est = estimator.update(tk, wheel.omega, wheel.omega_dot, speed, body.accel, torques[k])
         out['omega'][k] = wheel.omega
         out['omega_dot'][k] = wheel.omega_dot
         wheel_valid[k] = wheel.valid

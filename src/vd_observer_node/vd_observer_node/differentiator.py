@@ -146,6 +146,9 @@ def _positive_cubic_root(a: float, b: float, c: FloatArray) -> FloatArray:
     Newton from an upper bound converges monotonically because the polynomial is increasing
     and convex on y >= 0; min(cbrt(c), c / b) is such a bound.
     """
+    if not np.any(c > 0.0):
+        # Inside the band (the common, converged case) the root is 0.
+        return np.zeros_like(c)
     y = np.minimum(np.cbrt(c), c / b)
     for _ in range(_NEWTON_MAX_ITER):
         residual = ((y + a) * y + b) * y - c
@@ -300,9 +303,11 @@ class LevantDifferentiator:
 
     Initialisation policies (per channel, on its first finite samples):
         'first_sample': z = (f0, 0, 0) at the first sample.
-        'finite_difference': waits for a second sample and starts from
-            z = (f1, (f1 - f0) / tau, 0), which removes most of the convergence transient
-            when the signal starts with a large slope (a car already moving).
+        'finite_difference': waits for a sample at least `init_baseline` after the first
+            and starts from z = (f1, (f1 - f0) / (t1 - t0), 0), which removes most of the
+            convergence transient when the signal starts with a large slope (a car already
+            moving); a baseline of a few tens of ms keeps noise from producing a huge
+            initial slope.
         'zero': z = (0, 0, 0) before the first sample, then normal steps (shows finite-time
             convergence from a wrong state; mostly for tests).
     """
@@ -316,6 +321,7 @@ class LevantDifferentiator:
         discretization: str = 'implicit',
         init: str = 'finite_difference',
         max_gap: float = math.inf,
+        init_baseline: float = 0.0,
     ) -> None:
         """Create the differentiator.
 
@@ -326,6 +332,8 @@ class LevantDifferentiator:
             discretization: one of `DISCRETIZATIONS`.
             init: one of `INIT_POLICIES`.
             max_gap: time gap [s] beyond which the state is re-initialised.
+            init_baseline: minimum time [s] between the two samples of the
+                'finite_difference' initialisation.
 
         Raises:
             ConfigurationError: invalid L, name or gap.
@@ -341,6 +349,9 @@ class LevantDifferentiator:
         lip = np.broadcast_to(np.asarray(lipschitz, dtype=np.float64), (n_channels,)).copy()
         if not np.all(np.isfinite(lip) & (lip > 0.0)):
             raise ConfigurationError(f'Lipschitz bounds L must be finite and > 0: {lip}')
+        if not (math.isfinite(init_baseline) and init_baseline >= 0.0):
+            raise ConfigurationError(f'init_baseline must be finite and >= 0: {init_baseline}')
+        self._init_baseline = float(init_baseline)
         if not max_gap > 0.0:
             raise ConfigurationError(f'max_gap must be > 0, got {max_gap}')
         self._lipschitz = lip
@@ -378,6 +389,7 @@ class LevantDifferentiator:
         # First finite sample (stamp, value) of channels waiting for a finite difference.
         self._pending_t = np.full(self._n, np.nan)
         self._pending_f = np.full(self._n, np.nan)
+        self._all_active = bool(np.all(self._active))
 
     def update(self, t: float, f: ArrayLike) -> DerivativeEstimate:
         """Feed the sample f taken at stamp t and return the estimates for stamp t.
@@ -414,17 +426,24 @@ class LevantDifferentiator:
         if self._init == 'zero':
             return
         self._adopt(t, sample, finite)
+        self._all_active = bool(np.all(self._active))
 
     def _adopt(self, t: float, sample: FloatArray, finite: NDArray[np.bool_]) -> None:
         """Initialise channels that are not active yet from this sample."""
+        if self._all_active:
+            return
         new = finite & ~self._active
         if self._init == 'first_sample':
             self._z[:, new] = 0.0
             self._z[0, new] = sample[new]
             self._active |= new
             return
-        second = new & np.isfinite(self._pending_t)
-        first = new & ~second
+        pending = np.isfinite(self._pending_t)
+        first = new & ~pending
+        with np.errstate(invalid='ignore'):
+            second = new & pending & (t - self._pending_t >= self._init_baseline)
+        waiting = new & pending & ~second
+        self._z[0, waiting] = sample[waiting]
         if np.any(second):
             dt = t - self._pending_t[second]
             self._z[0, second] = sample[second]
@@ -449,10 +468,14 @@ class LevantDifferentiator:
         corrected = step(
             self._discretization, z, f_used, f_used, tau, self._lipschitz, self._gains
         )
+        if self._all_active and bool(np.all(use)):
+            self._z = corrected
+            return
         predicted = _open_loop(z, tau)
         stepped = np.where(use & self._active, corrected, predicted)
         self._z = np.where(self._active, stepped, z)
         self._adopt(t, sample, finite)
+        self._all_active = bool(np.all(self._active))
 
     def _output(self, valid: NDArray[np.bool_]) -> DerivativeEstimate:
         return DerivativeEstimate(

@@ -24,12 +24,20 @@ from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.filters import LowPass
 from vd_observer_node.vehicle import EstimatorVehicle
 
-__all__ = ['LOAD_TRANSFER_SOURCES', 'Estimates', 'Estimator', 'EstimatorConfig']
+__all__ = [
+    'LOAD_TRANSFER_SOURCES',
+    'SLOPE_ACCEL_SOURCES',
+    'Estimates',
+    'Estimator',
+    'EstimatorConfig',
+]
 
 FloatArray = NDArray[np.float64]
 
 #: How the load-transfer force G is obtained, see `EstimatorConfig.load_transfer_source`.
 LOAD_TRANSFER_SOURCES: Final = ('tire_forces', 'acceleration')
+#: Where m*v_dot in the slope balance comes from, see `EstimatorConfig.slope_accel_source`.
+SLOPE_ACCEL_SOURCES: Final = ('speed', 'observer')
 
 
 @dataclass(frozen=True)
@@ -43,6 +51,11 @@ class EstimatorConfig:
             Fx, Fz and mu by filter_order * tau.
         slope_filter_tau: time constant [s] of the low-pass on the slope force balance
             (0 = off); it delays the slope by filter_order * tau.
+        slope_accel_source: 'speed' (default) takes the filtered m*v_dot of the slope
+            balance as the derivative of the SAME low-pass applied to the speed, so the
+            force and inertia terms carry the same filter and noise on v is never
+            differentiated raw; 'observer' low-passes the balance built with the observer's
+            accel. With slope_filter_tau = 0 both use the observer's accel.
         filter_order: number of first-order stages of both filters.
         min_load_ratio: mu is invalid where Fz < min_load_ratio * static wheel load [-].
         min_excitation_ratio: mu is invalid where |Fx| < min_excitation_ratio * Fz [-].
@@ -54,7 +67,8 @@ class EstimatorConfig:
 
     load_transfer_source: str = 'tire_forces'
     force_filter_tau: float = 0.0
-    slope_filter_tau: float = 0.05
+    slope_filter_tau: float = 0.1
+    slope_accel_source: str = 'speed'
     filter_order: int = 2
     min_load_ratio: float = 0.1
     min_excitation_ratio: float = 0.02
@@ -67,6 +81,11 @@ class EstimatorConfig:
             raise ConfigurationError(
                 f'unknown load_transfer_source {self.load_transfer_source!r}; '
                 f'use one of {LOAD_TRANSFER_SOURCES}'
+            )
+        if self.slope_accel_source not in SLOPE_ACCEL_SOURCES:
+            raise ConfigurationError(
+                f'unknown slope_accel_source {self.slope_accel_source!r}; '
+                f'use one of {SLOPE_ACCEL_SOURCES}'
             )
         for f in fields(self):
             value = getattr(self, f.name)
@@ -141,6 +160,7 @@ class Estimator:
         self.config = config or EstimatorConfig()
         self._force_filter = LowPass(self.config.force_filter_tau, self.config.filter_order)
         self._slope_filter = LowPass(self.config.slope_filter_tau, self.config.filter_order)
+        self._speed_filter = LowPass(self.config.slope_filter_tau, self.config.filter_order)
         self._min_load = self.config.min_load_ratio * float(np.min(vehicle.static_wheel_loads))
         self.rejected_count = 0
         self.reset()
@@ -158,6 +178,7 @@ class Estimator:
         }
         self._force_filter.reset()
         self._slope_filter.reset()
+        self._speed_filter.reset()
         self.last: Estimates | None = None
 
     def _sanitise(self, name: str, value: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -246,8 +267,13 @@ class Estimator:
         mu = np.where(mu_valid, mu, 0.0)
         slip = phys.slip_ratio(x['omega'], v, veh, cfg.slip_eps)
 
-        net = float(np.sum(fx_raw)) - direction * rolling_sum - aero_signed - veh.mass * accel
-        net_f = float(self._slope_filter.update(dt, net))
+        forces = float(np.sum(fx_raw)) - direction * rolling_sum - aero_signed
+        if cfg.slope_accel_source == 'speed' and cfg.slope_filter_tau > 0.0:
+            self._speed_filter.update(dt, v)
+            accel_f = float(self._speed_filter.derivative())
+            net_f = float(self._slope_filter.update(dt, forces)) - veh.mass * accel_f
+        else:
+            net_f = float(self._slope_filter.update(dt, forces - veh.mass * accel))
         alpha, in_range = phys.slope_from_forces(net_f, veh, cfg.max_slope)
         slope_valid = bool(in_range) and body_ok and abs(v) >= cfg.min_speed
         if slope_valid:

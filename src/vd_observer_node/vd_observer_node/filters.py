@@ -37,6 +37,8 @@ class LowPass:
         self._tau = float(tau)
         self._order = order
         self._stages: list[NDArray[np.float64]] | None = None
+        self._previous: NDArray[np.float64] | None = None
+        self._last_dt = 0.0
 
     @property
     def delay(self) -> float:
@@ -46,6 +48,20 @@ class LowPass:
     def reset(self) -> None:
         """Forget the state; the next input initialises every stage."""
         self._stages = None
+        self._previous = None
+        self._last_dt = 0.0
+
+    def derivative(self) -> NDArray[np.float64]:
+        """Rate of change of the output over the last step [unit/s]: (y_k - y_(k-1)) / dt.
+
+        This is the same low-pass applied to the backward difference of the input (the
+        difference commutes with the linear filter), so the filtered derivative of a noisy
+        signal is obtained without differentiating the raw signal; exact on a ramp in steady
+        state, with half a sample of delay. Zero before the second update or with tau = 0.
+        """
+        if self._previous is None or self._last_dt <= 0.0 or self._stages is None:
+            return np.zeros(()) if self._stages is None else np.zeros_like(self._stages[-1])
+        return (self._stages[-1] - self._previous) / self._last_dt
 
     def update(self, dt: float, x: ArrayLike) -> NDArray[np.float64]:
         """Advance by dt [s] with the (finite) input x and return the output (same shape)."""
@@ -56,6 +72,8 @@ class LowPass:
             self._stages = [value.copy() for _ in range(self._order)]
             return value
         alpha = -math.expm1(-max(dt, 0.0) / self._tau)
+        self._previous = self._stages[-1].copy()
+        self._last_dt = dt
         signal = value
         for stage in self._stages:
             stage += alpha * (signal - stage)

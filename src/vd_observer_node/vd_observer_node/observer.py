@@ -49,6 +49,8 @@ class ObserverConfig:
         discretization: one of `differentiator.DISCRETIZATIONS`.
         init: one of `differentiator.INIT_POLICIES`.
         max_gap: a gap between stamps longer than this [s] re-initialises the observer.
+        init_baseline: time [s] between the two samples of the 'finite_difference'
+            initialisation (longer = less noise in the initial derivative).
     """
 
     gains: LevantGains = field(default_factory=lambda: DEFAULT_GAINS)
@@ -57,6 +59,7 @@ class ObserverConfig:
     discretization: str = 'implicit'
     init: str = 'finite_difference'
     max_gap: float = 0.5
+    init_baseline: float = 0.05
 
     def __post_init__(self) -> None:
         if self.discretization not in DISCRETIZATIONS:
@@ -65,6 +68,8 @@ class ObserverConfig:
             )
         if self.init not in INIT_POLICIES:
             raise ConfigurationError(f'unknown init {self.init!r}; use one of {INIT_POLICIES}')
+        if not (math.isfinite(self.init_baseline) and self.init_baseline >= 0.0):
+            raise ConfigurationError(f'init_baseline must be >= 0, got {self.init_baseline}')
         for name in ('wheel_lipschitz', 'speed_lipschitz', 'max_gap'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
@@ -129,6 +134,7 @@ class WheelObserver:
             discretization=config.discretization,
             init=config.init,
             max_gap=config.max_gap,
+            init_baseline=config.init_baseline,
         )
         self.last: WheelState | None = None
 
@@ -167,6 +173,7 @@ class SpeedObserver:
             discretization=config.discretization,
             init=config.init,
             max_gap=config.max_gap,
+            init_baseline=config.init_baseline,
         )
         self.last: SpeedState | None = None
 

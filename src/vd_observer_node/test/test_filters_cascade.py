@@ -1,0 +1,116 @@
+"""Low-pass filter, observer wrappers and the offline cascade on synthetic data."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from vd_observer_node.cascade import run_cascade
+from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimator import EstimatorConfig
+from vd_observer_node.filters import LowPass
+from vd_observer_node.observer import Observer, ObserverConfig
+from vd_observer_node.synthetic import synthetic_trajectory
+from vd_observer_node.vehicle import load_estimator_vehicle
+
+VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
+VEHICLE = load_estimator_vehicle(VEHICLE_FILE)
+
+
+def test_lowpass_step_response_and_derivative() -> None:
+    tau = 0.1
+    lp = LowPass(tau, order=1)
+    lp.update(0.0, 0.0)
+    out = 0.0
+    for _ in range(100):
+        out = float(lp.update(1e-3, 1.0))
+    assert out == pytest.approx(1.0 - math.exp(-1.0), rel=1e-9)
+    # The output's rate over the last step: (y_k - y_(k-1)) / dt.
+    previous = 1.0 - math.exp(-0.099 / tau)
+    assert float(lp.derivative()) == pytest.approx((out - previous) / 1e-3, rel=1e-6)
+
+
+def test_lowpass_derivative_of_a_ramp_is_its_slope() -> None:
+    lp = LowPass(0.05, order=2)
+    t = np.arange(0.0, 2.0, 1e-3)
+    for tk in t:
+        lp.update(1e-3, 3.0 * tk)
+    assert float(lp.derivative()) == pytest.approx(3.0, rel=1e-9)
+
+
+def test_lowpass_passthrough_and_errors() -> None:
+    assert float(LowPass(0.0).update(0.1, 5.0)) == 5.0
+    with pytest.raises(ConfigurationError):
+        LowPass(-1.0)
+    with pytest.raises(ConfigurationError):
+        LowPass(0.1, order=0)
+
+
+def test_observer_config_from_mapping() -> None:
+    cfg = ObserverConfig.from_mapping(
+        {'l0': 3.0, 'wheel_lipschitz': 50.0, 'discretization': 'euler'}
+    )
+    assert cfg.gains.l0 == 3.0 and cfg.wheel_lipschitz == 50.0
+    with pytest.raises(ConfigurationError):
+        ObserverConfig.from_mapping({'bogus': 1})
+    with pytest.raises(ConfigurationError):
+        ObserverConfig(discretization='rk4')
+    with pytest.raises(ConfigurationError):
+        ObserverConfig(speed_lipschitz=0.0)
+
+
+def test_observer_tracks_synthetic_wheels_and_speed() -> None:
+    t = np.arange(0.0, 3.0, 1e-3)
+    traj = synthetic_trajectory(t, VEHICLE)
+    observer = Observer(ObserverConfig(wheel_lipschitz=1000.0, speed_lipschitz=100.0))
+    for k in range(t.size):
+        out = observer.update(t[k], traj.angle[k], traj.speed[k])
+    np.testing.assert_allclose(out.omega, traj.omega[-1], rtol=1e-4)
+    np.testing.assert_allclose(out.omega_dot, traj.omega_dot[-1], atol=0.05)
+    assert out.accel == pytest.approx(traj.accel[-1], abs=0.01)
+    with pytest.raises(InputShapeError):
+        observer.wheels.update(10.0, np.zeros(3))
+
+
+def test_cascade_on_synthetic_sensors_with_jittery_stamps() -> None:
+    rng = np.random.default_rng(5)
+    t = np.concatenate(([0.0], np.cumsum(rng.uniform(0.7e-3, 1.3e-3, 4000))))
+    traj = synthetic_trajectory(t, VEHICLE)
+    est = run_cascade(
+        t,
+        traj.angle,
+        traj.speed,
+        traj.torque,
+        VEHICLE,
+        ObserverConfig(wheel_lipschitz=1000.0, speed_lipschitz=100.0),
+        EstimatorConfig(slope_filter_tau=0.02),
+    )
+    late = t > 1.0
+    # The slope filter (2 stages of 20 ms) delays the slowly varying slope by ~40 ms.
+    slope_err = np.degrees(np.abs(est.slope - traj.slope)[late])
+    assert slope_err.max() < 0.1
+    fx_err = np.abs(est.fx - traj.fx)[late]
+    assert fx_err.max() < 0.01 * np.abs(traj.fx).max()
+    np.testing.assert_allclose(est.fz[late], traj.fz[late], rtol=2e-3)
+    assert est.slope_valid[late].all()
+    # Wheels clearly excited (|Fx| > 5 % Fz) must be flagged valid, mu close to the truth.
+    excited = late[:, None] & (np.abs(traj.fx) > 0.05 * traj.fz)
+    assert excited.sum() > 1000
+    assert est.mu_valid[excited].all()
+    assert np.abs(est.mu - traj.fx / traj.fz)[excited].max() < 0.005
+
+
+def test_cascade_rejects_bad_shapes() -> None:
+    with pytest.raises(InputShapeError):
+        run_cascade(np.zeros(3), np.zeros((3, 4)), np.zeros(2), np.zeros((3, 4)), VEHICLE)
+    with pytest.raises(ConfigurationError):
+        run_cascade(
+            np.zeros(1),
+            np.zeros((1, 4)),
+            np.zeros(1),
+            np.zeros((1, 4)),
+            VEHICLE,
+            estimator_speed='guess',
+        )
