@@ -16,6 +16,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from vd_observer_node.errors import ObserverError
+from vd_observer_node.report.cli import add_report_parser
 
 __all__ = ['main']
 
@@ -120,6 +121,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     replay.add_argument('--no-progress', action='store_true', help='no progress bar')
     replay.set_defaults(run=_replay)
+    add_report_parser(commands)
     return parser
 
 

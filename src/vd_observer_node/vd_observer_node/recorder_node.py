@@ -36,6 +36,7 @@ from vd_sim_node.topics import CONTRACT
 
 from vd_observer_node.bag import BagWriter
 from vd_observer_node.bag.errors import BagError, UnknownMessageTypeError
+from vd_observer_node.bag.metadata import format_qos_profiles
 
 __all__ = ['RecorderNode', 'main']
 
@@ -66,12 +67,8 @@ PARAMS = [
 ]
 
 # rosbag2 stores the offered QoS per topic; all vd streams are offered like this.
-_STREAM_QOS_YAML = (
-    '- history: 1\n  depth: 100\n  reliability: 1\n  durability: 2\n'
-    '  deadline:\n    sec: 2147483647\n    nsec: 4294967295\n'
-    '  lifespan:\n    sec: 2147483647\n    nsec: 4294967295\n'
-    '  liveliness: 1\n  liveliness_lease_duration:\n    sec: 2147483647\n'
-    '    nsec: 4294967295\n  avoid_ros_namespace_conventions: false\n'
+_STREAM_QOS_YAML = format_qos_profiles(
+    [{'history': 'keep_last', 'depth': 100, 'reliability': 'reliable', 'durability': 'volatile'}]
 )
 
 
