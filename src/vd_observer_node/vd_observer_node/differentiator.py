@@ -143,12 +143,23 @@ def euler_step(
 def _positive_cubic_root(a: float, b: float, c: FloatArray) -> FloatArray:
     """Unique root y >= 0 of y^3 + a*y^2 + b*y = c for c >= 0, a, b > 0 (vectorized).
 
-    Newton from an upper bound converges monotonically because the polynomial is increasing
-    and convex on y >= 0; min(cbrt(c), c / b) is such a bound.
+    With p = b - a^2/3 > 0 (true for the default gains) the cubic is increasing on the whole
+    real line, so Cardano's formula gives its only real root; two Newton steps then remove
+    the cancellation of y = x - a/3 for small c. Otherwise Newton from the upper bound
+    min(cbrt(c), c / b) converges monotonically (the polynomial is convex for y >= 0).
     """
     if not np.any(c > 0.0):
         # Inside the band (the common, converged case) the root is 0.
         return np.zeros_like(c)
+    p = b - a * a / 3.0
+    if p > 0.0:
+        q = 2.0 * a**3 / 27.0 - a * b / 3.0 - c
+        root = np.sqrt(0.25 * q * q + p**3 / 27.0)
+        y = np.maximum(np.cbrt(-0.5 * q + root) + np.cbrt(-0.5 * q - root) - a / 3.0, 0.0)
+        for _ in range(2):
+            residual = ((y + a) * y + b) * y - c
+            y = np.maximum(y - residual / ((3.0 * y + 2.0 * a) * y + b), 0.0)
+        return y
     y = np.minimum(np.cbrt(c), c / b)
     for _ in range(_NEWTON_MAX_ITER):
         residual = ((y + a) * y + b) * y - c
@@ -212,10 +223,11 @@ def implicit_step(
     y = _positive_cubic_root(k0, k1, excess)
     # Inside the band the multivalued sign takes the value that zeroes the error exactly.
     sign_value = np.where(excess > 0.0, s, w / (scale * k2))
-    z2 = z[2] - tau * k2 * lip * sign_value
-    z1 = z[1] + tau * z[2] - 1.5 * tau**2 * k2 * lip * sign_value - s * k1 * tau**2 * lip * y
-    z0 = target + s * scale * y**3
-    return np.stack(np.broadcast_arrays(z0, z1, z2))
+    out = np.empty((3, *np.shape(w)))
+    out[2] = z[2] - tau * k2 * lip * sign_value
+    out[1] = z[1] + tau * z[2] - 1.5 * tau**2 * k2 * lip * sign_value - s * k1 * tau**2 * lip * y
+    out[0] = target + s * scale * y**3
+    return out
 
 
 def euler_taylor_step(

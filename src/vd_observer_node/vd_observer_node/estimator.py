@@ -162,6 +162,7 @@ class Estimator:
         self._slope_filter = LowPass(self.config.slope_filter_tau, self.config.filter_order)
         self._speed_filter = LowPass(self.config.slope_filter_tau, self.config.filter_order)
         self._min_load = self.config.min_load_ratio * float(np.min(vehicle.static_wheel_loads))
+        self._max_sine = math.sin(self.config.max_slope)
         self.rejected_count = 0
         self.reset()
 
@@ -169,24 +170,12 @@ class Estimator:
         """Forget the history (slope back to 0, filters empty)."""
         self._t: float | None = None
         self._slope = 0.0
-        self._held = {
-            'omega': np.zeros(4),
-            'omega_dot': np.zeros(4),
-            'torque': np.zeros(4),
-            'speed': np.zeros(1),
-            'accel': np.zeros(1),
-        }
+        # Last finite inputs, packed as omega (4), omega_dot (4), torque (4), speed, accel.
+        self._held = np.zeros(14)
         self._force_filter.reset()
         self._slope_filter.reset()
         self._speed_filter.reset()
         self.last: Estimates | None = None
-
-    def _sanitise(self, name: str, value: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
-        ok = np.isfinite(value)
-        held = self._held[name]
-        clean = np.where(ok, value, held)
-        self._held[name] = clean
-        return clean, ok
 
     def update(
         self,
@@ -203,44 +192,47 @@ class Estimator:
             t: stamp [s], strictly increasing.
             omega: shape (4,), [rad/s] wheel speeds (observer).
             omega_dot: shape (4,), [rad/s^2] wheel accelerations (observer).
-            speed: body speed [m/s] (observer or measured).
+            speed: body speed [m/s] (measured, or the observer's).
             accel: body acceleration dv/dt [m/s^2] (observer).
             torque: shape (4,), [N m] drive minus brake torque per wheel.
 
         Raises:
             InputShapeError: a per-wheel input is not of shape (4,).
         """
-        raw = {
-            'omega': _as_wheels('omega', omega),
-            'omega_dot': _as_wheels('omega_dot', omega_dot),
-            'torque': _as_wheels('torque', torque),
-            'speed': np.atleast_1d(np.asarray(speed, dtype=np.float64)),
-            'accel': np.atleast_1d(np.asarray(accel, dtype=np.float64)),
-        }
+        packed = np.empty(14)
+        packed[0:4] = _as_wheels('omega', omega)
+        packed[4:8] = _as_wheels('omega_dot', omega_dot)
+        packed[8:12] = _as_wheels('torque', torque)
+        packed[12] = speed
+        packed[13] = accel
         if not math.isfinite(t) or (self._t is not None and t <= self._t):
             self.rejected_count += 1
             return self.last if self.last is not None else self._empty(t)
         dt = 0.0 if self._t is None else t - self._t
         self._t = t
-        clean: dict[str, FloatArray] = {}
-        ok: dict[str, NDArray[np.bool_]] = {}
-        for name, value in raw.items():
-            clean[name], ok[name] = self._sanitise(name, value)
-        wheel_ok = ok['omega'] & ok['omega_dot'] & ok['torque'] & ok['speed'][0]
-        body_ok = bool(np.all(wheel_ok) and ok['accel'][0])
-        return self._estimate(t, dt, clean, wheel_ok, body_ok)
+        ok = np.isfinite(packed)
+        if ok.all():
+            wheel_ok = np.ones(4, dtype=bool)
+            body_ok = True
+        else:
+            packed = np.where(ok, packed, self._held)
+            wheel_ok = ok[0:4] & ok[4:8] & ok[8:12] & ok[12]
+            body_ok = bool(ok.all())
+        self._held = packed
+        return self._estimate(t, dt, packed, wheel_ok, body_ok)
 
     def _estimate(
         self,
         t: float,
         dt: float,
-        x: dict[str, FloatArray],
+        x: FloatArray,
         wheel_ok: NDArray[np.bool_],
         body_ok: bool,
     ) -> Estimates:
         veh, cfg = self.vehicle, self.config
-        v = float(x['speed'][0])
-        accel = float(x['accel'][0])
+        omega, omega_dot, torque = x[0:4], x[4:8], x[8:12]
+        v = float(x[12])
+        accel = float(x[13])
         # Same smooth sign as the simulator's rolling resistance; drag is exactly k*v*|v|.
         direction = float(phys.motion_direction(v, veh.rolling_regularisation_speed))
         aero = float(phys.aero_drag(v, veh))
@@ -249,7 +241,7 @@ class Estimator:
         cos_prev, sin_prev = math.cos(self._slope), math.sin(self._slope)
         weight = veh.mass * veh.gravity
 
-        fx_raw = phys.tire_longitudinal_force(x['torque'], x['omega_dot'], veh)
+        fx_raw = phys.tire_longitudinal_force(torque, omega_dot, veh)
         # Sum of the rolling resistances follows from sum(Fz) = m*g*cos(alpha) in both
         # load-transfer forms, so it does not depend on the transfer itself.
         rolling_sum = c_roll * weight * cos_prev
@@ -265,7 +257,7 @@ class Estimator:
         mu, mu_valid = phys.utilised_friction(fx, fz, self._min_load, cfg.min_excitation_ratio)
         mu_valid &= wheel_ok
         mu = np.where(mu_valid, mu, 0.0)
-        slip = phys.slip_ratio(x['omega'], v, veh, cfg.slip_eps)
+        slip = phys.slip_ratio(omega, v, veh, cfg.slip_eps)
 
         forces = float(np.sum(fx_raw)) - direction * rolling_sum - aero_signed
         if cfg.slope_accel_source == 'speed' and cfg.slope_filter_tau > 0.0:
@@ -274,10 +266,12 @@ class Estimator:
             net_f = float(self._slope_filter.update(dt, forces)) - veh.mass * accel_f
         else:
             net_f = float(self._slope_filter.update(dt, forces - veh.mass * accel))
-        alpha, in_range = phys.slope_from_forces(net_f, veh, cfg.max_slope)
-        slope_valid = bool(in_range) and body_ok and abs(v) >= cfg.min_speed
+        # Scalar form of estimators.slope_from_forces (this runs at the sensor rate).
+        sine = net_f / weight
+        in_range = abs(sine) <= self._max_sine
+        slope_valid = in_range and body_ok and abs(v) >= cfg.min_speed
         if slope_valid:
-            self._slope = float(alpha)
+            self._slope = math.asin(sine)
         self.last = Estimates(
             t=t,
             fx=fx,
