@@ -72,6 +72,12 @@ class RosProcessGroup:
         self.procs.append(proc)
         return proc
 
+    def node(self, name: str, package: str, executable: str, **params: object) -> RosProcess:
+        """Start a node as `ros2 run` would, with `-p key:=value` for each parameter."""
+        from vd_observer_node.launcher import NodeSpec
+
+        return self.start(name, NodeSpec(package, executable, name, params).argv())
+
     def python(self, name: str, script: Path | str, *args: str, **env: str) -> RosProcess:
         return self.start(name, [sys.executable, str(script), *args], **env)
 

@@ -21,7 +21,6 @@ import pytest
 from rosproc import RosProcessGroup
 from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.replay import replay_bag
-from vd_observer_node.launcher import find_executable
 
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
 RATE_HZ = 100.0
@@ -32,14 +31,6 @@ ESTIMATE_TOPICS = [
     '/vd/estimates/resistances',
     '/vd/estimates/slope',
 ]
-
-
-def node(procs: RosProcessGroup, name: str, pkg: str, exe: str, **params: object) -> Any:
-    args = [str(find_executable(pkg, exe)), '--ros-args']
-    for key, value in params.items():
-        text = str(value).lower() if isinstance(value, bool) else str(value)
-        args += ['-p', f'{key}:={text}']
-    return procs.start(name, args)
 
 
 def stamp_ns(msg: Any) -> int:
@@ -63,14 +54,13 @@ def wait_exit(proc: Any, timeout: float) -> int:
 
 
 def run_live_graph(procs: RosProcessGroup, bag: Path) -> None:
-    rec = node(procs, 'recorder', 'vd_observer_node', 'recorder_node', output=str(bag))
-    obs = node(procs, 'observer', 'vd_observer_node', 'observer_node')
-    est = node(procs, 'estimator', 'vd_observer_node', 'estimator_node')
+    rec = procs.node('recorder', 'vd_observer_node', 'recorder_node', output=str(bag))
+    obs = procs.node('observer', 'vd_observer_node', 'observer_node')
+    est = procs.node('estimator', 'vd_observer_node', 'estimator_node')
     for proc, text in ((rec, 'recording to'), (obs, 'observer ready'), (est, 'estimator ready')):
         proc.wait_for(text, timeout=30)
     time.sleep(1.0)  # discovery
-    sim = node(
-        procs,
+    sim = procs.node(
         'sim',
         'vd_sim_node',
         'sim_node',
@@ -143,14 +133,14 @@ def test_live_graph_estimates_every_sample_and_matches_the_offline_cascade(
 
     # live replay: the player plays the recorded sensors, the observers recompute
     replay = tmp_path / 'replayed'
-    rec = node(procs, 'recorder2', 'vd_observer_node', 'recorder_node', output=str(replay))
-    obs = node(procs, 'observer2', 'vd_observer_node', 'observer_node', use_sim_time=True)
-    est = node(procs, 'estimator2', 'vd_observer_node', 'estimator_node', use_sim_time=True)
+    rec = procs.node('recorder2', 'vd_observer_node', 'recorder_node', output=str(replay))
+    obs = procs.node('observer2', 'vd_observer_node', 'observer_node', use_sim_time=True)
+    est = procs.node('estimator2', 'vd_observer_node', 'estimator_node', use_sim_time=True)
     for proc, text in ((rec, 'recording to'), (obs, 'observer ready'), (est, 'estimator ready')):
         proc.wait_for(text, timeout=30)
     # start_delay: time for the observers' publishers and the recorder to discover each other
-    player = node(
-        procs, 'player', 'vd_observer_node', 'player_node', bag=str(bag), rate=1.0, start_delay=2.0
+    player = procs.node(
+        'player', 'vd_observer_node', 'player_node', bag=str(bag), rate=1.0, start_delay=2.0
     )
     assert wait_exit(player, 60) == 0, player.output()
     time.sleep(1.5)
