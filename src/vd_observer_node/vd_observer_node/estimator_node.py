@@ -31,16 +31,31 @@ from vd_sim_node.ros_common import (
 from vd_msgs.msg import Friction, Resistances, Slope, TireForces, WheelStates, WheelTorques
 from vd_observer_node.alignment import StampAligner
 from vd_observer_node.bag.replay import default_vehicle_file
-from vd_observer_node.estimator import LOAD_TRANSFER_SOURCES, Estimator, EstimatorConfig
+from vd_observer_node.estimator import (
+    LOAD_TRANSFER_SOURCES,
+    SLOPE_ACCEL_SOURCES,
+    Estimator,
+    EstimatorConfig,
+)
 from vd_observer_node.vehicle import load_estimator_vehicle
 
 __all__ = ['EstimatorNode', 'main']
+
+SPEED_TOPICS_CHOICES = ('measured', 'observer')
 
 PARAMS = [
     ParamSpec(
         'vehicle_file',
         '',
         "vehicle parameter YAML shared with the simulator ('' = the installed Clio RL 1.1 file)",
+    ),
+    ParamSpec(
+        'speed_source',
+        'measured',
+        "body speed fed to the estimator: 'measured' (/vd/sensors/body_velocity; the slope "
+        "low-pass smooths it) or 'observer' (/vd/observer/body_velocity, filtered); must "
+        'match the offline cascade (run_cascade estimator_speed) for identical results',
+        choices=SPEED_TOPICS_CHOICES,
     ),
     ParamSpec(
         'align_capacity',
@@ -50,11 +65,19 @@ PARAMS = [
         high=100000,
     ),
     *dataclass_param_specs(
-        EstimatorConfig, choices={'load_transfer_source': LOAD_TRANSFER_SOURCES}
+        EstimatorConfig,
+        choices={
+            'load_transfer_source': LOAD_TRANSFER_SOURCES,
+            'slope_accel_source': SLOPE_ACCEL_SOURCES,
+        },
     ),
 ]
 
 TOPICS = ('states', 'accel', 'speed', 'torques')
+SPEED_TOPICS = {
+    'measured': '/vd/sensors/body_velocity',
+    'observer': '/vd/observer/body_velocity',
+}
 
 
 class EstimatorNode(Node):  # type: ignore[misc]
@@ -65,6 +88,7 @@ class EstimatorNode(Node):  # type: ignore[misc]
         values = declare_parameters(self, PARAMS)
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')
+        speed_topic = SPEED_TOPICS[values.pop('speed_source')]
         self.vehicle = load_estimator_vehicle(vehicle_file)
         self.estimator = Estimator(self.vehicle, EstimatorConfig.from_mapping(values))
         self.aligner = StampAligner(TOPICS, capacity=capacity)
@@ -80,7 +104,7 @@ class EstimatorNode(Node):  # type: ignore[misc]
         for key, kind, topic in (
             ('states', WheelStates, '/vd/observer/wheel_states'),
             ('accel', AccelStamped, '/vd/observer/body_accel'),
-            ('speed', TwistStamped, '/vd/observer/body_velocity'),
+            ('speed', TwistStamped, speed_topic),
             ('torques', WheelTorques, '/vd/sensors/wheel_torques'),
         ):
             self.create_subscription(kind, topic, self._make_callback(key), STREAM_QOS)

@@ -98,6 +98,14 @@ PARAMS = [
         high=600.0,
     ),
     ParamSpec(
+        'wait_for_subscribers',
+        5.0,
+        'after start_delay, wait up to this long until every sensor (and truth) topic has a '
+        'subscriber, so that nodes started with the simulator miss no sample [s]',
+        low=0.0,
+        high=600.0,
+    ),
+    ParamSpec(
         'progress_period',
         10.0,
         'log progress every this much simulated time [s]',
@@ -180,6 +188,8 @@ class SimNode(Node):  # type: ignore[misc]
         self.published = 0
         self.wall_start: float | None = None
         self.first_sample_at = time.monotonic() + v['start_delay']
+        self.wait_until = self.first_sample_at + v['wait_for_subscribers']
+        self._matched_at: float | None = None
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(_BATCH_PERIOD, self.publish_batch, clock=steady)
         self.create_timer(1.0, self.publish_diagnostics, clock=steady)
@@ -195,6 +205,8 @@ class SimNode(Node):  # type: ignore[misc]
         if now < self.first_sample_at:
             return
         if self.wall_start is None:
+            if not self._subscribers_ready(now):
+                return
             self.wall_start = now
         target = (now - self.wall_start) * self.rtf if self.rtf > 0 else float('inf')
         deadline = now + _BATCH_BUDGET
@@ -212,6 +224,20 @@ class SimNode(Node):  # type: ignore[misc]
             )
             deliver_pending(self)
             raise NodeFinished()
+
+    def _subscribers_ready(self, now: float) -> bool:
+        """True once every data topic has a subscriber (or the wait is over)."""
+        streams = [p for p in self.publishers if p not in (self.p_clock, self.p_diag)]
+        missing = [p.topic_name for p in streams if p.get_subscription_count() == 0]
+        if not missing:
+            if self._matched_at is None:
+                # the publisher side matched; give the subscriber side a moment too
+                self._matched_at = now
+            return now - self._matched_at >= 0.3
+        if now < self.wait_until:
+            return False
+        self.get_logger().info(f'starting without subscribers on {", ".join(missing)}')
+        return True
 
     def _stamp(self, t: float) -> Any:
         return ns_to_time(round(t * 1e9))
