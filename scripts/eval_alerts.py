@@ -35,7 +35,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 
-from vd_observer_node.alerts import ALERT_KINDS, AlertConfig, AlertMonitor  # noqa: E402
+from vd_observer_node.alerts import (  # noqa: E402
+    ALERT_KINDS,
+    AlertConfig,
+    AlertMonitor,
+    slip_velocity,
+)
 from vd_observer_node.cascade import run_cascade  # noqa: E402
 from vd_observer_node.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.friction_potential import (  # noqa: E402
@@ -107,8 +112,9 @@ def run_detectors(
     road = np.zeros((n, 2), dtype=np.int64)
     for k in range(n):
         t = float(est.t[k])
-        pot = fric.update(t, est.slip[k], est.mu[k], est.mu_valid[k])
-        slip_vel = est.omega[k] * radius - speed[k]
+        slip_vel = slip_velocity(est.omega[k], float(speed[k]), radius)
+        fit_slip = fric.fit_slip(slip_vel, float(speed[k]))
+        pot = fric.update(t, fit_slip, est.mu[k], est.mu_valid[k])
         alerts = monitor.update(
             t, est.slip[k], slip_vel, est.mu[k], est.mu_valid[k], pot.wheel_mu_max()
         )
@@ -166,7 +172,7 @@ def report_alerts(sim: Any, det: dict[str, np.ndarray], truth: np.ndarray) -> di
         for wheel in range(4):
             true_onset = first_true(truth[:, kind, wheel] & (t >= 0.5), t)
             acts = activations(det['detected'][:, kind, wheel], det['level'][:, kind, wheel], t)
-            label = f'{name:12s} wheel {"FL FR RL RR".split()[wheel]}'
+            label = f'{name:12s} wheel {["FL", "FR", "RL", "RR"][wheel]}'
             if math.isnan(true_onset):
                 if acts:
                     counts['false_alarms'] += len(acts)

@@ -3,9 +3,12 @@
 Three alert kinds per wheel (FL=0, FR=1, RL=2, RR=3):
 
 * ``traction`` (code 0): excessive drive slip, traction control would act. Metric: the slip
-  ratio ``s`` while the slip velocity ``omega R - v`` exceeds ``min_slip_velocity``.
+  ratio ``s`` while the slip velocity ``omega R - v`` exceeds ``min_slip_velocity`` and the
+  tyre force is not braking (``mu >= 0`` or invalid).
 * ``lock`` (code 1): wheel lock tendency under braking, ABS would act. Metric: ``-s`` while
-  ``omega R - v < -min_slip_velocity``.
+  ``omega R - v < -min_slip_velocity`` and the tyre force is not driving (``mu <= 0`` or
+  invalid). The force-sign gates reject observer transients (a gear shift makes the wheel
+  speed estimate overshoot while the force says the wheel is driving).
 * ``low_friction`` (code 2): the utilised friction approaches the available one. Metric: the
   utilisation ``|mu| / mu_max`` of a wheel with a valid ``mu`` (``mu_max`` of its axle from
   `vd_observer_node.friction_potential`).
@@ -44,8 +47,8 @@ __all__ = [
     'LevelThresholds',
     'alert_metrics',
     'classify_level',
-    'step_channel',
     'slip_velocity',
+    'step_channel',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -327,11 +330,13 @@ def alert_metrics(
     m = _wheels('mu', mu)
     ok = _wheels('mu_valid', mu_valid, bool)
     mmax = _wheels('mu_max', mu_max)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        traction = np.where(sv > min_slip_velocity, s, 0.0)
-        lock = np.where(sv < -min_slip_velocity, -s, 0.0)
-        util = np.where(ok & (mmax > 0.0), np.abs(m) / mmax, 0.0)
-    out: FloatArray = np.vstack([traction, lock, util])
+    driving = ~ok | (m >= 0.0)
+    braking = ~ok | (m <= 0.0)
+    out: FloatArray = np.zeros((3, 4))
+    np.copyto(out[0], s, where=(sv > min_slip_velocity) & driving)
+    np.copyto(out[1], -s, where=(sv < -min_slip_velocity) & braking)
+    # mu_max <= 0 or nan never divides: the utilisation stays 0 there.
+    np.divide(np.abs(m), mmax, out=out[2], where=ok & (mmax > 0.0))
     bad = ~(np.isfinite(s) & np.isfinite(sv))
     out[:2, bad] = math.nan
     out[2, ~(np.isfinite(m) & np.isfinite(mmax))] = math.nan
@@ -355,20 +360,18 @@ class AlertMonitor:
         self.channels = [[ChannelState() for _ in range(4)] for _ in ALERT_KINDS]
         self._detected = np.full((len(ALERT_KINDS), 4), math.nan)
         self._t = math.nan
-        self.last: tuple[Alert, ...] = self._records()
+        self._records = [self._record(k, w) for k in range(len(ALERT_KINDS)) for w in range(4)]
+        self.last: tuple[Alert, ...] = tuple(self._records)
 
-    def _records(self) -> tuple[Alert, ...]:
-        return tuple(
-            Alert(
-                kind=kind,
-                wheel=w,
-                level=self.channels[k][w].level,
-                active=self.channels[k][w].active,
-                onset=self.channels[k][w].onset,
-                detected=float(self._detected[k, w]),
-            )
-            for k, kind in enumerate(ALERT_KINDS)
-            for w in range(4)
+    def _record(self, k: int, w: int) -> Alert:
+        channel = self.channels[k][w]
+        return Alert(
+            kind=ALERT_KINDS[k],
+            wheel=w,
+            level=channel.level,
+            active=channel.active,
+            onset=channel.onset,
+            detected=float(self._detected[k, w]),
         )
 
     def update(
@@ -405,17 +408,29 @@ class AlertMonitor:
         self._t = t
         cfg = self.config
         thresholds = (cfg.traction, cfg.lock, cfg.low_friction)
+        changed = False
         for k in range(len(ALERT_KINDS)):
             for w in range(4):
                 state = self.channels[k][w]
                 target = classify_level(float(metrics[k, w]), state.level, thresholds[k])
+                if (
+                    target == LEVEL_OK
+                    and state.level == LEVEL_OK
+                    and state.pending_level == LEVEL_OK
+                    and math.isnan(state.run_start)
+                ):
+                    continue  # the common quiet case: step_channel would return it unchanged
                 new = step_channel(state, t, target, cfg.raise_hold, cfg.release_hold)
-                if state.level == LEVEL_OK and new.level > LEVEL_OK:
-                    self._detected[k, w] = t
-                elif new.level == LEVEL_OK:
-                    self._detected[k, w] = math.nan
                 self.channels[k][w] = new
-        self.last = self._records()
+                if new.level != state.level:
+                    if state.level == LEVEL_OK:
+                        self._detected[k, w] = t
+                    elif new.level == LEVEL_OK:
+                        self._detected[k, w] = math.nan
+                    changed = True
+                    self._records[4 * k + w] = self._record(k, w)
+        if changed:
+            self.last = tuple(self._records)
         return self.last
 
     def active(self) -> tuple[Alert, ...]:

@@ -28,6 +28,7 @@ Pure step functions (`fit_step`, `fit_solution`, `classify_road`) and a stateful
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, Final
@@ -55,6 +56,7 @@ __all__ = [
     'classify_road',
     'fit_solution',
     'fit_step',
+    'floored_slip',
     'initial_fit_state',
     'make_bank',
     'shape_peak',
@@ -99,7 +101,11 @@ class FrictionPotentialConfig:
         prior_weight: weight of that tie-break on (mu_max - prior_mu_max)^2.
         min_slip: |slip| below this [-] carries no information on the peak (noise, sign
             errors) and is ignored.
-        max_slip: the curve peak is searched on (0, max_slip] [-].
+        max_slip: the curve peak is searched on (0, max_slip] [-]; larger |slip| is clipped.
+        slip_floor_speed: [m/s] denominator floor of the slip the fit uses
+            (`FrictionPotentialEstimator.fit_slip`): at walking pace the textbook slip ratio of
+            two small speeds is dominated by speed noise and is not what the tyre reacts to
+            (the vehicle file's ``tire.low_speed_velocity``, 1 m/s).
         confidence_utilisation_low: utilisation [-] giving confidence 0.
         confidence_utilisation_high: utilisation [-] giving confidence 1.
         class_bounds: mu_max boundaries ice|snow, snow|wet, wet|dry [-], increasing.
@@ -119,6 +125,7 @@ class FrictionPotentialConfig:
     prior_weight: float = 1e-3
     min_slip: float = 0.002
     max_slip: float = 1.0
+    slip_floor_speed: float = 1.0
     confidence_utilisation_low: float = 0.25
     confidence_utilisation_high: float = 0.75
     class_bounds: tuple[float, float, float] = (0.2, 0.45, 0.75)
@@ -130,7 +137,13 @@ class FrictionPotentialConfig:
             value = getattr(self, f.name)
             if isinstance(value, float) and not (math.isfinite(value) and value >= 0.0):
                 raise FrictionConfigError(f'{f.name} must be finite and >= 0, got {value}')
-        for name in ('forgetting_time', 'confidence_time', 'slip_stiffness', 'max_slip'):
+        for name in (
+            'forgetting_time',
+            'confidence_time',
+            'slip_stiffness',
+            'max_slip',
+            'slip_floor_speed',
+        ):
             if getattr(self, name) <= 0.0:
                 raise FrictionConfigError(f'{name} must be > 0, got {getattr(self, name)}')
         sharp = np.asarray(self.sharpness, dtype=float)
@@ -171,6 +184,23 @@ class FrictionPotentialConfig:
             raise FrictionConfigError(f'unknown friction settings: {sorted(unknown)}')
         clean = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
         return cls(**clean)
+
+
+def floored_slip(slip_velocity: ArrayLike, speed: float, floor: float) -> FloatArray:
+    """Slip ratio with a floored denominator, as the tyre model defines it.
+
+    Args:
+        slip_velocity: shape (4,), [m/s] omega R - v.
+        speed: body speed v [m/s].
+        floor: [m/s] denominator floor (> 0).
+
+    Returns:
+        shape (4,), [-] (omega R - v) / max(|omega R|, |v|, floor), positive driving.
+    """
+    sv = np.asarray(slip_velocity, dtype=float)
+    den = np.maximum(np.maximum(np.abs(sv + speed), abs(speed)), floor)
+    out: FloatArray = sv / den
+    return out
 
 
 def burckhardt_shape(slip: ArrayLike, sharpness: ArrayLike, falloff: ArrayLike) -> FloatArray:
@@ -262,6 +292,8 @@ class FitState:
         s_yy: shape (A,), sum of w * y^2.
         utilisation: shape (A,), forgotten maximum |mu| / mu_max [-].
         t: stamp of the last step [s] (nan before the first).
+        member: shape (A,), least-cost member for these statistics.
+        scale: shape (A,), its fitted scale a [-].
     """
 
     s_pp: FloatArray
@@ -269,18 +301,23 @@ class FitState:
     s_yy: FloatArray
     utilisation: FloatArray
     t: float
+    member: NDArray[np.int64]
+    scale: FloatArray
 
 
 def initial_fit_state(bank: CurveBank) -> FitState:
     """Empty statistics for the bank."""
     b = bank.sharpness.size
-    return FitState(
+    empty = FitState(
         s_pp=np.zeros((2, b)),
         s_py=np.zeros((2, b)),
         s_yy=np.zeros(2),
         utilisation=np.zeros(2),
         t=math.nan,
+        member=np.zeros(2, dtype=np.int64),
+        scale=np.zeros(2),
     )
+    return _with_best(empty, bank, FrictionPotentialConfig())
 
 
 @dataclass(frozen=True)
@@ -346,8 +383,9 @@ def fit_step(
         t: stamp [s]; a non-finite or non-increasing stamp returns ``state`` unchanged.
         slip: shape (4,), [-], positive driving, order FL, FR, RL, RR.
         mu: shape (4,), [-] utilised friction Fx/Fz.
-        mu_valid: shape (4,), bool; invalid, non-finite or |slip| < min_slip samples are
-            ignored.
+        mu_valid: shape (4,), bool; invalid or non-finite samples, |slip| < min_slip and
+            samples whose mu has the opposite sign of the slip (a tyre force always has the
+            sign of its slip: such a pair is an estimation transient) are ignored.
         bank: member grid from `make_bank(config)`.
         config: settings.
 
@@ -368,40 +406,36 @@ def fit_step(
         return state
     dt = 0.0 if not math.isfinite(state.t) else t - state.t
     use = ok & np.isfinite(s) & np.isfinite(m) & (np.abs(s) >= config.min_slip)
-    s_pp, s_py, s_yy = state.s_pp.copy(), state.s_py.copy(), state.s_yy.copy()
+    use &= np.sign(s) == np.sign(m)
     utilisation = state.utilisation * math.exp(-dt / config.confidence_time)
+    if not use.any():
+        return replace(state, utilisation=utilisation, t=t)
+    x = np.minimum(np.abs(s[use]), config.max_slip)
+    y = m[use] * np.sign(s[use])
+    phi = -np.expm1(-np.outer(x, bank.sharpness)) - np.outer(x, bank.falloff)
+    axle_of = np.asarray(AXLE_OF_WHEEL)[use]
+    s_pp, s_py, s_yy = state.s_pp.copy(), state.s_py.copy(), state.s_yy.copy()
     lam = math.exp(-dt / config.forgetting_time)
     for axle in (0, 1):
-        wheels = [i for i in (2 * axle, 2 * axle + 1) if use[i]]
-        if not wheels:
+        rows = axle_of == axle
+        if not rows.any():
             continue
-        s_pp[axle] *= lam
-        s_py[axle] *= lam
-        s_yy[axle] *= lam
-        for i in wheels:
-            phi = burckhardt_shape(abs(s[i]), bank.sharpness, bank.falloff)
-            y = float(m[i]) * math.copysign(1.0, float(s[i]))
-            s_pp[axle] += phi * phi
-            s_py[axle] += phi * y
-            s_yy[axle] += y * y
-    new = FitState(s_pp=s_pp, s_py=s_py, s_yy=s_yy, utilisation=utilisation, t=t)
-    mu_max = _best(new, bank, config)[0]
-    for axle in (0, 1):
-        for i in (2 * axle, 2 * axle + 1):
-            if use[i] and mu_max[axle] > 0.0:
-                utilisation[axle] = max(utilisation[axle], abs(float(m[i])) / mu_max[axle])
+        s_pp[axle] = lam * s_pp[axle] + np.einsum('ij,ij->j', phi[rows], phi[rows])
+        s_py[axle] = lam * s_py[axle] + y[rows] @ phi[rows]
+        s_yy[axle] = lam * s_yy[axle] + float(y[rows] @ y[rows])
+    new = _with_best(
+        FitState(s_pp, s_py, s_yy, utilisation, t, state.member, state.scale), bank, config
+    )
+    mu_max = new.scale * bank.peak[new.member]
+    ratio = np.abs(m[use]) / np.maximum(mu_max[axle_of], 1e-9)
+    np.maximum.at(utilisation, axle_of, ratio)
     return replace(new, utilisation=np.minimum(utilisation, 1.0))
 
 
-def _best(
-    state: FitState, bank: CurveBank, config: FrictionPotentialConfig
-) -> tuple[FloatArray, FloatArray, NDArray[np.int64]]:
+def _with_best(state: FitState, bank: CurveBank, config: FrictionPotentialConfig) -> FitState:
     scale, cost = _member_costs(state, bank, config)
     member = np.argmin(cost, axis=1).astype(np.int64)
-    rows = np.arange(2)
-    mu_max: FloatArray = scale[rows, member] * bank.peak[member]
-    s_peak: FloatArray = bank.slip_peak[member]
-    return mu_max, s_peak, member
+    return replace(state, member=member, scale=scale[np.arange(2), member])
 
 
 def classify_road(
@@ -422,7 +456,7 @@ def classify_road(
     if not math.isfinite(mu_max) or confidence < config.class_min_confidence:
         return ROAD_UNKNOWN
     b = config.class_bounds
-    raw = ROAD_ICE + int(np.searchsorted(np.asarray(b), mu_max, side='right'))
+    raw = ROAD_ICE + bisect.bisect_right(b, mu_max)
     if previous in (ROAD_ICE, ROAD_SNOW, ROAD_WET, ROAD_DRY) and raw != previous:
         lo = -math.inf if previous == ROAD_ICE else b[previous - ROAD_ICE - 1]
         hi = math.inf if previous == ROAD_DRY else b[previous - ROAD_ICE]
@@ -448,7 +482,9 @@ def fit_solution(
     Returns:
         The estimate for ``state.t``.
     """
-    mu_max, s_peak, member = _best(state, bank, config)
+    member = state.member
+    mu_max: FloatArray = state.scale * bank.peak[member]
+    s_peak: FloatArray = bank.slip_peak[member]
     span = config.confidence_utilisation_high - config.confidence_utilisation_low
     confidence = np.clip((state.utilisation - config.confidence_utilisation_low) / span, 0, 1)
     prev = np.asarray(previous_class, dtype=np.int64)
@@ -487,6 +523,10 @@ class FrictionPotentialEstimator:
         self.state = initial_fit_state(self.bank)
         self._classes = np.full(2, ROAD_UNKNOWN, dtype=np.int64)
         self.last: FrictionPotential | None = None
+
+    def fit_slip(self, slip_velocity: ArrayLike, speed: float) -> FloatArray:
+        """Slip for the fit: `floored_slip` with ``config.slip_floor_speed``."""
+        return floored_slip(slip_velocity, speed, self.config.slip_floor_speed)
 
     def update(
         self, t: float, slip: ArrayLike, mu: ArrayLike, mu_valid: ArrayLike
