@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import yaml
 from tqdm import tqdm
+from vd_sim_node.topics import ESTIMATES, OBSERVER, SENSORS
 
 from ..cascade import CascadeResult, run_cascade
 from ..errors import ConfigurationError
@@ -47,21 +48,9 @@ __all__ = [
     'replay_bag',
 ]
 
-SENSOR_TOPICS = {
-    '/vd/sensors/wheel_angles': 'vd_msgs/msg/WheelAngles',
-    '/vd/sensors/body_velocity': 'geometry_msgs/msg/TwistStamped',
-    '/vd/sensors/wheel_torques': 'vd_msgs/msg/WheelTorques',
-}
+SENSOR_TOPICS = SENSORS
 TRUTH_PREFIX = '/vd/truth/'
-ESTIMATE_TOPICS = {
-    '/vd/observer/wheel_states': 'vd_msgs/msg/WheelStates',
-    '/vd/observer/body_accel': 'geometry_msgs/msg/AccelStamped',
-    '/vd/observer/body_velocity': 'geometry_msgs/msg/TwistStamped',
-    '/vd/estimates/tire_forces': 'vd_msgs/msg/TireForces',
-    '/vd/estimates/friction': 'vd_msgs/msg/Friction',
-    '/vd/estimates/resistances': 'vd_msgs/msg/Resistances',
-    '/vd/estimates/slope': 'vd_msgs/msg/Slope',
-}
+ESTIMATE_TOPICS = {**OBSERVER, **ESTIMATES}
 _WRITE_BLOCK = 65536  # messages per vectorized write (and progress-bar update)
 
 
