@@ -17,18 +17,26 @@ class StampAligner:
     Each topic buffer is bounded: when full, its oldest message is dropped and counted.
     A message whose stamp is not newer than the last emitted stamp is stale: dropped and
     counted. When a set completes, older incomplete stamps can never complete in order and
-    are discarded too (counted as dropped).
+    are discarded too (counted as dropped). A stamp older than the last emitted one by more
+    than `max_jump_back_ns` (a looped bag, a restarted source) is not stale but a new time
+    line: the buffers are cleared (their messages counted as dropped) and matching starts
+    again (counted in `jump_back_count`).
     """
 
-    def __init__(self, topics: Sequence[str], capacity: int = 200) -> None:
+    def __init__(
+        self, topics: Sequence[str], capacity: int = 200, max_jump_back_ns: int | None = None
+    ) -> None:
         """Create the aligner.
 
         Args:
             topics: names of the topics to match (at least one, unique).
             capacity: maximum buffered messages per topic, >= 1.
+            max_jump_back_ns: [ns] > 0, see the class docstring; None = never restart (every
+                older stamp is stale).
 
         Raises:
-            ConfigurationError: empty or duplicate topics, capacity < 1.
+            ConfigurationError: empty or duplicate topics, capacity < 1, max_jump_back_ns
+                <= 0.
         """
         if not topics or len(set(topics)) != len(topics):
             raise ConfigurationError(f'topics must be non-empty and unique: {list(topics)}')
@@ -36,6 +44,10 @@ class StampAligner:
             raise ConfigurationError(f'capacity must be >= 1, got {capacity}')
         self._topics = tuple(topics)
         self._capacity = capacity
+        if max_jump_back_ns is not None and max_jump_back_ns <= 0:
+            raise ConfigurationError(f'max_jump_back_ns must be > 0, got {max_jump_back_ns}')
+        self._max_jump_back_ns = max_jump_back_ns
+        self.jump_back_count = 0
         self._buffers: dict[str, dict[int, Any]] = {name: {} for name in self._topics}
         self._last_emitted: int | None = None
         self.stale_count = 0
@@ -55,8 +67,11 @@ class StampAligner:
         if topic not in self._buffers:
             raise ConfigurationError(f'unknown topic {topic!r}; expected one of {self._topics}')
         if self._last_emitted is not None and stamp_ns <= self._last_emitted:
-            self.stale_count += 1
-            return None
+            jump = self._last_emitted - stamp_ns
+            if self._max_jump_back_ns is None or jump <= self._max_jump_back_ns:
+                self.stale_count += 1
+                return None
+            self._restart()
         buffer = self._buffers[topic]
         buffer[stamp_ns] = message
         if len(buffer) > self._capacity:
@@ -71,3 +86,10 @@ class StampAligner:
                 del b[old]
                 self.dropped_count += 1
         return matched
+
+    def _restart(self) -> None:
+        self.jump_back_count += 1
+        for b in self._buffers.values():
+            self.dropped_count += len(b)
+            b.clear()
+        self._last_emitted = None

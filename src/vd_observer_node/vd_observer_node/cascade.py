@@ -6,7 +6,7 @@ offline figures are those the nodes would produce on the same stamps.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -42,6 +42,8 @@ class CascadeResult:
         slope: shape (N,), [rad].
         slope_valid: shape (N,), bool.
         wheel_valid: shape (N, 4), bool, observer validity per wheel.
+        faults: total fault counts per kind, keys 'wheel.<kind>', 'speed.<kind>' (observers)
+            and 'estimator.<kind>', as the nodes report them on /diagnostics.
     """
 
     t: FloatArray
@@ -59,6 +61,7 @@ class CascadeResult:
     slope: FloatArray
     slope_valid: BoolArray
     wheel_valid: BoolArray
+    faults: dict[str, int] = field(default_factory=dict)
 
 
 def run_cascade(
@@ -153,4 +156,13 @@ def run_cascade(
         slope=scalars['slope'],
         slope_valid=slope_valid,
         wheel_valid=wheel_valid,
+        faults={
+            f'{part}.{kind}': n
+            for part, counter in (
+                ('wheel', observer.wheels.faults),
+                ('speed', observer.speed.faults),
+                ('estimator', estimator.faults),
+            )
+            for kind, n in counter.counts.items()
+        },
     )

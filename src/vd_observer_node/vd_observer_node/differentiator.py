@@ -52,6 +52,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.faults import OBSERVER_FAULTS, FaultCounter
 
 __all__ = [
     'DEFAULT_GAINS',
@@ -308,10 +309,18 @@ class DerivativeEstimate(NamedTuple):
 class LevantDifferentiator:
     """Stateful n-channel second-order Levant differentiator on irregular time stamps.
 
-    Invalid input never poisons the state: a non-increasing or non-finite time stamp is
-    rejected (state unchanged, counted in `rejected_count`); a non-finite sample of one
-    channel makes that channel coast open loop for the step (its `valid` flag is False).
-    A gap longer than `max_gap` re-initialises every channel from the new sample.
+    Invalid input never poisons the state (every case counted in `faults`, see
+    `vd_observer_node.faults`):
+
+    * a non-finite stamp, a duplicate stamp or a stamp slightly older than the last one is
+      rejected (state unchanged, also counted in `rejected_count`);
+    * a stamp older than the last one by more than `max_jump_back` (a looped bag, a restarted
+      source) resets the state and starts again from that sample ('time_jump_back');
+    * a gap longer than `max_gap` re-initialises every channel from the new sample ('gap');
+    * a non-finite sample of one channel makes that channel coast open loop for the step (its
+      `valid` flag is False; 'non_finite_value');
+    * a step whose state overflows (absurdly large finite input) resets the state
+      ('non_finite_output'), so the outputs stay finite always.
 
     Initialisation policies (per channel, on its first finite samples):
         'first_sample': z = (f0, 0, 0) at the first sample.
@@ -334,6 +343,7 @@ class LevantDifferentiator:
         init: str = 'finite_difference',
         max_gap: float = math.inf,
         init_baseline: float = 0.0,
+        max_jump_back: float | None = None,
     ) -> None:
         """Create the differentiator.
 
@@ -346,6 +356,8 @@ class LevantDifferentiator:
             max_gap: time gap [s] beyond which the state is re-initialised.
             init_baseline: minimum time [s] between the two samples of the
                 'finite_difference' initialisation.
+            max_jump_back: a stamp older than the last accepted one by more than this [s]
+                resets the state instead of being rejected; None = `max_gap`.
 
         Raises:
             ConfigurationError: invalid L, name or gap.
@@ -372,7 +384,12 @@ class LevantDifferentiator:
         self._discretization = discretization
         self._init = init
         self._max_gap = float(max_gap)
+        jump = self._max_gap if max_jump_back is None else float(max_jump_back)
+        if not jump > 0.0:
+            raise ConfigurationError(f'max_jump_back must be > 0, got {max_jump_back}')
+        self._max_jump_back = jump
         self.rejected_count = 0
+        self.faults = FaultCounter(OBSERVER_FAULTS)
         self.reset()
 
     @property
@@ -420,19 +437,37 @@ class LevantDifferentiator:
             sample = np.broadcast_to(np.asarray(f, dtype=np.float64), (self._n,))
         except ValueError as exc:
             raise InputShapeError(f'expected {self._n} samples, got shape {np.shape(f)}') from exc
-        if not math.isfinite(t) or (self._t is not None and t <= self._t):
-            self.rejected_count += 1
-            return self._output(np.zeros(self._n, dtype=bool))
+        if not math.isfinite(t):
+            return self._reject('non_finite_stamp')
+        if self._t is not None:
+            if t <= self._t:
+                if self._t - t <= self._max_jump_back:
+                    return self._reject('duplicate_stamp' if t == self._t else 'out_of_order')
+                self.faults.count('time_jump_back')
+                self.reset()
+            elif t - self._t > self._max_gap:
+                self.faults.count('gap')
+                self.reset()
         finite = np.isfinite(sample)
-        if self._t is not None and t - self._t > self._max_gap:
-            self.reset()
+        if not finite.all():
+            self.faults.count('non_finite_value')
         if self._t is None:
             self._start(t, sample, finite)
         else:
             self._advance(t, sample, finite)
+        if not np.isfinite(self._z).all():
+            # Overflow from absurd (finite) input: start again rather than emit inf/NaN.
+            self.faults.count('non_finite_output')
+            self.reset()
+            return self._output(np.zeros(self._n, dtype=bool))
         self._t = t
         self._f_last = np.where(finite, sample, np.nan)
         return self._output(finite & self._active)
+
+    def _reject(self, kind: str) -> DerivativeEstimate:
+        self.faults.count(kind)
+        self.rejected_count += 1
+        return self._output(np.zeros(self._n, dtype=bool))
 
     def _start(self, t: float, sample: FloatArray, finite: NDArray[np.bool_]) -> None:
         if self._init == 'zero':

@@ -6,8 +6,11 @@ previous slope estimate, mu = Fx/Fz, slip, rolling and aero resistance, and the 
 the longitudinal force balance. See docs/estimation.md.
 
 All outputs are finite always: a non-finite input is replaced by its last finite value and
-the affected validity flags are cleared; a non-finite or non-increasing stamp returns the
-previous estimates unchanged (counted in `rejected_count`).
+the affected validity flags are cleared; a non-finite, repeated or slightly older stamp
+returns the previous estimates unchanged (counted in `rejected_count`); a stamp older by more
+than `max_gap` (a looped bag) or a gap longer than `max_gap` resets the estimator; a wheel
+lifting off, mu or slope outside their plausible range clear the flags. Every case is counted
+per kind in `Estimator.faults` (see docs/faults.md).
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node import estimators as phys
 from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.faults import ESTIMATOR_FAULTS, FaultCounter
 from vd_observer_node.filters import LowPass
 from vd_observer_node.vehicle import EstimatorVehicle
 
@@ -63,6 +67,10 @@ class EstimatorConfig:
         min_speed: below this |v| [m/s] the slope is flagged invalid and held (at standstill
             the brake torque is a reaction, not the applied torque the sensor reports).
         slip_eps: floor of the slip denominator [m/s].
+        max_gap: a gap between stamps longer than this [s], or a stamp older than the last
+            one by more than this (a looped bag), resets the estimator; must be > 0.
+        max_mu: |mu| above this [-] is implausible for a tyre on a road: mu is flagged
+            invalid (and counted as 'mu_out_of_range'); must be > 0.
     """
 
     load_transfer_source: str = 'tire_forces'
@@ -75,6 +83,8 @@ class EstimatorConfig:
     max_slope: float = 0.5
     min_speed: float = 0.5
     slip_eps: float = 0.1
+    max_gap: float = 0.5
+    max_mu: float = 2.0
 
     def __post_init__(self) -> None:
         if self.load_transfer_source not in LOAD_TRANSFER_SOURCES:
@@ -93,6 +103,9 @@ class EstimatorConfig:
                 raise ConfigurationError(f'{f.name} must be finite and >= 0, got {value}')
         if self.filter_order < 1:
             raise ConfigurationError(f'filter_order must be >= 1, got {self.filter_order}')
+        for name in ('max_gap', 'max_mu'):
+            if not getattr(self, name) > 0.0:
+                raise ConfigurationError(f'{name} must be > 0, got {getattr(self, name)}')
         if not 0.0 < self.max_slope < math.pi / 2:
             raise ConfigurationError(f'max_slope must be in (0, pi/2), got {self.max_slope}')
 
@@ -146,6 +159,12 @@ def _as_wheels(name: str, value: ArrayLike) -> FloatArray:
     return array
 
 
+def _all_finite(est: Estimates) -> bool:
+    scalars = (est.aero, est.slope)
+    arrays = (est.fx, est.fz, est.mu, est.slip, est.rolling)
+    return all(math.isfinite(x) for x in scalars) and all(np.isfinite(a).all() for a in arrays)
+
+
 class Estimator:
     """Stateful per-stamp estimator (the estimator node calls `update` per aligned stamp)."""
 
@@ -164,10 +183,11 @@ class Estimator:
         self._min_load = self.config.min_load_ratio * float(np.min(vehicle.static_wheel_loads))
         self._max_sine = math.sin(self.config.max_slope)
         self.rejected_count = 0
+        self.faults = FaultCounter(ESTIMATOR_FAULTS)
         self.reset()
 
     def reset(self) -> None:
-        """Forget the history (slope back to 0, filters empty)."""
+        """Forget the history (slope back to 0, filters empty); fault counters stay."""
         self._t: float | None = None
         self._slope = 0.0
         # Last finite inputs, packed as omega (4), omega_dot (4), torque (4), speed, accel.
@@ -189,7 +209,7 @@ class Estimator:
         """Estimate everything for stamp t.
 
         Args:
-            t: stamp [s], strictly increasing.
+            t: stamp [s], normally increasing (see the module docstring for the others).
             omega: shape (4,), [rad/s] wheel speeds (observer).
             omega_dot: shape (4,), [rad/s^2] wheel accelerations (observer).
             speed: body speed [m/s] (measured, or the observer's).
@@ -205,9 +225,17 @@ class Estimator:
         packed[8:12] = _as_wheels('torque', torque)
         packed[12] = speed
         packed[13] = accel
-        if not math.isfinite(t) or (self._t is not None and t <= self._t):
-            self.rejected_count += 1
-            return self.last if self.last is not None else self._empty(t)
+        if not math.isfinite(t):
+            return self._reject('non_finite_stamp', t)
+        if self._t is not None:
+            if t <= self._t:
+                if self._t - t <= self.config.max_gap:
+                    return self._reject('duplicate_stamp' if t == self._t else 'out_of_order', t)
+                self.faults.count('time_jump_back')
+                self._restart()
+            elif t - self._t > self.config.max_gap:
+                self.faults.count('gap')
+                self._restart()
         dt = 0.0 if self._t is None else t - self._t
         self._t = t
         ok = np.isfinite(packed)
@@ -215,11 +243,31 @@ class Estimator:
             wheel_ok = np.ones(4, dtype=bool)
             body_ok = True
         else:
+            self.faults.count('non_finite_value')
             packed = np.where(ok, packed, self._held)
             wheel_ok = ok[0:4] & ok[4:8] & ok[8:12] & ok[12]
             body_ok = bool(ok.all())
         self._held = packed
-        return self._estimate(t, dt, packed, wheel_ok, body_ok)
+        est = self._estimate(t, dt, packed, wheel_ok, body_ok)
+        if not _all_finite(est):
+            # Overflow from absurd (finite) input: drop the poisoned state, report nothing valid.
+            self.faults.count('non_finite_output')
+            self.reset()
+            self._t = t
+            est = self._empty(t)
+            self.last = est
+        return est
+
+    def _reject(self, kind: str, t: float) -> Estimates:
+        self.faults.count(kind)
+        self.rejected_count += 1
+        return self.last if self.last is not None else self._empty(t)
+
+    def _restart(self) -> None:
+        """Reset after a time jump or gap, keeping the last finite inputs to hold."""
+        held = self._held
+        self.reset()
+        self._held = held
 
     def _estimate(
         self,
@@ -252,10 +300,17 @@ class Estimator:
         filtered = self._force_filter.update(dt, np.append(fx_raw, ground))
         fx, ground_f = filtered[:4], float(filtered[4])
 
-        fz = phys.wheel_loads(ground_f, cos_prev, veh)
+        # A load transfer beyond the axle's load means the wheel has lifted off: Fz = 0.
+        fz = np.maximum(phys.wheel_loads(ground_f, cos_prev, veh), 0.0)
         rolling = phys.rolling_resistance(v, fz, veh)
         mu, mu_valid = phys.utilised_friction(fx, fz, self._min_load, cfg.min_excitation_ratio)
         mu_valid &= wheel_ok
+        if bool(np.any(fz < self._min_load)):
+            self.faults.count('wheel_lift')
+        implausible = mu_valid & (np.abs(mu) > cfg.max_mu)
+        if implausible.any():
+            self.faults.count('mu_out_of_range')
+            mu_valid &= ~implausible
         mu = np.where(mu_valid, mu, 0.0)
         slip = phys.slip_ratio(omega, v, veh, cfg.slip_eps)
 
@@ -269,7 +324,10 @@ class Estimator:
         # Scalar form of estimators.slope_from_forces (this runs at the sensor rate).
         sine = net_f / weight
         in_range = abs(sine) <= self._max_sine
-        slope_valid = in_range and body_ok and abs(v) >= cfg.min_speed
+        usable = body_ok and abs(v) >= cfg.min_speed
+        if usable and not in_range:
+            self.faults.count('arcsin_domain' if abs(sine) > 1.0 else 'slope_out_of_range')
+        slope_valid = in_range and usable
         if slope_valid:
             self._slope = math.asin(sine)
         self.last = Estimates(

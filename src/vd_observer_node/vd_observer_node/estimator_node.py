@@ -14,7 +14,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, TwistStamped
 from rclpy.node import Node
 from vd_sim_node.ros_common import (
@@ -37,6 +37,7 @@ from vd_observer_node.estimator import (
     Estimator,
     EstimatorConfig,
 )
+from vd_observer_node.faults import merge_reports, summarise
 from vd_observer_node.vehicle import load_estimator_vehicle
 
 __all__ = ['EstimatorNode', 'main']
@@ -91,7 +92,12 @@ class EstimatorNode(Node):  # type: ignore[misc]
         speed_topic = SPEED_TOPICS[values.pop('speed_source')]
         self.vehicle = load_estimator_vehicle(vehicle_file)
         self.estimator = Estimator(self.vehicle, EstimatorConfig.from_mapping(values))
-        self.aligner = StampAligner(TOPICS, capacity=capacity)
+        self.aligner = StampAligner(
+            TOPICS,
+            capacity=capacity,
+            max_jump_back_ns=round(self.estimator.config.max_gap * 1e9),
+        )
+        self._align_reported: dict[str, int] = {}
         self.pub_forces = self.create_publisher(
             TireForces, '/vd/estimates/tire_forces', STREAM_QOS
         )
@@ -151,14 +157,27 @@ class EstimatorNode(Node):  # type: ignore[misc]
         )
 
     def publish_diagnostics(self) -> None:
-        dropped = self.aligner.dropped_count + self.aligner.stale_count
-        level = DiagnosticStatus.OK if dropped == 0 else DiagnosticStatus.WARN
-        message = 'ok' if dropped == 0 else f'{dropped} messages could not be matched by stamp'
+        # Level and message name the faults of the last period; the counters are totals.
+        # Stale (older) messages at the aligner are the out-of-order/duplicate stamps of the
+        # inputs; its restarts are the looped bag seen before the estimator core sees it.
+        align = {
+            'out_of_order': self.aligner.stale_count,
+            'time_jump_back': self.aligner.jump_back_count,
+        }
+        report = merge_reports(
+            {
+                'estimator': self.estimator.faults.report(),
+                'align': summarise(align, self._align_reported),
+            }
+        )
+        self._align_reported = align
         values = {
             **self.counts,
             'unmatched_dropped': self.aligner.dropped_count,
             'stale': self.aligner.stale_count,
+            **report.counts,
         }
+        level, message = report.level, report.message
         self.pub_diag.publish(
             diagnostic_array(
                 self.get_clock().now().to_msg(),

@@ -23,6 +23,7 @@ from vd_observer_node.differentiator import (
     LevantGains,
 )
 from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.faults import FaultCounter
 
 __all__ = [
     'Observer',
@@ -48,7 +49,9 @@ class ObserverConfig:
         speed_lipschitz: L for the body speed, bound on |d^3 v/dt^3| [m/s^4].
         discretization: one of `differentiator.DISCRETIZATIONS`.
         init: one of `differentiator.INIT_POLICIES`.
-        max_gap: a gap between stamps longer than this [s] re-initialises the observer.
+        max_gap: a gap between stamps longer than this [s] re-initialises the observer, and
+            so does a stamp older than the last one by more than this (a looped bag); a
+            smaller step back or a repeated stamp is dropped. See docs/faults.md.
         init_baseline: time [s] between the two samples of the 'finite_difference'
             initialisation (longer = less noise in the initial derivative).
     """
@@ -140,8 +143,13 @@ class WheelObserver:
 
     @property
     def rejected_count(self) -> int:
-        """Samples rejected for a non-increasing or non-finite stamp."""
+        """Samples rejected for a duplicate, slightly older or non-finite stamp."""
         return self._diff.rejected_count
+
+    @property
+    def faults(self) -> FaultCounter:
+        """Input faults per kind (see `differentiator.LevantDifferentiator`)."""
+        return self._diff.faults
 
     def update(self, t: float, angles: ArrayLike) -> WheelState:
         """Feed the wheel angles at stamp t.
@@ -179,8 +187,13 @@ class SpeedObserver:
 
     @property
     def rejected_count(self) -> int:
-        """Samples rejected for a non-increasing or non-finite stamp."""
+        """Samples rejected for a duplicate, slightly older or non-finite stamp."""
         return self._diff.rejected_count
+
+    @property
+    def faults(self) -> FaultCounter:
+        """Input faults per kind (see `differentiator.LevantDifferentiator`)."""
+        return self._diff.faults
 
     def update(self, t: float, speed: float) -> SpeedState:
         """Feed the measured body speed [m/s] at stamp t [s]."""

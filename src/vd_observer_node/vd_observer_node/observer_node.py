@@ -15,7 +15,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, TwistStamped
 from rclpy.node import Node
 from vd_sim_node.ros_common import (
@@ -31,6 +31,7 @@ from vd_sim_node.ros_common import (
 
 from vd_msgs.msg import WheelAngles, WheelStates
 from vd_observer_node.differentiator import DEFAULT_GAINS, DISCRETIZATIONS, INIT_POLICIES
+from vd_observer_node.faults import ERROR, merge_reports
 from vd_observer_node.observer import ObserverConfig, SpeedObserver, WheelObserver
 
 __all__ = ['ObserverNode', 'main']
@@ -111,14 +112,20 @@ class ObserverNode(Node):  # type: ignore[misc]
         self.pub_speed.publish(speed)
 
     def publish_diagnostics(self) -> None:
-        rejected = self.wheels.rejected_count + self.speed.rejected_count
-        faults = rejected + self.counts['withheld_non_finite']
-        level = DiagnosticStatus.OK if faults == 0 else DiagnosticStatus.WARN
-        message = 'ok' if faults == 0 else f'{faults} samples rejected or withheld'
+        # Level and message name the faults of the last period; the counters are totals.
+        report = merge_reports(
+            {'wheel': self.wheels.faults.report(), 'speed': self.speed.faults.report()}
+        )
+        level = report.level
+        message = report.message
+        if self.counts['withheld_non_finite']:
+            level = max(level, ERROR)
+            message += f'; {self.counts["withheld_non_finite"]} non-finite outputs withheld'
         values = {
             **self.counts,
             'rejected_wheel_stamps': self.wheels.rejected_count,
             'rejected_speed_stamps': self.speed.rejected_count,
+            **report.counts,
         }
         self.pub_diag.publish(
             diagnostic_array(

@@ -1,0 +1,144 @@
+"""Fault kinds of the observers and the estimator, their severity and per-kind counters.
+
+The core counts what went wrong with its inputs (and the rare internal overflow) in a
+`FaultCounter`; the nodes turn `FaultCounter.report` into one ``/diagnostics`` status per
+node, so the live graph and the offline cascade count the same faults on the same input.
+See docs/faults.md for what each kind means and what the core does about it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Final
+
+from vd_observer_node.errors import ConfigurationError
+
+__all__ = [
+    'ERROR',
+    'ESTIMATOR_FAULTS',
+    'FAULT_LEVELS',
+    'OBSERVER_FAULTS',
+    'OK',
+    'WARN',
+    'FaultCounter',
+    'FaultReport',
+    'merge_reports',
+    'summarise',
+]
+
+#: Levels, numerically equal to diagnostic_msgs/DiagnosticStatus OK, WARN, ERROR.
+OK: Final = 0
+WARN: Final = 1
+ERROR: Final = 2
+
+#: Severity of every fault kind. Input faults are WARN: the core handles them (drops, holds,
+#: resets) and the outputs stay finite; ERROR means the core had to throw its state away
+#: because a computation overflowed.
+FAULT_LEVELS: Final[Mapping[str, int]] = {
+    'non_finite_stamp': WARN,
+    'non_finite_value': WARN,
+    'duplicate_stamp': WARN,
+    'out_of_order': WARN,
+    'gap': WARN,
+    'time_jump_back': WARN,
+    'wheel_lift': WARN,
+    'mu_out_of_range': WARN,
+    'slope_out_of_range': WARN,
+    'arcsin_domain': WARN,
+    'non_finite_output': ERROR,
+}
+
+#: Kinds an observer (differentiator) can count.
+OBSERVER_FAULTS: Final = (
+    'non_finite_stamp',
+    'non_finite_value',
+    'duplicate_stamp',
+    'out_of_order',
+    'gap',
+    'time_jump_back',
+    'non_finite_output',
+)
+#: Kinds the estimator can count.
+ESTIMATOR_FAULTS: Final = (*OBSERVER_FAULTS, 'wheel_lift', 'mu_out_of_range',
+                           'slope_out_of_range', 'arcsin_domain')  # fmt: skip
+
+
+@dataclass(frozen=True)
+class FaultReport:
+    """What happened since the previous report, and the totals.
+
+    Attributes:
+        level: OK, WARN or ERROR: the worst severity among `active`.
+        active: kinds counted since the previous report, in `FAULT_LEVELS` order.
+        counts: total count per kind since start (every kind, zeros included).
+    """
+
+    level: int
+    active: tuple[str, ...]
+    counts: dict[str, int]
+
+    @property
+    def message(self) -> str:
+        """One line for DiagnosticStatus.message: 'ok' or the active kinds."""
+        if not self.active:
+            return 'ok'
+        return 'faults since last report: ' + ', '.join(self.active)
+
+
+class FaultCounter:
+    """Counts faults per kind; `report` also says which kinds occurred since the last report."""
+
+    def __init__(self, kinds: Iterable[str] = tuple(FAULT_LEVELS)) -> None:
+        """Create zeroed counters.
+
+        Args:
+            kinds: fault kinds to count, each a key of `FAULT_LEVELS`.
+
+        Raises:
+            ConfigurationError: an unknown kind.
+        """
+        self._counts = {k: 0 for k in kinds}
+        unknown = set(self._counts) - set(FAULT_LEVELS)
+        if unknown:
+            raise ConfigurationError(f'unknown fault kinds {sorted(unknown)}')
+        self._reported = dict(self._counts)
+
+    def count(self, kind: str, n: int = 1) -> None:
+        """Add n occurrences of `kind` (a kind this counter was created with)."""
+        self._counts[kind] += n
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Total per kind since creation (a copy)."""
+        return dict(self._counts)
+
+    @property
+    def total(self) -> int:
+        """Sum over all kinds."""
+        return sum(self._counts.values())
+
+    def report(self) -> FaultReport:
+        """Summarise and start a new reporting period."""
+        report = summarise(self._counts, self._reported)
+        self._reported = dict(self._counts)
+        return report
+
+
+def summarise(counts: Mapping[str, int], previous: Mapping[str, int]) -> FaultReport:
+    """FaultReport of totals `counts` against the totals at the previous report."""
+    active = tuple(k for k in FAULT_LEVELS if counts.get(k, 0) > previous.get(k, 0))
+    level = max((FAULT_LEVELS[k] for k in active), default=OK)
+    return FaultReport(level=level, active=active, counts=dict(counts))
+
+
+def merge_reports(reports: Mapping[str, FaultReport]) -> FaultReport:
+    """Combine the reports of several parts of one node (e.g. 'wheel', 'speed').
+
+    Counters are prefixed by the part name ('wheel.gap'); level and active kinds combine
+    (an active kind is named once, prefixed).
+    """
+    level = max((r.level for r in reports.values()), default=OK)
+    active = tuple(f'{part}.{k}' for part, r in reports.items() for k in r.active)
+    counts = {f'{part}.{k}': v for part, r in reports.items() for k, v in r.counts.items()}
+    return FaultReport(level=level, active=active, counts=counts)
