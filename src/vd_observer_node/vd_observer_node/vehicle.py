@@ -63,13 +63,17 @@ class EstimatorVehicle:
         for key, value in self.__dict__.items():
             if key == 'name':
                 continue
-            if not (isinstance(value, int | float) and math.isfinite(value)):
-                raise VehicleParameterError(f'{key} must be a finite number, got {value!r}')
             # c0 = 0 or Cx = 0 switch a resistance off; every other quantity must be > 0.
-            if value < 0.0 or (
-                value == 0.0 and key not in ('rolling_c0', 'rolling_c1', 'drag_coefficient')
+            zero_ok = key in ('rolling_c0', 'rolling_c1', 'drag_coefficient')
+            allowed = 'a finite number >= 0' if zero_ok else 'a finite number > 0'
+            # Name the key as it is written in the YAML file, so the user finds it.
+            where = '.'.join(_KEYS.get(key, ('rolling_resistance', 'regularisation_speed')))
+            if (
+                not (isinstance(value, int | float) and math.isfinite(value))
+                or value < 0.0
+                or (value == 0.0 and not zero_ok)
             ):
-                raise VehicleParameterError(f'{key} must be positive, got {value!r}')
+                raise VehicleParameterError(f'{where} ({key}) must be {allowed}, got {value!r}')
         if self.cg_to_front_axle >= self.wheelbase:
             raise VehicleParameterError(
                 f'cg_to_front_axle ({self.cg_to_front_axle}) must be < '
@@ -157,5 +161,10 @@ def load_estimator_vehicle(path: str | Path) -> EstimatorVehicle:
         text = Path(path).read_text(encoding='utf-8')
         data = yaml.safe_load(text)
     except (OSError, yaml.YAMLError) as exc:
-        raise VehicleParameterError(f'cannot read vehicle file {path}: {exc}') from exc
-    return vehicle_from_mapping(data)
+        # One line: a node refusing to start prints exactly this (YAML errors span lines).
+        reason = ' '.join(str(exc).split())
+        raise VehicleParameterError(f'cannot read vehicle file {path}: {reason}') from exc
+    try:
+        return vehicle_from_mapping(data)
+    except VehicleParameterError as exc:
+        raise VehicleParameterError(f'vehicle file {path}: {exc}') from exc
