@@ -294,7 +294,7 @@ class Alert:
 
 
 def _wheels(name: str, value: ArrayLike, dtype: type = float) -> NDArray[Any]:
-    array = np.asarray(value, dtype=dtype)
+    array: NDArray[Any] = np.asarray(value, dtype=dtype)
     if array.shape != (4,):
         raise InputShapeError(f'{name} must have shape (4,), got {array.shape}')
     return array

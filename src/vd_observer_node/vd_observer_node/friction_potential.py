@@ -182,7 +182,9 @@ class FrictionPotentialConfig:
         unknown = set(data) - known
         if unknown:
             raise FrictionConfigError(f'unknown friction settings: {sorted(unknown)}')
-        clean = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+        clean: dict[str, Any] = {
+            k: tuple(v) if isinstance(v, list) else v for k, v in data.items()
+        }
         return cls(**clean)
 
 
