@@ -28,7 +28,8 @@ hash_of() { cat "$@" | sha256sum | cut -c1-16; }
 
 # --- 1. virtual environment and dependencies --------------------------------------------
 deps_hash=$(printf '%s %s\n' "$mode" "$("$python" -V 2>&1)" \
-  | cat - requirements/*.in requirements/lock-*.txt | sha256sum | cut -c1-16)
+  | cat - requirements/python.in requirements/ros-kilted-wheels.in \
+    requirements/lock-kilted-py311.txt | sha256sum | cut -c1-16)
 deps_stamp="$venv/.vd-deps-$deps_hash"
 if [ ! -f "$deps_stamp" ]; then
   log "installing dependencies ($mode)"
@@ -52,7 +53,7 @@ if [ ! -f "$deps_stamp" ]; then
     # targets name its include folders, which makes CMake stop on non-existent paths.
     py_inc=$("$venv/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
     np_inc=$("$venv/bin/python" -c 'import numpy; print(numpy.get_include())')
-    grep -rlE '/opt/python/cp[0-9]+-cp[0-9]+' "$venv/share" --include='*.cmake' 2>/dev/null \
+    { grep -rlE '/opt/python/cp[0-9]+-cp[0-9]+' "$venv/share" --include='*.cmake' || true; } \
       | while read -r f; do
           sed -i -E \
             -e "s#/opt/python/cp[0-9]+-cp[0-9]+/lib/python3\.[0-9]+/site-packages/numpy/_core/include#$np_inc#g" \

@@ -18,6 +18,8 @@ TYPES = [
     'Slope',
     'TwistStamped',
     'AccelStamped',
+    'Alerts',
+    'FrictionPotential',
 ]
 
 

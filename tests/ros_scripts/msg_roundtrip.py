@@ -6,6 +6,7 @@ that what crossed the middleware is intact, field by field. Used by test_msgs_mi
 
 from __future__ import annotations
 
+import importlib
 import json
 import random
 import sys
@@ -16,7 +17,9 @@ from geometry_msgs.msg import AccelStamped, TwistStamped
 from rclpy.node import Node
 
 from vd_msgs.msg import (
+    Alerts,
     Friction,
+    FrictionPotential,
     Resistances,
     Slope,
     TireForces,
@@ -35,6 +38,8 @@ TYPES = [
     Slope,
     TwistStamped,
     AccelStamped,
+    Alerts,
+    FrictionPotential,
 ]
 
 
@@ -46,10 +51,18 @@ def fill(msg: Any, rng: random.Random) -> Any:
             value[:] = [rng.uniform(-1e3, 1e3) for _ in range(len(value))]
         elif kind.startswith('boolean['):
             setattr(msg, name, [rng.random() < 0.5 for _ in range(len(value))])
+        elif kind.startswith('uint8['):
+            setattr(msg, name, [rng.randint(0, 255) for _ in range(len(value))])
+        elif kind.startswith('sequence<'):
+            package, _, type_name = kind[len('sequence<') : -1].partition('/')
+            item_class = getattr(importlib.import_module(f'{package}.msg'), type_name)
+            setattr(msg, name, [fill(item_class(), rng) for _ in range(3)])
         elif kind in ('double', 'float'):
             setattr(msg, name, rng.uniform(-1e3, 1e3))
         elif kind == 'int8':
             setattr(msg, name, rng.randint(-128, 127))
+        elif kind == 'uint8':
+            setattr(msg, name, rng.randint(0, 255))
         elif kind in ('int32', 'uint32'):
             setattr(msg, name, rng.randint(0, 2**31 - 1))
         elif kind == 'boolean':
@@ -62,13 +75,18 @@ def fill(msg: Any, rng: random.Random) -> Any:
 
 
 def as_dict(msg: Any) -> Any:
-    if not hasattr(msg, 'get_fields_and_field_types'):
-        return (
-            [float(v) if not isinstance(v, bool) else v for v in msg]
-            if hasattr(msg, '__len__') and not isinstance(msg, str)
-            else msg
-        )
-    return {n: as_dict(getattr(msg, n)) for n in msg.get_fields_and_field_types()}
+    """A message as plain JSON-able data (fields recursively, arrays as lists)."""
+    if hasattr(msg, 'get_fields_and_field_types'):
+        return {n: as_dict(getattr(msg, n)) for n in msg.get_fields_and_field_types()}
+    if isinstance(msg, str | bool | int | float):
+        return msg
+    if hasattr(msg, '__len__'):
+        return [as_dict(v) if hasattr(v, 'get_fields_and_field_types') else _plain(v) for v in msg]
+    return msg
+
+
+def _plain(value: Any) -> Any:
+    return value if isinstance(value, bool) else float(value)
 
 
 def expected(kind: type) -> Any:
