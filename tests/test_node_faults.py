@@ -96,7 +96,14 @@ FEED_AND_CAPTURE = textwrap.dedent(
         time.sleep(0.05)
     time.sleep(0.5)
     print('feeding', len(seq), flush=True)
-    for row in seq:
+    for k, row in enumerate(seq):
+        # Flow control: never run more than 40 samples ahead of the nodes' outputs, so that
+        # no KEEP_LAST queue overflows on a loaded machine (losses would hide faults).
+        wait_until = time.monotonic() + 5.0
+        while time.monotonic() < wait_until and (
+            len(got['states']) < k - 40 or len(got['slope']) < k - 45
+        ):
+            time.sleep(0.001)
         header_stamp = ns_to_time(round(row['t'] * 1e9))
         a = WheelAngles(); a.header.stamp = header_stamp; a.header.frame_id = 'base_link'
         a.angle = [float(x) for x in row['angle']]
@@ -159,6 +166,7 @@ def test_sensor_faults_through_the_live_nodes(procs: RosProcessGroup, tmp_path: 
         rows = np.array(got[key], dtype=np.float64)
         assert rows.shape[0] > 300, key
         assert np.isfinite(rows).all(), key
+    assert len(got['states']) == len(sent), 'the observer must answer every wheel sample'
     # Diagnostics name each fault kind with a counter.
     obs_diag = _last_diag(got['diag'], 'vd: observer')['values']
     for part in ('wheel', 'speed'):
@@ -252,6 +260,15 @@ def test_bad_parameters_refuse_to_start_with_one_line(
         (procs.node(f'case{i}', 'vd_observer_node', exe, **params), words)
         for i, ((exe, params), words) in enumerate(cases)
     ]
+    from vd_observer_node.launcher import NodeSpec
+
+    bad_params = tmp_path / 'params.yaml'
+    bad_params.write_text('observer_node:\n  ros__parameters: {max_gap: [1,\n', encoding='utf-8')
+    for i, (exe, path) in enumerate(
+        (('observer_node', tmp_path / 'no_params.yaml'), ('estimator_node', bad_params))
+    ):
+        argv = [*NodeSpec('vd_observer_node', exe, f'pf{i}', {}).argv(), '--params-file']
+        started.append((procs.start(f'pf{i}', [*argv, str(path)]), ('--params-file', path.name)))
     for proc, words in started:
         _refused(proc, *words)
 
