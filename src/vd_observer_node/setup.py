@@ -28,6 +28,7 @@ setup(
         'console_scripts': [
             'observer_node = vd_observer_node.observer_node:main',
             'estimator_node = vd_observer_node.estimator_node:main',
+            'alerts_node = vd_observer_node.alerts_node:main',
             'recorder_node = vd_observer_node.recorder_node:main',
             'player_node = vd_observer_node.player_node:main',
             'vd = vd_observer_node.cli:main',

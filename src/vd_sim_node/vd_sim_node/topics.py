@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Final
 
-__all__ = ['CONTRACT', 'ESTIMATES', 'OBSERVER', 'SENSORS', 'TRUTH']
+__all__ = ['ALERTS', 'CONTRACT', 'ESTIMATES', 'OBSERVER', 'SENSORS', 'TRUTH']
 
 SENSORS: Final = {
     '/vd/sensors/wheel_angles': 'vd_msgs/msg/WheelAngles',
@@ -26,6 +26,10 @@ ESTIMATES: Final = {
     '/vd/estimates/resistances': 'vd_msgs/msg/Resistances',
     '/vd/estimates/slope': 'vd_msgs/msg/Slope',
 }
+ALERTS: Final = {
+    '/vd/estimates/alerts': 'vd_msgs/msg/Alerts',
+    '/vd/estimates/friction_potential': 'vd_msgs/msg/FrictionPotential',
+}
 TRUTH: Final = {
     '/vd/truth/wheel_states': 'vd_msgs/msg/WheelStates',
     '/vd/truth/body_accel': 'geometry_msgs/msg/AccelStamped',
@@ -35,4 +39,4 @@ TRUTH: Final = {
     '/vd/truth/resistances': 'vd_msgs/msg/Resistances',
     '/vd/truth/slope': 'vd_msgs/msg/Slope',
 }
-CONTRACT: Final = {**SENSORS, **OBSERVER, **ESTIMATES, **TRUTH}
+CONTRACT: Final = {**SENSORS, **OBSERVER, **ESTIMATES, **ALERTS, **TRUTH}
