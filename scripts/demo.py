@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """`make demo`: the whole graph on a scenario, recorded to an MCAP bag, then the report.
 
-Starts recorder_node, observer_node, estimator_node and sim_node as separate processes over
+Starts recorder_node, observer_node, estimator_node, alerts_node and sim_node as separate processes over
 the real middleware (the same graph as `launch/demo.launch.py` for a system ROS 2), shows
 the simulation's progress, stops every process cleanly with SIGINT, keeps the bag and runs
 `vd report` on it. Run inside the workspace environment (`make demo` sources env.sh).
@@ -54,6 +54,7 @@ def main(argv: list[str] | None = None) -> int:
                 NodeSpec('vd_observer_node', 'recorder_node', 'recorder', {'output': str(bag)}),
                 NodeSpec('vd_observer_node', 'observer_node', 'observer'),
                 NodeSpec('vd_observer_node', 'estimator_node', 'estimator'),
+                NodeSpec('vd_observer_node', 'alerts_node', 'alerts'),
             ],
             settle_s=3.0,
         )

@@ -40,6 +40,7 @@ def generate_launch_description() -> LaunchDescription:
             ),
             Node(package='vd_observer_node', executable='observer_node', output='screen'),
             Node(package='vd_observer_node', executable='estimator_node', output='screen'),
+            Node(package='vd_observer_node', executable='alerts_node', output='screen'),
             # give the subscribers time to be discovered before the first sample
             TimerAction(period=2.0, actions=[sim]),
             RegisterEventHandler(
