@@ -1,10 +1,10 @@
 #!/usr/bin/env python3
 """`make demo`: the whole graph on a scenario, recorded to an MCAP bag, then the report.
 
-Starts recorder_node, observer_node, estimator_node, alerts_node and sim_node as separate processes over
-the real middleware (the same graph as `launch/demo.launch.py` for a system ROS 2), shows
-the simulation's progress, stops every process cleanly with SIGINT, keeps the bag and runs
-`vd report` on it. Run inside the workspace environment (`make demo` sources env.sh).
+Starts recorder_node, observer_node, estimator_node, alerts_node and sim_node as separate
+processes over the real middleware (the same graph as `launch/demo.launch.py` for a system
+ROS 2), shows the simulation's progress, stops every process cleanly with SIGINT, keeps the
+bag and runs `vd report` on it. Run inside the workspace environment (`make demo` sources env.sh).
 """
 
 from __future__ import annotations
