@@ -455,9 +455,11 @@ def main(argv: list[str] | None = None) -> int:
                 r = run('sweep', rate, args.sweep_duration, recorder=False, publish_truth=truth)
                 lost = max(r.lost().values(), default=-1)
                 p99 = r.latency_ms.get('p99', float('nan'))
+                p50 = r.latency_ms.get('p50', float('nan'))
                 print(
                     f'  {rate:6g} Hz: published {r.published}, worst loss {lost}, achieved '
-                    f'real time {r.achieved_rtf:.3f}, latency p99 {p99:.2f} ms, CPU sim '
+                    f'real time {r.achieved_rtf:.3f}, latency p50 {p50:.1f} p99 {p99:.1f} ms, '
+                    f'CPU sim '
                     f'{r.cpu_pct.get("sim", float("nan")):.0f} % obs '
                     f'{r.cpu_pct.get("observer", float("nan")):.0f} % est '
                     f'{r.cpu_pct.get("estimator", float("nan")):.0f} %'
