@@ -7,7 +7,10 @@ own process (GraphLauncher, like ``ros2 run``), plus a probe process
 (scripts/latency_probe.py) that notes the wall-clock reception time of every message.
 Stamps are simulation time, so the latency of a sample is the probe's reception time of
 ``/vd/estimates/slope`` minus its reception time of ``/vd/sensors/wheel_angles`` for the same
-stamp (both clocks are the probe's CLOCK_MONOTONIC). It includes the probe's own queueing.
+stamp (both clocks are the probe's CLOCK_MONOTONIC). It includes the probe's own queueing,
+and when the probe falls behind on the angles it is biased low (even negative), so the
+script also prints the slope estimate's lateness against the real-time schedule: reception
+minus (stamp + the smallest reception-minus-stamp offset seen on the angles).
 
 Figures per run:
 * lost per topic: samples the simulator published minus distinct stamps the probe received
@@ -201,6 +204,19 @@ def _analyse_probe(result: RunResult, npz: Path) -> None:
             'p99': float(np.percentile(lat, 99)),
             'max': float(lat.max()),
             'n': float(len(lat)),
+            'negative': float(np.mean(lat < 0.0)),
+        }
+    if src and dst:
+        # When the probe itself falls behind, it reads wheel angles late and the difference
+        # above can even turn negative. Lateness against the real-time schedule does not
+        # depend on the probe's angle queue: the fastest angle delivery fixes the schedule
+        # (stamp + offset); a slope estimate's lateness is its reception minus that.
+        offset = min(t - s for s, t in src.items())
+        late = np.array([t - s - offset for s, t in dst.items()], dtype=float) / 1e6
+        result.latency_ms |= {
+            'sched_p50': float(np.percentile(late, 50)),
+            'sched_p99': float(np.percentile(late, 99)),
+            'sched_max': float(late.max()),
         }
 
 
@@ -380,6 +396,13 @@ def _print_runs(title: str, runs: Sequence[RunResult]) -> None:
             print(
                 f'  latency {key:3s} angles->slope: '
                 f'{spread([r.latency_ms[key] for r in lat], ".2f")} ms'
+            )
+        negative = [100.0 * r.latency_ms.get('negative', float('nan')) for r in lat]
+        print(f'  share of negative angles->slope (probe behind): {spread(negative, ".1f")} %')
+        for key in ('p50', 'p99', 'max'):
+            print(
+                f'  slope lateness vs real-time schedule {key}: '
+                f'{spread([r.latency_ms["sched_" + key] for r in lat], ".2f")} ms'
             )
     names = [
         n for n in ('sim', 'observer', 'estimator', 'recorder', 'probe') if n in good[0].cpu_pct
