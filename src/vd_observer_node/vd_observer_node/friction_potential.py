@@ -99,6 +99,9 @@ class FrictionPotentialConfig:
             regressor (small: the data override it once they cover the linear region).
         prior_mu_max: road assumed without data [-] (tie-break among equally good members).
         prior_weight: weight of that tie-break on (mu_max - prior_mu_max)^2.
+        shrink_to_prior: below class_min_confidence report w * fit + (1 - w) * prior_mu_max,
+            w = confidence / class_min_confidence, instead of the bare fit (the utilisation
+            behind the confidence uses the bare fit).
         min_slip: |slip| below this [-] carries no information on the peak (noise, sign
             errors) and is ignored.
         max_slip: the curve peak is searched on (0, max_slip] [-]; larger |slip| is clipped.
@@ -123,6 +126,7 @@ class FrictionPotentialConfig:
     stiffness_weight: float = 5.0
     prior_mu_max: float = 1.0
     prior_weight: float = 1e-3
+    shrink_to_prior: bool = True
     min_slip: float = 0.002
     max_slip: float = 1.0
     slip_floor_speed: float = 1.0
@@ -485,10 +489,18 @@ def fit_solution(
         The estimate for ``state.t``.
     """
     member = state.member
-    mu_max: FloatArray = state.scale * bank.peak[member]
+    fitted = state.scale * bank.peak[member]
     s_peak: FloatArray = bank.slip_peak[member]
     span = config.confidence_utilisation_high - config.confidence_utilisation_low
     confidence = np.clip((state.utilisation - config.confidence_utilisation_low) / span, 0, 1)
+    # Unexcited, the fit only knows the linear region and its peak is arbitrary (it drifted to
+    # 3 on the dry paper cruise): report the prior there, the fit once the tyre was pushed.
+    weight = np.clip(confidence / max(config.class_min_confidence, 1e-9), 0.0, 1.0)
+    mu_max: FloatArray = (
+        weight * fitted + (1.0 - weight) * config.prior_mu_max
+        if config.shrink_to_prior
+        else fitted
+    )
     prev = np.asarray(previous_class, dtype=np.int64)
     road = np.array(
         [
