@@ -13,6 +13,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -87,6 +88,7 @@ class PlayerNode(Node):  # type: ignore[misc]
         self.loop = v['loop']
         self.index = 0
         self.loops = 0
+        self.publish_failures = 0
         self.t0_bag = self.messages[0].log_time_ns
         self.t0_wall: float | None = None
         self.start_at = time.monotonic() + v['start_delay']
@@ -116,7 +118,12 @@ class PlayerNode(Node):  # type: ignore[misc]
         last: Any = None
         while self.index < len(self.messages) and self.messages[self.index].log_time_ns <= due_ns:
             last = self.messages[self.index]
-            self.publishers_by_topic[last.topic].publish(last.data)
+            try:
+                self.publishers_by_topic[last.topic].publish(last.data)
+            except RCLError as exc:  # the middleware refused (overload): count, play on
+                self.publish_failures += 1
+                if self.publish_failures == 1:
+                    self.get_logger().warning(f'publish failed on {last.topic}: {exc}')
             self.index += 1
         if last is not None and self.p_clock is not None:
             self.p_clock.publish(ClockMsg(clock=ns_to_time(last.log_time_ns)))

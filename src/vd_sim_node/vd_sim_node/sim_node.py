@@ -24,6 +24,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import AccelStamped, TwistStamped
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
@@ -186,6 +187,7 @@ class SimNode(Node):  # type: ignore[misc]
         self.p_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
 
         self.published = 0
+        self.publish_failures = 0
         self.wall_start: float | None = None
         self.first_sample_at = time.monotonic() + v['start_delay']
         self.wait_until = self.first_sample_at + v['wait_for_subscribers']
@@ -213,7 +215,13 @@ class SimNode(Node):  # type: ignore[misc]
         last: SampleFrame | None = None
         while not self.sim.done and self.sim.t <= target and time.monotonic() < deadline:
             last = self.sim.step()
-            self.publish_frame(last)
+            try:
+                self.publish_frame(last)
+            except RCLError as exc:
+                # the middleware refused a publish (overload): count it, keep simulating
+                self.publish_failures += 1
+                if self.publish_failures == 1:
+                    self.get_logger().warning(f'publish failed at t={last.t:.3f} s: {exc}')
         if last is not None:
             self.p_clock.publish(ClockMsg(clock=self._stamp(last.t)))
             self._log_progress(last)
@@ -300,15 +308,19 @@ class SimNode(Node):  # type: ignore[misc]
         elapsed = time.monotonic() - (self.wall_start or time.monotonic())
         achieved = self.sim.t / elapsed if elapsed > 0 else 0.0
         lagging = self.rtf > 0 and elapsed > 2.0 and achieved < 0.9 * self.rtf
-        level = DiagnosticStatus.WARN if lagging else DiagnosticStatus.OK
-        message = (
-            f'behind real-time factor {self.rtf:g} (achieved {achieved:.2f})' if lagging else 'ok'
-        )
+        problems = []
+        if lagging:
+            problems.append(f'behind real-time factor {self.rtf:g} (achieved {achieved:.2f})')
+        if self.publish_failures:
+            problems.append(f'{self.publish_failures} samples failed to publish')
+        level = DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
+        message = '; '.join(problems) or 'ok'
         values = {
             'sim_time_s': f'{self.sim.t:.3f}',
             'samples_published': self.published,
             'achieved_real_time_factor': f'{achieved:.2f}',
             'requested_real_time_factor': self.rtf,
+            'publish_failures': self.publish_failures,
         }
         self.p_diag.publish(
             diagnostic_array(
