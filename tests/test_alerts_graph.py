@@ -46,7 +46,7 @@ def test_lock_alert_on_hard_braking_over_low_friction(
         rate_hz=100.0,
         real_time_factor=1.0,
     )
-    sim.wait_for('scenario finished', timeout=90)
+    sim.wait_for('scenario finished', timeout=120)
     time.sleep(1.5)
     for proc in [*reversed(others), rec]:
         assert proc.stop() == 0, proc.output()[-3000:]

@@ -68,7 +68,7 @@ PARAMS = [
 
 # rosbag2 stores the offered QoS per topic; all vd streams are offered like this.
 _STREAM_QOS_YAML = format_qos_profiles(
-    [{'history': 'keep_last', 'depth': 100, 'reliability': 'reliable', 'durability': 'volatile'}]
+    [{'history': 'keep_last', 'depth': 1000, 'reliability': 'reliable', 'durability': 'volatile'}]
 )
 
 

@@ -6,10 +6,10 @@ computes anything physical: that stays in the ROS-free core.
 
 QoS choices (see the README's topic contract):
 
-* Sensor, observer, estimate and truth streams: RELIABLE, KEEP_LAST, depth 100. Reliable
+* Sensor, observer, estimate and truth streams: RELIABLE, KEEP_LAST, depth 1000. Reliable
   publishers also serve best-effort subscribers (``qos_profile_sensor_data``), so users may
-  pick either; our own subscribers ask for reliable delivery with room for a 100 ms burst at
-  1 kHz because a lost wheel-angle sample is a corrupted derivative.
+  pick either; our own subscribers ask for reliable delivery with room for a 1 s stall at
+  1 kHz, because a lost wheel-angle sample is a corrupted derivative.
 * ``/clock``: RELIABLE, depth 1, like ``ros2 bag play``.
 * ``/diagnostics``: RELIABLE, depth 10 (the diagnostic_aggregator default).
 """
@@ -64,7 +64,7 @@ __all__ = [
 
 STREAM_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
-    depth=100,
+    depth=1000,
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.VOLATILE,
 )
@@ -292,7 +292,13 @@ def run_node(factory: Any, args: list[str] | None = None) -> int:
     if kind not in EXECUTORS:
         print(f'error: VD_ROS_EXECUTOR={kind!r}; use one of {EXECUTORS}', file=sys.stderr)
         return 2
-    rclpy.init(args=args)
+    from rclpy._rclpy_pybind11 import RCLError
+
+    try:
+        rclpy.init(args=args)
+    except RCLError as exc:  # e.g. a malformed --params-file: one line, not a traceback
+        print(f'error: cannot start: {str(exc).splitlines()[0]}', file=sys.stderr, flush=True)
+        return 2
     node = None
     executor = None
     try:
