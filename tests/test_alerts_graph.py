@@ -44,7 +44,7 @@ def test_lock_alert_on_hard_braking_over_low_friction(
         'sim_node',
         scenario_file='braking_low_mu_hard',
         rate_hz=100.0,
-        real_time_factor=1.0,
+        real_time_factor=0.5,
     )
     sim.wait_for('scenario finished', timeout=120)
     time.sleep(1.5)
