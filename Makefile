@@ -39,7 +39,9 @@ typecheck: setup
 	@echo 'mypy --strict <ROS-free core>; mypy <nodes>'
 	@$(RUN) mypy --strict $(CORE_FILES) && mypy $(ROS_FILES)
 
+# the peers compared in bench_peers.py (opensmc, commonroad-vehicle-models) are bench-only
 bench: setup
+	$(RUN) pip install --quiet -r requirements/bench.in -c requirements/lock-kilted-py311.txt
 	$(RUN) for s in scripts/bench_*.py scripts/eval_*.py scripts/check_*.py; do \
 	  [ -f "$$s" ] || continue; echo "=== $$s"; python "$$s"; done
 

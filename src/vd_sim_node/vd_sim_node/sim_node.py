@@ -102,7 +102,8 @@ PARAMS = [
         'wait_for_subscribers',
         5.0,
         'after start_delay, wait up to this long until every sensor (and truth) topic has a '
-        'subscriber, so that nodes started with the simulator miss no sample [s]',
+        'subscriber and discovery has settled for 1 s, so that nodes started with the '
+        'simulator miss no sample [s]',
         low=0.0,
         high=600.0,
     ),
@@ -116,6 +117,7 @@ PARAMS = [
 ]
 
 _BATCH_PERIOD = 0.01  # [s] wall time between publishing batches
+_SETTLE_S = 1.0  # [s] subscriber counts unchanged this long = discovery has settled
 _BATCH_BUDGET = 0.05  # [s] wall time one batch may take before yielding to the executor
 
 
@@ -169,8 +171,11 @@ class SimNode(Node):  # type: ignore[misc]
         self.progress_period = v['progress_period']
         self._next_progress = 0.0
 
+        self.streams: list[Any] = []
+
         def pub(kind: Any, topic: str) -> Any:
-            return self.create_publisher(kind, topic, STREAM_QOS)
+            self.streams.append(self.create_publisher(kind, topic, STREAM_QOS))
+            return self.streams[-1]
 
         self.p_angles = pub(WheelAngles, '/vd/sensors/wheel_angles')
         self.p_speed = pub(TwistStamped, '/vd/sensors/body_velocity')
@@ -191,7 +196,8 @@ class SimNode(Node):  # type: ignore[misc]
         self.wall_start: float | None = None
         self.first_sample_at = time.monotonic() + v['start_delay']
         self.wait_until = self.first_sample_at + v['wait_for_subscribers']
-        self._matched_at: float | None = None
+        self._counts: tuple[int, ...] = ()
+        self._counts_since = 0.0
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(_BATCH_PERIOD, self.publish_batch, clock=steady)
         self.create_timer(1.0, self.publish_diagnostics, clock=steady)
@@ -234,17 +240,22 @@ class SimNode(Node):  # type: ignore[misc]
             raise NodeFinished()
 
     def _subscribers_ready(self, now: float) -> bool:
-        """True once every data topic has a subscriber (or the wait is over)."""
-        streams = [p for p in self.publishers if p not in (self.p_clock, self.p_diag)]
-        missing = [p.topic_name for p in streams if p.get_subscription_count() == 0]
-        if not missing:
-            if self._matched_at is None:
-                # the publisher side matched; give the subscriber side a moment too
-                self._matched_at = now
-            return now - self._matched_at >= 0.3
+        """True once every data topic has a subscriber and discovery has settled.
+
+        Settled = the subscriber counts have not changed for _SETTLE_S: a topic whose first
+        subscriber (say the recorder) matched may still be waiting for the second (the
+        observer). Past `wait_for_subscribers` the run starts anyway.
+        """
+        counts = tuple(p.get_subscription_count() for p in self.streams)
+        if counts != self._counts:
+            self._counts, self._counts_since = counts, now
+        missing = [p.topic_name for p, n in zip(self.streams, counts, strict=True) if n == 0]
+        if not missing and now - self._counts_since >= _SETTLE_S:
+            return True
         if now < self.wait_until:
             return False
-        self.get_logger().info(f'starting without subscribers on {", ".join(missing)}')
+        if missing:
+            self.get_logger().info(f'starting without subscribers on {", ".join(missing)}')
         return True
 
     def _stamp(self, t: float) -> Any:
