@@ -1,6 +1,6 @@
 """The whole vd graph on a scenario, recorded to an MCAP bag (system ROS 2 with ros2 launch).
 
-    ros2 launch vd_observer_node demo.launch.py scenario:=paper_table1 rate_hz:=200.0 \
+    ros2 launch vd_observer_node demo.launch.py scenario:=paper_table1 rate_hz:=100.0 \
         real_time_factor:=1.0 bag:=vd_demo
 
 The same graph as `make demo` (scripts/demo.py), which does not need ros2 launch. The launch
@@ -29,7 +29,7 @@ def generate_launch_description() -> LaunchDescription:
     return LaunchDescription(
         [
             DeclareLaunchArgument('scenario', default_value='paper_table1'),
-            DeclareLaunchArgument('rate_hz', default_value='200.0'),
+            DeclareLaunchArgument('rate_hz', default_value='100.0'),
             DeclareLaunchArgument('real_time_factor', default_value='1.0'),
             DeclareLaunchArgument('bag', default_value='vd_demo'),
             Node(
