@@ -22,6 +22,7 @@ from vd_sim_node.ros_common import (
     STREAM_QOS,
     NodeFinished,
     ParamSpec,
+    SubscriberGate,
     declare_parameters,
     deliver_pending,
     ns_to_time,
@@ -92,7 +93,9 @@ class PlayerNode(Node):  # type: ignore[misc]
         self.t0_bag = self.messages[0].log_time_ns
         self.t0_wall: float | None = None
         self.start_at = time.monotonic() + v['start_delay']
-        self.wait_until = self.start_at + v['wait_for_subscribers']
+        self.gate = SubscriberGate(
+            list(self.publishers_by_topic.values()), self.start_at + v['wait_for_subscribers']
+        )
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(_PERIOD, self.play, clock=steady)
         span = (self.messages[-1].log_time_ns - self.t0_bag) * 1e-9
@@ -106,13 +109,10 @@ class PlayerNode(Node):  # type: ignore[misc]
         if now < self.start_at:
             return
         if self.t0_wall is None:
-            unmatched = [
-                t for t, p in self.publishers_by_topic.items() if p.get_subscription_count() == 0
-            ]
-            if unmatched and now < self.wait_until:
+            if not self.gate.ready(now):
                 return
-            if unmatched and self.loops == 0:
-                self.get_logger().warning(f'no subscriber yet on {", ".join(unmatched)}')
+            if self.gate.missing and self.loops == 0:
+                self.get_logger().warning(f'no subscriber yet on {", ".join(self.gate.missing)}')
             self.t0_wall = now
         due_ns = self.t0_bag + int((now - self.t0_wall) * self.rate * 1e9)
         last: Any = None

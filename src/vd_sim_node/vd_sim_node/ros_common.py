@@ -53,6 +53,7 @@ __all__ = [
     'InvalidParameterError',
     'NodeFinished',
     'ParamSpec',
+    'SubscriberGate',
     'dataclass_param_specs',
     'declare_parameters',
     'deliver_pending',
@@ -244,6 +245,34 @@ def _header(stamp: Time) -> Any:
     from std_msgs.msg import Header
 
     return Header(stamp=stamp)
+
+
+class SubscriberGate:
+    """Decides when a source node (simulator, player) may send its first message.
+
+    Open once every given publisher has a subscriber and the subscriber counts have not
+    changed for `settle_s` (a topic whose first subscriber, say the recorder, matched may still
+    be waiting for its second, the observer), or once `deadline` (monotonic [s]) has passed.
+    """
+
+    def __init__(self, publishers: Sequence[Any], deadline: float, settle_s: float = 1.0):
+        self.publishers = list(publishers)
+        self.deadline = deadline
+        self.settle_s = settle_s
+        self._counts: tuple[int, ...] = ()
+        self._since = 0.0
+        self.missing: list[str] = []
+
+    def ready(self, now: float) -> bool:
+        """True when the source may start; `missing` then names topics with no subscriber."""
+        counts = tuple(p.get_subscription_count() for p in self.publishers)
+        if counts != self._counts:
+            self._counts, self._since = counts, now
+        self.missing = [
+            p.topic_name for p, n in zip(self.publishers, counts, strict=True) if n == 0
+        ]
+        settled = not self.missing and now - self._since >= self.settle_s
+        return settled or now >= self.deadline
 
 
 def deliver_pending(node: Node, timeout_s: float = 2.0) -> bool:

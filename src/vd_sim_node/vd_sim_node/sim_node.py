@@ -46,6 +46,7 @@ from vd_sim_node.ros_common import (
     STREAM_QOS,
     NodeFinished,
     ParamSpec,
+    SubscriberGate,
     declare_parameters,
     deliver_pending,
     diagnostic_array,
@@ -117,7 +118,6 @@ PARAMS = [
 ]
 
 _BATCH_PERIOD = 0.01  # [s] wall time between publishing batches
-_SETTLE_S = 1.0  # [s] subscriber counts unchanged this long = discovery has settled
 _BATCH_BUDGET = 0.05  # [s] wall time one batch may take before yielding to the executor
 
 
@@ -195,9 +195,8 @@ class SimNode(Node):  # type: ignore[misc]
         self.publish_failures = 0
         self.wall_start: float | None = None
         self.first_sample_at = time.monotonic() + v['start_delay']
-        self.wait_until = self.first_sample_at + v['wait_for_subscribers']
-        self._counts: tuple[int, ...] = ()
-        self._counts_since = 0.0
+        self.wait_for_subscribers = v['wait_for_subscribers']
+        self.gate: SubscriberGate | None = None
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(_BATCH_PERIOD, self.publish_batch, clock=steady)
         self.create_timer(1.0, self.publish_diagnostics, clock=steady)
@@ -213,8 +212,13 @@ class SimNode(Node):  # type: ignore[misc]
         if now < self.first_sample_at:
             return
         if self.wall_start is None:
-            if not self._subscribers_ready(now):
+            if self.gate is None:
+                self.gate = SubscriberGate(self.streams, now + self.wait_for_subscribers)
+            if not self.gate.ready(now):
                 return
+            if self.gate.missing:
+                missing = ', '.join(self.gate.missing)
+                self.get_logger().info(f'starting without subscribers on {missing}')
             self.wall_start = now
         target = (now - self.wall_start) * self.rtf if self.rtf > 0 else float('inf')
         deadline = now + _BATCH_BUDGET
@@ -238,25 +242,6 @@ class SimNode(Node):  # type: ignore[misc]
             )
             deliver_pending(self)
             raise NodeFinished()
-
-    def _subscribers_ready(self, now: float) -> bool:
-        """True once every data topic has a subscriber and discovery has settled.
-
-        Settled = the subscriber counts have not changed for _SETTLE_S: a topic whose first
-        subscriber (say the recorder) matched may still be waiting for the second (the
-        observer). Past `wait_for_subscribers` the run starts anyway.
-        """
-        counts = tuple(p.get_subscription_count() for p in self.streams)
-        if counts != self._counts:
-            self._counts, self._counts_since = counts, now
-        missing = [p.topic_name for p, n in zip(self.streams, counts, strict=True) if n == 0]
-        if not missing and now - self._counts_since >= _SETTLE_S:
-            return True
-        if now < self.wait_until:
-            return False
-        if missing:
-            self.get_logger().info(f'starting without subscribers on {", ".join(missing)}')
-        return True
 
     def _stamp(self, t: float) -> Any:
         return ns_to_time(round(t * 1e9))
