@@ -125,21 +125,25 @@ class SpeedState(NamedTuple):
     valid: bool
 
 
-class WheelObserver:
-    """Four-wheel Levant differentiator on the unwrapped wheel angles."""
+def _differentiator(
+    config: ObserverConfig, lipschitz: float, n_channels: int
+) -> LevantDifferentiator:
+    """The Levant differentiator of one signal kind, with the shared settings of `config`."""
+    return LevantDifferentiator(
+        lipschitz,
+        n_channels=n_channels,
+        gains=config.gains,
+        discretization=config.discretization,
+        init=config.init,
+        max_gap=config.max_gap,
+        init_baseline=config.init_baseline,
+    )
 
-    def __init__(self, config: ObserverConfig) -> None:
-        """Create the observer from its settings."""
-        self._diff = LevantDifferentiator(
-            config.wheel_lipschitz,
-            n_channels=4,
-            gains=config.gains,
-            discretization=config.discretization,
-            init=config.init,
-            max_gap=config.max_gap,
-            init_baseline=config.init_baseline,
-        )
-        self.last: WheelState | None = None
+
+class _DifferentiatorObserver:
+    """What both observers share: one differentiator and its fault bookkeeping."""
+
+    _diff: LevantDifferentiator
 
     @property
     def rejected_count(self) -> int:
@@ -150,6 +154,15 @@ class WheelObserver:
     def faults(self) -> FaultCounter:
         """Input faults per kind (see `differentiator.LevantDifferentiator`)."""
         return self._diff.faults
+
+
+class WheelObserver(_DifferentiatorObserver):
+    """Four-wheel Levant differentiator on the unwrapped wheel angles."""
+
+    def __init__(self, config: ObserverConfig) -> None:
+        """Create the observer from its settings."""
+        self._diff = _differentiator(config, config.wheel_lipschitz, n_channels=4)
+        self.last: WheelState | None = None
 
     def update(self, t: float, angles: ArrayLike) -> WheelState:
         """Feed the wheel angles at stamp t.
@@ -169,31 +182,13 @@ class WheelObserver:
         return self.last
 
 
-class SpeedObserver:
+class SpeedObserver(_DifferentiatorObserver):
     """Levant differentiator on the measured body speed."""
 
     def __init__(self, config: ObserverConfig) -> None:
         """Create the observer from its settings."""
-        self._diff = LevantDifferentiator(
-            config.speed_lipschitz,
-            n_channels=1,
-            gains=config.gains,
-            discretization=config.discretization,
-            init=config.init,
-            max_gap=config.max_gap,
-            init_baseline=config.init_baseline,
-        )
+        self._diff = _differentiator(config, config.speed_lipschitz, n_channels=1)
         self.last: SpeedState | None = None
-
-    @property
-    def rejected_count(self) -> int:
-        """Samples rejected for a duplicate, slightly older or non-finite stamp."""
-        return self._diff.rejected_count
-
-    @property
-    def faults(self) -> FaultCounter:
-        """Input faults per kind (see `differentiator.LevantDifferentiator`)."""
-        return self._diff.faults
 
     def update(self, t: float, speed: float) -> SpeedState:
         """Feed the measured body speed [m/s] at stamp t [s]."""
