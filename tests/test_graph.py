@@ -140,7 +140,13 @@ def test_live_graph_estimates_every_sample_and_matches_the_offline_cascade(
         proc.wait_for(text, timeout=30)
     # start_delay: time for the observers' publishers and the recorder to discover each other
     player = procs.node(
-        'player', 'vd_observer_node', 'player_node', bag=str(bag), rate=1.0, start_delay=2.0
+        'player',
+        'vd_observer_node',
+        'player_node',
+        bag=str(bag),
+        rate=1.0,
+        start_delay=2.0,
+        min_subscribers=2,
     )
     assert wait_exit(player, 60) == 0, player.output()
     time.sleep(1.5)

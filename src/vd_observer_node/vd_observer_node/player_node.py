@@ -56,6 +56,14 @@ PARAMS = [
         low=0.0,
         high=600.0,
     ),
+    ParamSpec(
+        'min_subscribers',
+        1,
+        'subscribers each played topic must have before playing starts (e.g. 2 when a '
+        'recorder and an observer both listen)',
+        low=1,
+        high=1000,
+    ),
 ]
 
 _PERIOD = 0.002  # [s] publishing timer period
@@ -94,7 +102,9 @@ class PlayerNode(Node):  # type: ignore[misc]
         self.t0_wall: float | None = None
         self.start_at = time.monotonic() + v['start_delay']
         self.gate = SubscriberGate(
-            list(self.publishers_by_topic.values()), self.start_at + v['wait_for_subscribers']
+            list(self.publishers_by_topic.values()),
+            self.start_at + v['wait_for_subscribers'],
+            min_subscribers=v['min_subscribers'],
         )
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(_PERIOD, self.play, clock=steady)

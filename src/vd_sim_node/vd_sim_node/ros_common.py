@@ -250,13 +250,20 @@ def _header(stamp: Time) -> Any:
 class SubscriberGate:
     """Decides when a source node (simulator, player) may send its first message.
 
-    Open once every given publisher has a subscriber and the subscriber counts have not
+    Open once every given publisher has `min_subscribers` subscribers and the counts have not
     changed for `settle_s` (a topic whose first subscriber, say the recorder, matched may still
     be waiting for its second, the observer), or once `deadline` (monotonic [s]) has passed.
     """
 
-    def __init__(self, publishers: Sequence[Any], deadline: float, settle_s: float = 1.0):
+    def __init__(
+        self,
+        publishers: Sequence[Any],
+        deadline: float,
+        settle_s: float = 1.0,
+        min_subscribers: int = 1,
+    ):
         self.publishers = list(publishers)
+        self.min_subscribers = min_subscribers
         self.deadline = deadline
         self.settle_s = settle_s
         self._counts: tuple[int, ...] = ()
@@ -264,12 +271,14 @@ class SubscriberGate:
         self.missing: list[str] = []
 
     def ready(self, now: float) -> bool:
-        """True when the source may start; `missing` then names topics with no subscriber."""
+        """True when the source may start; `missing` then names topics short of subscribers."""
         counts = tuple(p.get_subscription_count() for p in self.publishers)
         if counts != self._counts:
             self._counts, self._since = counts, now
         self.missing = [
-            p.topic_name for p, n in zip(self.publishers, counts, strict=True) if n == 0
+            p.topic_name
+            for p, n in zip(self.publishers, counts, strict=True)
+            if n < self.min_subscribers
         ]
         settled = not self.missing and now - self._since >= self.settle_s
         return settled or now >= self.deadline
