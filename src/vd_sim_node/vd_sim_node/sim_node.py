@@ -5,7 +5,8 @@ Publishes (stamps = simulation time of the sample, starting at 0):
 * sensors: ``/vd/sensors/wheel_angles`` (WheelAngles), ``/vd/sensors/body_velocity``
   (TwistStamped), ``/vd/sensors/wheel_torques`` (WheelTorques);
 * truth: ``/vd/truth/{wheel_states, body_accel, body_velocity, tire_forces, friction,
-  resistances, slope}``;
+  resistances, slope, friction_potential}`` (the last: the tyre's Magic-Formula peak at the
+  true load and road μ per axle, confidence 1, see :mod:`vd_sim_node.vehicle.friction_truth`);
 * ``/clock`` once per publishing batch (so nodes with ``use_sim_time`` follow the simulation),
   and ``/diagnostics`` once per wall second.
 
@@ -32,6 +33,7 @@ from std_msgs.msg import Header
 
 from vd_msgs.msg import (
     Friction,
+    FrictionPotential,
     Resistances,
     Slope,
     TireForces,
@@ -53,6 +55,7 @@ from vd_sim_node.ros_common import (
     ns_to_time,
     run_node,
 )
+from vd_sim_node.vehicle.friction_truth import axle_mean, road_class, vehicle_road_class
 from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.scenario import Scenario, load_scenario
 from vd_sim_node.vehicle.simulation import SampleFrame, Simulator
@@ -188,6 +191,7 @@ class SimNode(Node):  # type: ignore[misc]
             self.t_friction = pub(Friction, '/vd/truth/friction')
             self.t_resist = pub(Resistances, '/vd/truth/resistances')
             self.t_slope = pub(Slope, '/vd/truth/slope')
+            self.t_potential = pub(FrictionPotential, '/vd/truth/friction_potential')
         self.p_clock = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
         self.p_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
 
@@ -289,6 +293,7 @@ class SimNode(Node):  # type: ignore[misc]
                 Resistances(header=header, rolling=f.rolling.tolist(), aero=float(f.aero))
             )
             self.t_slope.publish(Slope(header=header, angle=float(f.slope), valid=True))
+            self.t_potential.publish(_potential_message(header, f))
         self.published += 1
 
     def _log_progress(self, f: SampleFrame) -> None:
@@ -323,6 +328,19 @@ class SimNode(Node):  # type: ignore[misc]
                 self._stamp(self.sim.t), 'vd: simulator', 'sim_node', level, message, values
             )
         )
+
+
+def _potential_message(header: Header, f: SampleFrame) -> FrictionPotential:
+    """The true friction potential of one sample: axle means of the wheels' MF peaks."""
+    mu_max = axle_mean(f.peak_mu)
+    return FrictionPotential(
+        header=header,
+        mu_max=mu_max.tolist(),
+        slip_peak=axle_mean(f.peak_slip).tolist(),
+        confidence=[1.0, 1.0],
+        road_class=road_class(mu_max).tolist(),
+        vehicle_road_class=int(vehicle_road_class(mu_max)),
+    )
 
 
 def main(args: list[str] | None = None) -> int:

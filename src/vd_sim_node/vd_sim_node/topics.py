@@ -38,5 +38,6 @@ TRUTH: Final = {
     '/vd/truth/friction': 'vd_msgs/msg/Friction',
     '/vd/truth/resistances': 'vd_msgs/msg/Resistances',
     '/vd/truth/slope': 'vd_msgs/msg/Slope',
+    '/vd/truth/friction_potential': 'vd_msgs/msg/FrictionPotential',
 }
 CONTRACT: Final = {**SENSORS, **OBSERVER, **ESTIMATES, **ALERTS, **TRUTH}

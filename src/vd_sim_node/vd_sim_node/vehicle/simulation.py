@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 from scipy.integrate import odeint
 
 from vd_sim_node.errors import SimulationError
+from vd_sim_node.vehicle.friction_truth import friction_table, true_friction_potential
 from vd_sim_node.vehicle.model import WHEELS, VehicleModel
 from vd_sim_node.vehicle.params import VehicleParams
 from vd_sim_node.vehicle.powertrain import (
@@ -75,6 +76,9 @@ class SimResult:
         aero: shape (N,), [N], drag magnitude.
         slope: shape (N,), [rad], road slope.
         road_mu: shape (N,), [-], road friction scale.
+        peak_mu: shape (N, 4), [-], true friction potential: the MF peak mu at the wheel's
+            load and road_mu, on the side of the sign of fx (see :mod:`.friction_truth`).
+        peak_slip: shape (N, 4), [-], slip magnitude at that peak.
         throttle: shape (N,), [0..1], throttle applied to the engine (0 during a shift).
         brake_torque: shape (N, 4), [N m], brake torque magnitude per wheel.
         power_sources: shape (N,), [W], power of all bond-graph sources (engine, gravity).
@@ -103,6 +107,8 @@ class SimResult:
     aero: FloatArray
     slope: FloatArray
     road_mu: FloatArray
+    peak_mu: FloatArray
+    peak_slip: FloatArray
     throttle: FloatArray
     brake_torque: FloatArray
     power_sources: FloatArray
@@ -138,6 +144,8 @@ class SampleFrame:
     aero: float
     slope: float
     road_mu: float
+    peak_mu: FloatArray
+    peak_slip: FloatArray
     throttle: float
     brake_torque: FloatArray
     power_sources: float
@@ -205,6 +213,7 @@ class Simulator:
         self._sensors = SensorModel(scenario.sensors, seed)
         vp = self.model.params
         self._total_ratios = np.array(vp.gearbox.ratios) * vp.gearbox.final_drive
+        self._friction_table = friction_table(vp.tire)  # truth of the friction potential
         self._k = 0  # next sample index to compute
         self._t = 0.0  # time of the state self._x
         self._drv, self._x = self._initial_conditions()
@@ -516,6 +525,7 @@ class Simulator:
         gear = 0 if self._drv.clutch == ClutchMode.OPEN else self._drv.gear
         meas_angle, meas_speed, meas_torque = self._sensors.measure(angle, v, torque)
         full = np.full
+        potential = true_friction_potential(self._friction_table, fz, fx, full(M, u[3]))
         return {
             't': ts.copy(),
             'wheel_angle': meas_angle,
@@ -537,6 +547,8 @@ class Simulator:
             'aero': np.abs(out[m.out['aero']]),
             'slope': full(M, u[2]),
             'road_mu': full(M, u[3]),
+            'peak_mu': potential.mu_max,
+            'peak_slip': potential.slip_peak,
             'throttle': full(M, u[0]),
             'brake_torque': np.abs(brake_signed),
             'power_sources': out[c.n_outputs - 3],
@@ -565,6 +577,8 @@ _WHEEL_SERIES = frozenset(
         'mu',
         'slip',
         'rolling',
+        'peak_mu',
+        'peak_slip',
         'brake_torque',
     }
 )
