@@ -16,14 +16,69 @@ import numpy as np
 
 from ..bag.cdr_batch import encode_batch
 from ..bag.writer import BagWriter
-from .topics import ESTIMATE_TOPICS, SENSOR_TOPICS, TRUTH_TOPICS
+from .topics import ALERT_TOPICS, ESTIMATE_TOPICS, SENSOR_TOPICS, TRUTH_TOPICS
 
-__all__ = ['TopicValues', 'cascade_topics', 'sim_topics', 'write_topic_arrays_bag']
+__all__ = [
+    'TopicValues',
+    'alerts_topics',
+    'cascade_topics',
+    'encode_alerts',
+    'sim_topics',
+    'true_potential_values',
+    'write_topic_arrays_bag',
+]
 
 #: topic -> {dotted field name: array of shape (N,) or (N, K)}; fields not given are zero.
 TopicValues = Mapping[str, Mapping[str, np.ndarray]]
 
-_TYPES = {**SENSOR_TOPICS, **ESTIMATE_TOPICS, **TRUTH_TOPICS}
+_TYPES = {**SENSOR_TOPICS, **ESTIMATE_TOPICS, **ALERT_TOPICS, **TRUTH_TOPICS}
+_ALERTS_TYPE = 'vd_msgs/msg/Alerts'
+
+
+def _le(values: np.ndarray, dtype: str) -> np.ndarray:
+    """shape (N, ...) -> (N, bytes) little-endian bytes of each row."""
+    arr = np.ascontiguousarray(np.asarray(values).astype(dtype))
+    return arr.view(np.uint8).reshape(arr.shape[0], -1)
+
+
+def encode_alerts(
+    stamp_ns: np.ndarray, frame_id: str, values: Mapping[str, np.ndarray]
+) -> list[bytes]:
+    """CDR bytes of vd_msgs/msg/Alerts messages with all 12 channels, kind-major.
+
+    Args:
+        stamp_ns: shape (N,), int64 [ns] header stamps.
+        frame_id: header.frame_id.
+        values: 'level' (N, 3, 4) (0 OK, 1 warning, 2 critical); optional 'onset_ns' and
+            'detected_ns' (N, 3, 4) int64 [ns] (0 while inactive).
+    """
+    stamps = np.asarray(stamp_ns, dtype=np.int64)
+    n = stamps.shape[0]
+    level = np.asarray(values['level']).reshape(n, 12)
+    zeros = np.zeros((n, 12), dtype=np.int64)
+    onset = np.asarray(values.get('onset_ns', zeros), dtype=np.int64).reshape(n, 12)
+    detected = np.asarray(values.get('detected_ns', zeros), dtype=np.int64).reshape(n, 12)
+    frame = frame_id.encode() + b'\x00'
+    count_at = 4 + ((12 + len(frame) + 3) & ~3)  # CDR alignment from the encapsulation end
+    size = count_at + 4 + 20 * 12
+    out = np.zeros((n, size), dtype=np.uint8)
+    out[:, 1] = 1  # CDR little endian
+    out[:, 4:8] = _le(stamps // 1_000_000_000, '<i4')
+    out[:, 8:12] = _le(stamps % 1_000_000_000, '<u4')
+    out[:, 12:16] = _le(np.full(n, len(frame)), '<u4')
+    out[:, 16 : 16 + len(frame)] = np.frombuffer(frame, dtype=np.uint8)
+    out[:, count_at : count_at + 4] = _le(np.full(n, 12), '<u4')
+    channel = np.arange(12)
+    records = np.zeros((n, 12, 20), dtype=np.uint8)
+    records[:, :, 0] = channel // 4
+    records[:, :, 1] = channel % 4
+    records[:, :, 2] = level
+    records[:, :, 3] = level > 0
+    for k, stamp in ((4, onset), (12, detected)):
+        records[:, :, k : k + 4] = _le(stamp // 1_000_000_000, '<i4').reshape(n, 12, 4)
+        records[:, :, k + 4 : k + 8] = _le(stamp % 1_000_000_000, '<u4').reshape(n, 12, 4)
+    out[:, count_at + 4 :] = records.reshape(n, -1)
+    return [row.tobytes() for row in out]
 
 
 def _full_fields(msgtype: str, n: int, given: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
@@ -66,8 +121,11 @@ def write_topic_arrays_bag(
     for k, name in enumerate(names):
         topic_stamps = np.asarray((stamps or {}).get(name, stamp_ns), dtype=np.int64)
         n = topic_stamps.shape[0]
-        values = _full_fields(_TYPES[name], n, topics[name])
-        datas.extend(encode_batch(_TYPES[name], topic_stamps, frame_id, values))
+        if _TYPES[name] == _ALERTS_TYPE:
+            datas.extend(encode_alerts(topic_stamps, frame_id, topics[name]))
+        else:
+            values = _full_fields(_TYPES[name], n, topics[name])
+            datas.extend(encode_batch(_TYPES[name], topic_stamps, frame_id, values))
         logs.append(topic_stamps + int((log_delay_ns or {}).get(name, 0)))
         which.append(np.full(n, k, dtype=np.int64))
     log = np.concatenate(logs)
@@ -114,7 +172,80 @@ def sim_topics(sim: Any, *, truth: bool = True) -> dict[str, dict[str, np.ndarra
                 '/vd/truth/slope': {'angle': sim.slope, 'valid': np.ones(sim.t.shape, bool)},
             }
         )
+        if hasattr(sim, 'peak_mu'):
+            topics['/vd/truth/friction_potential'] = true_potential_values(
+                sim.peak_mu, sim.peak_slip
+            )
     return topics
+
+
+def true_potential_values(peak_mu: np.ndarray, peak_slip: np.ndarray) -> dict[str, np.ndarray]:
+    """``/vd/truth/friction_potential`` fields from the per-wheel true peaks, as the simulator
+    node publishes them (axle means, confidence 1, road class of the true μ_max).
+
+    Args:
+        peak_mu: shape (N, 4), [-] true MF peak μ per wheel (``SimResult.peak_mu``).
+        peak_slip: shape (N, 4), [-] slip at the peak (``SimResult.peak_slip``).
+    """
+    from vd_sim_node.vehicle.friction_truth import axle_mean, road_class, vehicle_road_class
+
+    mu_max = axle_mean(peak_mu)
+    return {
+        'mu_max': mu_max,
+        'slip_peak': axle_mean(peak_slip),
+        'confidence': np.ones_like(mu_max),
+        'road_class': road_class(mu_max).astype(np.uint8),
+        'vehicle_road_class': vehicle_road_class(mu_max).astype(np.uint8),
+    }
+
+
+def alerts_topics(
+    t0_ns: int,
+    level: np.ndarray,
+    onset: np.ndarray | None = None,
+    detected: np.ndarray | None = None,
+    mu_max: np.ndarray | None = None,
+    slip_peak: np.ndarray | None = None,
+    confidence: np.ndarray | None = None,
+    road_class: np.ndarray | None = None,
+) -> dict[str, dict[str, np.ndarray]]:
+    """``/vd/estimates/alerts`` (and ``friction_potential``) values from detector arrays.
+
+    Args:
+        t0_ns: [ns] stamp of t = 0 for the onset/detected stamps.
+        level: shape (N, 3, 4), alert levels.
+        onset: shape (N, 3, 4), [s] from t0 (nan while inactive), or None.
+        detected: same, or None.
+        mu_max, slip_peak, confidence: shape (N, 2), or None (no friction-potential topic
+            unless ``mu_max`` is given).
+        road_class: shape (N, 2) codes, or None.
+    """
+
+    def ns(seconds: np.ndarray | None) -> np.ndarray:
+        if seconds is None:
+            return np.zeros(level.shape, dtype=np.int64)
+        s = np.asarray(seconds, dtype=np.float64)
+        return np.where(np.isfinite(s), t0_ns + np.round(np.nan_to_num(s) * 1e9), 0).astype(
+            np.int64
+        )
+
+    out: dict[str, dict[str, np.ndarray]] = {
+        '/vd/estimates/alerts': {
+            'level': np.asarray(level),
+            'onset_ns': ns(onset),
+            'detected_ns': ns(detected),
+        }
+    }
+    if mu_max is not None:
+        m = np.asarray(mu_max, dtype=np.float64)
+        classes = np.zeros(m.shape, np.uint8) if road_class is None else np.asarray(road_class)
+        out['/vd/estimates/friction_potential'] = {
+            'mu_max': m,
+            'slip_peak': np.zeros_like(m) if slip_peak is None else np.asarray(slip_peak),
+            'confidence': np.zeros_like(m) if confidence is None else np.asarray(confidence),
+            'road_class': classes.astype(np.uint8),
+        }
+    return out
 
 
 def cascade_topics(result: Any, wheel_angle: np.ndarray) -> dict[str, dict[str, np.ndarray]]:

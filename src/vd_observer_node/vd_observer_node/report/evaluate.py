@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from .alerts import AlertSettings, AlertsSection, alert_data, evaluate_alerts_section
 from .errors import ReportInputError
 from .load import BagSeries, TopicSeries
 from .metrics import (
@@ -169,6 +170,7 @@ class AccuracyReport:
         convergence: slope convergence after each step.
         targets: target name -> (value, limit, met) for the issue's targets found.
         notes: what is missing from the bag and other caveats.
+        alerts: the alerts and friction-potential section (None: skipped, see ``notes``).
     """
 
     bag: str
@@ -182,6 +184,7 @@ class AccuracyReport:
     convergence: tuple[SlopeConvergence, ...]
     targets: dict[str, tuple[float, float, bool]]
     notes: tuple[str, ...]
+    alerts: AlertsSection | None = None
 
 
 @dataclass(frozen=True)
@@ -417,6 +420,7 @@ def evaluate(
     *,
     settings: EvaluationSettings | None = None,
     static_loads: FloatArray | None = None,
+    alert_settings: AlertSettings | None = None,
 ) -> tuple[AccuracyReport, list[Comparison]]:
     """Metrics of every estimated quantity against the truth in the bag.
 
@@ -425,6 +429,7 @@ def evaluate(
         settings: evaluation settings; default :class:`EvaluationSettings`.
         static_loads: shape (4,), [N], static wheel loads for the Fz percentage; default the
             median true Fz over the first ``settle_s`` seconds.
+        alert_settings: definitions of the alerts section; default :class:`AlertSettings`.
 
     Returns:
         (report, comparisons for the figures).
@@ -489,6 +494,14 @@ def evaluate(
     if missing_truth:
         notes.append('truth topics missing: ' + ', '.join(missing_truth))
     notes.extend(f'{name} skipped: {why}' for name, why in series.skipped.items())
+    data, alert_notes = alert_data(series)
+    section = (
+        None
+        if data is None
+        else evaluate_alerts_section(data, alert_settings or AlertSettings(), tuple(alert_notes))
+    )
+    if section is None:
+        notes.extend(alert_notes)
     report = AccuracyReport(
         bag=str(series.path),
         first_stamp_s=t0 * 1e-9,
@@ -501,6 +514,7 @@ def evaluate(
         convergence=tuple(convergence),
         targets=_targets(quantities),
         notes=tuple(notes),
+        alerts=section,
     )
     return report, comparisons
 

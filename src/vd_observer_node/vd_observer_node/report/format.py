@@ -8,6 +8,7 @@ import math
 import unicodedata
 from typing import Any
 
+from .alerts import AXLE_NAMES, AlertsSection, road_name
 from .evaluate import AccuracyReport, QuantityMetrics
 from .topics import WHEEL_NAMES
 
@@ -46,6 +47,17 @@ def report_json(report: AccuracyReport) -> str:
     }
     for q in data['quantities']:
         q['wheels'] = dict(zip(WHEEL_NAMES, q['wheels'], strict=False))
+    if report.alerts is not None:
+        data['alerts']['targets'] = {
+            name: {'value': value, 'limit': limit, 'met': met}
+            for name, (value, limit, met) in report.alerts.targets.items()
+        }
+        for e in data['alerts']['episodes'] + data['alerts']['false_alarms']:
+            e['wheel'] = WHEEL_NAMES[e['wheel']]
+        for m in data['alerts']['mu_max']:
+            m['axle'] = AXLE_NAMES[m['axle']]
+            m['true_road_class'] = road_name(m['true_road_class'])
+            m['road_class'] = road_name(m['road_class'])
     return json.dumps(_clean(data), indent=2, allow_nan=False) + '\n'
 
 
@@ -121,6 +133,66 @@ def _window_text(report: AccuracyReport) -> str:
     )
 
 
+def _ms(seconds: float | None) -> str:
+    return 'n/a' if seconds is None else f'{1e3 * seconds:.0f} ms'
+
+
+def _alert_summary(section: AlertsSection) -> str:
+    c = section.counts
+    goal = section.settings.delay_goal_s
+    return (
+        f'{c["episodes"]} truth episodes: {c["met"]} detected within {1e3 * goal:.0f} ms, '
+        f'{c["late"]} later, {c["missed"]} missed; {c["false_alarms"]} false alarms'
+    )
+
+
+def _episode_text(e: Any) -> str:
+    wheel = WHEEL_NAMES[e.wheel]
+    if e.delay_s is None:
+        return f'{e.kind} {wheel}: true onset {e.true_onset_s:.3f} s, NOT DETECTED'
+    return (
+        f'{e.kind} {wheel}: true onset {e.true_onset_s:.3f} s, delay {_ms(e.delay_s)} ({e.status})'
+    )
+
+
+def _segment_text(m: Any) -> str:
+    recent = (
+        f'while excited rms {m.recent_rms:.3f}, {m.recent_within_pct:.0f} % within 0.1; '
+        if m.recent_samples
+        else 'never excited for long, '
+    )
+    return (
+        f'mu_max {AXLE_NAMES[m.axle]} [{m.start_s:.2f}, {m.end_s:.2f}] s, true '
+        f'{m.true_mu_max:.3f} ({road_name(m.true_road_class)}): {recent}'
+        f'all after excitation rms {m.rms:.3f}, class {road_name(m.road_class)}'
+    )
+
+
+_TEXT_EPISODES = 8  # episode lines in the terminal table; the rest is in metrics.md
+
+
+def _alerts_text(section: AlertsSection) -> list[str]:
+    lines = [f'alerts ({section.samples} samples): {_alert_summary(section)}']
+    shown = [e for e in section.episodes if e.status != 'met'] + [
+        e for e in section.episodes if e.status == 'met'
+    ]
+    lines += ['  ' + _episode_text(e) for e in shown[:_TEXT_EPISODES]]
+    if len(shown) > _TEXT_EPISODES:
+        lines.append(f'  ... {len(shown) - _TEXT_EPISODES} more episodes in metrics.md')
+    if section.false_alarms:
+        stamps = ', '.join(
+            f'{a.kind} {WHEEL_NAMES[a.wheel]} {a.t_s:.2f} s' for a in section.false_alarms[:4]
+        )
+        more = len(section.false_alarms) - 4
+        lines.append(f'  false alarms at {stamps}' + (f' (+{more})' if more > 0 else ''))
+    lines += ['  ' + _segment_text(m) for m in section.mu_max]
+    for name, (value, limit, met) in section.targets.items():
+        verdict = 'met' if met else 'MISSED'
+        lines.append(f'  goal {name}: {_num(value)} (goal {limit:g}): {verdict}')
+    lines += [f'  note: {n}' for n in section.notes]
+    return lines
+
+
 def report_text(report: AccuracyReport) -> str:
     """A concise fixed-width table for the terminal."""
     rows = _rows(report)
@@ -141,6 +213,8 @@ def report_text(report: AccuracyReport) -> str:
     lines.extend(_convergence_lines(report))
     for name, (value, limit, met) in report.targets.items():
         lines.append(f'target {name}: {_num(value)} <= {limit:g}: {"met" if met else "MISSED"}')
+    if report.alerts is not None:
+        lines.extend(_alerts_text(report.alerts))
     lines.extend(f'note: {n}' for n in report.notes)
     return '\n'.join(lines) + '\n'
 
@@ -205,6 +279,93 @@ def report_markdown(report: AccuracyReport) -> str:
         ]
         for name, (value, limit, met) in report.targets.items():
             out.append(_md([name, _num(value), f'{limit:g}', 'yes' if met else '**no**']))
+    if report.alerts is not None:
+        out += _alerts_markdown(report.alerts)
     if report.notes:
         out += ['', '## Notes', ''] + [f'- {n}' for n in report.notes]
     return '\n'.join(out) + '\n'
+
+
+def _opt(value: float | None, digits: int = 3) -> str:
+    return '-' if value is None else f'{value:.{digits}f}'
+
+
+def _alerts_markdown(section: AlertsSection) -> list[str]:
+    cfg = section.settings
+    out = [
+        '',
+        '## Alerts: detection delay and false alarms',
+        '',
+        f'Truth (docs/alerts.md 4.1): traction at true slip >= the MF peak slip, lock at '
+        f'slip <= -peak slip, low_friction at |mu| >= {cfg.low_friction_ratio:g} x peak mu '
+        f'(peak at the true load and road mu, /vd/truth/friction_potential); onsets from '
+        f'{cfg.settle_s:g} s, merged within {cfg.merge_s:g} s; an activation up to '
+        f'{cfg.early_s:g} s early counts; false alarm: no relaxed truth '
+        f'({cfg.relaxed_scale:g} x thresholds) within [-{cfg.false_before_s:g}, '
+        f'+{cfg.false_after_s:g}] s. {section.samples} samples.',
+        '',
+        f'**{_alert_summary(section)}.**',
+    ]
+    if section.episodes:
+        out += [
+            '',
+            '| kind | wheel | true onset [s] | detected [s] | delay [ms] | status '
+            '| reported onset [s] |',
+            '|---|---|---|---|---|---|---|',
+        ]
+        for e in section.episodes:
+            delay = '-' if e.delay_s is None else f'{1e3 * e.delay_s:.1f}'
+            status = e.status if e.status == 'met' else f'**{e.status}**'
+            out.append(
+                f'| {e.kind} | {WHEEL_NAMES[e.wheel]} | {e.true_onset_s:.3f} | '
+                f'{_opt(e.detected_s)} | {delay} | {status} | {_opt(e.reported_onset_s)} |'
+            )
+    if section.false_alarms:
+        out += ['', '| false alarm: kind | wheel | at [s] |', '|---|---|---|']
+        out += [
+            f'| {a.kind} | {WHEEL_NAMES[a.wheel]} | {a.t_s:.3f} |' for a in section.false_alarms
+        ]
+    if section.mu_max:
+        out += [
+            '',
+            f'## Friction potential: mu_max error (goal |err| <= {cfg.mu_max_goal:g})',
+            '',
+            f'(a) while the axle was excited (true utilisation >= {cfg.excitation_ratio:g}) '
+            f'within the last {cfg.excitation_window_s:g} s, from '
+            f'{cfg.excitation_start_s:g} s after the first excitation; (b) every sample after '
+            'the first excitation of the constant-road segment.',
+            '',
+            '| axle | segment [s] | excited at [s] | true mu_max | true class | (a) samples '
+            '| (a) RMS | (a) within 0.1 | (b) mean estimate | (b) RMS | (b) max err '
+            '| (b) within 0.1 | last miss after [s] | confidence | class |',
+            '|' + '---|' * 15,
+        ]
+        for m in section.mu_max:
+            out.append(
+                _md(
+                    [
+                        AXLE_NAMES[m.axle],
+                        f'{m.start_s:.2f} - {m.end_s:.2f}',
+                        f'{m.excited_s:.3f}',
+                        f'{m.true_mu_max:.3f}',
+                        road_name(m.true_road_class),
+                        str(m.recent_samples),
+                        _num(m.recent_rms, 3),
+                        f'{_num(m.recent_within_pct, 3)} %',
+                        f'{m.estimate_mean:.3f}',
+                        f'{m.rms:.3f}',
+                        f'{m.max_abs:.3f}',
+                        f'{m.within_pct:.1f} %',
+                        f'{m.last_miss_s:.3f}',
+                        _num(m.confidence_mean, 2),
+                        road_name(m.road_class),
+                    ]
+                )
+            )
+    if section.targets:
+        out += ['', '| goal | value | limit | met |', '|---|---|---|---|']
+        for name, (value, limit, met) in section.targets.items():
+            out.append(_md([name, _num(value), f'{limit:g}', 'yes' if met else '**no**']))
+    if section.notes:
+        out += [''] + [f'- {n}' for n in section.notes]
+    return out

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
-from vd_sim_node.topics import ESTIMATES, OBSERVER, SENSORS, TRUTH
+from vd_sim_node.topics import ALERTS, ESTIMATES, OBSERVER, SENSORS, TRUTH
 
 __all__ = [
+    'ALERT_TOPIC',
+    'ALERT_TOPICS',
+    'ESTIMATED_POTENTIAL_TOPIC',
     'ESTIMATE_TOPICS',
     'GEAR_TOPIC',
     'SENSOR_TOPICS',
+    'TRUE_POTENTIAL_TOPIC',
     'TRUTH_TOPICS',
     'WHEEL_NAMES',
 ]
@@ -20,3 +24,9 @@ SENSOR_TOPICS = SENSORS
 GEAR_TOPIC = '/vd/sensors/wheel_torques'
 ESTIMATE_TOPICS = {**OBSERVER, **ESTIMATES}
 TRUTH_TOPICS = TRUTH
+#: Alerts and the friction-potential estimate (the alerts section of the report).
+ALERT_TOPICS = ALERTS
+ALERT_TOPIC = '/vd/estimates/alerts'
+ESTIMATED_POTENTIAL_TOPIC = '/vd/estimates/friction_potential'
+#: The simulator's true friction potential (MF peak at the true load and road mu).
+TRUE_POTENTIAL_TOPIC = '/vd/truth/friction_potential'

@@ -1,0 +1,719 @@
+"""Alerts and friction-potential section of the report: detection delay, false alarms, μ_max error.
+
+The metric functions are pure array functions, shared by ``vd report`` (arrays from a bag) and
+``scripts/eval_alerts.py`` (arrays from an in-memory ``simulate()`` run). Definitions
+(docs/alerts.md section 4.1), all against the simulator's truth of the friction potential
+(``/vd/truth/friction_potential``: the tyre's Magic-Formula peak at the true load and road μ):
+
+* truth condition per (kind, wheel): ``traction`` true slip >= peak slip; ``lock`` true slip
+  <= -peak slip; ``low_friction`` |true μ| >= 0.8 x peak μ. Scaled by 0.8 ("relaxed": the
+  tyre near, not past, its limit) to judge false alarms.
+* Episodes: runs of the truth condition from ``settle_s`` (0.5 s) on, a run starting within
+  1 s of the previous run's start merged into it. Delay = first activation (OK -> active) at
+  or after onset - 1 s, minus the onset (negative = earlier than the truth); none, or more
+  than 1 s late: missed. Goal <= 100 ms.
+* False alarm: an activation with no relaxed truth condition within [-0.5 s, +0.1 s] of it.
+* μ_max error = estimate - true μ_max per axle and constant-road segment, (a) at samples where
+  the axle's true utilisation |μ| / peak μ reached 0.5 within the last 0.5 s (from 0.1 s after
+  the first such sample), (b) every sample after the first excitation. Goal |err| <= 0.1.
+
+Kinds in the order of ``vd_msgs/Alert`` (KIND_TRACTION=0, KIND_LOCK=1, KIND_LOW_FRICTION=2);
+wheels FL=0, FR=1, RL=2, RR=3; axles 0 front, 1 rear. Time in seconds.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Final
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .load import BagSeries
+from .topics import ALERT_TOPIC, ESTIMATED_POTENTIAL_TOPIC, TRUE_POTENTIAL_TOPIC
+
+__all__ = [
+    'ALERT_KINDS',
+    'AXLE_NAMES',
+    'ROAD_NAMES',
+    'AlertData',
+    'AlertEpisode',
+    'AlertSettings',
+    'AlertsSection',
+    'FalseAlarm',
+    'MuMaxSegment',
+    'activation_indices',
+    'alert_data',
+    'axle_utilisation',
+    'evaluate_alerts',
+    'evaluate_alerts_section',
+    'false_alarms',
+    'mu_max_errors',
+    'road_name',
+    'score_episodes',
+    'segments_from_peaks',
+    'segments_from_road',
+    'truth_conditions',
+    'truth_episodes',
+]
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+IntArray = NDArray[np.int64]
+
+#: Alert kinds, index = vd_msgs/Alert KIND_* code.
+ALERT_KINDS: Final = ('traction', 'lock', 'low_friction')
+#: Road class names, index = vd_msgs/FrictionPotential ROAD_* code.
+ROAD_NAMES: Final = ('unknown', 'ice', 'snow', 'wet', 'dry')
+AXLE_NAMES: Final = ('front', 'rear')
+
+
+@dataclass(frozen=True)
+class AlertSettings:
+    """Definitions of the alert and μ_max metrics (docs/alerts.md section 4.1).
+
+    Attributes:
+        low_friction_ratio: low_friction truth: |μ| >= this x peak μ.
+        relaxed_scale: thresholds scale of the relaxed truth that excuses an activation.
+        settle_s: [s] true onsets before this (from the first stamp) are not scored.
+        merge_s: [s] an episode starting within this of the previous start is merged into it.
+        early_s: [s] an activation up to this long before the true onset counts.
+        max_delay_s: [s] later than this after the onset: missed.
+        false_before_s: [s] relaxed truth looked for this long before an activation...
+        false_after_s: [s] ...and this long after it.
+        delay_goal_s: [s] detection delay goal.
+        excitation_ratio: the axle counts as excited when a wheel's |μ| / peak μ reaches this.
+        excitation_window_s: [s] (a) counts samples excited within this window before them...
+        excitation_start_s: [s] ...from this long after the segment's first excitation.
+        mu_max_goal: [-] |μ_max error| goal.
+        road_jump: relative jump of the true μ_max of both axles, the same way within one
+            sample, that starts a new constant-road segment (bags carry no road_mu; a load
+            step moves the peak by a few per cent at most, and the axles oppositely).
+    """
+
+    low_friction_ratio: float = 0.8
+    relaxed_scale: float = 0.8
+    settle_s: float = 0.5
+    merge_s: float = 1.0
+    early_s: float = 1.0
+    max_delay_s: float = 1.0
+    false_before_s: float = 0.5
+    false_after_s: float = 0.1
+    delay_goal_s: float = 0.1
+    excitation_ratio: float = 0.5
+    excitation_window_s: float = 0.5
+    excitation_start_s: float = 0.1
+    mu_max_goal: float = 0.1
+    road_jump: float = 0.05
+
+
+@dataclass(frozen=True)
+class AlertEpisode:
+    """One truth episode of one (kind, wheel) channel and its detection.
+
+    Attributes:
+        kind: 'traction', 'lock' or 'low_friction'.
+        wheel: 0..3 (FL, FR, RL, RR).
+        true_onset_s: [s] first stamp of the truth condition.
+        detected_s: [s] stamp of the activation that detects it (None: missed).
+        delay_s: [s] detected - true onset (None: missed; negative: earlier than the truth).
+        reported_onset_s: [s] the alert's own onset stamp at the detection (None if unknown).
+        status: 'met' (delay <= goal), 'late' (detected within max_delay_s, after the goal),
+            'missed' (no activation, or more than max_delay_s late).
+    """
+
+    kind: str
+    wheel: int
+    true_onset_s: float
+    detected_s: float | None
+    delay_s: float | None
+    reported_onset_s: float | None
+    status: str
+
+
+@dataclass(frozen=True)
+class FalseAlarm:
+    """An activation with no relaxed truth condition near it.
+
+    Attributes:
+        kind: alert kind.
+        wheel: 0..3.
+        t_s: [s] stamp of the activation.
+    """
+
+    kind: str
+    wheel: int
+    t_s: float
+
+
+@dataclass(frozen=True)
+class MuMaxSegment:
+    """μ_max error of one axle over one constant-road segment, after the first excitation.
+
+    Attributes:
+        axle: 0 front, 1 rear.
+        start_index: first sample of the segment (index into the evaluated arrays).
+        start_s: [s] segment start.
+        end_s: [s] last stamp of the segment.
+        excited_s: [s] first stamp with the axle excited (utilisation >= excitation_ratio).
+        true_mu_max: [-] mean true μ_max from the first excitation on.
+        true_road_class: most frequent true road class code from the first excitation on.
+        recent_samples: samples of metric (a) (excited within the window).
+        recent_rms: [-] RMS error of (a) (nan if no sample).
+        recent_within_pct: [%] share of (a) within the goal (nan if no sample).
+        estimate_mean: [-] mean estimate from the first excitation on (b).
+        max_abs: [-] largest |error| of (b).
+        rms: [-] RMS error of (b).
+        within_pct: [%] share of (b) within the goal.
+        last_miss_s: [s] after the first excitation of the last sample outside the goal (0:
+            none).
+        confidence_mean: mean estimated confidence of (b) (nan if not available).
+        road_class: most frequent estimated road class code of (b) (-1 if not available).
+    """
+
+    axle: int
+    start_index: int
+    start_s: float
+    end_s: float
+    excited_s: float
+    true_mu_max: float
+    true_road_class: int
+    recent_samples: int
+    recent_rms: float
+    recent_within_pct: float
+    estimate_mean: float
+    max_abs: float
+    rms: float
+    within_pct: float
+    last_miss_s: float
+    confidence_mean: float
+    road_class: int
+
+
+@dataclass(frozen=True)
+class AlertsSection:
+    """The report section (metrics only; no arrays, so it serialises to JSON).
+
+    Attributes:
+        settings: the definitions used.
+        samples: evaluated stamps (common to alerts and truth).
+        episodes: every truth episode, kind-major then wheel then time.
+        false_alarms: every false alarm.
+        mu_max: μ_max error per axle and segment (empty without a friction-potential estimate).
+        counts: 'episodes', 'met', 'late', 'missed', 'false_alarms'.
+        targets: goal name -> (value, limit, met), as the accuracy targets.
+        notes: what was left out and why.
+    """
+
+    settings: AlertSettings
+    samples: int
+    episodes: tuple[AlertEpisode, ...]
+    false_alarms: tuple[FalseAlarm, ...]
+    mu_max: tuple[MuMaxSegment, ...]
+    counts: dict[str, int]
+    targets: dict[str, tuple[float, float, bool]]
+    notes: tuple[str, ...] = ()
+
+
+# -- truth ------------------------------------------------------------------------------------
+
+
+def truth_conditions(
+    slip: ArrayLike,
+    mu: ArrayLike,
+    peak_slip: ArrayLike,
+    peak_mu: ArrayLike,
+    *,
+    scale: float = 1.0,
+    low_friction_ratio: float = 0.8,
+) -> BoolArray:
+    """Truth condition of each alert kind per wheel.
+
+    Args:
+        slip: shape (N, 4), [-] true slip.
+        mu: shape (N, 4), [-] true utilised μ = Fx / Fz.
+        peak_slip: shape (N, 4), [-] true slip magnitude at the MF peak (side of the force).
+        peak_mu: shape (N, 4), [-] true MF peak μ.
+        scale: 1 for the truth, < 1 (0.8) for the relaxed condition of the false alarms.
+        low_friction_ratio: low_friction holds at |μ| >= scale x this x peak μ.
+
+    Returns:
+        Shape (N, 3, 4), bool, kinds in :data:`ALERT_KINDS` order.
+    """
+    s = np.asarray(slip, dtype=np.float64)
+    ps = np.asarray(peak_slip, dtype=np.float64)
+    pm = np.asarray(peak_mu, dtype=np.float64)
+    out: BoolArray = np.stack(
+        [
+            s >= scale * ps,
+            s <= -scale * ps,
+            np.abs(np.asarray(mu, dtype=np.float64)) >= scale * low_friction_ratio * pm,
+        ],
+        axis=1,
+    )
+    return out
+
+
+def _rising(mask: BoolArray) -> IntArray:
+    """Indices where a 1-D bool series becomes true (including index 0 if true there)."""
+    prev = np.concatenate([[False], mask[:-1]])
+    out: IntArray = np.flatnonzero(mask & ~prev).astype(np.int64)
+    return out
+
+
+def activation_indices(level: ArrayLike) -> IntArray:
+    """Indices of the OK -> active transitions of one channel (level (N,), 0 = OK)."""
+    return _rising(np.asarray(level) > 0)
+
+
+def truth_episodes(
+    t: ArrayLike, condition: ArrayLike, settings: AlertSettings | None = None
+) -> FloatArray:
+    """True onsets [s] of one channel: runs of the condition from ``settle_s`` on, merged.
+
+    Args:
+        t: shape (N,), [s] from the first stamp.
+        condition: shape (N,), bool truth condition of the channel.
+        settings: definitions (default :class:`AlertSettings`).
+    """
+    cfg = settings or AlertSettings()
+    tt = np.asarray(t, dtype=np.float64)
+    cond = np.asarray(condition, dtype=bool) & (tt >= cfg.settle_s)
+    starts = tt[_rising(cond)]
+    # a run within merge_s of the previous run's start is the same event with a short dip
+    keep = np.concatenate([[True], np.diff(starts) > cfg.merge_s]) if starts.size else starts
+    out: FloatArray = starts[keep.astype(bool)] if starts.size else starts
+    return out
+
+
+def score_episodes(
+    onsets: ArrayLike,
+    activations: ArrayLike,
+    settings: AlertSettings | None = None,
+) -> list[tuple[float, float | None, float | None, str]]:
+    """Detection of each true onset by the first activation at or after onset - early_s.
+
+    Args:
+        onsets: shape (E,), [s] true onsets of one channel.
+        activations: shape (A,), [s] activation stamps of that channel, increasing.
+        settings: definitions.
+
+    Returns:
+        Per onset: (onset, detection stamp or None, delay or None, status).
+    """
+    cfg = settings or AlertSettings()
+    acts = np.asarray(activations, dtype=np.float64)
+    out: list[tuple[float, float | None, float | None, str]] = []
+    for onset in np.asarray(onsets, dtype=np.float64).tolist():
+        k = int(np.searchsorted(acts, onset - cfg.early_s, side='left'))
+        if k >= acts.size:
+            out.append((onset, None, None, 'missed'))
+            continue
+        first = float(acts[k])
+        delay = first - onset
+        if delay > cfg.max_delay_s:
+            out.append((onset, None, None, 'missed'))
+            continue
+        out.append((onset, first, delay, 'met' if delay <= cfg.delay_goal_s else 'late'))
+    return out
+
+
+def false_alarms(
+    t: ArrayLike, activations: ArrayLike, relaxed: ArrayLike, settings: AlertSettings | None = None
+) -> FloatArray:
+    """Activations [s] of one channel with no relaxed truth within [-0.5 s, +0.1 s] of them.
+
+    Args:
+        t: shape (N,), [s].
+        activations: shape (A,), [s] activation stamps.
+        relaxed: shape (N,), bool relaxed truth condition of the channel.
+        settings: definitions.
+    """
+    cfg = settings or AlertSettings()
+    tt = np.asarray(t, dtype=np.float64)
+    rel = np.asarray(relaxed, dtype=bool)
+    # relaxed samples up to each stamp: a window holds one iff the count increases across it
+    cum = np.concatenate([[0], np.cumsum(rel)])
+    acts = np.asarray(activations, dtype=np.float64)
+    lo = np.searchsorted(tt, acts - cfg.false_before_s, side='left')
+    hi = np.searchsorted(tt, acts + cfg.false_after_s, side='right')
+    out: FloatArray = acts[cum[hi] == cum[lo]]
+    return out
+
+
+def evaluate_alerts(
+    t: ArrayLike,
+    truth: ArrayLike,
+    relaxed: ArrayLike,
+    level: ArrayLike,
+    onset: ArrayLike | None = None,
+    settings: AlertSettings | None = None,
+) -> tuple[list[AlertEpisode], list[FalseAlarm]]:
+    """Episodes with their detection, and false alarms, of all 12 channels.
+
+    Args:
+        t: shape (N,), [s] increasing.
+        truth: shape (N, 3, 4), bool, from :func:`truth_conditions`.
+        relaxed: shape (N, 3, 4), bool, the relaxed truth (scale 0.8).
+        level: shape (N, 3, 4), int alert level (0 OK).
+        onset: shape (N, 3, 4), [s] the alerts' own onset stamps (nan while inactive), or None.
+        settings: definitions.
+
+    Returns:
+        (episodes kind-major, wheel, time; false alarms in the same order).
+    """
+    cfg = settings or AlertSettings()
+    tt = np.asarray(t, dtype=np.float64)
+    tru = np.asarray(truth, dtype=bool)
+    rel = np.asarray(relaxed, dtype=bool)
+    lev = np.asarray(level)
+    ons = None if onset is None else np.asarray(onset, dtype=np.float64)
+    episodes: list[AlertEpisode] = []
+    alarms: list[FalseAlarm] = []
+    for kind, name in enumerate(ALERT_KINDS):
+        for wheel in range(4):
+            idx = activation_indices(lev[:, kind, wheel])
+            acts = tt[idx]
+            for stamp in false_alarms(tt, acts, rel[:, kind, wheel], cfg).tolist():
+                alarms.append(FalseAlarm(name, wheel, stamp))
+            onsets = truth_episodes(tt, tru[:, kind, wheel], cfg)
+            for true_onset, det, delay, status in score_episodes(onsets, acts, cfg):
+                reported = None
+                if det is not None and ons is not None:
+                    value = float(ons[int(np.searchsorted(tt, det)), kind, wheel])
+                    reported = value if math.isfinite(value) else None
+                episodes.append(
+                    AlertEpisode(name, wheel, true_onset, det, delay, reported, status)
+                )
+    return episodes, alarms
+
+
+# -- friction potential ----------------------------------------------------------------------
+
+
+def axle_utilisation(mu: ArrayLike, peak_mu: ArrayLike) -> FloatArray:
+    """True utilisation of each axle: the larger |μ| / peak μ of its two wheels.
+
+    Args:
+        mu: shape (N, 4), [-] true μ.
+        peak_mu: shape (N, 4), [-] true peak μ (floored at 1e-6: no division by zero).
+
+    Returns:
+        Shape (N, 2) (front, rear).
+    """
+    util = np.abs(np.asarray(mu, dtype=np.float64)) / np.maximum(
+        np.asarray(peak_mu, dtype=np.float64), 1e-6
+    )
+    out: FloatArray = np.maximum(util[:, 0::2], util[:, 1::2])
+    return out
+
+
+def segments_from_road(road_mu: ArrayLike) -> IntArray:
+    """Start indices of the constant-road segments from the true road_mu (in memory)."""
+    r = np.asarray(road_mu, dtype=np.float64)
+    out: IntArray = np.concatenate([[0], np.flatnonzero(np.diff(r) != 0.0) + 1]).astype(np.int64)
+    return out
+
+
+def segments_from_peaks(axle_mu_max: ArrayLike, road_jump: float = 0.05) -> IntArray:
+    """Start indices of constant-road segments from the true μ_max of both axles (bags).
+
+    A road step scales both axles' peak by the same factor within one sample; a load step
+    moves them by a few per cent and in opposite directions. A new segment starts where both
+    axles jump by more than ``road_jump`` (relative) the same way.
+
+    Args:
+        axle_mu_max: shape (N, 2), [-] true μ_max (front, rear).
+        road_jump: relative jump threshold.
+    """
+    m = np.maximum(np.asarray(axle_mu_max, dtype=np.float64), 1e-9)
+    ratio = np.log(m[1:] / m[:-1])
+    step = math.log1p(road_jump)
+    jump = ((ratio > step).all(axis=1)) | ((ratio < -step).all(axis=1))
+    out: IntArray = np.concatenate([[0], np.flatnonzero(jump) + 1]).astype(np.int64)
+    return out
+
+
+def _recently(mask: BoolArray, t: FloatArray, window: float) -> BoolArray:
+    """shape (N,), bool: mask held at some stamp in [t - window, t]."""
+    last = np.maximum.accumulate(np.where(mask, t, -np.inf))
+    out: BoolArray = t - last <= window
+    return out
+
+
+def _mode(values: IntArray) -> int:
+    return int(np.bincount(values).argmax()) if values.size else -1
+
+
+def mu_max_errors(
+    t: ArrayLike,
+    utilisation: ArrayLike,
+    true_mu_max: ArrayLike,
+    estimate: ArrayLike,
+    segment_starts: ArrayLike,
+    *,
+    confidence: ArrayLike | None = None,
+    road_class: ArrayLike | None = None,
+    true_road_class: ArrayLike | None = None,
+    settings: AlertSettings | None = None,
+) -> list[MuMaxSegment]:
+    """μ_max error per axle and constant-road segment after the axle's first excitation.
+
+    Args:
+        t: shape (N,), [s].
+        utilisation: shape (N, 2), true |μ| / peak μ per axle (:func:`axle_utilisation`).
+        true_mu_max: shape (N, 2), [-].
+        estimate: shape (N, 2), [-] estimated μ_max.
+        segment_starts: start indices of the segments (first 0), increasing.
+        confidence: shape (N, 2), estimated confidence, or None.
+        road_class: shape (N, 2), estimated road class codes, or None.
+        true_road_class: shape (N, 2), true road class codes, or None.
+        settings: definitions.
+
+    Returns:
+        One :class:`MuMaxSegment` per axle (front first) and segment with an excitation.
+    """
+    cfg = settings or AlertSettings()
+    tt = np.asarray(t, dtype=np.float64)
+    util = np.asarray(utilisation, dtype=np.float64)
+    truth = np.asarray(true_mu_max, dtype=np.float64)
+    est = np.asarray(estimate, dtype=np.float64)
+    starts = np.asarray(segment_starts, dtype=np.int64)
+    conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
+    klass = None if road_class is None else np.asarray(road_class, dtype=np.int64)
+    tclass = None if true_road_class is None else np.asarray(true_road_class, dtype=np.int64)
+    segments = np.split(np.arange(tt.size), starts[1:])
+    out: list[MuMaxSegment] = []
+    for axle in range(2):
+        for seg in segments:
+            if seg.size == 0:
+                continue
+            excited_mask = util[seg, axle] >= cfg.excitation_ratio
+            excited = np.flatnonzero(excited_mask)
+            if excited.size == 0:
+                continue
+            idx = seg[excited[0] :]
+            t_excited = float(tt[idx[0]])
+            err = est[idx, axle] - truth[idx, axle]
+            within = np.abs(err) <= cfg.mu_max_goal
+            bad = np.flatnonzero(~within)
+            recent = _recently(excited_mask, tt[seg], cfg.excitation_window_s)
+            recent_idx = seg[recent & (tt[seg] >= t_excited + cfg.excitation_start_s)]
+            err_recent = est[recent_idx, axle] - truth[recent_idx, axle]
+            has_recent = recent_idx.size > 0
+            recent_rms = math.sqrt(float(np.mean(err_recent**2))) if has_recent else math.nan
+            out.append(
+                MuMaxSegment(
+                    axle=axle,
+                    start_index=int(seg[0]),
+                    start_s=float(tt[seg[0]]),
+                    end_s=float(tt[seg[-1]]),
+                    excited_s=t_excited,
+                    true_mu_max=float(np.mean(truth[idx, axle])),
+                    true_road_class=-1 if tclass is None else _mode(tclass[idx, axle]),
+                    recent_samples=int(recent_idx.size),
+                    recent_rms=recent_rms,
+                    recent_within_pct=(
+                        100.0 * float(np.mean(np.abs(err_recent) <= cfg.mu_max_goal))
+                        if has_recent
+                        else math.nan
+                    ),
+                    estimate_mean=float(np.mean(est[idx, axle])),
+                    max_abs=float(np.abs(err).max()),
+                    rms=math.sqrt(float(np.mean(err**2))),
+                    within_pct=100.0 * float(within.mean()),
+                    last_miss_s=float(tt[idx[bad[-1]]] - t_excited) if bad.size else 0.0,
+                    confidence_mean=math.nan if conf is None else float(np.mean(conf[idx, axle])),
+                    road_class=-1 if klass is None else _mode(klass[idx, axle]),
+                )
+            )
+    return out
+
+
+# -- the report section from a bag -----------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class AlertData:
+    """The arrays of the section on common stamps (t from the bag's first stamp).
+
+    Attributes:
+        t: shape (N,), [s].
+        slip: shape (N, 4), [-] true slip.
+        mu: shape (N, 4), [-] true μ.
+        peak_slip: shape (N, 4), [-] true peak slip (the axle's value on both its wheels).
+        peak_mu: shape (N, 4), [-] true peak μ (the axle's value on both its wheels).
+        true_mu_max: shape (N, 2), [-].
+        true_road_class: shape (N, 2), codes.
+        level: shape (N, 3, 4), alert levels, or None (no alerts topic).
+        onset: shape (N, 3, 4), [s] the alerts' onset stamps (nan while inactive), or None.
+        mu_max: shape (N, 2), [-] estimated μ_max, or None (no friction-potential estimate).
+        confidence: shape (N, 2), or None.
+        road_class: shape (N, 2), estimated codes, or None.
+    """
+
+    t: FloatArray
+    slip: FloatArray
+    mu: FloatArray
+    peak_slip: FloatArray
+    peak_mu: FloatArray
+    true_mu_max: FloatArray
+    true_road_class: IntArray
+    level: IntArray | None = None
+    onset: FloatArray | None = None
+    mu_max: FloatArray | None = None
+    confidence: FloatArray | None = None
+    road_class: IntArray | None = None
+
+
+def _rows(stamps: np.ndarray, wanted: np.ndarray) -> np.ndarray:
+    """Row of each wanted stamp in a sorted stamp array (all present)."""
+    return np.searchsorted(stamps, wanted)
+
+
+def alert_data(series: BagSeries) -> tuple[AlertData | None, list[str]]:
+    """Pair the alerts, the friction-potential estimate and their truth by header stamp.
+
+    Returns:
+        (data, notes); data is None with a note saying why when the bag cannot be judged
+        (no true friction potential, or neither alerts nor a friction-potential estimate).
+    """
+    topics = series.topics
+    need = [TRUE_POTENTIAL_TOPIC, '/vd/truth/friction']
+    missing = [name for name in need if name not in topics]
+    if missing:
+        return None, [
+            'alerts section skipped: no '
+            + ' or '.join(missing)
+            + ' in the bag (recorded before the simulator published the true friction '
+            'potential, or without truth)'
+        ]
+    if ALERT_TOPIC not in topics and ESTIMATED_POTENTIAL_TOPIC not in topics:
+        return None, [
+            f'alerts section skipped: neither {ALERT_TOPIC} nor {ESTIMATED_POTENTIAL_TOPIC} '
+            'in the bag (run the alerts node; `vd replay` does not compute them yet)'
+        ]
+    notes: list[str] = []
+    present = [name for name in (*need, ALERT_TOPIC, ESTIMATED_POTENTIAL_TOPIC) if name in topics]
+    stamps = topics[present[0]].stamp_ns
+    for name in present[1:]:
+        stamps = np.intersect1d(stamps, topics[name].stamp_ns)
+    if stamps.size == 0:
+        return None, ['alerts section skipped: no stamp common to the alerts and the truth']
+    t0 = min(int(s.stamp_ns[0]) for s in topics.values())
+    t = (stamps - t0) * 1e-9
+    fric = topics['/vd/truth/friction']
+    fr = _rows(fric.stamp_ns, stamps)
+    pot = topics[TRUE_POTENTIAL_TOPIC]
+    pr = _rows(pot.stamp_ns, stamps)
+    true_mu_max = pot.values['mu_max'][pr].astype(np.float64)
+    true_slip_peak = pot.values['slip_peak'][pr].astype(np.float64)
+    wheel = np.array([0, 0, 1, 1])
+    data = AlertData(
+        t=t,
+        slip=fric.values['slip'][fr].astype(np.float64),
+        mu=fric.values['mu'][fr].astype(np.float64),
+        peak_slip=true_slip_peak[:, wheel],
+        peak_mu=true_mu_max[:, wheel],
+        true_mu_max=true_mu_max,
+        true_road_class=pot.values['road_class'][pr].astype(np.int64),
+    )
+    kw: dict[str, np.ndarray] = {}
+    if ALERT_TOPIC in topics:
+        alerts = topics[ALERT_TOPIC]
+        ar = _rows(alerts.stamp_ns, stamps)
+        kw['level'] = alerts.values['level'][ar].astype(np.int64)
+        onset_ns = alerts.values['onset_ns'][ar]
+        kw['onset'] = np.where(onset_ns > 0, (onset_ns - t0) * 1e-9, np.nan)
+    else:
+        notes.append(f'{ALERT_TOPIC} missing: no alert delays or false alarms')
+    if ESTIMATED_POTENTIAL_TOPIC in topics:
+        est = topics[ESTIMATED_POTENTIAL_TOPIC]
+        er = _rows(est.stamp_ns, stamps)
+        kw['mu_max'] = est.values['mu_max'][er].astype(np.float64)
+        kw['confidence'] = est.values['confidence'][er].astype(np.float64)
+        kw['road_class'] = est.values['road_class'][er].astype(np.int64)
+    else:
+        notes.append(f'{ESTIMATED_POTENTIAL_TOPIC} missing: no μ_max error')
+    dropped = topics[TRUE_POTENTIAL_TOPIC].stamp_ns.size - stamps.size
+    if dropped > 0:
+        notes.append(f'alerts section: {dropped} truth stamps without a matching estimate')
+    return replace(data, **kw), notes
+
+
+def evaluate_alerts_section(
+    data: AlertData, settings: AlertSettings | None = None, notes: tuple[str, ...] = ()
+) -> AlertsSection:
+    """All metrics of the section from the paired arrays."""
+    cfg = settings or AlertSettings()
+    episodes: list[AlertEpisode] = []
+    alarms: list[FalseAlarm] = []
+    if data.level is not None:
+        truth = truth_conditions(
+            data.slip,
+            data.mu,
+            data.peak_slip,
+            data.peak_mu,
+            low_friction_ratio=cfg.low_friction_ratio,
+        )
+        relaxed = truth_conditions(
+            data.slip,
+            data.mu,
+            data.peak_slip,
+            data.peak_mu,
+            scale=cfg.relaxed_scale,
+            low_friction_ratio=cfg.low_friction_ratio,
+        )
+        episodes, alarms = evaluate_alerts(data.t, truth, relaxed, data.level, data.onset, cfg)
+    segments: list[MuMaxSegment] = []
+    if data.mu_max is not None:
+        segments = mu_max_errors(
+            data.t,
+            axle_utilisation(data.mu, data.peak_mu),
+            data.true_mu_max,
+            data.mu_max,
+            segments_from_peaks(data.true_mu_max, cfg.road_jump),
+            confidence=data.confidence,
+            road_class=data.road_class,
+            true_road_class=data.true_road_class,
+            settings=cfg,
+        )
+    counts = {
+        'episodes': len(episodes),
+        'met': sum(e.status == 'met' for e in episodes),
+        'late': sum(e.status == 'late' for e in episodes),
+        'missed': sum(e.status == 'missed' for e in episodes),
+        'false_alarms': len(alarms),
+    }
+    targets: dict[str, tuple[float, float, bool]] = {}
+    if data.level is not None:
+        delays = [e.delay_s for e in episodes if e.delay_s is not None]
+        if episodes:
+            worst = max(delays) if len(delays) == len(episodes) else math.inf
+            targets['alert delay, worst episode [s]'] = (
+                worst,
+                cfg.delay_goal_s,
+                bool(worst <= cfg.delay_goal_s),
+            )
+        targets['false alarms [-]'] = (float(len(alarms)), 0.0, not alarms)
+    recent = [s for s in segments if s.recent_samples]
+    if recent:
+        n = sum(s.recent_samples for s in recent)
+        share = sum(s.recent_within_pct * s.recent_samples for s in recent) / n
+        targets['mu_max within 0.1 while excited [%]'] = (share, 100.0, bool(share >= 100.0))
+    return AlertsSection(
+        settings=cfg,
+        samples=int(data.t.size),
+        episodes=tuple(episodes),
+        false_alarms=tuple(alarms),
+        mu_max=tuple(segments),
+        counts=counts,
+        targets=targets,
+        notes=notes,
+    )
+
+
+def road_name(code: int) -> str:
+    """Name of a road class code ('n/a' for -1 or an unknown code)."""
+    return ROAD_NAMES[code] if 0 <= code < len(ROAD_NAMES) else 'n/a'
