@@ -9,10 +9,13 @@ docs/alerts.md):
 
 * per (kind, wheel) with a true onset: true onset, detection stamp (alert becomes active),
   delay = detection - true onset (goal <= 100 ms), and the reported onset stamp;
-* alerts that became active with no true onset on that (kind, wheel): false alarms
-  (goal on paper_table1: none);
+* activations with no relaxed truth (0.8 x the thresholds) within [-0.5, +0.1] s: false
+  alarms (goal on paper_table1: none);
 * per axle and road segment where the tyre was truly excited beyond half its peak: mu_max
   error against the Magic Formula peak at the true road_mu and load (goal |err| <= 0.1).
+
+The truth (``SimResult.peak_mu`` / ``peak_slip``, from ``vd_sim_node.vehicle.friction_truth``)
+and the metrics (``vd_observer_node.report.alerts``) are the ones ``vd report`` uses on a bag.
 
 Usage:
     python scripts/eval_alerts.py [--scenarios launch_low_mu,braking_low_mu_hard,paper_table1]
@@ -49,7 +52,16 @@ from vd_observer_node.friction_potential import (  # noqa: E402
     FrictionPotentialEstimator,
 )
 from vd_observer_node.observer import ObserverConfig  # noqa: E402
+from vd_observer_node.report.alerts import (  # noqa: E402
+    AlertSettings,
+    axle_utilisation,
+    evaluate_alerts,
+    mu_max_errors,
+    segments_from_road,
+    truth_conditions,
+)
 from vd_observer_node.vehicle import load_estimator_vehicle  # noqa: E402
+from vd_sim_node.vehicle.friction_truth import axle_mean, road_class  # noqa: E402
 
 VEHICLE_FILE = ROOT / 'src' / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
 SCENARIO_DIR = ROOT / 'src' / 'vd_sim_node' / 'config' / 'scenarios'
@@ -60,36 +72,8 @@ TUNED: dict[str, dict[str, float]] = {
     'ideal': {'wheel_lipschitz': 10000.0, 'speed_lipschitz': 2000.0, 'slope_filter_tau': 0.05},
     'noisy': {'wheel_lipschitz': 300.0, 'speed_lipschitz': 20.0, 'slope_filter_tau': 0.1},
 }
-#: Truth onset of low_friction: |mu| reaches this fraction of the true peak.
-LOW_FRICTION_TRUTH_RATIO = 0.8
-#: Truth excitation for the mu_max error: utilisation beyond this fraction of the peak.
-EXCITATION_RATIO = 0.5
-#: Scale of the truth thresholds below which an alert counts as a false alarm.
-RELAXED_SCALE = 0.8
-DELAY_GOAL = 0.1
-MU_MAX_GOAL = 0.1
-
-
-def unit_road_peaks(tire: Any, fz: np.ndarray) -> dict[str, np.ndarray]:
-    """MF peak mu and slip at road_mu = 1 for loads fz (any shape), driving and braking side.
-
-    With the road scale only in D (the slip stiffness unchanged), Fx(k; r) = r Fx(k / r; 1),
-    so the peak mu and its slip both scale with the road_mu r.
-    """
-    from vd_sim_node.vehicle.tire import magic_formula_fx
-
-    grid_fz = np.linspace(200.0, 6000.0, 59)
-    kappa = np.linspace(0.0, 0.6, 6001)
-    out: dict[str, list[float]] = {'mu_drive': [], 's_drive': [], 'mu_brake': [], 's_brake': []}
-    for load in grid_fz:
-        drive = magic_formula_fx(kappa, load, 1.0, tire) / load
-        brake = -magic_formula_fx(-kappa, load, 1.0, tire) / load
-        out['mu_drive'].append(float(drive.max()))
-        out['s_drive'].append(float(kappa[np.argmax(drive)]))
-        out['mu_brake'].append(float(brake.max()))
-        out['s_brake'].append(float(kappa[np.argmax(brake)]))
-    clipped = np.clip(fz, grid_fz[0], grid_fz[-1])
-    return {k: np.interp(clipped, grid_fz, np.asarray(v)) for k, v in out.items()}
+#: Truth and metric definitions (docs/alerts.md 4.1), shared with `vd report`.
+SETTINGS = AlertSettings()
 
 
 def run_detectors(
@@ -138,156 +122,88 @@ def run_detectors(
     }
 
 
-def truth_conditions(sim: Any, peaks: dict[str, np.ndarray], scale: float = 1.0) -> np.ndarray:
-    """shape (N, 3, 4), bool: the truth condition of each alert kind per wheel.
-
-    traction: true slip >= scale * slip at the MF peak (driving side); lock: true slip <=
-    -scale * peak slip (braking side); low_friction: |true mu| >= scale * 0.8 * MF peak mu,
-    all at the true road_mu and wheel load. scale < 1 gives the relaxed condition used to
-    judge false alarms.
-    """
-    r = sim.road_mu[:, None]
-    s_drive = r * peaks['s_drive']
-    s_brake = r * peaks['s_brake']
-    mu_peak = np.where(sim.fx >= 0.0, r * peaks['mu_drive'], r * peaks['mu_brake'])
-    cond = np.zeros((sim.t.size, 3, 4), dtype=bool)
-    cond[:, 0] = sim.slip >= scale * s_drive
-    cond[:, 1] = sim.slip <= -scale * s_brake
-    cond[:, 2] = np.abs(sim.mu) >= scale * LOW_FRICTION_TRUTH_RATIO * mu_peak
-    return cond
-
-
-def first_true(mask: np.ndarray, t: np.ndarray) -> float:
-    """First stamp where mask holds (nan if never)."""
-    idx = np.flatnonzero(mask)
-    return float(t[idx[0]]) if idx.size else math.nan
-
-
-def activations(det: np.ndarray, level: np.ndarray, t: np.ndarray) -> list[tuple[float, float]]:
-    """(detected stamp, onset) of each OK -> active transition of one channel."""
-    active = level > 0
-    starts = np.flatnonzero(active & ~np.concatenate([[False], active[:-1]]))
-    return [(float(t[i]), float(det[i])) for i in starts]
+def truth_and_relaxed(sim: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Truth and relaxed truth conditions (N, 3, 4) from the simulator's friction potential."""
+    args = (sim.slip, sim.mu, sim.peak_slip, sim.peak_mu)
+    ratio = SETTINGS.low_friction_ratio
+    truth = truth_conditions(*args, low_friction_ratio=ratio)
+    relaxed = truth_conditions(*args, scale=SETTINGS.relaxed_scale, low_friction_ratio=ratio)
+    return truth, relaxed
 
 
 def report_alerts(
     sim: Any, det: dict[str, np.ndarray], truth: np.ndarray, relaxed: np.ndarray
 ) -> dict[str, int]:
-    """Print delays and false alarms; return counts.
+    """Print delays and false alarms per (kind, wheel); return counts.
 
-    A truth episode is a run of samples where the truth condition holds; its delay is the
-    first activation at or after (onset - 1 s) minus the onset. An activation is a false alarm
-    when the relaxed truth condition (the tyre near, not past, the limit) does not hold
-    anywhere in [activation - 0.5 s, activation + 0.1 s].
+    Definitions in docs/alerts.md 4.1, computed by the report's shared
+    ``vd_observer_node.report.alerts.evaluate_alerts``.
     """
-    t = sim.t
-    counts = {'delays_met': 0, 'delays_missed': 0, 'false_alarms': 0, 'missed': 0}
-    for kind, name in enumerate(ALERT_KINDS):
+    episodes, alarms = evaluate_alerts(sim.t, truth, relaxed, det['level'], det['onset'], SETTINGS)
+    counts = {
+        'delays_met': sum(e.status == 'met' for e in episodes),
+        'delays_missed': sum(e.status == 'late' for e in episodes),
+        'false_alarms': len(alarms),
+        'missed': sum(e.status == 'missed' for e in episodes),
+    }
+    goal_ms = 1e3 * SETTINGS.delay_goal_s
+    for name in ALERT_KINDS:
         for wheel in range(4):
-            cond = truth[:, kind, wheel] & (t >= 0.5)
-            acts = activations(det['detected'][:, kind, wheel], det['level'][:, kind, wheel], t)
             label = f'{name:12s} wheel {["FL", "FR", "RL", "RR"][wheel]}'
-            false = [
-                a
-                for a in acts
-                if not np.any(relaxed[(t >= a[0] - 0.5) & (t <= a[0] + 0.1), kind, wheel])
-            ]
+            false = [a.t_s for a in alarms if a.kind == name and a.wheel == wheel]
             if false:
-                counts['false_alarms'] += len(false)
-                stamps = ', '.join(f'{a[0]:.3f}' for a in false[:5])
+                stamps = ', '.join(f'{a:.3f}' for a in false[:5])
                 print(f'   {label}: FALSE ALARM x{len(false)} at {stamps} s')
-            starts = np.flatnonzero(cond & ~np.concatenate([[False], cond[:-1]]))
-            episodes = [float(t[i]) for i in starts]
-            # merge episodes closer than 1 s (one event with a short dip)
-            merged = [e for i, e in enumerate(episodes) if i == 0 or e - episodes[i - 1] > 1.0]
-            for onset in merged:
-                hits = [a for a in acts if a[0] >= onset - 1.0]
-                if not hits:
-                    counts['missed'] += 1
-                    print(f'   {label}: true onset {onset:.3f} s, NOT DETECTED')
+            for e in episodes:
+                if e.kind != name or e.wheel != wheel:
                     continue
-                first = hits[0][0]
-                delay = first - onset
-                if delay > 1.0:
-                    counts['missed'] += 1
-                    print(f'   {label}: true onset {onset:.3f} s, NOT DETECTED within 1 s')
+                if e.detected_s is None or e.delay_s is None:
+                    print(
+                        f'   {label}: true onset {e.true_onset_s:.3f} s, NOT DETECTED within 1 s'
+                    )
                     continue
-                k = int(np.searchsorted(t, first))
-                reported_onset = float(det['onset'][k, kind, wheel])
-                ok = delay <= DELAY_GOAL
-                counts['delays_met' if ok else 'delays_missed'] += 1
+                reported = math.nan if e.reported_onset_s is None else e.reported_onset_s
                 print(
-                    f'   {label}: true onset {onset:.3f} s, detected {first:.3f} s, '
-                    f'delay {1e3 * delay:6.1f} ms ({"MET" if ok else "MISSED"} <= 100 ms), '
-                    f'reported onset {reported_onset:.3f} s'
+                    f'   {label}: true onset {e.true_onset_s:.3f} s, '
+                    f'detected {e.detected_s:.3f} s, '
+                    f'delay {1e3 * e.delay_s:6.1f} ms '
+                    f'({"MET" if e.status == "met" else "MISSED"} <= {goal_ms:.0f} ms), '
+                    f'reported onset {reported:.3f} s'
                 )
     return counts
 
 
-def report_mu_max(sim: Any, det: dict[str, np.ndarray], peaks: dict[str, np.ndarray]) -> None:
+def report_mu_max(sim: Any, det: dict[str, np.ndarray]) -> None:
     """Print the mu_max error per axle and road segment after true excitation."""
-    t = sim.t
-    r = sim.road_mu
-    util = np.abs(sim.mu) / np.maximum(
-        np.where(sim.fx >= 0.0, peaks['mu_drive'], peaks['mu_brake']) * r[:, None], 1e-6
+    true_mu_max = axle_mean(sim.peak_mu)
+    segments = mu_max_errors(
+        sim.t,
+        axle_utilisation(sim.mu, sim.peak_mu),
+        true_mu_max,
+        det['mu_max'],
+        segments_from_road(sim.road_mu),
+        confidence=det['conf'],
+        road_class=det['road'],
+        true_road_class=road_class(true_mu_max),
+        settings=SETTINGS,
     )
-    seg_edges = np.flatnonzero(np.diff(r) != 0.0) + 1
-    segments = np.split(np.arange(t.size), seg_edges)
-    for axle, wheels in ((0, [0, 1]), (1, [2, 3])):
-        true_peak = (
-            r
-            * 0.5
-            * (
-                np.where(
-                    sim.fx[:, wheels[0]] >= 0,
-                    peaks['mu_drive'][:, wheels[0]],
-                    peaks['mu_brake'][:, wheels[0]],
-                )
-                + np.where(
-                    sim.fx[:, wheels[1]] >= 0,
-                    peaks['mu_drive'][:, wheels[1]],
-                    peaks['mu_brake'][:, wheels[1]],
-                )
-            )
+    for m in segments:
+        recent_text = (
+            f'while excited in the last {SETTINGS.excitation_window_s:g} s (from '
+            f'+{SETTINGS.excitation_start_s:g} s): |err| rms {m.recent_rms:.3f}, '
+            f'{m.recent_within_pct:.1f} % within {SETTINGS.mu_max_goal:g}; '
+            if m.recent_samples
+            else ''
         )
-        for seg in segments:
-            excited = np.flatnonzero(util[seg][:, wheels].max(axis=1) >= EXCITATION_RATIO)
-            if excited.size == 0:
-                continue
-            idx = seg[excited[0] :]
-            err = det['mu_max'][idx, axle] - true_peak[idx]
-            within = np.abs(err) <= MU_MAX_GOAL
-            bad = np.flatnonzero(~within)
-            settle = float(t[idx[bad[-1]]] - t[idx[0]]) if bad.size else 0.0
-            recent = _recently(util[seg][:, wheels].max(axis=1) >= EXCITATION_RATIO, t[seg], 0.5)
-            recent_idx = seg[recent & (t[seg] >= t[idx[0]] + 0.1)]
-            err_recent = det['mu_max'][recent_idx, axle] - true_peak[recent_idx]
-            recent_text = (
-                f'while excited in the last 0.5 s (from +0.1 s): |err| rms '
-                f'{math.sqrt(float(np.mean(err_recent**2))):.3f}, '
-                f'{100 * float(np.mean(np.abs(err_recent) <= MU_MAX_GOAL)):.1f} % within 0.1; '
-                if recent_idx.size
-                else ''
-            )
-            print(
-                f'   mu_max axle {"front" if axle == 0 else "rear"} road_mu {r[seg[0]]:.2f} '
-                f'[{t[seg[0]]:.2f}, {t[seg[-1]]:.2f}] s: excited at {t[idx[0]]:.3f} s, '
-                f'true peak {np.mean(true_peak[idx]):.3f}, {recent_text}all after: estimate mean '
-                f'{np.mean(det["mu_max"][idx, axle]):.3f}, |err| max {np.abs(err).max():.3f}, '
-                f'rms {math.sqrt(float(np.mean(err**2))):.3f}, '
-                f'{100 * within.mean():.1f} % within 0.1 '
-                f'(last miss {settle:.3f} s after excitation), '
-                f'confidence mean {np.mean(det["conf"][idx, axle]):.2f}, '
-                f'class {ROAD_CLASS_NAMES[int(np.bincount(det["road"][idx, axle]).argmax())]}'
-            )
-
-
-def _recently(mask: np.ndarray, t: np.ndarray, window: float) -> np.ndarray:
-    """shape (N,), bool: mask held at some stamp in [t - window, t]."""
-    last = np.where(mask, t, -np.inf)
-    last = np.maximum.accumulate(last)
-    out: np.ndarray = t - last <= window
-    return out
+        print(
+            f'   mu_max axle {"front" if m.axle == 0 else "rear"} road_mu '
+            f'{sim.road_mu[m.start_index]:.2f} [{m.start_s:.2f}, {m.end_s:.2f}] s: excited at '
+            f'{m.excited_s:.3f} s, true peak {m.true_mu_max:.3f}, {recent_text}all after: '
+            f'estimate mean {m.estimate_mean:.3f}, |err| max {m.max_abs:.3f}, rms {m.rms:.3f}, '
+            f'{m.within_pct:.1f} % within {SETTINGS.mu_max_goal:g} '
+            f'(last miss {m.last_miss_s:.3f} s after excitation), '
+            f'confidence mean {m.confidence_mean:.2f}, class {ROAD_CLASS_NAMES[m.road_class]}'
+        )
 
 
 def main() -> None:
@@ -332,16 +248,14 @@ def main() -> None:
             t0 = time.perf_counter()
             det = run_detectors(est, sim.body_speed, vehicle.effective_radius, alert_cfg, fric_cfg)
             cost = (time.perf_counter() - t0) / sim.t.size
-            peaks = unit_road_peaks(sim_vehicle.tire, sim.fz)
-            truth = truth_conditions(sim, peaks)
-            relaxed = truth_conditions(sim, peaks, RELAXED_SCALE)
+            truth, relaxed = truth_and_relaxed(sim)
             print(
                 f'== {name} / {case}: encoder {counts or "ideal"} counts/rev, speed noise '
                 f'{noise} m/s, {sim.t.size} samples; friction + alerts '
                 f'{1e6 * cost:.0f} us/sample'
             )
             result = report_alerts(sim, det, truth, relaxed)
-            report_mu_max(sim, det, peaks)
+            report_mu_max(sim, det)
             for key, value in result.items():
                 totals[f'{name}/{key}'] = totals.get(f'{name}/{key}', 0) + value
             print(f'   summary: {result}')
