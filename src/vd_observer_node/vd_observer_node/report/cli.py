@@ -32,7 +32,8 @@ def add_report_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentPa
         'report',
         help='accuracy of the estimates against the truth in a bag (metrics + figures)',
         description='Compare /vd/observer/* and /vd/estimates/* with /vd/truth/* (paired by '
-        'header stamp); write metrics.json, metrics.md and PNG figures.',
+        'header stamp); judge the alerts and the friction potential against '
+        '/vd/truth/friction_potential; write metrics.json, metrics.md and PNG figures.',
     )
     parser.add_argument('bag', type=Path, help='bag folder or .mcap file with truth topics')
     parser.add_argument(
@@ -87,6 +88,13 @@ def _run(args: argparse.Namespace) -> int:
         from .figures import write_figures
 
         figures = write_figures(comparisons, report, out)
+        if report.alerts is not None:
+            from .alerts import alert_data
+            from .figures import write_alert_figures
+
+            data, _ = alert_data(series)
+            if data is not None:
+                figures += write_alert_figures(data, report.alerts, out)
     sys.stdout.write(report_text(report))
     print(
         f'wrote metrics.json, metrics.md and {len(figures)} figures to {out} '

@@ -23,11 +23,19 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
+from .alerts import (
+    ALERT_KINDS,
+    AXLE_NAMES,
+    AlertData,
+    AlertsSection,
+    axle_utilisation,
+    truth_conditions,
+)
 from .evaluate import AccuracyReport, Comparison
 from .metrics import error_stats
 from .topics import WHEEL_NAMES
 
-__all__ = ['DPI', 'envelope', 'write_figures']
+__all__ = ['DPI', 'envelope', 'write_alert_figures', 'write_figures']
 
 FloatArray = NDArray[np.float64]
 
@@ -234,6 +242,168 @@ def write_figures(
     if comparisons:
         fig = _summary_figure(comparisons, report)
         path = out / 'summary.png'
+        fig.savefig(path, dpi=DPI)
+        plt.close(fig)
+        written.append(path)
+    return written
+
+
+_KIND_COLORS = ('tab:orange', 'tab:purple', 'tab:green')
+_LANE = 3.0  # y distance between the kinds' lanes (levels 0..2 within a lane)
+
+
+def _runs(mask: np.ndarray, t: FloatArray) -> list[tuple[float, float]]:
+    """(start, width) [s] of each run of a bool series, for ``broken_barh``."""
+    m = np.concatenate([[False], mask.astype(bool), [False]])
+    edges = np.flatnonzero(np.diff(m.astype(np.int8)))
+    starts, stops = edges[0::2], edges[1::2] - 1
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    return [(float(t[a]), float(t[b] - t[a]) + dt) for a, b in zip(starts, stops, strict=True)]
+
+
+def _steps(t: FloatArray, y: np.ndarray) -> tuple[FloatArray, np.ndarray]:
+    """Only the change points of a piecewise-constant series (plotted as steps-post)."""
+    keep = np.concatenate([[True], np.diff(y) != 0, [True]])[: t.size]
+    keep[-1] = True
+    return t[keep], y[keep]
+
+
+def _alerts_figure(data: AlertData, section: AlertsSection) -> Figure:
+    assert data.level is not None
+    cfg = section.settings
+    truth = truth_conditions(
+        data.slip, data.mu, data.peak_slip, data.peak_mu, low_friction_ratio=cfg.low_friction_ratio
+    )
+    fig, axes = plt.subplots(2, 2, figsize=(13, 7.5), sharex=True, sharey=True)
+    t_end = float(data.t[-1]) if data.t.size else 1.0
+    for wheel, ax in enumerate(axes.ravel()):
+        for kind, name in enumerate(ALERT_KINDS):
+            base = _LANE * kind
+            color = _KIND_COLORS[kind]
+            ax.broken_barh(
+                _runs(truth[:, kind, wheel], data.t),
+                (base - 0.2, 2.4),
+                facecolors=color,
+                alpha=0.18,
+                lw=0,
+            )
+            ts, lv = _steps(data.t, data.level[:, kind, wheel])
+            ax.plot(ts, base + lv, drawstyle='steps-post', color=color, lw=1.2, label=name)
+        for e in section.episodes:
+            if e.wheel == wheel and e.status == 'missed':
+                y = _LANE * ALERT_KINDS.index(e.kind) + 1.0
+                ax.plot(e.true_onset_s, y, 'kv', ms=7)
+        for a in section.false_alarms:
+            if a.wheel == wheel:
+                ax.plot(a.t_s, _LANE * ALERT_KINDS.index(a.kind) + 1.0, 'rx', ms=9, mew=2)
+        ax.set_title(WHEEL_NAMES[wheel], fontsize=10)
+        ax.set_xlim(0.0, t_end)
+        ax.set_yticks(
+            [_LANE * k + v for k in range(3) for v in (0, 1, 2)],
+            [f'{n} {lv}' for n in ('traction', 'lock', 'low μ') for lv in ('ok', 'warn', 'crit')],
+            fontsize=7,
+        )
+        ax.grid(True, lw=0.3)
+        if wheel >= 2:
+            ax.set_xlabel('time [s]')
+    axes[0, 0].legend(loc='upper left', fontsize=8)
+    c = section.counts
+    fig.suptitle(
+        f'Alert levels per wheel; shaded: true condition (MF peak at the true road mu); '
+        f'x: false alarm, v: missed onset\n{c["met"]} of {c["episodes"]} episodes within '
+        f'{1e3 * cfg.delay_goal_s:.0f} ms, {c["late"]} later, {c["missed"]} missed, '
+        f'{c["false_alarms"]} false alarms',
+        fontsize=11,
+    )
+    fig.subplots_adjust(left=0.09, right=0.98, bottom=0.08, top=0.88, hspace=0.2, wspace=0.12)
+    return fig
+
+
+def _potential_figure(data: AlertData, section: AlertsSection) -> Figure:
+    assert data.mu_max is not None
+    cfg = section.settings
+    util = axle_utilisation(data.mu, data.peak_mu)
+    fig, axes = plt.subplots(2, 1, figsize=(12, 7.5), sharex=True)
+    t_end = float(data.t[-1]) if data.t.size else 1.0
+    for axle, ax in enumerate(axes):
+        ax.broken_barh(
+            _runs(util[:, axle] >= cfg.excitation_ratio, data.t),
+            (0.0, 10.0),
+            facecolors='0.85',
+            lw=0,
+            zorder=0,
+        )
+        ax.plot(
+            *envelope(data.t, data.true_mu_max[:, axle]),
+            color=_TRUTH_COLOR,
+            lw=1.2,
+            label='true μ_max (MF peak)',
+        )
+        ax.plot(
+            *envelope(data.t, data.mu_max[:, axle]),
+            color=_EST_COLOR,
+            lw=1.0,
+            label='estimated μ_max',
+        )
+        top = max(1.3, float(np.nanmax(data.true_mu_max[:, axle])) * 1.25)
+        ax.set_ylim(0.0, top)
+        ax.set_xlim(0.0, t_end)
+        ax.set_ylabel('μ_max [-]')
+        ax.grid(True, lw=0.3)
+        parts = [
+            f'{m.recent_rms:.3f} RMS, {m.recent_within_pct:.0f} % within {cfg.mu_max_goal:g} '
+            f'({m.start_s:.1f}-{m.end_s:.1f} s)'
+            for m in section.mu_max
+            if m.axle == axle and m.recent_samples
+        ]
+        ax.set_title(
+            f'{AXLE_NAMES[axle]} axle; grey: excited (true utilisation >= '
+            f'{cfg.excitation_ratio:g}); while excited: ' + ('; '.join(parts) or 'never'),
+            fontsize=9,
+        )
+        if data.confidence is not None:
+            twin = ax.twinx()
+            twin.plot(
+                *envelope(data.t, data.confidence[:, axle]),
+                color='tab:green',
+                lw=0.8,
+                alpha=0.7,
+                label='confidence',
+            )
+            twin.set_ylim(0.0, 1.05)
+            twin.set_ylabel('confidence [-]', color='tab:green')
+            if axle == 0:
+                twin.legend(loc='upper right', fontsize=8)
+        if axle == 0:
+            ax.legend(loc='upper left', fontsize=8)
+    axes[-1].set_xlabel('time [s]')
+    fig.suptitle("Road-friction potential: estimate vs the simulated tyre's peak", fontsize=12)
+    fig.subplots_adjust(left=0.07, right=0.93, bottom=0.07, top=0.9, hspace=0.25)
+    return fig
+
+
+def write_alert_figures(
+    data: AlertData, section: AlertsSection, out_dir: str | os.PathLike[str]
+) -> list[Path]:
+    """Write ``alerts.png`` and ``friction_potential.png`` (each only if its estimate exists).
+
+    Args:
+        data: paired arrays from :func:`~vd_observer_node.report.alerts.alert_data`.
+        section: the metrics of the same data.
+        out_dir: existing directory.
+
+    Returns:
+        The files written.
+    """
+    out = Path(out_dir)
+    written: list[Path] = []
+    figures = []
+    if data.level is not None and data.t.size:
+        figures.append(('alerts.png', _alerts_figure(data, section)))
+    if data.mu_max is not None and data.t.size:
+        figures.append(('friction_potential.png', _potential_figure(data, section)))
+    for name, fig in figures:
+        path = out / name
         fig.savefig(path, dpi=DPI)
         plt.close(fig)
         written.append(path)
