@@ -21,6 +21,7 @@ from vd_sim_node.vehicle.friction_truth import (
     axle_mean,
     friction_table,
     road_class,
+    road_class_of,
     true_friction_potential,
     vehicle_road_class,
 )
@@ -121,6 +122,7 @@ def test_road_class_bounds() -> None:
     values = [0.0, 0.199, 0.2, 0.449, 0.45, 0.749, 0.75, 1.2, math.nan]
     expect = [ROAD_ICE, ROAD_ICE, ROAD_SNOW, ROAD_SNOW, ROAD_WET, ROAD_WET, ROAD_DRY, ROAD_DRY]
     np.testing.assert_array_equal(road_class(values), [*expect, ROAD_UNKNOWN])
+    assert [road_class_of(v) for v in values] == [*expect, ROAD_UNKNOWN]
     np.testing.assert_array_equal(vehicle_road_class([[1.0, 0.3], [0.5, 0.9]]), [2, 3])
 
 
@@ -130,6 +132,7 @@ def test_road_class_is_monotone_in_mu_max(values: list[float]) -> None:
     codes = road_class(ordered)
     assert np.all(np.diff(codes) >= 0)
     assert codes.min() >= ROAD_ICE and codes.max() <= ROAD_DRY
+    assert [road_class_of(v) for v in ordered.tolist()] == codes.tolist()
 
 
 def test_invalid_grid_is_rejected() -> None:

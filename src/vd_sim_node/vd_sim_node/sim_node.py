@@ -55,7 +55,7 @@ from vd_sim_node.ros_common import (
     ns_to_time,
     run_node,
 )
-from vd_sim_node.vehicle.friction_truth import axle_mean, road_class, vehicle_road_class
+from vd_sim_node.vehicle.friction_truth import road_class_of
 from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.scenario import Scenario, load_scenario
 from vd_sim_node.vehicle.simulation import SampleFrame, Simulator
@@ -331,15 +331,21 @@ class SimNode(Node):  # type: ignore[misc]
 
 
 def _potential_message(header: Header, f: SampleFrame) -> FrictionPotential:
-    """The true friction potential of one sample: axle means of the wheels' MF peaks."""
-    mu_max = axle_mean(f.peak_mu)
+    """The true friction potential of one sample: axle means of the wheels' MF peaks.
+
+    Plain floats rather than numpy calls: this runs per sample (about 9 us instead of 75).
+    Same values as ``friction_truth.axle_mean`` / ``road_class`` / ``vehicle_road_class``.
+    """
+    mu = f.peak_mu.tolist()
+    slip = f.peak_slip.tolist()
+    mu_max = [0.5 * (mu[0] + mu[1]), 0.5 * (mu[2] + mu[3])]
     return FrictionPotential(
         header=header,
-        mu_max=mu_max.tolist(),
-        slip_peak=axle_mean(f.peak_slip).tolist(),
+        mu_max=mu_max,
+        slip_peak=[0.5 * (slip[0] + slip[1]), 0.5 * (slip[2] + slip[3])],
         confidence=[1.0, 1.0],
-        road_class=road_class(mu_max).tolist(),
-        vehicle_road_class=int(vehicle_road_class(mu_max)),
+        road_class=[road_class_of(m) for m in mu_max],
+        vehicle_road_class=road_class_of(min(mu_max)),
     )
 
 

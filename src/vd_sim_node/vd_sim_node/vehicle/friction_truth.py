@@ -20,7 +20,9 @@ ROS-free. Wheel order FL=0, FR=1, RL=2, RR=3; axles 0 front (FL, FR), 1 rear (RL
 
 from __future__ import annotations
 
+import bisect
 import functools
+import math
 from dataclasses import dataclass
 from typing import Final
 
@@ -43,6 +45,7 @@ __all__ = [
     'axle_mean',
     'friction_table',
     'road_class',
+    'road_class_of',
     'true_friction_potential',
     'vehicle_road_class',
 ]
@@ -207,6 +210,18 @@ def road_class(
     codes = ROAD_ICE + np.searchsorted(np.asarray(bounds, dtype=np.float64), m, side='right')
     out: IntArray = np.where(np.isfinite(m), codes, ROAD_UNKNOWN).astype(np.int64)
     return out
+
+
+def road_class_of(mu_max: float, bounds: tuple[float, float, float] = ROAD_CLASS_BOUNDS) -> int:
+    """:func:`road_class` of one value, without numpy (the simulator node's per-sample path).
+
+    Args:
+        mu_max: [-].
+        bounds: increasing class bounds.
+    """
+    if not math.isfinite(mu_max):
+        return ROAD_UNKNOWN
+    return ROAD_ICE + bisect.bisect_right(bounds, mu_max)
 
 
 def vehicle_road_class(axle_mu_max: ArrayLike) -> IntArray:
