@@ -1,11 +1,12 @@
 """Accuracy report of a bag: estimates vs simulator truth, metrics (JSON/Markdown) and PNGs.
 
 ROS-free. Pipeline: :func:`load_bag_series` (batch-decoded topics) -> :func:`evaluate`
-(metrics, comparisons) -> :func:`report_json` / :func:`report_markdown` /
-:func:`report_text` and :func:`~.figures.write_figures`. The ``vd report`` sub-command is
-in :mod:`.cli`. See docs/report.md.
+(metrics, comparisons, the alerts section of :mod:`.alerts`) -> :func:`report_json` /
+:func:`report_markdown` / :func:`report_text` and :func:`~.figures.write_figures`. The
+``vd report`` sub-command is in :mod:`.cli`. See docs/report.md.
 """
 
+from .alerts import AlertSettings, AlertsSection
 from .errors import ReportError, ReportInputError
 from .evaluate import (
     AccuracyReport,
@@ -21,6 +22,8 @@ from .metrics import ErrorStats
 
 __all__ = [
     'AccuracyReport',
+    'AlertSettings',
+    'AlertsSection',
     'BagSeries',
     'Comparison',
     'ErrorStats',
