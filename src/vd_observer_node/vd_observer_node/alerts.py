@@ -3,15 +3,20 @@
 Three alert kinds per wheel (FL=0, FR=1, RL=2, RR=3):
 
 * ``traction`` (code 0): excessive drive slip, traction control would act. Metric: the slip
-  ratio ``s`` while the slip velocity ``omega R - v`` exceeds ``min_slip_velocity`` and the
-  tyre force is not braking (``mu >= 0`` or invalid).
+  ratio ``s`` while the slip velocity ``omega R - v`` exceeds ``min_slip_velocity``, the wheel
+  is driven (torque > ``min_wheel_torque``) and the tyre force is not braking (``mu >= 0`` or
+  invalid).
 * ``lock`` (code 1): wheel lock tendency under braking, ABS would act. Metric: ``-s`` while
-  ``omega R - v < -min_slip_velocity`` and the tyre force is not driving (``mu <= 0`` or
-  invalid). The force-sign gates reject observer transients (a gear shift makes the wheel
-  speed estimate overshoot while the force says the wheel is driving).
+  ``omega R - v < -min_slip_velocity``, the wheel is braked (torque < ``-min_wheel_torque``)
+  and the tyre force is not driving (``mu <= 0`` or invalid). The torque and force-sign gates
+  reject wheel-speed transients: when a spinning wheel re-grips during a gear shift, a fast
+  wheel-speed estimate overshoots below the road speed while no brake acts; an undriven rear
+  wheel cannot spin.
 * ``low_friction`` (code 2): the utilised friction approaches the available one. Metric: the
   utilisation ``|mu| / mu_max`` of a wheel with a valid ``mu`` (``mu_max`` of its axle from
-  `vd_observer_node.friction_potential`).
+  `vd_observer_node.friction_potential`), and 1 for a wheel past its peak slip (slip beyond
+  ``slip_peak`` with a force of the same sign and the slip-velocity gate open): past the peak
+  the tyre uses all the friction there is, even though its mu has dropped below the peak.
 
 Each metric goes through `classify_level` (two thresholds per level, ``*_on`` to enter,
 ``*_off`` to leave: a hysteresis band) and then `step_channel` (debounce in time: a higher
@@ -118,6 +123,8 @@ class AlertConfig:
         low_friction: thresholds on the utilisation |mu| / mu_max [-].
         min_slip_velocity: |omega R - v| [m/s] below which a slip ratio is not alarming (at
             walking pace the ratio of two small speeds is large for a harmless creep).
+        min_wheel_torque: [N m] a wheel counts as driven above this wheel torque and as
+            braked below its negative (traction and lock gates).
         raise_hold: a higher level must hold this long [s] before it is reported.
         release_hold: a lower level must hold this long [s] before it is reported.
     """
@@ -126,11 +133,12 @@ class AlertConfig:
     lock: LevelThresholds = field(default_factory=_slip_thresholds)
     low_friction: LevelThresholds = field(default_factory=_utilisation_thresholds)
     min_slip_velocity: float = 0.3
+    min_wheel_torque: float = 20.0
     raise_hold: float = 0.01
     release_hold: float = 0.3
 
     def __post_init__(self) -> None:
-        for name in ('min_slip_velocity', 'raise_hold', 'release_hold'):
+        for name in ('min_slip_velocity', 'min_wheel_torque', 'raise_hold', 'release_hold'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise AlertConfigError(f'{name} must be finite and >= 0, got {value}')
@@ -303,20 +311,24 @@ def _wheels(name: str, value: ArrayLike, dtype: type = float) -> NDArray[Any]:
 def alert_metrics(
     slip: ArrayLike,
     slip_vel: ArrayLike,
+    wheel_torque: ArrayLike,
     mu: ArrayLike,
     mu_valid: ArrayLike,
     mu_max: ArrayLike,
-    min_slip_velocity: float,
+    slip_peak: ArrayLike,
+    config: AlertConfig,
 ) -> FloatArray:
     """Metric of every (kind, wheel) channel (pure).
 
     Args:
         slip: shape (4,), [-] slip ratio, positive driving.
         slip_vel: shape (4,), [m/s] omega R - v.
+        wheel_torque: shape (4,), [N m] drive minus brake torque.
         mu: shape (4,), [-] utilised friction.
         mu_valid: shape (4,), bool.
         mu_max: shape (4,), [-] available friction of each wheel's axle.
-        min_slip_velocity: [m/s] gate of the slip metrics.
+        slip_peak: shape (4,), [-] slip magnitude at mu_max.
+        config: gates (min_slip_velocity, min_wheel_torque).
 
     Returns:
         shape (3, 4): rows traction, lock, low_friction; 0 where a gate is closed, nan for
@@ -327,17 +339,23 @@ def alert_metrics(
     """
     s = _wheels('slip', slip)
     sv = _wheels('slip_velocity', slip_vel)
+    torque = _wheels('wheel_torque', wheel_torque)
     m = _wheels('mu', mu)
     ok = _wheels('mu_valid', mu_valid, bool)
     mmax = _wheels('mu_max', mu_max)
-    driving = ~ok | (m >= 0.0)
-    braking = ~ok | (m <= 0.0)
+    speak = _wheels('slip_peak', slip_peak)
+    gate = config.min_slip_velocity
+    driving = (~ok | (m >= 0.0)) & (torque > config.min_wheel_torque)
+    braking = (~ok | (m <= 0.0)) & (torque < -config.min_wheel_torque)
     out: FloatArray = np.zeros((3, 4))
-    np.copyto(out[0], s, where=(sv > min_slip_velocity) & driving)
-    np.copyto(out[1], -s, where=(sv < -min_slip_velocity) & braking)
+    np.copyto(out[0], s, where=(sv > gate) & driving)
+    np.copyto(out[1], -s, where=(sv < -gate) & braking)
     # mu_max <= 0 or nan never divides: the utilisation stays 0 there.
     np.divide(np.abs(m), mmax, out=out[2], where=ok & (mmax > 0.0))
-    bad = ~(np.isfinite(s) & np.isfinite(sv))
+    with np.errstate(invalid='ignore'):
+        past_peak = ok & (np.abs(sv) > gate) & (np.abs(s) >= speak) & (np.sign(s) == np.sign(m))
+    out[2] = np.where(past_peak, np.maximum(out[2], 1.0), out[2])
+    bad = ~(np.isfinite(s) & np.isfinite(sv) & np.isfinite(torque))
     out[:2, bad] = math.nan
     out[2, ~(np.isfinite(m) & np.isfinite(mmax))] = math.nan
     return out
@@ -379,9 +397,11 @@ class AlertMonitor:
         t: float,
         slip: ArrayLike,
         slip_vel: ArrayLike,
+        wheel_torque: ArrayLike,
         mu: ArrayLike,
         mu_valid: ArrayLike,
         mu_max: ArrayLike,
+        slip_peak: ArrayLike,
     ) -> tuple[Alert, ...]:
         """Advance all channels to stamp t.
 
@@ -389,10 +409,13 @@ class AlertMonitor:
             t: stamp [s]; non-finite or non-increasing: the previous records are returned.
             slip: shape (4,), [-] slip ratio, positive driving.
             slip_vel: shape (4,), [m/s] omega R - v (see `slip_velocity`).
+            wheel_torque: shape (4,), [N m] drive minus brake torque.
             mu: shape (4,), [-] utilised friction.
             mu_valid: shape (4,), bool.
             mu_max: shape (4,), [-] available friction per wheel
                 (`FrictionPotential.wheel_mu_max()`).
+            slip_peak: shape (4,), [-] slip at mu_max per wheel
+                (`FrictionPotential.wheel_slip_peak()`).
 
         Returns:
             12 records, kinds in ALERT_KINDS order, wheels 0..3 within each kind.
@@ -401,7 +424,7 @@ class AlertMonitor:
             InputShapeError: an input is not shape (4,).
         """
         metrics = alert_metrics(
-            slip, slip_vel, mu, mu_valid, mu_max, self.config.min_slip_velocity
+            slip, slip_vel, wheel_torque, mu, mu_valid, mu_max, slip_peak, self.config
         )
         if not math.isfinite(t) or (math.isfinite(self._t) and t <= self._t):
             return self.last

@@ -1,29 +1,34 @@
 """Online road-friction potential: maximum available mu per axle from (slip, mu) pairs.
 
-Model: a bank of Burckhardt-shaped curves (Burckhardt 1993; Kiencke & Nielsen, *Automotive
-Control Systems*, 2005)::
+Model (the similarity method, Pacejka, *Tire and Vehicle Dynamics*, 3rd ed., sec. 4.3.2): on
+another road the tyre's mu-slip curve is the dry curve scaled by the road's friction scale
+``r`` in both axes, ``mu(s; r) = r * mu1(s / r)``: the peak scales with ``r`` while the slope
+at zero slip (the carcass stiffness) does not. ``mu1`` is the vehicle's own Magic Formula at
+the sample's load (the vehicle file the simulator uses; ``vd_sim_node.vehicle.tire``). The
+one unknown ``r`` is found on a fixed grid of road scales by exponentially forgotten least
+squares per axle; ``mu_max = r * peak1(load)`` and ``slip_peak = r * slip1(load)``.
 
-    mu(s) = a * shape(|s|),     shape(x) = 1 - exp(-c2 x) - kappa x
+Why one parameter and not a free curve: with only (slip, mu) samples from the linear part of
+the curve, every peak fits, and the first design here (a bank of Burckhardt curves with a free
+scale) then drifted to whatever the noise favoured -- 3 on the dry paper cruise, 0.3 with a
+96-count encoder. With the stiffness fixed by the tyre, linear-region samples fit all scales
+alike and say nothing, as they should; samples past the linear part pin ``r`` quickly.
 
-one member per (c2, kappa) pair of a fixed grid, each with a single free scale ``a`` fitted by
-exponentially forgotten, regularised least squares on the axle's valid samples
-(``y = mu * sign(s)``, ``x = |s|``). The regulariser pulls ``a`` towards the scale that gives
-the prior slip stiffness ``a * (c2 - kappa) = slip_stiffness`` (the tyre's initial slope barely
-changes with the road, its peak does), so a member is chosen by how well it explains the data
-AND the tyre's known stiffness. The member of least cost wins; its curve peak is ``mu_max`` and
-the slip there ``slip_peak``. Without informative data every member's cost is its small
-tie-break term and the prior road (``prior_mu_max``) is reported with confidence 0.
+Errors in variables: the slip is noisy (speed and encoder noise divided by the slip's
+denominator ``max(|omega R|, |v|)``). Each residual is weighted by the variance it would have
+if the curve were right, ``mu_noise_std^2 + (d mu/d s)^2 sigma_s^2`` with
+``sigma_s = slip_velocity_noise / denominator`` (the effective-variance method): a steep
+(dry) curve is not blamed for a slip error, a flat (icy) one is. Samples whose slip is within
+``min_slip_sigmas`` of zero, or whose denominator is below ``min_slip_speed``, are not used.
 
-Confidence: the forgotten maximum utilisation ``|mu| / mu_max`` seen on the axle (the peak is
-only observable once the tyre has been pushed towards it), mapped linearly from
-``confidence_utilisation_low`` (0) to ``confidence_utilisation_high`` (1).
+Confidence (profile likelihood): the least extra weighted cost of any road scale whose peak
+is more than ``confidence_margin`` from the estimate, mapped linearly from ``evidence_low``
+(0) to ``evidence_high`` (1). Below ``class_min_confidence`` the reported values are shrunk
+towards the prior road; the road class (dry / wet / snow / ice) is UNKNOWN there.
 
-Road class from ``mu_max`` with a hysteresis margin; ``UNKNOWN`` while the confidence is below
-``class_min_confidence``.
-
-Pure step functions (`fit_step`, `fit_solution`, `classify_road`) and a stateful wrapper
-(`FrictionPotentialEstimator`) that the node calls per estimate. Axles: 0 front (FL, FR),
-1 rear (RL, RR).
+Pure step functions (`fit_step`, `fit_solution`, `fit_confidence`, `classify_road`) and a
+stateful wrapper (`FrictionPotentialEstimator`) the node calls per estimate. Axles: 0 front
+(FL, FR), 1 rear (RL, RR). Time in seconds.
 """
 
 from __future__ import annotations
@@ -35,6 +40,18 @@ from typing import Any, Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from vd_sim_node.vehicle.friction_truth import (
+    ROAD_CLASS_BOUNDS,
+    ROAD_DRY,
+    ROAD_ICE,
+    ROAD_SNOW,
+    ROAD_UNKNOWN,
+    ROAD_WET,
+    FrictionTable,
+    friction_table,
+)
+from vd_sim_node.vehicle.params import TireParams
+from vd_sim_node.vehicle.tire import magic_formula_fx
 
 from vd_observer_node.errors import InputShapeError, ObserverError
 
@@ -46,38 +63,37 @@ __all__ = [
     'ROAD_SNOW',
     'ROAD_UNKNOWN',
     'ROAD_WET',
-    'CurveBank',
     'FitState',
     'FrictionConfigError',
     'FrictionPotential',
     'FrictionPotentialConfig',
     'FrictionPotentialEstimator',
-    'burckhardt_shape',
+    'TyreCurves',
     'classify_road',
+    'fit_confidence',
     'fit_solution',
     'fit_step',
-    'floored_slip',
     'initial_fit_state',
-    'make_bank',
-    'shape_peak',
+    'slip_ratio',
 ]
 
 FloatArray = NDArray[np.float64]
-BoolArray = NDArray[np.bool_]
 
 #: Axle index of each wheel FL, FR, RL, RR (0 front, 1 rear).
 AXLE_OF_WHEEL: Final = (0, 0, 1, 1)
-ROAD_UNKNOWN: Final = 0
-ROAD_ICE: Final = 1
-ROAD_SNOW: Final = 2
-ROAD_WET: Final = 3
-ROAD_DRY: Final = 4
 #: Name of each road class code.
 ROAD_CLASS_NAMES: Final = ('unknown', 'ice', 'snow', 'wet', 'dry')
+_AXLES: Final = np.asarray(AXLE_OF_WHEEL)
+#: [-] slip step of the numerical slope d mu / d s.
+_SLOPE_STEP: Final = 1e-4
 
 
 class FrictionConfigError(ObserverError):
     """A friction-potential setting is invalid (names the setting and the rule)."""
+
+
+def _default_scales() -> tuple[float, ...]:
+    return tuple(float(x) for x in np.geomspace(0.05, 1.6, 80))
 
 
 @dataclass(frozen=True)
@@ -85,54 +101,50 @@ class FrictionPotentialConfig:
     """Settings of the friction-potential estimator.
 
     Attributes:
+        road_scales: candidate road friction scales r [-] (increasing, > 0); 0.05..1.6
+            covers ice to a grippy dry road (the dry tyre's own road is 1).
         forgetting_time: time constant [s] of the exponential forgetting of the fit data; the
-            data are forgotten only while new informative samples arrive, so an estimate is
-            kept (with decaying confidence) while the tyre is not excited.
-        confidence_time: time constant [s] of the forgotten maximum utilisation.
-        sharpness: Burckhardt c2 values of the bank [-] (> 0, increasing); c2 ~ stiffness /
-            mu_max, so 5..600 covers dry asphalt to ice.
-        falloff: Burckhardt kappa values of the bank [-] (>= 0, < 1): the post-peak decline
-            relative to the scale.
-        slip_stiffness: the tyre's initial slope d mu / d s at zero slip [-] (MF
-            pKx1 of the vehicle file, 18 for the Clio's tyre).
-        stiffness_weight: weight of the stiffness prior, in equivalent samples of unit
-            regressor (small: the data override it once they cover the linear region).
-        prior_mu_max: road assumed without data [-] (tie-break among equally good members).
-        prior_weight: weight of that tie-break on (mu_max - prior_mu_max)^2.
-        shrink_to_prior: below class_min_confidence report w * fit + (1 - w) * prior_mu_max,
-            w = confidence / class_min_confidence, instead of the bare fit (the utilisation
-            behind the confidence uses the bare fit).
-        min_slip: |slip| below this [-] carries no information on the peak (noise, sign
-            errors) and is ignored.
-        max_slip: the curve peak is searched on (0, max_slip] [-]; larger |slip| is clipped.
-        slip_floor_speed: [m/s] denominator floor of the slip the fit uses
-            (`FrictionPotentialEstimator.fit_slip`): at walking pace the textbook slip ratio of
-            two small speeds is dominated by speed noise and is not what the tyre reacts to
-            (the vehicle file's ``tire.low_speed_velocity``, 1 m/s).
-        confidence_utilisation_low: utilisation [-] giving confidence 0.
-        confidence_utilisation_high: utilisation [-] giving confidence 1.
+            data are forgotten only while new usable samples arrive, so an estimate is kept
+            while the tyre is not excited.
+        load_time: time constant [s] of the axle load and force direction the reported peak
+            is evaluated at.
+        prior_road_scale: road scale r [-] assumed without evidence (1: the dry road).
+        shrink_to_prior: below class_min_confidence report w * fit + (1 - w) * prior,
+            w = confidence / class_min_confidence, instead of the bare fit.
+        min_slip: |slip| below this [-] is ignored.
+        max_slip: |slip| is clipped to this [-].
+        min_slip_speed: [m/s] samples whose slip denominator max(|omega R|, |v|) is below
+            this are ignored (at walking pace the slip is mostly noise).
+        slip_velocity_noise: [m/s] noise bound of the slip velocity omega R - v (about 3
+            standard deviations: 0.07 m/s measured with a 96-count encoder and 0.05 m/s speed
+            noise); sigma_s = this / denominator.
+        min_slip_sigmas: samples with |slip| < this * sigma_s are ignored (their sign and
+            size are noise).
+        mu_noise_std: [-] noise of the mu estimates.
+        confidence_margin: [-] the confidence says how firmly the data exclude peaks further
+            than this from the estimate (the accuracy goal, 0.1).
+        evidence_low: weighted cost advantage at and below which the confidence is 0.
+        evidence_high: weighted cost advantage at and above which the confidence is 1.
         class_bounds: mu_max boundaries ice|snow, snow|wet, wet|dry [-], increasing.
         class_margin: hysteresis margin [-] on the class boundaries.
         class_min_confidence: below this confidence the class is UNKNOWN [-].
     """
 
-    forgetting_time: float = 1.0
-    confidence_time: float = 3.0
-    sharpness: tuple[float, ...] = field(
-        default_factory=lambda: tuple(float(x) for x in np.geomspace(5.0, 600.0, 28))
-    )
-    falloff: tuple[float, ...] = (0.0, 0.1, 0.2, 0.3, 0.4, 0.5)
-    slip_stiffness: float = 18.0
-    stiffness_weight: float = 5.0
-    prior_mu_max: float = 1.0
-    prior_weight: float = 1e-3
+    road_scales: tuple[float, ...] = field(default_factory=_default_scales)
+    forgetting_time: float = 0.5
+    load_time: float = 0.05
+    prior_road_scale: float = 1.0
     shrink_to_prior: bool = True
     min_slip: float = 0.002
     max_slip: float = 1.0
-    slip_floor_speed: float = 1.0
-    confidence_utilisation_low: float = 0.25
-    confidence_utilisation_high: float = 0.75
-    class_bounds: tuple[float, float, float] = (0.2, 0.45, 0.75)
+    min_slip_speed: float = 2.0
+    slip_velocity_noise: float = 0.2
+    min_slip_sigmas: float = 2.0
+    mu_noise_std: float = 0.05
+    confidence_margin: float = 0.1
+    evidence_low: float = 10.0
+    evidence_high: float = 100.0
+    class_bounds: tuple[float, float, float] = ROAD_CLASS_BOUNDS
     class_margin: float = 0.03
     class_min_confidence: float = 0.5
 
@@ -143,25 +155,29 @@ class FrictionPotentialConfig:
                 raise FrictionConfigError(f'{f.name} must be finite and >= 0, got {value}')
         for name in (
             'forgetting_time',
-            'confidence_time',
-            'slip_stiffness',
+            'load_time',
+            'prior_road_scale',
             'max_slip',
-            'slip_floor_speed',
+            'min_slip_speed',
+            'mu_noise_std',
+            'confidence_margin',
         ):
             if getattr(self, name) <= 0.0:
                 raise FrictionConfigError(f'{name} must be > 0, got {getattr(self, name)}')
-        sharp = np.asarray(self.sharpness, dtype=float)
-        if sharp.size == 0 or not np.all(np.isfinite(sharp)) or np.any(sharp <= 0.0):
-            raise FrictionConfigError(f'sharpness must be non-empty, finite, > 0: {sharp}')
-        fall = np.asarray(self.falloff, dtype=float)
-        if fall.size == 0 or not np.all(np.isfinite(fall)) or np.any((fall < 0) | (fall >= 1)):
-            raise FrictionConfigError(f'falloff values must be in [0, 1): {fall}')
-        if np.any(sharp[:, None] <= fall[None, :]):
-            raise FrictionConfigError('every sharpness must exceed every falloff (positive slope)')
-        if not self.confidence_utilisation_low < self.confidence_utilisation_high:
+        scales = np.asarray(self.road_scales, dtype=float)
+        if (
+            scales.size < 2
+            or not np.all(np.isfinite(scales))
+            or np.any(scales <= 0.0)
+            or np.any(np.diff(scales) <= 0.0)
+        ):
             raise FrictionConfigError(
-                'confidence_utilisation_low must be < confidence_utilisation_high, got '
-                f'{self.confidence_utilisation_low}, {self.confidence_utilisation_high}'
+                f'road_scales must be >= 2 finite, positive, increasing values: {scales}'
+            )
+        if not self.evidence_low < self.evidence_high:
+            raise FrictionConfigError(
+                f'evidence_low must be < evidence_high, got {self.evidence_low}, '
+                f'{self.evidence_high}'
             )
         b = self.class_bounds
         if len(b) != 3 or not 0.0 < b[0] < b[1] < b[2]:
@@ -192,151 +208,136 @@ class FrictionPotentialConfig:
         return cls(**clean)
 
 
-def floored_slip(slip_velocity: ArrayLike, speed: float, floor: float) -> FloatArray:
-    """Slip ratio with a floored denominator, as the tyre model defines it.
+def slip_ratio(slip_velocity: ArrayLike, speed: float) -> tuple[FloatArray, FloatArray]:
+    """Slip ratio and its denominator.
 
     Args:
         slip_velocity: shape (4,), [m/s] omega R - v.
         speed: body speed v [m/s].
-        floor: [m/s] denominator floor (> 0).
 
     Returns:
-        shape (4,), [-] (omega R - v) / max(|omega R|, |v|, floor), positive driving.
+        (slip, denominator): shape (4,) each; slip [-] = (omega R - v) / max(|omega R|, |v|),
+        positive driving, nan where the denominator is 0; denominator [m/s].
     """
     sv = np.asarray(slip_velocity, dtype=float)
-    den = np.maximum(np.maximum(np.abs(sv + speed), abs(speed)), floor)
-    out: FloatArray = sv / den
-    return out
-
-
-def burckhardt_shape(slip: ArrayLike, sharpness: ArrayLike, falloff: ArrayLike) -> FloatArray:
-    """Unit-scale Burckhardt curve 1 - exp(-c2 |s|) - kappa |s| (odd in s).
-
-    Args:
-        slip: [-], any shape broadcastable with the others.
-        sharpness: c2 [-].
-        falloff: kappa [-].
-
-    Returns:
-        shape(s) * sign(s), [-], broadcast shape.
-    """
-    s = np.asarray(slip, dtype=float)
-    x = np.abs(s)
-    c2 = np.asarray(sharpness, dtype=float)
-    kappa = np.asarray(falloff, dtype=float)
-    out: FloatArray = np.sign(s) * (-np.expm1(-c2 * x) - kappa * x)
-    return out
-
-
-def shape_peak(
-    sharpness: ArrayLike, falloff: ArrayLike, max_slip: float
-) -> tuple[FloatArray, FloatArray]:
-    """Peak of the unit-scale curve on (0, max_slip].
-
-    Args:
-        sharpness: c2 [-], any shape.
-        falloff: kappa [-], broadcastable.
-        max_slip: upper end of the slip range [-].
-
-    Returns:
-        (peak value [-], slip at the peak [-]), broadcast shape. For kappa = 0 the curve rises
-        monotonically and the peak is at max_slip.
-    """
-    c2 = np.asarray(sharpness, dtype=float)
-    kappa = np.asarray(falloff, dtype=float)
-    with np.errstate(divide='ignore'):
-        stationary = np.where(kappa > 0.0, np.log(c2 / np.maximum(kappa, 1e-300)) / c2, np.inf)
-    s_peak: FloatArray = np.minimum(stationary, max_slip)
-    value: FloatArray = -np.expm1(-c2 * s_peak) - kappa * s_peak
-    return value, s_peak
+    den: FloatArray = np.maximum(np.abs(sv + speed), abs(speed))
+    slip: FloatArray = np.full(sv.shape, math.nan)
+    np.divide(sv, den, out=slip, where=den > 0.0)
+    return slip, den
 
 
 @dataclass(frozen=True)
-class CurveBank:
-    """The fixed member grid (B members).
+class TyreCurves:
+    """The tyre's mu-slip curves for the similarity model.
 
     Attributes:
-        sharpness: shape (B,), c2 [-].
-        falloff: shape (B,), kappa [-].
-        peak: shape (B,), unit-scale peak value [-].
-        slip_peak: shape (B,), slip at the peak [-].
-        stiffness_scale: shape (B,), the scale a giving the prior slip stiffness [-].
+        tire: Magic Formula coefficients (vehicle file ``tire``).
+        table: its peak mu and slip at road scale 1 against the load.
     """
 
-    sharpness: FloatArray
-    falloff: FloatArray
-    peak: FloatArray
-    slip_peak: FloatArray
-    stiffness_scale: FloatArray
+    tire: TireParams
+    table: FrictionTable
 
+    @classmethod
+    def from_tire(cls, tire: TireParams) -> TyreCurves:
+        """Curves of the vehicle file's tyre."""
+        return cls(tire, friction_table(tire))
 
-def make_bank(config: FrictionPotentialConfig) -> CurveBank:
-    """All (sharpness, falloff) combinations of the config, with their peaks."""
-    c2, kappa = np.meshgrid(
-        np.asarray(config.sharpness, dtype=float),
-        np.asarray(config.falloff, dtype=float),
-        indexing='ij',
-    )
-    c2, kappa = c2.ravel(), kappa.ravel()
-    peak, s_peak = shape_peak(c2, kappa, config.max_slip)
-    return CurveBank(
-        sharpness=c2,
-        falloff=kappa,
-        peak=peak,
-        slip_peak=s_peak,
-        stiffness_scale=config.slip_stiffness / (c2 - kappa),
-    )
+    def mu(self, slip: FloatArray, load: FloatArray, scales: FloatArray) -> FloatArray:
+        """mu(s; r) = Fx(s, Fz, r) / Fz for every sample and road scale.
+
+        Args:
+            slip: shape (n,), [-] signed.
+            load: shape (n,), [N] (> 0).
+            scales: shape (M,), [-] road scales.
+
+        Returns:
+            shape (n, M), [-].
+        """
+        z = load[:, None]
+        out: FloatArray = magic_formula_fx(slip[:, None], z, scales[None, :], self.tire) / z
+        return out
+
+    def slope(self, slip: FloatArray, load: FloatArray, scales: FloatArray) -> FloatArray:
+        """d mu / d s at every sample and road scale, shape (n, M) (central difference)."""
+        h = _SLOPE_STEP
+        out: FloatArray = (self.mu(slip + h, load, scales) - self.mu(slip - h, load, scales)) / (
+            2.0 * h
+        )
+        return out
+
+    def peak(self, load: FloatArray, driving: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
+        """Peak mu and its slip at road scale 1.
+
+        Args:
+            load: [N], any shape.
+            driving: same shape; True for the driving side (slip > 0).
+
+        Returns:
+            (peak mu [-], slip at the peak [-]), same shape.
+        """
+        t = self.table
+        mu = np.where(
+            driving, np.interp(load, t.load, t.mu_drive), np.interp(load, t.load, t.mu_brake)
+        )
+        slip = np.where(
+            driving,
+            np.interp(load, t.load, t.slip_drive),
+            np.interp(load, t.load, t.slip_brake),
+        )
+        return mu, slip
 
 
 @dataclass(frozen=True)
 class FitState:
-    """Forgotten sufficient statistics per axle and member (A = 2 axles, B members).
+    """Forgotten statistics per axle (A = 2 axles, M road scales).
 
     Attributes:
-        s_pp: shape (A, B), sum of w * phi^2.
-        s_py: shape (A, B), sum of w * phi * y.
-        s_yy: shape (A,), sum of w * y^2.
-        utilisation: shape (A,), forgotten maximum |mu| / mu_max [-].
+        cost: shape (A, M), forgotten sum of weighted squared residuals per road scale.
+        count: shape (A,), forgotten number of used samples.
+        load: shape (A,), [N] smoothed wheel load of the used samples.
+        direction: shape (A,), smoothed sign of their force (> 0 driving, < 0 braking).
         t: stamp of the last step [s] (nan before the first).
-        member: shape (A,), least-cost member for these statistics.
-        scale: shape (A,), its fitted scale a [-].
     """
 
-    s_pp: FloatArray
-    s_py: FloatArray
-    s_yy: FloatArray
-    utilisation: FloatArray
+    cost: FloatArray
+    count: FloatArray
+    load: FloatArray
+    direction: FloatArray
     t: float
-    member: NDArray[np.int64]
-    scale: FloatArray
 
 
-def initial_fit_state(bank: CurveBank) -> FitState:
-    """Empty statistics for the bank."""
-    b = bank.sharpness.size
-    empty = FitState(
-        s_pp=np.zeros((2, b)),
-        s_py=np.zeros((2, b)),
-        s_yy=np.zeros(2),
-        utilisation=np.zeros(2),
+def initial_fit_state(config: FrictionPotentialConfig, static_load: ArrayLike) -> FitState:
+    """Empty statistics.
+
+    Args:
+        config: settings (the number of road scales).
+        static_load: shape (2,), [N] wheel load per axle before any sample.
+    """
+    load = np.asarray(static_load, dtype=float)
+    if load.shape != (2,):
+        raise InputShapeError(f'static_load must have shape (2,), got {load.shape}')
+    return FitState(
+        cost=np.zeros((2, len(config.road_scales))),
+        count=np.zeros(2),
+        load=load.copy(),
+        direction=np.ones(2),
         t=math.nan,
-        member=np.zeros(2, dtype=np.int64),
-        scale=np.zeros(2),
     )
-    return _with_best(empty, bank, FrictionPotentialConfig())
 
 
 @dataclass(frozen=True)
 class FrictionPotential:
-    """Friction potential for one stamp (per axle arrays shape (2,), 0 front, 1 rear).
+    """Friction potential for one stamp (per-axle arrays shape (2,), 0 front, 1 rear).
 
     Attributes:
         t: stamp [s].
         mu_max: [-] maximum available friction coefficient.
         slip_peak: [-] slip magnitude at which mu_max is reached.
-        confidence: [0..1] how far the tyre has been pushed towards its peak.
-        road_class: ROAD_* code per axle (UNKNOWN while confidence is too low).
-        member: index of the winning bank member per axle.
+        confidence: [0..1] how firmly the data exclude peaks further than
+            ``confidence_margin`` from the fit (0 without informative data).
+        road_class: ROAD_* code per axle (UNKNOWN while the confidence is too low).
+        road_scale: [-] fitted road friction scale r (before shrinking to the prior).
     """
 
     t: float
@@ -344,11 +345,16 @@ class FrictionPotential:
     slip_peak: FloatArray
     confidence: FloatArray
     road_class: NDArray[np.int64]
-    member: NDArray[np.int64]
+    road_scale: FloatArray
 
     def wheel_mu_max(self) -> FloatArray:
         """mu_max of each wheel's axle, shape (4,), order FL, FR, RL, RR."""
-        out: FloatArray = self.mu_max[list(AXLE_OF_WHEEL)]
+        out: FloatArray = self.mu_max[_AXLES]
+        return out
+
+    def wheel_slip_peak(self) -> FloatArray:
+        """slip_peak of each wheel's axle, shape (4,), order FL, FR, RL, RR."""
+        out: FloatArray = self.slip_peak[_AXLES]
         return out
 
     def vehicle_road_class(self) -> int:
@@ -360,26 +366,22 @@ class FrictionPotential:
         return int(self.road_class[int(np.argmax(conf))])
 
 
-def _member_costs(
-    state: FitState, bank: CurveBank, config: FrictionPotentialConfig
-) -> tuple[FloatArray, FloatArray]:
-    """Scale and cost per axle and member, shapes (A, B)."""
-    a0 = bank.stiffness_scale[None, :]
-    w = config.stiffness_weight
-    scale = (state.s_py + w * a0) / (state.s_pp + w)
-    sse = state.s_yy[:, None] - 2.0 * scale * state.s_py + scale * scale * state.s_pp
-    mu_max = scale * bank.peak[None, :]
-    cost = sse + w * (scale - a0) ** 2 + config.prior_weight * (mu_max - config.prior_mu_max) ** 2
-    return scale, cost
+def _wheels(name: str, value: ArrayLike, dtype: type = float) -> NDArray[Any]:
+    array: NDArray[Any] = np.asarray(value, dtype=dtype)
+    if array.shape != (4,):
+        raise InputShapeError(f'{name} must have shape (4,), got {array.shape}')
+    return array
 
 
 def fit_step(
     state: FitState,
     t: float,
-    slip: ArrayLike,
+    slip_velocity: ArrayLike,
+    speed: float,
     mu: ArrayLike,
     mu_valid: ArrayLike,
-    bank: CurveBank,
+    load: ArrayLike,
+    curves: TyreCurves,
     config: FrictionPotentialConfig,
 ) -> FitState:
     """Add one stamp's wheel samples to the statistics (pure).
@@ -387,61 +389,96 @@ def fit_step(
     Args:
         state: statistics before the stamp.
         t: stamp [s]; a non-finite or non-increasing stamp returns ``state`` unchanged.
-        slip: shape (4,), [-], positive driving, order FL, FR, RL, RR.
+        slip_velocity: shape (4,), [m/s] omega R - v, order FL, FR, RL, RR.
+        speed: [m/s] body speed v.
         mu: shape (4,), [-] utilised friction Fx/Fz.
-        mu_valid: shape (4,), bool; invalid or non-finite samples, |slip| < min_slip and
-            samples whose mu has the opposite sign of the slip (a tyre force always has the
-            sign of its slip: such a pair is an estimation transient) are ignored.
-        bank: member grid from `make_bank(config)`.
+        mu_valid: shape (4,), bool.
+        load: shape (4,), [N] estimated wheel loads Fz.
+        curves: the tyre's curves.
         config: settings.
 
     Returns:
-        The updated statistics.
+        The updated statistics. Ignored samples: invalid or non-finite values, a load <= 0,
+        a slip denominator below ``min_slip_speed``, |slip| below ``min_slip`` or
+        ``min_slip_sigmas`` slip noise, and a mu of the opposite sign of the slip (a tyre
+        force has the sign of its slip; the opposite is an estimation transient).
 
     Raises:
         InputShapeError: an input is not shape (4,).
     """
-    s = np.asarray(slip, dtype=float)
-    m = np.asarray(mu, dtype=float)
-    ok = np.asarray(mu_valid, dtype=bool)
-    if s.shape != (4,) or m.shape != (4,) or ok.shape != (4,):
-        raise InputShapeError(
-            f'slip, mu, mu_valid must have shape (4,), got {s.shape}, {m.shape}, {ok.shape}'
-        )
+    sv = _wheels('slip_velocity', slip_velocity)
+    m = _wheels('mu', mu)
+    ok = _wheels('mu_valid', mu_valid, bool)
+    fz = _wheels('load', load)
     if not math.isfinite(t) or (math.isfinite(state.t) and t <= state.t):
         return state
-    dt = 0.0 if not math.isfinite(state.t) else t - state.t
-    use = ok & np.isfinite(s) & np.isfinite(m) & (np.abs(s) >= config.min_slip)
-    use &= np.sign(s) == np.sign(m)
-    utilisation = state.utilisation * math.exp(-dt / config.confidence_time)
+    if not math.isfinite(speed):
+        return replace(state, t=t)
+    slip, den = slip_ratio(sv, speed)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        sigma_s = config.slip_velocity_noise / den
+        use = ok & np.isfinite(slip) & np.isfinite(m) & np.isfinite(fz) & (fz > 0.0)
+        use &= den >= config.min_slip_speed
+        use &= np.abs(slip) >= np.maximum(config.min_slip, config.min_slip_sigmas * sigma_s)
+        use &= np.sign(slip) == np.sign(m)
     if not use.any():
-        return replace(state, utilisation=utilisation, t=t)
-    x = np.minimum(np.abs(s[use]), config.max_slip)
-    y = m[use] * np.sign(s[use])
-    phi = -np.expm1(-np.outer(x, bank.sharpness)) - np.outer(x, bank.falloff)
-    axle_of = np.asarray(AXLE_OF_WHEEL)[use]
-    s_pp, s_py, s_yy = state.s_pp.copy(), state.s_py.copy(), state.s_yy.copy()
+        return replace(state, t=t)
+    dt = 0.0 if not math.isfinite(state.t) else t - state.t
+    s = np.clip(slip[use], -config.max_slip, config.max_slip)
+    z = fz[use]
+    scales = np.asarray(config.road_scales, dtype=float)
+    predicted = curves.mu(s, z, scales)
+    slope = curves.slope(s, z, scales)
+    variance = config.mu_noise_std**2 + (slope * sigma_s[use][:, None]) ** 2
+    weighted = (m[use][:, None] - predicted) ** 2 / variance
+    axle_of = _AXLES[use]
+    cost, count = state.cost.copy(), state.count.copy()
+    axle_load, direction = state.load.copy(), state.direction.copy()
     lam = math.exp(-dt / config.forgetting_time)
+    blend = 1.0 - math.exp(-dt / config.load_time) if dt > 0.0 else 1.0
     for axle in (0, 1):
         rows = axle_of == axle
         if not rows.any():
             continue
-        s_pp[axle] = lam * s_pp[axle] + np.einsum('ij,ij->j', phi[rows], phi[rows])
-        s_py[axle] = lam * s_py[axle] + y[rows] @ phi[rows]
-        s_yy[axle] = lam * s_yy[axle] + float(y[rows] @ y[rows])
-    new = _with_best(
-        FitState(s_pp, s_py, s_yy, utilisation, t, state.member, state.scale), bank, config
+        cost[axle] = lam * cost[axle] + weighted[rows].sum(axis=0)
+        count[axle] = lam * count[axle] + float(np.count_nonzero(rows))
+        axle_load[axle] += blend * (float(np.mean(z[rows])) - axle_load[axle])
+        direction[axle] += blend * (float(np.mean(np.sign(s[rows]))) - direction[axle])
+    return FitState(cost, count, axle_load, direction, t)
+
+
+def _fitted(
+    state: FitState, curves: TyreCurves, config: FrictionPotentialConfig
+) -> tuple[NDArray[np.int64], FloatArray, FloatArray]:
+    """Best scale index, unit peak mu and unit peak slip per axle."""
+    best = np.argmin(state.cost, axis=1).astype(np.int64)
+    unit_mu, unit_slip = curves.peak(state.load, state.direction >= 0.0)
+    return best, unit_mu, unit_slip
+
+
+def fit_confidence(
+    state: FitState, curves: TyreCurves, config: FrictionPotentialConfig
+) -> FloatArray:
+    """Confidence per axle that the fitted peak is within ``confidence_margin`` (pure).
+
+    The least extra weighted cost of a road scale whose peak lies further than the margin
+    from the best one's, mapped linearly from ``evidence_low`` (0) to ``evidence_high`` (1).
+
+    Returns:
+        shape (2,), [0..1]; 0 for an axle without samples.
+    """
+    best, unit_mu, _ = _fitted(state, curves, config)
+    scales = np.asarray(config.road_scales, dtype=float)
+    peaks = scales[None, :] * unit_mu[:, None]
+    rows = np.arange(2)
+    far = np.abs(peaks - peaks[rows, best][:, None]) > config.confidence_margin
+    rival = np.where(far, state.cost, np.inf).min(axis=1)
+    evidence = np.where(
+        (state.count > 0.0) & np.isfinite(rival), rival - state.cost[rows, best], 0.0
     )
-    mu_max = new.scale * bank.peak[new.member]
-    ratio = np.abs(m[use]) / np.maximum(mu_max[axle_of], 1e-9)
-    np.maximum.at(utilisation, axle_of, ratio)
-    return replace(new, utilisation=np.minimum(utilisation, 1.0))
-
-
-def _with_best(state: FitState, bank: CurveBank, config: FrictionPotentialConfig) -> FitState:
-    scale, cost = _member_costs(state, bank, config)
-    member = np.argmin(cost, axis=1).astype(np.int64)
-    return replace(state, member=member, scale=scale[np.arange(2), member])
+    span = config.evidence_high - config.evidence_low
+    out: FloatArray = np.clip((evidence - config.evidence_low) / span, 0.0, 1.0)
+    return out
 
 
 def classify_road(
@@ -473,7 +510,7 @@ def classify_road(
 
 def fit_solution(
     state: FitState,
-    bank: CurveBank,
+    curves: TyreCurves,
     config: FrictionPotentialConfig,
     previous_class: ArrayLike = (ROAD_UNKNOWN, ROAD_UNKNOWN),
 ) -> FrictionPotential:
@@ -481,26 +518,25 @@ def fit_solution(
 
     Args:
         state: statistics.
-        bank: member grid.
+        curves: the tyre's curves.
         config: settings.
         previous_class: shape (2,), road class per axle at the previous stamp (hysteresis).
 
     Returns:
         The estimate for ``state.t``.
     """
-    member = state.member
-    fitted = state.scale * bank.peak[member]
-    s_peak: FloatArray = bank.slip_peak[member]
-    span = config.confidence_utilisation_high - config.confidence_utilisation_low
-    confidence = np.clip((state.utilisation - config.confidence_utilisation_low) / span, 0, 1)
-    # Unexcited, the fit only knows the linear region and its peak is arbitrary (it drifted to
-    # 3 on the dry paper cruise): report the prior there, the fit once the tyre was pushed.
+    best, unit_mu, unit_slip = _fitted(state, curves, config)
+    scales = np.asarray(config.road_scales, dtype=float)
+    fitted = np.where(state.count > 0.0, scales[best], config.prior_road_scale)
+    confidence = fit_confidence(state, curves, config)
+    # Unexcited, every scale fits the linear part of the curve: report the prior road there.
     weight = np.clip(confidence / max(config.class_min_confidence, 1e-9), 0.0, 1.0)
-    mu_max: FloatArray = (
-        weight * fitted + (1.0 - weight) * config.prior_mu_max
+    scale = (
+        weight * fitted + (1.0 - weight) * config.prior_road_scale
         if config.shrink_to_prior
         else fitted
     )
+    mu_max: FloatArray = scale * unit_mu
     prev = np.asarray(previous_class, dtype=np.int64)
     road = np.array(
         [
@@ -512,55 +548,73 @@ def fit_solution(
     return FrictionPotential(
         t=state.t,
         mu_max=mu_max,
-        slip_peak=s_peak,
+        slip_peak=scale * unit_slip,
         confidence=confidence,
         road_class=road,
-        member=member,
+        road_scale=fitted,
     )
 
 
 class FrictionPotentialEstimator:
     """Stateful wrapper: the node calls `update` once per estimate."""
 
-    def __init__(self, config: FrictionPotentialConfig | None = None) -> None:
+    def __init__(
+        self,
+        curves: TyreCurves,
+        static_load: ArrayLike,
+        config: FrictionPotentialConfig | None = None,
+    ) -> None:
         """Create the estimator.
 
         Args:
+            curves: the tyre's curves (`TyreCurves.from_tire(vehicle.tire)`).
+            static_load: shape (2,), [N] static wheel load per axle (front, rear).
             config: settings; defaults if None.
         """
+        self.curves = curves
         self.config = config or FrictionPotentialConfig()
-        self.bank = make_bank(self.config)
+        self.static_load = np.asarray(static_load, dtype=float)
         self.reset()
 
     def reset(self) -> None:
         """Forget all data (prior road, confidence 0)."""
-        self.state = initial_fit_state(self.bank)
+        self.state = initial_fit_state(self.config, self.static_load)
         self._classes = np.full(2, ROAD_UNKNOWN, dtype=np.int64)
-        self.last: FrictionPotential | None = None
-
-    def fit_slip(self, slip_velocity: ArrayLike, speed: float) -> FloatArray:
-        """Slip for the fit: `floored_slip` with ``config.slip_floor_speed``."""
-        return floored_slip(slip_velocity, speed, self.config.slip_floor_speed)
+        self.last = fit_solution(self.state, self.curves, self.config, self._classes)
 
     def update(
-        self, t: float, slip: ArrayLike, mu: ArrayLike, mu_valid: ArrayLike
+        self,
+        t: float,
+        slip_velocity: ArrayLike,
+        speed: float,
+        mu: ArrayLike,
+        mu_valid: ArrayLike,
+        load: ArrayLike,
     ) -> FrictionPotential:
         """Add one stamp's samples and return the current potential.
 
         Args:
             t: stamp [s] (non-finite or non-increasing: previous result returned).
-            slip: shape (4,), [-] positive driving, order FL, FR, RL, RR.
+            slip_velocity: shape (4,), [m/s] omega R - v, order FL, FR, RL, RR.
+            speed: [m/s] body speed.
             mu: shape (4,), [-] utilised friction.
             mu_valid: shape (4,), bool.
+            load: shape (4,), [N] wheel loads.
 
         Raises:
             InputShapeError: an input is not shape (4,).
         """
         before = self.state
-        self.state = fit_step(self.state, t, slip, mu, mu_valid, self.bank, self.config)
-        if self.state is before and self.last is not None:
+        self.state = fit_step(
+            self.state, t, slip_velocity, speed, mu, mu_valid, load, self.curves, self.config
+        )
+        if self.state is before:
             return self.last
-        result = fit_solution(self.state, self.bank, self.config, self._classes)
+        if self.state.cost is before.cost:
+            # no usable sample: only the stamp moved, the estimate is unchanged
+            self.last = replace(self.last, t=self.state.t)
+            return self.last
+        result = fit_solution(self.state, self.curves, self.config, self._classes)
         self._classes = result.road_class.copy()
         self.last = result
         return result
