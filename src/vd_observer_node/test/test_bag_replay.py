@@ -9,6 +9,7 @@ import pytest
 from vd_observer_node.bag import BagReader, BagWriter, ReplayInputError
 from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.bag.replay import (
+    ALERT_TOPICS,
     ESTIMATE_TOPICS,
     SENSOR_TOPICS,
     default_vehicle_file,
@@ -40,7 +41,7 @@ def test_inputs_and_truth_copied_raw(replayed: tuple[Path, Path, object]) -> Non
     assert set(source) <= set(result)
     for topic, messages in source.items():
         assert result[topic] == messages, topic
-    assert set(result) - set(source) == set(ESTIMATE_TOPICS)
+    assert set(result) - set(source) == set(ESTIMATE_TOPICS) | set(ALERT_TOPICS)
 
 
 def test_estimates_equal_run_cascade_on_the_same_arrays(
@@ -152,3 +153,172 @@ def test_replay_config_reaches_the_cascade(tmp_path: Path) -> None:
     bad.write_text('something: else\n')
     with pytest.raises(ConfigurationError, match='mapping'):
         load_replay_config(bad)
+
+
+# -- friction potential and alerts (SituationMonitor) ------------------------------------------
+
+CONFIG = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config'
+SIM_RATE = 200.0  # [Hz] enough for the launch's spin-up, small enough for a fast test
+
+
+@pytest.fixture(scope='module')
+def launch(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, object]:
+    """launch_low_mu at 200 Hz written as a recording, and its replay."""
+    from vd_observer_node.report.devbag import sim_topics, write_topic_arrays_bag
+    from vd_sim_node.vehicle.params import load_vehicle
+    from vd_sim_node.vehicle.scenario import load_scenario
+    from vd_sim_node.vehicle.simulation import simulate
+
+    folder = tmp_path_factory.mktemp('launch')
+    sim = simulate(
+        load_vehicle(CONFIG / 'clio_rl_1_1.yaml'),
+        load_scenario(CONFIG / 'scenarios' / 'launch_low_mu.yaml'),
+        rate_hz=SIM_RATE,
+    )
+    stamps = np.round(sim.t * 1e9).astype(np.int64) + 1_700_000_000 * 10**9
+    write_topic_arrays_bag(folder / 'in', stamps, sim_topics(sim))
+    report = replay_bag(folder / 'in', folder / 'out', progress=False)
+    return folder / 'in', folder / 'out', report
+
+
+def _expected_situation(in_bag: Path, vehicle_file: Path) -> list[object]:
+    """SituationMonitor fed per stamp, independently of replay's batch code."""
+    from vd_observer_node.friction_potential import TyreCurves
+    from vd_observer_node.situation import SituationMonitor
+    from vd_sim_node.vehicle.params import load_vehicle
+
+    raw = BagReader(in_bag).topic_arrays(SENSOR_TOPICS)
+    angles = decode_batch('vd_msgs/msg/WheelAngles', raw['/vd/sensors/wheel_angles'].datas)
+    speed = decode_batch('geometry_msgs/msg/TwistStamped', raw['/vd/sensors/body_velocity'].datas)
+    torque = decode_batch('vd_msgs/msg/WheelTorques', raw['/vd/sensors/wheel_torques'].datas)
+    vehicle = load_estimator_vehicle(vehicle_file)
+    t = angles.stamp_ns * 1e-9
+    v = speed.values['twist.linear.x']
+    est = run_cascade(t, angles.values['angle'], v, torque.values['torque'], vehicle)
+    monitor = SituationMonitor(
+        TyreCurves.from_tire(load_vehicle(vehicle_file).tire),
+        vehicle.static_wheel_loads[[0, 2]],
+        vehicle.effective_radius,
+    )
+    return [
+        monitor.update(
+            float(t[k]),
+            angles.values['angle'][k],
+            float(v[k]),
+            torque.values['torque'][k],
+            est.omega[k],
+            est.mu[k],
+            est.mu_valid[k],
+            est.fz[k],
+        )
+        for k in range(t.size)
+    ]
+
+
+def _time_ns(stamp: object) -> int:
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)  # type: ignore[attr-defined]
+
+
+def test_alerts_and_potential_equal_the_situation_monitor(
+    launch: tuple[Path, Path, object],
+) -> None:
+    """Decoded with the rosbags typestore (not replay's encoders): every stamp carries the 12
+    records and the friction potential SituationMonitor gives on the same inputs."""
+    in_bag, out_bag, report = launch
+    expected = _expected_situation(in_bag, default_vehicle_file())
+    sensor_stamps = [
+        _time_ns(m.header.stamp)
+        for _, _, _, m in BagReader(in_bag).messages(['/vd/sensors/wheel_angles'])
+    ]
+    alerts = list(BagReader(out_bag).messages(['/vd/estimates/alerts']))
+    potentials = list(BagReader(out_bag).messages(['/vd/estimates/friction_potential']))
+    assert len(alerts) == len(potentials) == len(expected) == report.samples  # type: ignore[attr-defined]
+    active = 0
+    for k, (sit, (_, _, _, msg), (_, _, _, pot)) in enumerate(
+        zip(expected, alerts, potentials, strict=True)
+    ):
+        assert _time_ns(msg.header.stamp) == _time_ns(pot.header.stamp) == sensor_stamps[k]
+        assert len(msg.alerts) == 12
+        for rec, a in zip(msg.alerts, sit.alerts, strict=True):  # type: ignore[attr-defined]
+            assert (rec.kind, rec.wheel, rec.level, rec.active) == (
+                a.kind_code,
+                a.wheel,
+                a.level,
+                a.active,
+            )
+            for field in ('onset', 'detected'):
+                value = getattr(a, field)
+                want = round(value * 1e9) if np.isfinite(value) else 0
+                assert _time_ns(getattr(rec, field)) == want, (k, field)
+            active += bool(rec.active)
+        p = sit.potential  # type: ignore[attr-defined]
+        np.testing.assert_array_equal(pot.mu_max, p.mu_max)
+        np.testing.assert_array_equal(pot.slip_peak, p.slip_peak)
+        np.testing.assert_array_equal(pot.confidence, p.confidence)
+        np.testing.assert_array_equal(pot.road_class, p.road_class)
+        assert pot.vehicle_road_class == p.vehicle_road_class()
+    # the launch on the low-mu patch spins the driven wheels: the comparison is not all-OK
+    assert active > 0
+    assert report.situation_time_s > 0.0  # type: ignore[attr-defined]
+
+
+def test_traction_alert_on_the_launch_reaches_the_report(
+    launch: tuple[Path, Path, object], tmp_path: Path
+) -> None:
+    """`vd report` of the replayed recording has the alerts section with figures."""
+    from vd_observer_node.report.evaluate import evaluate
+    from vd_observer_node.report.load import load_bag_series
+
+    _, out_bag, _ = launch
+    report, _ = evaluate(load_bag_series(out_bag, progress=False))
+    section = report.alerts
+    assert section is not None
+    assert section.samples > 0 and section.mu_max
+    traction = [e for e in section.episodes if e.kind == 'traction']
+    assert traction and any(e.detected_s is not None for e in traction)
+
+
+def test_situation_off_writes_no_alerts(tmp_path: Path) -> None:
+    write_synthetic_drive_bag(tmp_path / 'in', duration_s=1.0, rate_hz=100.0, with_truth=False)
+    report = replay_bag(tmp_path / 'in', tmp_path / 'out', progress=False, situation=False)
+    assert report.situation_time_s == 0.0
+    assert not set(ALERT_TOPICS) & set(BagReader(tmp_path / 'out').topics)
+
+
+def test_vehicle_file_supplies_the_tyre(tmp_path: Path) -> None:
+    """A tyre with a lower peak (pDx1) in the vehicle file lowers the friction potential."""
+    import yaml
+
+    write_synthetic_drive_bag(tmp_path / 'in', duration_s=2.0, rate_hz=100.0, with_truth=False)
+    data = yaml.safe_load(default_vehicle_file().read_text())
+    data['tire']['pDx1'] = 0.5 * data['tire']['pDx1']
+    low = tmp_path / 'low_grip.yaml'
+    low.write_text(yaml.safe_dump(data))
+    replay_bag(tmp_path / 'in', tmp_path / 'default', progress=False)
+    replay_bag(tmp_path / 'in', tmp_path / 'low', progress=False, vehicle_file=low)
+
+    def mu_max(bag: Path) -> np.ndarray:
+        arr = BagReader(bag).topic_arrays(['/vd/estimates/friction_potential'])
+        msgs = arr['/vd/estimates/friction_potential'].datas
+        return decode_batch('vd_msgs/msg/FrictionPotential', msgs).values['mu_max']
+
+    default, lowered = mu_max(tmp_path / 'default'), mu_max(tmp_path / 'low')
+    # the prior (no informative data on a gentle drive) is the tyre's own peak: halved
+    np.testing.assert_allclose(lowered[-1], 0.5 * default[-1], rtol=0.05)
+
+
+def test_replay_config_reads_the_alert_sections(tmp_path: Path) -> None:
+    from vd_observer_node.alerts import AlertConfig
+    from vd_observer_node.bag.replay import load_replay_config
+    from vd_observer_node.errors import ConfigurationError
+    from vd_observer_node.situation import SituationConfig
+
+    settings = tmp_path / 'settings.yaml'
+    settings.write_text('situation:\n  alert_wheel_lipschitz: 10000.0\nalerts: {}\n')
+    config = load_replay_config(settings)
+    assert config.situation == SituationConfig(alert_wheel_lipschitz=10000.0)
+    assert config.alerts == AlertConfig()
+    assert config.friction is None
+    settings.write_text('situation:\n  no_such_setting: 1.0\n')
+    with pytest.raises(ConfigurationError):
+        load_replay_config(settings)

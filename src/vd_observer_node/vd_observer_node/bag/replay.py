@@ -6,10 +6,18 @@ Pipeline (whole arrays, no per-message decoding in Python):
 2. batch-decode the sensors to numpy (:mod:`.cdr_batch`);
 3. align them on exact header stamps (a stamp present on all three topics, as the live
    estimator node's ``StampAligner`` does) and call :func:`vd_observer_node.cascade.run_cascade`;
-4. batch-encode the estimates (and the observer's filtered speed on
+4. run :class:`vd_observer_node.situation.SituationMonitor` per aligned stamp on the sensors
+   and the cascade's wheel speed, μ and loads, as the live alerts node does: the friction
+   potential (``/vd/estimates/friction_potential``) and the 12 alert records
+   (``/vd/estimates/alerts``). The tyre curves come from the same vehicle file as the
+   estimator vehicle;
+5. batch-encode the estimates (and the observer's filtered speed on
    ``/vd/observer/body_velocity``, as the live observer node publishes it), stamped with the
    wheel-angle header stamp they derive from and logged at that message's log time;
-5. write inputs (raw), truth (raw) and estimates, merged in log-time order, to OUT_BAG.
+6. write inputs (raw), truth (raw) and estimates, merged in log-time order, to OUT_BAG.
+
+Inputs' own ``/vd/estimates/*`` and ``/vd/observer/*`` topics (a live recording) are not
+copied: the output holds the replayed ones only.
 """
 
 from __future__ import annotations
@@ -25,19 +33,24 @@ from typing import Any
 import numpy as np
 import yaml
 from tqdm import tqdm
-from vd_sim_node.topics import ESTIMATES, OBSERVER, SENSORS
+from vd_sim_node.topics import ALERTS, ESTIMATES, OBSERVER, SENSORS
 
+from ..alerts import ALERT_KINDS, AlertConfig
 from ..cascade import CascadeResult, run_cascade
-from ..errors import ConfigurationError
+from ..errors import ConfigurationError, VehicleParameterError
 from ..estimator import EstimatorConfig
+from ..friction_potential import FrictionPotentialConfig, TyreCurves
 from ..observer import ObserverConfig
+from ..situation import SituationConfig, SituationMonitor
 from ..vehicle import EstimatorVehicle, load_estimator_vehicle
+from .alerts_cdr import encode_alerts
 from .cdr_batch import decode_batch, encode_batch
 from .errors import BagExistsError, BagNotFoundError, ReplayInputError
 from .reader import BagReader, TopicArrays
 from .writer import BagWriter
 
 __all__ = [
+    'ALERT_TOPICS',
     'ESTIMATE_TOPICS',
     'SENSOR_TOPICS',
     'TRUTH_PREFIX',
@@ -46,12 +59,16 @@ __all__ = [
     'default_vehicle_file',
     'load_replay_config',
     'replay_bag',
+    'run_situation',
 ]
 
 SENSOR_TOPICS = SENSORS
 TRUTH_PREFIX = '/vd/truth/'
 ESTIMATE_TOPICS = {**OBSERVER, **ESTIMATES}
+#: Written by the situation monitor phase (``situation=True``), as the alerts node publishes.
+ALERT_TOPICS = dict(ALERTS)
 _WRITE_BLOCK = 65536  # messages per vectorized write (and progress-bar update)
+_SITUATION_BLOCK = 1000  # samples per progress-bar update of the situation phase
 
 
 @dataclass(frozen=True)
@@ -64,7 +81,10 @@ class ReplayReport:
         messages_written: messages in the output bag.
         bag_duration_s: log-time span of the sensor data [s].
         wall_time_s: replay wall time [s]; cascade_time_s of it in the cascade.
+        cascade_time_s: [s] wall time of the cascade.
         unmatched: sensor messages whose stamp is missing on another sensor topic.
+        situation_time_s: [s] wall time of the situation monitor (alerts and friction
+            potential; 0 when not run).
     """
 
     samples: int
@@ -74,6 +94,7 @@ class ReplayReport:
     wall_time_s: float
     cascade_time_s: float
     unmatched: int
+    situation_time_s: float = 0.0
 
     @property
     def real_time_factor(self) -> float:
@@ -85,20 +106,32 @@ class ReplayReport:
         """Sensor messages processed per wall-clock second."""
         return self.sensor_messages / self.wall_time_s if self.wall_time_s > 0 else float('inf')
 
+    @property
+    def situation_us_per_sample(self) -> float:
+        """[us] situation-monitor wall time per aligned sample (0 when not run)."""
+        return 1e6 * self.situation_time_s / self.samples if self.samples else 0.0
+
 
 @dataclass(frozen=True)
 class ReplayConfig:
-    """Cascade settings of an offline replay (None: the defaults)."""
+    """Cascade and alert settings of an offline replay (None: the defaults)."""
 
     observer: ObserverConfig | None = None
     estimator: EstimatorConfig | None = None
     cascade_kwargs: dict[str, Any] | None = None
+    alerts: AlertConfig | None = None
+    friction: FrictionPotentialConfig | None = None
+    situation: SituationConfig | None = None
+
+
+_SECTIONS = ('observer', 'estimator', 'cascade', 'alerts', 'friction_potential', 'situation')
 
 
 def load_replay_config(path: str | os.PathLike[str]) -> ReplayConfig:
-    """Read cascade settings from YAML: optional ``observer``, ``estimator`` and ``cascade``
-    mappings (flat, the keys of ``ObserverConfig.from_mapping`` /
-    ``EstimatorConfig.from_mapping`` / extra ``run_cascade`` keyword arguments).
+    """Read replay settings from YAML: optional ``observer``, ``estimator``, ``cascade``,
+    ``alerts``, ``friction_potential`` and ``situation`` mappings (flat, the keys of
+    ``ObserverConfig.from_mapping`` / ``EstimatorConfig.from_mapping`` / extra ``run_cascade``
+    keyword arguments / ``AlertConfig`` / ``FrictionPotentialConfig`` / ``SituationConfig``).
 
     Raises:
         ConfigurationError: unreadable file, not a mapping, or unknown keys.
@@ -107,12 +140,12 @@ def load_replay_config(path: str | os.PathLike[str]) -> ReplayConfig:
         data = yaml.safe_load(Path(path).read_text(encoding='utf-8')) or {}
     except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
         raise ConfigurationError(f'{path}: cannot read replay settings: {exc}') from exc
-    if not isinstance(data, dict) or set(data) - {'observer', 'estimator', 'cascade'}:
+    if not isinstance(data, dict) or set(data) - set(_SECTIONS):
         raise ConfigurationError(
-            f'{path}: expected a mapping with observer / estimator / cascade sections'
+            f'{path}: expected a mapping with sections among {" / ".join(_SECTIONS)}'
         )
     sections = {}
-    for key in ('observer', 'estimator', 'cascade'):
+    for key in _SECTIONS:
         value = data.get(key)
         if value is not None and not isinstance(value, dict):
             raise ConfigurationError(f'{path}: {key} must be a mapping')
@@ -125,6 +158,15 @@ def load_replay_config(path: str | os.PathLike[str]) -> ReplayConfig:
         if sections['estimator'] is not None
         else None,
         cascade_kwargs=sections['cascade'],
+        alerts=AlertConfig.from_mapping(sections['alerts'])
+        if sections['alerts'] is not None
+        else None,
+        friction=FrictionPotentialConfig.from_mapping(sections['friction_potential'])
+        if sections['friction_potential'] is not None
+        else None,
+        situation=SituationConfig.from_mapping(sections['situation'])
+        if sections['situation'] is not None
+        else None,
     )
 
 
@@ -195,6 +237,94 @@ def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str,
     }
 
 
+def _stamp_ns(seconds: np.ndarray) -> np.ndarray:
+    """[s] -> int64 [ns] as the alerts node stamps onset/detected (0 while nan)."""
+    finite = np.isfinite(seconds)
+    out: np.ndarray = np.where(finite, np.round(np.where(finite, seconds, 0.0) * 1e9), 0)
+    return out.astype(np.int64)
+
+
+def run_situation(
+    t: np.ndarray,
+    wheel_angle: np.ndarray,
+    speed: np.ndarray,
+    wheel_torque: np.ndarray,
+    result: CascadeResult,
+    monitor: SituationMonitor,
+    progress: Callable[[int], object] | None = None,
+) -> dict[str, dict[str, np.ndarray]]:
+    """Friction potential and alerts of every stamp, as the alerts node computes them.
+
+    Args:
+        t: shape (N,), [s] aligned stamps, increasing.
+        wheel_angle: shape (N, 4), [rad] measured wheel angles.
+        speed: shape (N,), [m/s] MEASURED body speed (what the node receives).
+        wheel_torque: shape (N, 4), [N m] measured wheel torques.
+        result: the cascade on the same stamps (omega, mu, mu_valid, fz used).
+        monitor: a fresh (or reset) situation monitor, fed in order.
+        progress: called with the number of samples done since its last call.
+
+    Returns:
+        Topic values: ``/vd/estimates/alerts`` ('level', 'onset_ns', 'detected_ns', each
+        (N, 3, 4)) and ``/vd/estimates/friction_potential`` ('mu_max', 'slip_peak',
+        'confidence' (N, 2) float, 'road_class' (N, 2) uint8, 'vehicle_road_class' (N,)).
+    """
+    n = t.shape[0]
+    level = np.zeros((n, len(ALERT_KINDS), 4), dtype=np.uint8)
+    onset = np.full((n, len(ALERT_KINDS), 4), np.nan)
+    detected = np.full((n, len(ALERT_KINDS), 4), np.nan)
+    mu_max = np.zeros((n, 2))
+    slip_peak = np.zeros((n, 2))
+    confidence = np.zeros((n, 2))
+    road = np.zeros((n, 2), dtype=np.uint8)
+    vehicle_road = np.zeros(n, dtype=np.uint8)
+    # Plain Python lists per row: indexing numpy rows per stamp costs more than the copy.
+    ts = t.tolist()
+    speeds = speed.tolist()
+    done = 0
+    for k in range(n):
+        sit = monitor.update(
+            ts[k],
+            wheel_angle[k],
+            speeds[k],
+            wheel_torque[k],
+            result.omega[k],
+            result.mu[k],
+            result.mu_valid[k],
+            result.fz[k],
+        )
+        for j, a in enumerate(sit.alerts):
+            # Situation.alerts is kind-major with wheels 0..3, the message's record order.
+            level[k, j // 4, j % 4] = a.level
+            onset[k, j // 4, j % 4] = a.onset
+            detected[k, j // 4, j % 4] = a.detected
+        pot = sit.potential
+        mu_max[k] = pot.mu_max
+        slip_peak[k] = pot.slip_peak
+        confidence[k] = pot.confidence
+        road[k] = pot.road_class
+        vehicle_road[k] = pot.vehicle_road_class()
+        if progress is not None and (k + 1) % _SITUATION_BLOCK == 0:
+            progress(k + 1 - done)
+            done = k + 1
+    if progress is not None and n > done:
+        progress(n - done)
+    return {
+        '/vd/estimates/alerts': {
+            'level': level,
+            'onset_ns': _stamp_ns(onset),
+            'detected_ns': _stamp_ns(detected),
+        },
+        '/vd/estimates/friction_potential': {
+            'mu_max': mu_max,
+            'slip_peak': slip_peak,
+            'confidence': confidence,
+            'road_class': road,
+            'vehicle_road_class': vehicle_road,
+        },
+    }
+
+
 def replay_bag(
     in_bag: str | os.PathLike[str],
     out_bag: str | os.PathLike[str],
@@ -205,23 +335,38 @@ def replay_bag(
     progress: bool = True,
     cascade: Callable[..., CascadeResult] = run_cascade,
     cascade_kwargs: Mapping[str, Any] | None = None,
+    vehicle_file: str | os.PathLike[str] | None = None,
+    situation: bool = True,
+    alert_config: AlertConfig | None = None,
+    friction_config: FrictionPotentialConfig | None = None,
+    situation_config: SituationConfig | None = None,
 ) -> ReplayReport:
     """Replay a bag's sensor topics through the cascade and write inputs, truth and estimates.
 
     Args:
         in_bag: input bag folder or .mcap file.
         out_bag: output bag folder (must not exist).
-        vehicle: estimator vehicle; default the Clio file (:func:`default_vehicle_file`).
+        vehicle: estimator vehicle; default the one of ``vehicle_file``.
         observer_config: observer settings; default ObserverConfig().
         estimator_config: estimator settings; default EstimatorConfig().
         progress: show a tqdm progress bar on stderr.
         cascade: the array cascade (injectable for tests); signature of ``run_cascade``.
         cascade_kwargs: further keyword arguments of the cascade (settings added to
             ``run_cascade`` later, so the replay can match the live nodes' parameters).
+        vehicle_file: vehicle YAML of the estimator vehicle (unless ``vehicle`` is given) and
+            of the tyre curves of the friction potential; default the Clio file
+            (:func:`default_vehicle_file`). Pass the file ``vehicle`` was read from, or the
+            tyre of the default file is used with it.
+        situation: also compute and write the friction potential and the alerts
+            (:data:`ALERT_TOPICS`) with :class:`SituationMonitor`, as the alerts node does.
+        alert_config: alert settings; default AlertConfig().
+        friction_config: friction-potential settings; default FrictionPotentialConfig().
+        situation_config: fast-observer settings; default SituationConfig().
 
     Raises:
         ReplayInputError: a sensor topic is missing or has the wrong type.
         BagError: reading or writing failed (see .errors).
+        VehicleParameterError: the vehicle file is unreadable or invalid.
     """
     started = time.perf_counter()
     target = Path(out_bag)
@@ -237,6 +382,26 @@ def replay_bag(
         if info.msgtype != msgtype:
             raise ReplayInputError(f'{in_bag}: {name} has type {info.msgtype}, need {msgtype}')
     truth = [t for t in topics if t.startswith(TRUTH_PREFIX)]
+    source = Path(vehicle_file) if vehicle_file is not None else default_vehicle_file()
+    estimator_vehicle = vehicle or load_estimator_vehicle(source)
+    monitor = None
+    if situation:
+        from vd_sim_node.errors import ParameterError
+        from vd_sim_node.vehicle.params import load_vehicle
+
+        try:
+            tire = load_vehicle(source).tire
+        except ParameterError as exc:
+            raise VehicleParameterError(f'vehicle file {source}: {exc}') from exc
+        monitor = SituationMonitor(
+            TyreCurves.from_tire(tire),
+            estimator_vehicle.static_wheel_loads[[0, 2]],
+            estimator_vehicle.effective_radius,
+            observer=observer_config,
+            alerts=alert_config,
+            friction=friction_config,
+            situation=situation_config,
+        )
     total_in = sum(topics[t].message_count for t in [*SENSOR_TOPICS, *truth])
     bar = tqdm(
         total=2 * total_in,
@@ -264,17 +429,42 @@ def replay_bag(
         sensor_count = len(angles.stamp_ns) + len(speed.stamp_ns) + len(torque.stamp_ns)
         bar.set_postfix_str(f'cascade on {len(common)} samples')
         cascade_start = time.perf_counter()
+        t = common.astype(np.float64) * 1e-9
+        wheel_angle = angles.values['angle'][ia]
+        body_speed = speed.values['twist.linear.x'][iv]
+        wheel_torque = torque.values['torque'][it]
         result = cascade(
-            common.astype(np.float64) * 1e-9,
-            angles.values['angle'][ia],
-            speed.values['twist.linear.x'][iv],
-            torque.values['torque'][it],
-            vehicle or load_estimator_vehicle(default_vehicle_file()),
+            t,
+            wheel_angle,
+            body_speed,
+            wheel_torque,
+            estimator_vehicle,
             observer_config,
             estimator_config,
             **dict(cascade_kwargs or {}),
         )
         cascade_time = time.perf_counter() - cascade_start
+        situation_values: dict[str, dict[str, np.ndarray]] = {}
+        situation_time = 0.0
+        if monitor is not None:
+            # The per-stamp loop costs ~20x a message read or written: a bar of its own in
+            # samples, so the message bar's rate and remaining time stay true.
+            bar.set_postfix_str(f'alerts on {len(common)} samples')
+            situation_start = time.perf_counter()
+            with tqdm(
+                total=len(common),
+                unit='sample',
+                unit_scale=True,
+                desc='alerts',
+                disable=not progress,
+                file=sys.stderr,
+                position=1,
+                leave=False,
+            ) as phase:
+                situation_values = run_situation(
+                    t, wheel_angle, body_speed, wheel_torque, result, monitor, phase.update
+                )
+            situation_time = time.perf_counter() - situation_start
         frames = angles.frame_id[ia]
         frame_id = frames[0].decode() if len(frames) else ''
         log_ns = arrays['/vd/sensors/wheel_angles'].log_time_ns[ia]
@@ -282,9 +472,17 @@ def replay_bag(
         for topic in [*SENSOR_TOPICS, *truth]:
             arr = arrays[topic]
             outputs.append((topic, arr.msgtype, arr.log_time_ns, arr.datas))
-        for topic, values in _estimates(result, angles.values['angle'][ia]).items():
+        for topic, values in _estimates(result, wheel_angle).items():
             datas = encode_batch(ESTIMATE_TOPICS[topic], common, frame_id, values)
             outputs.append((topic, ESTIMATE_TOPICS[topic], log_ns, datas))
+        for topic, values in situation_values.items():
+            msgtype = ALERT_TOPICS[topic]
+            if topic == '/vd/estimates/alerts':
+                datas = encode_alerts(common, frame_id, values)
+            else:
+                datas = encode_batch(msgtype, common, frame_id, values)
+            outputs.append((topic, msgtype, log_ns, datas))
+        bar.set_postfix_str('writing')
         written = _write_merged(out_bag, reader, outputs, bar, total_in)
     wall = time.perf_counter() - started
     sensor_log = np.concatenate([arrays[t].log_time_ns for t in SENSOR_TOPICS])
@@ -296,6 +494,7 @@ def replay_bag(
         wall_time_s=wall,
         cascade_time_s=cascade_time,
         unmatched=sensor_count - 3 * len(common),
+        situation_time_s=situation_time,
     )
 
 

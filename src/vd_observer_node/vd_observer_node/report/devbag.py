@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from ..bag.alerts_cdr import ALERTS_TYPE as _ALERTS_TYPE
+from ..bag.alerts_cdr import encode_alerts
 from ..bag.cdr_batch import encode_batch
 from ..bag.writer import BagWriter
 from .topics import ALERT_TOPICS, ESTIMATE_TOPICS, SENSOR_TOPICS, TRUTH_TOPICS
@@ -32,53 +34,6 @@ __all__ = [
 TopicValues = Mapping[str, Mapping[str, np.ndarray]]
 
 _TYPES = {**SENSOR_TOPICS, **ESTIMATE_TOPICS, **ALERT_TOPICS, **TRUTH_TOPICS}
-_ALERTS_TYPE = 'vd_msgs/msg/Alerts'
-
-
-def _le(values: np.ndarray, dtype: str) -> np.ndarray:
-    """shape (N, ...) -> (N, bytes) little-endian bytes of each row."""
-    arr = np.ascontiguousarray(np.asarray(values).astype(dtype))
-    return arr.view(np.uint8).reshape(arr.shape[0], -1)
-
-
-def encode_alerts(
-    stamp_ns: np.ndarray, frame_id: str, values: Mapping[str, np.ndarray]
-) -> list[bytes]:
-    """CDR bytes of vd_msgs/msg/Alerts messages with all 12 channels, kind-major.
-
-    Args:
-        stamp_ns: shape (N,), int64 [ns] header stamps.
-        frame_id: header.frame_id.
-        values: 'level' (N, 3, 4) (0 OK, 1 warning, 2 critical); optional 'onset_ns' and
-            'detected_ns' (N, 3, 4) int64 [ns] (0 while inactive).
-    """
-    stamps = np.asarray(stamp_ns, dtype=np.int64)
-    n = stamps.shape[0]
-    level = np.asarray(values['level']).reshape(n, 12)
-    zeros = np.zeros((n, 12), dtype=np.int64)
-    onset = np.asarray(values.get('onset_ns', zeros), dtype=np.int64).reshape(n, 12)
-    detected = np.asarray(values.get('detected_ns', zeros), dtype=np.int64).reshape(n, 12)
-    frame = frame_id.encode() + b'\x00'
-    count_at = 4 + ((12 + len(frame) + 3) & ~3)  # CDR alignment from the encapsulation end
-    size = count_at + 4 + 20 * 12
-    out = np.zeros((n, size), dtype=np.uint8)
-    out[:, 1] = 1  # CDR little endian
-    out[:, 4:8] = _le(stamps // 1_000_000_000, '<i4')
-    out[:, 8:12] = _le(stamps % 1_000_000_000, '<u4')
-    out[:, 12:16] = _le(np.full(n, len(frame)), '<u4')
-    out[:, 16 : 16 + len(frame)] = np.frombuffer(frame, dtype=np.uint8)
-    out[:, count_at : count_at + 4] = _le(np.full(n, 12), '<u4')
-    channel = np.arange(12)
-    records = np.zeros((n, 12, 20), dtype=np.uint8)
-    records[:, :, 0] = channel // 4
-    records[:, :, 1] = channel % 4
-    records[:, :, 2] = level
-    records[:, :, 3] = level > 0
-    for k, stamp in ((4, onset), (12, detected)):
-        records[:, :, k : k + 4] = _le(stamp // 1_000_000_000, '<i4').reshape(n, 12, 4)
-        records[:, :, k + 4 : k + 8] = _le(stamp % 1_000_000_000, '<u4').reshape(n, 12, 4)
-    out[:, count_at + 4 :] = records.reshape(n, -1)
-    return [row.tobytes() for row in out]
 
 
 def _full_fields(msgtype: str, n: int, given: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
