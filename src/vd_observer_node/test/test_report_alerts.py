@@ -17,6 +17,7 @@ from vd_observer_node.bag.typestore import deserialize, message_class, serialize
 from vd_observer_node.report.alerts import (
     AlertSettings,
     activation_indices,
+    already_active,
     axle_utilisation,
     evaluate_alerts,
     false_alarms,
@@ -58,9 +59,24 @@ def test_truth_conditions_per_kind_and_relaxed() -> None:
     assert truth.shape == (1, 3, 4)
     np.testing.assert_array_equal(truth[0, 0], [True, False, False, False])  # traction
     np.testing.assert_array_equal(truth[0, 1], [False, False, True, False])  # lock
-    np.testing.assert_array_equal(truth[0, 2], [False, False, False, True])  # |mu| >= 0.4
+    # |mu| >= 0.4 on RR; FL and RL past their peak slip with mu 0: all friction used
+    np.testing.assert_array_equal(truth[0, 2], [True, False, True, True])
     relaxed = truth_conditions(slip, mu, peak_slip, peak_mu, scale=0.8)
     np.testing.assert_array_equal(relaxed[0, 0], [True, True, False, False])  # 0.09 >= 0.08
+    np.testing.assert_array_equal(relaxed[0, 2], [True, True, True, True])
+
+
+def test_spinning_wheel_past_its_peak_is_low_friction() -> None:
+    """At slip 0.95 the MF tyre gives ~0.65 of its peak: below the 0.8 ratio, yet past the
+    peak all available friction is used."""
+    peak_slip, peak_mu = np.full((1, 4), 0.12), np.full((1, 4), 0.3)
+    slip = np.array([[0.95, -0.95, 0.05, 0.95]])
+    mu = np.array([[0.65 * 0.3, -0.65 * 0.3, 0.65 * 0.3, 0.0]])
+    truth = truth_conditions(slip, mu, peak_slip, peak_mu)
+    np.testing.assert_array_equal(truth[0, 2], [True, True, False, True])
+    # RL, before its peak at the same mu: not low friction (0.65 < 0.8) but relaxed
+    relaxed = truth_conditions(slip, mu, peak_slip, peak_mu, scale=0.8)
+    np.testing.assert_array_equal(relaxed[0, 2], [True, True, True, True])  # 0.65 >= 0.64
 
 
 @given(
@@ -79,6 +95,8 @@ def test_truth_implies_relaxed(
     relaxed = truth_conditions(*args, *peaks, scale=scale)
     assert np.all(relaxed | ~truth)
     assert not np.any(truth[:, 0] & truth[:, 1])  # a wheel cannot spin and lock at once
+    for cond in (truth, relaxed):  # past the peak is low friction, at every scale
+        assert np.all(cond[:, 2] | ~(cond[:, 0] | cond[:, 1]))
 
 
 # -- episodes, delays, false alarms ---------------------------------------------------------
@@ -104,6 +122,42 @@ def test_known_onset_gives_known_delay() -> None:
     assert scored[1][2] == pytest.approx(0.3)
     assert scored[2][2] == pytest.approx(-0.2)
     assert scored[3][1] is None and scored[3][2] is None
+
+
+def test_episode_beginning_while_already_active_is_detected_with_no_delay() -> None:
+    onsets = np.array([3.0, 6.0, 9.0])
+    # 3.0: active since 1.0 (2 s before, beyond early_s) -> already active;
+    # 6.0: active since 5.5 (within early_s) -> the early activation, delay -0.5;
+    # 9.0: the channel went OK at 8.0 and activates 1.5 s late -> missed
+    activations = np.array([1.0, 5.5, 10.5])
+    active_at = np.array([True, True, False])
+    scored = score_episodes(onsets, activations, CFG, active_at_onset=active_at)
+    assert scored[0] == (3.0, 3.0, 0.0, 'met')
+    assert scored[1][2] == pytest.approx(-0.5) and scored[1][3] == 'met'
+    assert scored[2][3] == 'missed'
+    np.testing.assert_array_equal(
+        already_active(onsets, activations, active_at, CFG), [True, False, False]
+    )
+    # without the level at the onsets: as before, the long-active episode is missed
+    assert score_episodes(onsets, activations, CFG)[0][3] == 'missed'
+
+
+def test_evaluate_alerts_reports_already_active() -> None:
+    """low_friction FL active from 1.0 s (a wet road, say) when the wheel spins at 4.0 s."""
+    t = _t(8.0)
+    n = t.size
+    truth = np.zeros((n, 3, 4), bool)
+    truth[(t >= 4.0) & (t < 5.0), 2, 0] = True
+    level = np.zeros((n, 3, 4), np.int64)
+    level[(t >= 1.0 - 1e-9) & (t < 6.0), 2, 0] = 1
+    onset = np.where(level > 0, 0.98, np.nan)
+    episodes, alarms = evaluate_alerts(t, truth, truth, level, onset, CFG)
+    (episode,) = episodes
+    assert episode.already_active and episode.status == 'met'
+    assert episode.detected_s == pytest.approx(4.0) and episode.delay_s == 0.0
+    assert episode.reported_onset_s == pytest.approx(0.98)
+    (alarm,) = alarms  # the activation at 1.0 s itself had no truth near it
+    assert alarm.t_s == pytest.approx(1.0)
 
 
 def test_one_spurious_activation_is_one_false_alarm() -> None:
@@ -249,7 +303,7 @@ def _synthetic_topics(t: np.ndarray, with_truth_potential: bool = True) -> dict[
     spin = (t >= 3.0) & (t < 4.0)
     slip[spin, :2] = 0.3
     mu = np.zeros((n, 4))
-    mu[spin, :2] = 0.7  # excited (> 0.5 peak), but short of the low_friction truth (0.8)
+    mu[spin, :2] = 0.7  # excited (> 0.5 peak), short of 0.8 peak; low_friction by the slip
     level = np.zeros((n, 3, 4), np.int64)
     level[(t >= 3.05 - 1e-9) & (t < 4.2), 0, :2] = 2
     level[(t >= 7.0 - 1e-9) & (t < 7.5), 1, 3] = 1
@@ -288,6 +342,8 @@ def test_section_end_to_end_through_the_command(tmp_path: Path) -> None:
     assert [(e['kind'], e['wheel'], e['status']) for e in episodes] == [
         ('traction', 'FL', 'met'),
         ('traction', 'FR', 'met'),
+        ('low_friction', 'FL', 'missed'),  # past the peak slip, no low_friction alert
+        ('low_friction', 'FR', 'missed'),
     ]
     assert episodes[0]['delay_s'] == pytest.approx(0.05)
     assert episodes[0]['reported_onset_s'] == pytest.approx(3.04)

@@ -6,12 +6,16 @@ The metric functions are pure array functions, shared by ``vd report`` (arrays f
 (``/vd/truth/friction_potential``: the tyre's Magic-Formula peak at the true load and road μ):
 
 * truth condition per (kind, wheel): ``traction`` true slip >= peak slip; ``lock`` true slip
-  <= -peak slip; ``low_friction`` |true μ| >= 0.8 x peak μ. Scaled by 0.8 ("relaxed": the
+  <= -peak slip; ``low_friction`` |true μ| >= 0.8 x peak μ, or the wheel past its peak slip
+  (traction or lock condition: past the peak the tyre uses all the friction there is, though
+  its μ fell below 0.8 x the peak, e.g. 0.65 x at slip 0.95). Scaled by 0.8 ("relaxed": the
   tyre near, not past, its limit) to judge false alarms.
 * Episodes: runs of the truth condition from ``settle_s`` (0.5 s) on, a run starting within
   1 s of the previous run's start merged into it. Delay = first activation (OK -> active) at
   or after onset - 1 s, minus the onset (negative = earlier than the truth); none, or more
-  than 1 s late: missed. Goal <= 100 ms.
+  than 1 s late: missed. An episode beginning while the channel is already active from an
+  activation more than 1 s before counts as detected with delay 0 ("already active"): the
+  driver is being warned. Goal <= 100 ms.
 * False alarm: an activation with no relaxed truth condition within [-0.5 s, +0.1 s] of it.
 * μ_max error = estimate - true μ_max per axle and constant-road segment, (a) at samples where
   the axle's true utilisation |μ| / peak μ reached 0.5 within the last 0.5 s (from 0.1 s after
@@ -45,6 +49,7 @@ __all__ = [
     'MuMaxSegment',
     'activation_indices',
     'alert_data',
+    'already_active',
     'axle_utilisation',
     'evaluate_alerts',
     'evaluate_alerts_section',
@@ -121,6 +126,8 @@ class AlertEpisode:
         reported_onset_s: [s] the alert's own onset stamp at the detection (None if unknown).
         status: 'met' (delay <= goal), 'late' (detected within max_delay_s, after the goal),
             'missed' (no activation, or more than max_delay_s late).
+        already_active: the channel was active at the true onset from an activation more
+            than ``early_s`` before it: detected_s = true onset, delay 0, status 'met'.
     """
 
     kind: str
@@ -130,6 +137,7 @@ class AlertEpisode:
     delay_s: float | None
     reported_onset_s: float | None
     status: str
+    already_active: bool = False
 
 
 @dataclass(frozen=True)
@@ -236,7 +244,8 @@ def truth_conditions(
         peak_slip: shape (N, 4), [-] true slip magnitude at the MF peak (side of the force).
         peak_mu: shape (N, 4), [-] true MF peak μ.
         scale: 1 for the truth, < 1 (0.8) for the relaxed condition of the false alarms.
-        low_friction_ratio: low_friction holds at |μ| >= scale x this x peak μ.
+        low_friction_ratio: low_friction holds at |μ| >= scale x this x peak μ, and wherever
+            the traction or lock condition (at the same scale) holds.
 
     Returns:
         Shape (N, 3, 4), bool, kinds in :data:`ALERT_KINDS` order.
@@ -244,14 +253,12 @@ def truth_conditions(
     s = np.asarray(slip, dtype=np.float64)
     ps = np.asarray(peak_slip, dtype=np.float64)
     pm = np.asarray(peak_mu, dtype=np.float64)
-    out: BoolArray = np.stack(
-        [
-            s >= scale * ps,
-            s <= -scale * ps,
-            np.abs(np.asarray(mu, dtype=np.float64)) >= scale * low_friction_ratio * pm,
-        ],
-        axis=1,
-    )
+    traction = s >= scale * ps
+    lock = s <= -scale * ps
+    # Past the peak μ falls again (0.65 x the peak at slip 0.95 on a spinning wheel): the
+    # ratio alone would call the friction no longer scarce just when all of it is used.
+    near_peak = np.abs(np.asarray(mu, dtype=np.float64)) >= scale * low_friction_ratio * pm
+    out: BoolArray = np.stack([traction, lock, near_peak | traction | lock], axis=1)
     return out
 
 
@@ -287,10 +294,42 @@ def truth_episodes(
     return out
 
 
+def already_active(
+    onsets: ArrayLike,
+    activations: ArrayLike,
+    active_at_onset: ArrayLike,
+    settings: AlertSettings | None = None,
+) -> BoolArray:
+    """Which true onsets find the channel already active from an activation > early_s before.
+
+    Such an episode has no activation of its own to time (the alert never went back to OK),
+    yet the driver is being warned: it counts as detected at the onset, delay 0.
+
+    Args:
+        onsets: shape (E,), [s] true onsets of one channel.
+        activations: shape (A,), [s] activation stamps of that channel, increasing.
+        active_at_onset: shape (E,), bool, the channel's level > 0 at each onset's stamp.
+        settings: definitions.
+
+    Returns:
+        shape (E,), bool.
+    """
+    cfg = settings or AlertSettings()
+    ons = np.asarray(onsets, dtype=np.float64)
+    acts = np.asarray(activations, dtype=np.float64)
+    # no activation in [onset - early_s, onset]: the one that made it active is older
+    first_in_window = np.searchsorted(acts, ons - cfg.early_s, side='left')
+    after_onset = np.searchsorted(acts, ons, side='right')
+    out: BoolArray = np.asarray(active_at_onset, dtype=bool) & (first_in_window == after_onset)
+    return out
+
+
 def score_episodes(
     onsets: ArrayLike,
     activations: ArrayLike,
     settings: AlertSettings | None = None,
+    *,
+    active_at_onset: ArrayLike | None = None,
 ) -> list[tuple[float, float | None, float | None, str]]:
     """Detection of each true onset by the first activation at or after onset - early_s.
 
@@ -298,14 +337,26 @@ def score_episodes(
         onsets: shape (E,), [s] true onsets of one channel.
         activations: shape (A,), [s] activation stamps of that channel, increasing.
         settings: definitions.
+        active_at_onset: shape (E,), bool, the channel active at each onset's stamp, or None
+            (unknown: never "already active"). See :func:`already_active`.
 
     Returns:
-        Per onset: (onset, detection stamp or None, delay or None, status).
+        Per onset: (onset, detection stamp or None, delay or None, status); an already
+        active episode gives (onset, onset, 0.0, 'met').
     """
     cfg = settings or AlertSettings()
     acts = np.asarray(activations, dtype=np.float64)
+    ons = np.asarray(onsets, dtype=np.float64)
+    active = (
+        np.zeros(ons.shape, dtype=bool)
+        if active_at_onset is None
+        else already_active(ons, acts, active_at_onset, cfg)
+    )
     out: list[tuple[float, float | None, float | None, str]] = []
-    for onset in np.asarray(onsets, dtype=np.float64).tolist():
+    for onset, was_active in zip(ons.tolist(), active.tolist(), strict=True):
+        if was_active:
+            out.append((onset, onset, 0.0, 'met'))
+            continue
         k = int(np.searchsorted(acts, onset - cfg.early_s, side='left'))
         if k >= acts.size:
             out.append((onset, None, None, 'missed'))
@@ -378,13 +429,18 @@ def evaluate_alerts(
             for stamp in false_alarms(tt, acts, rel[:, kind, wheel], cfg).tolist():
                 alarms.append(FalseAlarm(name, wheel, stamp))
             onsets = truth_episodes(tt, tru[:, kind, wheel], cfg)
-            for true_onset, det, delay, status in score_episodes(onsets, acts, cfg):
+            active_at = lev[np.searchsorted(tt, onsets), kind, wheel] > 0
+            was_active = already_active(onsets, acts, active_at, cfg)
+            scored = score_episodes(onsets, acts, cfg, active_at_onset=active_at)
+            for (true_onset, det, delay, status), prior in zip(
+                scored, was_active.tolist(), strict=True
+            ):
                 reported = None
                 if det is not None and ons is not None:
                     value = float(ons[int(np.searchsorted(tt, det)), kind, wheel])
                     reported = value if math.isfinite(value) else None
                 episodes.append(
-                    AlertEpisode(name, wheel, true_onset, det, delay, reported, status)
+                    AlertEpisode(name, wheel, true_onset, det, delay, reported, status, prior)
                 )
     return episodes, alarms
 
@@ -592,7 +648,7 @@ def alert_data(series: BagSeries) -> tuple[AlertData | None, list[str]]:
     if ALERT_TOPIC not in topics and ESTIMATED_POTENTIAL_TOPIC not in topics:
         return None, [
             f'alerts section skipped: neither {ALERT_TOPIC} nor {ESTIMATED_POTENTIAL_TOPIC} '
-            'in the bag (run the alerts node; `vd replay` does not compute them yet)'
+            'in the bag (run the alerts node, or `vd replay` the bag)'
         ]
     notes: list[str] = []
     present = [name for name in (*need, ALERT_TOPIC, ESTIMATED_POTENTIAL_TOPIC) if name in topics]
