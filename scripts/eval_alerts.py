@@ -3,12 +3,13 @@
 
 Simulates each scenario (default: launch_low_mu, braking_low_mu_hard, paper_table1) with ideal
 sensors and with a 96 counts/rev encoder plus 0.05 m/s body-speed noise, runs the observer /
-estimator cascade (`run_cascade`), then `FrictionPotentialEstimator` and `AlertMonitor` per
-stamp exactly as the node would, and prints against the simulator's truth (definitions in
-docs/alerts.md):
+estimator cascade (`run_cascade`), then `SituationMonitor` (fast wheel observer, friction
+potential, alerts) per stamp exactly as the alerts node and `vd replay` do, and prints against
+the simulator's truth (definitions in docs/alerts.md):
 
 * per (kind, wheel) with a true onset: true onset, detection stamp (alert becomes active),
-  delay = detection - true onset (goal <= 100 ms), and the reported onset stamp;
+  delay = detection - true onset (goal <= 100 ms), and the reported onset stamp ("already
+  active" when the channel was active since more than 1 s before the onset: delay 0);
 * activations with no relaxed truth (0.8 x the thresholds) within [-0.5, +0.1] s: false
   alarms (goal on paper_table1: none);
 * per axle and road segment where the tyre was truly excited beyond half its peak: mu_max
@@ -38,18 +39,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 
-from vd_observer_node.alerts import (  # noqa: E402
-    ALERT_KINDS,
-    AlertConfig,
-    AlertMonitor,
-    slip_velocity,
-)
+from vd_observer_node.alerts import ALERT_KINDS, AlertConfig  # noqa: E402
 from vd_observer_node.cascade import run_cascade  # noqa: E402
 from vd_observer_node.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.friction_potential import (  # noqa: E402
     ROAD_CLASS_NAMES,
     FrictionPotentialConfig,
-    FrictionPotentialEstimator,
+    TyreCurves,
 )
 from vd_observer_node.observer import ObserverConfig  # noqa: E402
 from vd_observer_node.report.alerts import (  # noqa: E402
@@ -60,6 +56,7 @@ from vd_observer_node.report.alerts import (  # noqa: E402
     segments_from_road,
     truth_conditions,
 )
+from vd_observer_node.situation import SituationConfig, SituationMonitor  # noqa: E402
 from vd_observer_node.vehicle import load_estimator_vehicle  # noqa: E402
 from vd_sim_node.vehicle.friction_truth import axle_mean, road_class  # noqa: E402
 
@@ -72,23 +69,24 @@ TUNED: dict[str, dict[str, float]] = {
     'ideal': {'wheel_lipschitz': 10000.0, 'speed_lipschitz': 2000.0, 'slope_filter_tau': 0.05},
     'noisy': {'wheel_lipschitz': 300.0, 'speed_lipschitz': 20.0, 'slope_filter_tau': 0.1},
 }
+#: Fast wheel observer of the slip alerts per case: ideal encoders allow a faster one.
+ALERT_WHEEL_LIPSCHITZ = {'ideal': 10000.0, 'noisy': SituationConfig().alert_wheel_lipschitz}
 #: Truth and metric definitions (docs/alerts.md 4.1), shared with `vd report`.
 SETTINGS = AlertSettings()
 
 
-def run_detectors(
-    est: Any,
-    speed: np.ndarray,
-    radius: float,
-    alert_cfg: AlertConfig,
-    fric_cfg: FrictionPotentialConfig,
-) -> dict[str, np.ndarray]:
-    """Friction potential and alerts per stamp, as the node would compute them.
+def run_detectors(est: Any, sim: Any, monitor: SituationMonitor) -> dict[str, np.ndarray]:
+    """Friction potential and alerts per stamp, as the alerts node computes them.
 
-    The slip velocity uses the measured body speed, the speed the estimator's slip uses.
+    Args:
+        est: the cascade on the simulator's sensors (omega, mu, mu_valid, fz used).
+        sim: the simulator run (t, wheel_angle, the MEASURED body_speed, wheel_torque).
+        monitor: a fresh situation monitor.
+
+    Returns:
+        'level' (N, 3, 4), 'detected' and 'onset' (N, 3, 4) [s] (nan while inactive),
+        'mu_max', 'conf' (N, 2), 'road' (N, 2) codes.
     """
-    fric = FrictionPotentialEstimator(fric_cfg)
-    monitor = AlertMonitor(alert_cfg)
     n = est.t.size
     level = np.zeros((n, 3, 4), dtype=np.int64)
     detected = np.full((n, 3, 4), math.nan)
@@ -97,21 +95,24 @@ def run_detectors(
     conf = np.zeros((n, 2))
     road = np.zeros((n, 2), dtype=np.int64)
     for k in range(n):
-        t = float(est.t[k])
-        slip_vel = slip_velocity(est.omega[k], float(speed[k]), radius)
-        fit_slip = fric.fit_slip(slip_vel, float(speed[k]))
-        pot = fric.update(t, fit_slip, est.mu[k], est.mu_valid[k])
-        alerts = monitor.update(
-            t, est.slip[k], slip_vel, est.mu[k], est.mu_valid[k], pot.wheel_mu_max()
+        sit = monitor.update(
+            float(sim.t[k]),
+            sim.wheel_angle[k],
+            float(sim.body_speed[k]),
+            sim.wheel_torque[k],
+            est.omega[k],
+            est.mu[k],
+            est.mu_valid[k],
+            est.fz[k],
         )
-        for a in alerts:
+        for a in sit.alerts:
             kind = ALERT_KINDS.index(a.kind)
             level[k, kind, a.wheel] = a.level
             detected[k, kind, a.wheel] = a.detected
             onset[k, kind, a.wheel] = a.onset
-        mu_max[k] = pot.mu_max
-        conf[k] = pot.confidence
-        road[k] = pot.road_class
+        mu_max[k] = sit.potential.mu_max
+        conf[k] = sit.potential.confidence
+        road[k] = sit.potential.road_class
     return {
         'level': level,
         'detected': detected,
@@ -163,6 +164,12 @@ def report_alerts(
                     )
                     continue
                 reported = math.nan if e.reported_onset_s is None else e.reported_onset_s
+                if e.already_active:
+                    print(
+                        f'   {label}: true onset {e.true_onset_s:.3f} s, already active '
+                        f'(delay 0, MET), reported onset {reported:.3f} s'
+                    )
+                    continue
                 print(
                     f'   {label}: true onset {e.true_onset_s:.3f} s, '
                     f'detected {e.detected_s:.3f} s, '
@@ -219,6 +226,8 @@ def main() -> None:
 
     sim_vehicle = load_vehicle(VEHICLE_FILE)
     vehicle = load_estimator_vehicle(VEHICLE_FILE)
+    curves = TyreCurves.from_tire(sim_vehicle.tire)
+    static_load = vehicle.static_wheel_loads[[0, 2]]
     alert_cfg = AlertConfig()
     fric_cfg = FrictionPotentialConfig()
     totals: dict[str, int] = {}
@@ -245,14 +254,23 @@ def main() -> None:
                 obs_cfg,
                 est_cfg,
             )
+            monitor = SituationMonitor(
+                curves,
+                static_load,
+                vehicle.effective_radius,
+                observer=obs_cfg,
+                alerts=alert_cfg,
+                friction=fric_cfg,
+                situation=SituationConfig(alert_wheel_lipschitz=ALERT_WHEEL_LIPSCHITZ[case]),
+            )
             t0 = time.perf_counter()
-            det = run_detectors(est, sim.body_speed, vehicle.effective_radius, alert_cfg, fric_cfg)
+            det = run_detectors(est, sim, monitor)
             cost = (time.perf_counter() - t0) / sim.t.size
             truth, relaxed = truth_and_relaxed(sim)
             print(
                 f'== {name} / {case}: encoder {counts or "ideal"} counts/rev, speed noise '
-                f'{noise} m/s, {sim.t.size} samples; friction + alerts '
-                f'{1e6 * cost:.0f} us/sample'
+                f'{noise} m/s, {sim.t.size} samples; situation monitor (fast observer L '
+                f'{ALERT_WHEEL_LIPSCHITZ[case]:g}, friction, alerts) {1e6 * cost:.0f} us/sample'
             )
             result = report_alerts(sim, det, truth, relaxed)
             report_mu_max(sim, det)
