@@ -130,19 +130,28 @@ def test_step_channel_levels_hold_long_enough(targets: list[int]) -> None:
 
 
 def test_metrics_gates() -> None:
+    cfg = AlertConfig(min_slip_velocity=0.3, min_wheel_torque=20.0)
     slip = np.array([0.5, -0.5, 0.5, -0.5])
     sv = np.array([0.1, -2.0, 2.0, 2.0])
+    torque = np.array([500.0, -800.0, 500.0, 500.0])
     mu = np.array([0.2, -0.2, -0.1, 0.3])
     valid = np.array([True, True, True, False])
     mmax = np.array([0.25, 0.25, 0.0, 0.5])
-    m = alert_metrics(slip, sv, mu, valid, mmax, min_slip_velocity=0.3)
+    far_peak = np.full(4, 2.0)  # no wheel past its peak slip
+    m = alert_metrics(slip, sv, torque, mu, valid, mmax, far_peak, cfg)
     # traction: FL gated by slip velocity, RL by the braking force
     np.testing.assert_allclose(m[0], [0.0, 0.0, 0.0, -0.5])
     np.testing.assert_allclose(m[1], [0.0, 0.5, 0.0, 0.0])
     # utilisation: RL has no mu_max, RR has no valid mu
     np.testing.assert_allclose(m[2], [0.8, 0.8, 0.0, 0.0])
+    # torque gates: an undriven wheel cannot spin, an unbraked one cannot lock
+    idle = alert_metrics(slip, sv, np.zeros(4), mu, valid, mmax, far_peak, cfg)
+    np.testing.assert_allclose(idle[:2], 0.0)
+    # past its peak slip a wheel uses all the friction there is, whatever its mu
+    past = alert_metrics(slip, sv, torque, mu, valid, mmax, np.full(4, 0.2), cfg)
+    np.testing.assert_allclose(past[2], [0.8, 1.0, 0.0, 0.0])  # FL: slip velocity gate
     with pytest.raises(InputShapeError):
-        alert_metrics(slip[:3], sv, mu, valid, mmax, 0.3)
+        alert_metrics(slip[:3], sv, torque, mu, valid, mmax, far_peak, cfg)
 
 
 def test_slip_velocity() -> None:
@@ -165,8 +174,10 @@ def test_monitor_equals_pure_steps() -> None:
         mu = 0.3 * np.sign(slip) + rng.normal(0, 0.02, 4)
         valid = rng.uniform(size=4) > 0.05
         mmax = np.full(4, 0.35)
-        records = monitor.update(t, slip, sv, mu, valid, mmax)
-        metrics = alert_metrics(slip, sv, mu, valid, mmax, cfg.min_slip_velocity)
+        speak = np.full(4, 0.1)
+        torque = 800.0 * np.sign(slip)
+        records = monitor.update(t, slip, sv, torque, mu, valid, mmax, speak)
+        metrics = alert_metrics(slip, sv, torque, mu, valid, mmax, speak, cfg)
         for kind in range(3):
             for w in range(4):
                 s = states[kind][w]
@@ -181,19 +192,25 @@ def test_monitor_equals_pure_steps() -> None:
     assert any(r.active for r in monitor.last)  # the signal did raise alerts
     # a stale stamp changes nothing
     before = monitor.last
-    assert monitor.update(0.5, np.ones(4), np.ones(4), np.ones(4), [True] * 4, mmax) is before
+    ones = np.ones(4)
+    assert monitor.update(0.5, ones, ones, ones, ones, [True] * 4, mmax, speak) is before
 
 
 # --- scenarios: the simulator's truth against the detections -------------------------------
 
 
 @cache
-def scenario_run(name: str, duration: float | None = None) -> dict[str, Any]:
-    """Simulate (ideal sensors), run the cascade, the friction potential and the alerts."""
+def scenario_run(name: str, duration: float | None = None, noisy: bool = False) -> dict[str, Any]:
+    """Simulate, run the cascade and the situation monitor (alerts, friction potential).
+
+    Ideal sensors with the ideal-sensor tuning of scripts/eval_estimators.py, or (noisy) a
+    96 counts/rev encoder and 0.05 m/s speed noise with the default observer settings.
+    """
     from vd_observer_node.cascade import run_cascade
     from vd_observer_node.estimator import EstimatorConfig
-    from vd_observer_node.friction_potential import FrictionPotentialEstimator
+    from vd_observer_node.friction_potential import TyreCurves
     from vd_observer_node.observer import ObserverConfig
+    from vd_observer_node.situation import SituationConfig, SituationMonitor
     from vd_observer_node.vehicle import load_estimator_vehicle
     from vd_sim_node.vehicle.params import load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
@@ -206,38 +223,47 @@ def scenario_run(name: str, duration: float | None = None) -> dict[str, Any]:
     scenario = dataclasses.replace(
         scenario,
         sensors=dataclasses.replace(
-            scenario.sensors, encoder_counts_per_rev=0, speed_noise_std=0.0
+            scenario.sensors,
+            encoder_counts_per_rev=96 if noisy else 0,
+            speed_noise_std=0.05 if noisy else 0.0,
         ),
     )
     sim_vehicle = load_vehicle(vehicle_file)
     sim = simulate(sim_vehicle, scenario)
     vehicle = load_estimator_vehicle(vehicle_file)
-    # the ideal-sensor tuning of scripts/eval_estimators.py
+    if noisy:
+        observer, fast, est_cfg = ObserverConfig(), SituationConfig(), EstimatorConfig()
+    else:
+        observer = ObserverConfig(wheel_lipschitz=10000.0, speed_lipschitz=2000.0)
+        fast = SituationConfig(alert_wheel_lipschitz=10000.0)
+        est_cfg = EstimatorConfig(slope_filter_tau=0.05)
     est = run_cascade(
-        sim.t,
-        sim.wheel_angle,
-        sim.body_speed,
-        sim.wheel_torque,
-        vehicle,
-        ObserverConfig(wheel_lipschitz=10000.0, speed_lipschitz=2000.0),
-        EstimatorConfig(slope_filter_tau=0.05),
+        sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, vehicle, observer, est_cfg
     )
-    fric = FrictionPotentialEstimator()
-    monitor = AlertMonitor()
+    monitor = SituationMonitor(
+        TyreCurves.from_tire(sim_vehicle.tire),
+        vehicle.static_wheel_loads[[0, 2]],
+        vehicle.effective_radius,
+        observer=observer,
+        situation=fast,
+    )
     n = sim.t.size
     level = np.zeros((n, 3, 4), dtype=int)
     mu_max = np.zeros((n, 2))
     for k in range(n):
-        t = float(sim.t[k])
-        sv = slip_velocity(est.omega[k], float(sim.body_speed[k]), vehicle.effective_radius)
-        pot = fric.update(
-            t, fric.fit_slip(sv, float(sim.body_speed[k])), est.mu[k], est.mu_valid[k]
+        out = monitor.update(
+            float(sim.t[k]),
+            sim.wheel_angle[k],
+            float(sim.body_speed[k]),
+            sim.wheel_torque[k],
+            est.omega[k],
+            est.mu[k],
+            est.mu_valid[k],
+            est.fz[k],
         )
-        for a in monitor.update(
-            t, est.slip[k], sv, est.mu[k], est.mu_valid[k], pot.wheel_mu_max()
-        ):
+        for a in out.alerts:
             level[k, ALERT_KINDS.index(a.kind), a.wheel] = a.level
-        mu_max[k] = pot.mu_max
+        mu_max[k] = out.potential.mu_max
     # truth: the Magic Formula peak scales with road_mu in both mu and slip (stiffness fixed)
     from vd_sim_node.vehicle.tire import magic_formula_fx
 
@@ -291,8 +317,9 @@ def test_low_friction_alert_and_mu_max_on_the_low_mu_launch() -> None:
     assert np.sqrt(np.mean(err**2)) <= 0.1
 
 
-def test_lock_alert_on_hard_braking_on_low_mu() -> None:
-    run = scenario_run('braking_low_mu_hard')
+@pytest.mark.parametrize('noisy', [False, True], ids=['ideal', 'encoder96'])
+def test_lock_alert_on_hard_braking_on_low_mu(noisy: bool) -> None:
+    run = scenario_run('braking_low_mu_hard', noisy=noisy)
     t = run['t']
     s_peak = run['road_mu'] * run['unit_peak_slip']
     for wheel in range(4):

@@ -22,7 +22,8 @@ if the curve were right, ``mu_noise_std^2 + (d mu/d s)^2 sigma_s^2`` with
 ``min_slip_sigmas`` of zero, or whose denominator is below ``min_slip_speed``, are not used.
 
 Confidence (profile likelihood): the least extra weighted cost of any road scale whose peak
-is more than ``confidence_margin`` from the estimate, mapped linearly from ``evidence_low``
+is more than ``confidence_margin`` from the estimate, per sample times ``evidence_samples``
+(correlated samples are not independent evidence), mapped linearly from ``evidence_low``
 (0) to ``evidence_high`` (1). Below ``class_min_confidence`` the reported values are shrunk
 towards the prior road; the road class (dry / wet / snow / ice) is UNKNOWN there.
 
@@ -123,8 +124,12 @@ class FrictionPotentialConfig:
         mu_noise_std: [-] noise of the mu estimates.
         confidence_margin: [-] the confidence says how firmly the data exclude peaks further
             than this from the estimate (the accuracy goal, 0.1).
-        evidence_low: weighted cost advantage at and below which the confidence is 0.
-        evidence_high: weighted cost advantage at and above which the confidence is 1.
+        evidence_samples: the forgotten data count as this many independent samples: the
+            evidence is the mean weighted cost advantage per sample times this. Consecutive
+            samples are correlated (one observer filters them) and a small systematic model
+            error summed over a thousand samples a second would otherwise become certainty.
+        evidence_low: evidence at and below which the confidence is 0.
+        evidence_high: evidence at and above which the confidence is 1.
         class_bounds: mu_max boundaries ice|snow, snow|wet, wet|dry [-], increasing.
         class_margin: hysteresis margin [-] on the class boundaries.
         class_min_confidence: below this confidence the class is UNKNOWN [-].
@@ -142,6 +147,7 @@ class FrictionPotentialConfig:
     min_slip_sigmas: float = 2.0
     mu_noise_std: float = 0.05
     confidence_margin: float = 0.1
+    evidence_samples: float = 100.0
     evidence_low: float = 10.0
     evidence_high: float = 100.0
     class_bounds: tuple[float, float, float] = ROAD_CLASS_BOUNDS
@@ -161,6 +167,7 @@ class FrictionPotentialConfig:
             'min_slip_speed',
             'mu_noise_std',
             'confidence_margin',
+            'evidence_samples',
         ):
             if getattr(self, name) <= 0.0:
                 raise FrictionConfigError(f'{name} must be > 0, got {getattr(self, name)}')
@@ -462,7 +469,8 @@ def fit_confidence(
     """Confidence per axle that the fitted peak is within ``confidence_margin`` (pure).
 
     The least extra weighted cost of a road scale whose peak lies further than the margin
-    from the best one's, mapped linearly from ``evidence_low`` (0) to ``evidence_high`` (1).
+    from the best one's, per sample times ``evidence_samples``, mapped linearly from
+    ``evidence_low`` (0) to ``evidence_high`` (1).
 
     Returns:
         shape (2,), [0..1]; 0 for an axle without samples.
@@ -473,9 +481,9 @@ def fit_confidence(
     rows = np.arange(2)
     far = np.abs(peaks - peaks[rows, best][:, None]) > config.confidence_margin
     rival = np.where(far, state.cost, np.inf).min(axis=1)
-    evidence = np.where(
-        (state.count > 0.0) & np.isfinite(rival), rival - state.cost[rows, best], 0.0
-    )
+    informed = (state.count > 0.0) & np.isfinite(rival)
+    advantage = np.where(informed, rival - state.cost[rows, best], 0.0)
+    evidence = advantage / np.maximum(state.count, 1.0) * config.evidence_samples
     span = config.evidence_high - config.evidence_low
     out: FloatArray = np.clip((evidence - config.evidence_low) / span, 0.0, 1.0)
     return out
