@@ -255,6 +255,8 @@ def test_bad_parameters_refuse_to_start_with_one_line(
             ('wheel.inertia_rear',),
         ),
         (('estimator_node', {'max_mu': 0.0}), ('max_mu',)),
+        (('alerts_node', {'traction.warning_off': 0.5}), ('warning_off', 'warning_on')),
+        (('alerts_node', {'evidence_low': 500.0}), ('evidence_low',)),
     ]
     started = [
         (procs.node(f'case{i}', 'vd_observer_node', exe, **params), words)

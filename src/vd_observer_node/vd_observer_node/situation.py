@@ -172,11 +172,15 @@ class SituationMonitor:
 
         Returns:
             The situation at t. Non-finite or stale inputs are absorbed by the parts (see
-            their docs); the outputs stay finite.
+            their docs); the outputs stay finite. A stamp older than the last one by more
+            than the observer's ``max_gap`` resets everything (a looped bag).
 
         Raises:
             InputShapeError: an array input has the wrong shape.
         """
+        if self.last is not None and t < self.last.t - self.observer_config.max_gap:
+            # a looped bag or a restarted source: start again, as the observers do
+            self.reset()
         fast = self.fast.update(t, wheel_angle)
         v = float(speed) if math.isfinite(speed) else math.nan
         sv_fast = np.where(fast.valid, slip_velocity(fast.omega, v, self.radius), 0.0)
