@@ -136,7 +136,7 @@ class FrictionPotentialConfig:
     """
 
     road_scales: tuple[float, ...] = field(default_factory=_default_scales)
-    forgetting_time: float = 0.5
+    forgetting_time: float = 0.25
     load_time: float = 0.05
     prior_road_scale: float = 1.0
     shrink_to_prior: bool = True
