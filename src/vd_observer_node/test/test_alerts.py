@@ -210,7 +210,7 @@ def scenario_run(name: str, duration: float | None = None, noisy: bool = False) 
     from vd_observer_node.estimator import EstimatorConfig
     from vd_observer_node.friction_potential import TyreCurves
     from vd_observer_node.observer import ObserverConfig
-    from vd_observer_node.situation import SituationConfig, SituationMonitor
+    from vd_observer_node.situation import SituationConfig, SituationMonitor, run_situation
     from vd_observer_node.vehicle import load_estimator_vehicle
     from vd_sim_node.vehicle.params import load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
@@ -247,23 +247,8 @@ def scenario_run(name: str, duration: float | None = None, noisy: bool = False) 
         observer=observer,
         situation=fast,
     )
-    n = sim.t.size
-    level = np.zeros((n, 3, 4), dtype=int)
-    mu_max = np.zeros((n, 2))
-    for k in range(n):
-        out = monitor.update(
-            float(sim.t[k]),
-            sim.wheel_angle[k],
-            float(sim.body_speed[k]),
-            sim.wheel_torque[k],
-            est.omega[k],
-            est.mu[k],
-            est.mu_valid[k],
-            est.fz[k],
-        )
-        for a in out.alerts:
-            level[k, ALERT_KINDS.index(a.kind), a.wheel] = a.level
-        mu_max[k] = out.potential.mu_max
+    series = run_situation(monitor, sim.wheel_angle, sim.body_speed, sim.wheel_torque, est)
+    level, mu_max = series.level, series.mu_max
     # truth: the Magic Formula peak scales with road_mu in both mu and slip (stiffness fixed)
     from vd_sim_node.vehicle.tire import magic_formula_fx
 

@@ -23,8 +23,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node.alerts import Alert, AlertConfig, AlertMonitor, slip_velocity
-from vd_observer_node.errors import ConfigurationError
+from vd_observer_node.alerts import ALERT_KINDS, Alert, AlertConfig, AlertMonitor, slip_velocity
+from vd_observer_node.cascade import CascadeResult
+from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.friction_potential import (
     FrictionPotential,
     FrictionPotentialConfig,
@@ -33,7 +34,14 @@ from vd_observer_node.friction_potential import (
 )
 from vd_observer_node.observer import ObserverConfig, WheelObserver
 
-__all__ = ['Situation', 'SituationConfig', 'SituationMonitor', 'floored_slip']
+__all__ = [
+    'Situation',
+    'SituationConfig',
+    'SituationMonitor',
+    'SituationSeries',
+    'floored_slip',
+    'run_situation',
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -200,3 +208,99 @@ class SituationMonitor:
         )
         self.last = Situation(t, potential, alerts, slip)
         return self.last
+
+
+@dataclass(frozen=True)
+class SituationSeries:
+    """The monitor's outputs over a record of N stamps (offline replay, evaluation, tests).
+
+    Attributes:
+        t: shape (N,), [s].
+        level: shape (N, 3, 4), alert level per kind (ALERT_KINDS order) and wheel.
+        onset: shape (N, 3, 4), [s] onset stamp (nan while inactive).
+        detected: shape (N, 3, 4), [s] detection stamp (nan while inactive).
+        mu_max: shape (N, 2), [-] per axle.
+        slip_peak: shape (N, 2), [-] per axle.
+        confidence: shape (N, 2), [0..1] per axle.
+        road_class: shape (N, 2), ROAD_* code per axle.
+        vehicle_road_class: shape (N,), ROAD_* code.
+    """
+
+    t: FloatArray
+    level: NDArray[np.int64]
+    onset: FloatArray
+    detected: FloatArray
+    mu_max: FloatArray
+    slip_peak: FloatArray
+    confidence: FloatArray
+    road_class: NDArray[np.int64]
+    vehicle_road_class: NDArray[np.int64]
+
+
+def run_situation(
+    monitor: SituationMonitor,
+    wheel_angle: ArrayLike,
+    speed: ArrayLike,
+    wheel_torque: ArrayLike,
+    cascade: CascadeResult,
+) -> SituationSeries:
+    """Feed a whole record through `monitor`, one stamp at a time, as the node would.
+
+    Args:
+        monitor: the monitor (its state carries on; `reset` it for a new record).
+        wheel_angle: shape (N, 4), [rad] at the cascade's stamps.
+        speed: shape (N,), [m/s] measured body speed.
+        wheel_torque: shape (N, 4), [N m].
+        cascade: the cascade's result on the same stamps (`run_cascade`).
+
+    Raises:
+        InputShapeError: inconsistent shapes.
+    """
+    angles = np.asarray(wheel_angle, dtype=np.float64)
+    speeds = np.asarray(speed, dtype=np.float64)
+    torques = np.asarray(wheel_torque, dtype=np.float64)
+    n = cascade.t.shape[0]
+    if angles.shape != (n, 4) or speeds.shape != (n,) or torques.shape != (n, 4):
+        raise InputShapeError(
+            f'expected wheel_angle ({n}, 4), speed ({n},), wheel_torque ({n}, 4); got '
+            f'{angles.shape}, {speeds.shape}, {torques.shape}'
+        )
+    kinds = len(ALERT_KINDS)
+    level = np.zeros((n, kinds, 4), dtype=np.int64)
+    onset = np.full((n, kinds, 4), math.nan)
+    detected = np.full((n, kinds, 4), math.nan)
+    axle = {k: np.zeros((n, 2)) for k in ('mu_max', 'slip_peak', 'confidence')}
+    road = np.zeros((n, 2), dtype=np.int64)
+    vehicle_road = np.zeros(n, dtype=np.int64)
+    for k in range(n):
+        out = monitor.update(
+            float(cascade.t[k]),
+            angles[k],
+            float(speeds[k]),
+            torques[k],
+            cascade.omega[k],
+            cascade.mu[k],
+            cascade.mu_valid[k],
+            cascade.fz[k],
+        )
+        for i, a in enumerate(out.alerts):
+            level[k, i // 4, a.wheel] = a.level
+            onset[k, i // 4, a.wheel] = a.onset
+            detected[k, i // 4, a.wheel] = a.detected
+        pot = out.potential
+        axle['mu_max'][k] = pot.mu_max
+        axle['slip_peak'][k] = pot.slip_peak
+        axle['confidence'][k] = pot.confidence
+        road[k] = pot.road_class
+        vehicle_road[k] = pot.vehicle_road_class()
+    return SituationSeries(
+        t=cascade.t.copy(),
+        level=level,
+        onset=onset,
+        detected=detected,
+        mu_max=axle['mu_max'],
+        slip_peak=axle['slip_peak'],
+        confidence=axle['confidence'],
+        road_class=road,
+        vehicle_road_class=vehicle_road,
+    )
