@@ -11,7 +11,6 @@ fault counters go to ``/diagnostics`` once per second. All math is in
 
 from __future__ import annotations
 
-import sys
 from typing import Any
 
 import numpy as np
@@ -38,7 +37,7 @@ from vd_observer_node.estimator import (
     Estimator,
     EstimatorConfig,
 )
-from vd_observer_node.faults import merge_reports, params_file_problem, summarise
+from vd_observer_node.faults import merge_reports, summarise
 from vd_observer_node.vehicle import load_estimator_vehicle
 
 __all__ = ['EstimatorNode', 'main']
@@ -193,10 +192,6 @@ class EstimatorNode(Node):  # type: ignore[misc]
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``ros2 run vd_observer_node estimator_node``."""
-    problem = params_file_problem(sys.argv if args is None else args)
-    if problem is not None:
-        print(f'error: {problem}', file=sys.stderr, flush=True)
-        return 2
     return run_node(EstimatorNode, args)
 
 

@@ -12,7 +12,6 @@ counters go to ``/diagnostics`` once per second. All math is in
 
 from __future__ import annotations
 
-import sys
 from typing import Any
 
 import numpy as np
@@ -32,7 +31,7 @@ from vd_sim_node.ros_common import (
 
 from vd_msgs.msg import WheelAngles, WheelStates
 from vd_observer_node.differentiator import DEFAULT_GAINS, DISCRETIZATIONS, INIT_POLICIES
-from vd_observer_node.faults import ERROR, merge_reports, params_file_problem
+from vd_observer_node.faults import ERROR, merge_reports
 from vd_observer_node.observer import ObserverConfig, SpeedObserver, WheelObserver
 
 __all__ = ['ObserverNode', 'main']
@@ -142,10 +141,6 @@ class ObserverNode(Node):  # type: ignore[misc]
 
 def main(args: list[str] | None = None) -> int:
     """Entry point of ``ros2 run vd_observer_node observer_node``."""
-    problem = params_file_problem(sys.argv if args is None else args)
-    if problem is not None:
-        print(f'error: {problem}', file=sys.stderr, flush=True)
-        return 2
     return run_node(ObserverNode, args)
 
 

@@ -32,6 +32,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from vd_sim_node.errors import VehicleSimError
+from vd_sim_node.params_file import params_file_problem
 
 try:  # vd_observer_node depends on this package, not the other way round
     from vd_observer_node.bag.errors import BagError
@@ -332,6 +333,10 @@ def run_node(factory: Any, args: list[str] | None = None) -> int:
         return 2
     from rclpy._rclpy_pybind11 import RCLError
 
+    problem = params_file_problem(sys.argv if args is None else args)
+    if problem is not None:
+        print(f'error: {problem}', file=sys.stderr, flush=True)
+        return 2
     try:
         rclpy.init(args=args)
     except RCLError as exc:  # e.g. a malformed --params-file: one line, not a traceback
