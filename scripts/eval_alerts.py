@@ -56,7 +56,11 @@ from vd_observer_node.report.alerts import (  # noqa: E402
     segments_from_road,
     truth_conditions,
 )
-from vd_observer_node.situation import SituationConfig, SituationMonitor  # noqa: E402
+from vd_observer_node.situation import (  # noqa: E402
+    SituationConfig,
+    SituationMonitor,
+    run_situation,
+)
 from vd_observer_node.vehicle import load_estimator_vehicle  # noqa: E402
 from vd_sim_node.vehicle.friction_truth import axle_mean, road_class  # noqa: E402
 
@@ -76,50 +80,26 @@ SETTINGS = AlertSettings()
 
 
 def run_detectors(est: Any, sim: Any, monitor: SituationMonitor) -> dict[str, np.ndarray]:
-    """Friction potential and alerts per stamp, as the alerts node computes them.
+    """Friction potential and alerts per stamp, as the alerts node computes them
+    (`vd_observer_node.situation.run_situation`, the loop `vd replay` runs too).
 
     Args:
-        est: the cascade on the simulator's sensors (omega, mu, mu_valid, fz used).
-        sim: the simulator run (t, wheel_angle, the MEASURED body_speed, wheel_torque).
+        est: the cascade on the simulator's sensors (t, omega, mu, mu_valid, fz used).
+        sim: the simulator run (wheel_angle, the MEASURED body_speed, wheel_torque).
         monitor: a fresh situation monitor.
 
     Returns:
         'level' (N, 3, 4), 'detected' and 'onset' (N, 3, 4) [s] (nan while inactive),
         'mu_max', 'conf' (N, 2), 'road' (N, 2) codes.
     """
-    n = est.t.size
-    level = np.zeros((n, 3, 4), dtype=np.int64)
-    detected = np.full((n, 3, 4), math.nan)
-    onset = np.full((n, 3, 4), math.nan)
-    mu_max = np.zeros((n, 2))
-    conf = np.zeros((n, 2))
-    road = np.zeros((n, 2), dtype=np.int64)
-    for k in range(n):
-        sit = monitor.update(
-            float(sim.t[k]),
-            sim.wheel_angle[k],
-            float(sim.body_speed[k]),
-            sim.wheel_torque[k],
-            est.omega[k],
-            est.mu[k],
-            est.mu_valid[k],
-            est.fz[k],
-        )
-        for a in sit.alerts:
-            kind = ALERT_KINDS.index(a.kind)
-            level[k, kind, a.wheel] = a.level
-            detected[k, kind, a.wheel] = a.detected
-            onset[k, kind, a.wheel] = a.onset
-        mu_max[k] = sit.potential.mu_max
-        conf[k] = sit.potential.confidence
-        road[k] = sit.potential.road_class
+    series = run_situation(monitor, sim.wheel_angle, sim.body_speed, sim.wheel_torque, est)
     return {
-        'level': level,
-        'detected': detected,
-        'onset': onset,
-        'mu_max': mu_max,
-        'conf': conf,
-        'road': road,
+        'level': series.level,
+        'detected': series.detected,
+        'onset': series.onset,
+        'mu_max': series.mu_max,
+        'conf': series.confidence,
+        'road': series.road_class,
     }
 
 

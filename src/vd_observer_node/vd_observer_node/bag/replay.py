@@ -26,7 +26,7 @@ import os
 import sys
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -35,13 +35,13 @@ import yaml
 from tqdm import tqdm
 from vd_sim_node.topics import ALERTS, ESTIMATES, OBSERVER, SENSORS
 
-from ..alerts import ALERT_KINDS, AlertConfig
+from ..alerts import AlertConfig
 from ..cascade import CascadeResult, run_cascade
 from ..errors import ConfigurationError, VehicleParameterError
 from ..estimator import EstimatorConfig
 from ..friction_potential import FrictionPotentialConfig, TyreCurves
 from ..observer import ObserverConfig
-from ..situation import SituationConfig, SituationMonitor
+from ..situation import SituationConfig, SituationMonitor, run_situation
 from ..vehicle import EstimatorVehicle, load_estimator_vehicle
 from .alerts_cdr import encode_alerts
 from .cdr_batch import decode_batch, encode_batch
@@ -59,7 +59,7 @@ __all__ = [
     'default_vehicle_file',
     'load_replay_config',
     'replay_bag',
-    'run_situation',
+    'situation_topics',
 ]
 
 SENSOR_TOPICS = SENSORS
@@ -244,8 +244,18 @@ def _stamp_ns(seconds: np.ndarray) -> np.ndarray:
     return out.astype(np.int64)
 
 
-def run_situation(
-    t: np.ndarray,
+def _rows(result: CascadeResult, start: int, stop: int) -> CascadeResult:
+    """The cascade result on stamps [start, stop) (every per-stamp array sliced)."""
+    n = result.t.shape[0]
+    sliced: dict[str, Any] = {
+        f.name: value[start:stop]
+        for f in fields(result)
+        if isinstance(value := getattr(result, f.name), np.ndarray) and value.shape[:1] == (n,)
+    }
+    return replace(result, **sliced)
+
+
+def situation_topics(
     wheel_angle: np.ndarray,
     speed: np.ndarray,
     wheel_torque: np.ndarray,
@@ -255,72 +265,54 @@ def run_situation(
 ) -> dict[str, dict[str, np.ndarray]]:
     """Friction potential and alerts of every stamp, as the alerts node computes them.
 
+    Runs :func:`vd_observer_node.situation.run_situation` in blocks of stamps (the monitor's
+    state carries across them), so a progress bar can follow.
+
     Args:
-        t: shape (N,), [s] aligned stamps, increasing.
         wheel_angle: shape (N, 4), [rad] measured wheel angles.
         speed: shape (N,), [m/s] MEASURED body speed (what the node receives).
         wheel_torque: shape (N, 4), [N m] measured wheel torques.
-        result: the cascade on the same stamps (omega, mu, mu_valid, fz used).
-        monitor: a fresh (or reset) situation monitor, fed in order.
-        progress: called with the number of samples done since its last call.
+        result: the cascade on the same N stamps (t, omega, mu, mu_valid, fz used).
+        monitor: a fresh (or reset) situation monitor.
+        progress: called with the number of stamps done since its last call.
 
     Returns:
         Topic values: ``/vd/estimates/alerts`` ('level', 'onset_ns', 'detected_ns', each
         (N, 3, 4)) and ``/vd/estimates/friction_potential`` ('mu_max', 'slip_peak',
         'confidence' (N, 2) float, 'road_class' (N, 2) uint8, 'vehicle_road_class' (N,)).
     """
-    n = t.shape[0]
-    level = np.zeros((n, len(ALERT_KINDS), 4), dtype=np.uint8)
-    onset = np.full((n, len(ALERT_KINDS), 4), np.nan)
-    detected = np.full((n, len(ALERT_KINDS), 4), np.nan)
-    mu_max = np.zeros((n, 2))
-    slip_peak = np.zeros((n, 2))
-    confidence = np.zeros((n, 2))
-    road = np.zeros((n, 2), dtype=np.uint8)
-    vehicle_road = np.zeros(n, dtype=np.uint8)
-    # Plain Python lists per row: indexing numpy rows per stamp costs more than the copy.
-    ts = t.tolist()
-    speeds = speed.tolist()
-    done = 0
-    for k in range(n):
-        sit = monitor.update(
-            ts[k],
-            wheel_angle[k],
-            speeds[k],
-            wheel_torque[k],
-            result.omega[k],
-            result.mu[k],
-            result.mu_valid[k],
-            result.fz[k],
+    n = result.t.shape[0]
+    parts = []
+    # one (empty) block when n == 0: the shapes of the outputs still come out right
+    for start in range(0, max(n, 1), _SITUATION_BLOCK):
+        stop = min(start + _SITUATION_BLOCK, n)
+        parts.append(
+            run_situation(
+                monitor,
+                wheel_angle[start:stop],
+                speed[start:stop],
+                wheel_torque[start:stop],
+                _rows(result, start, stop),
+            )
         )
-        for j, a in enumerate(sit.alerts):
-            # Situation.alerts is kind-major with wheels 0..3, the message's record order.
-            level[k, j // 4, j % 4] = a.level
-            onset[k, j // 4, j % 4] = a.onset
-            detected[k, j // 4, j % 4] = a.detected
-        pot = sit.potential
-        mu_max[k] = pot.mu_max
-        slip_peak[k] = pot.slip_peak
-        confidence[k] = pot.confidence
-        road[k] = pot.road_class
-        vehicle_road[k] = pot.vehicle_road_class()
-        if progress is not None and (k + 1) % _SITUATION_BLOCK == 0:
-            progress(k + 1 - done)
-            done = k + 1
-    if progress is not None and n > done:
-        progress(n - done)
+        if progress is not None:
+            progress(stop - start)
+
+    def cat(name: str) -> np.ndarray:
+        return np.concatenate([getattr(p, name) for p in parts])
+
     return {
         '/vd/estimates/alerts': {
-            'level': level,
-            'onset_ns': _stamp_ns(onset),
-            'detected_ns': _stamp_ns(detected),
+            'level': cat('level').astype(np.uint8),
+            'onset_ns': _stamp_ns(cat('onset')),
+            'detected_ns': _stamp_ns(cat('detected')),
         },
         '/vd/estimates/friction_potential': {
-            'mu_max': mu_max,
-            'slip_peak': slip_peak,
-            'confidence': confidence,
-            'road_class': road,
-            'vehicle_road_class': vehicle_road,
+            'mu_max': cat('mu_max'),
+            'slip_peak': cat('slip_peak'),
+            'confidence': cat('confidence'),
+            'road_class': cat('road_class').astype(np.uint8),
+            'vehicle_road_class': cat('vehicle_road_class').astype(np.uint8),
         },
     }
 
@@ -461,8 +453,8 @@ def replay_bag(
                 position=1,
                 leave=False,
             ) as phase:
-                situation_values = run_situation(
-                    t, wheel_angle, body_speed, wheel_torque, result, monitor, phase.update
+                situation_values = situation_topics(
+                    wheel_angle, body_speed, wheel_torque, result, monitor, phase.update
                 )
             situation_time = time.perf_counter() - situation_start
         frames = angles.frame_id[ia]
