@@ -82,17 +82,22 @@ def _replay(args: argparse.Namespace) -> int:
         args.in_bag,
         args.out_bag,
         vehicle=vehicle,
+        vehicle_file=args.vehicle,
         observer_config=config.observer,
         estimator_config=config.estimator,
         cascade_kwargs=config.cascade_kwargs,
+        alert_config=config.alerts,
+        friction_config=config.friction,
+        situation_config=config.situation,
         progress=not args.no_progress,
     )
     print(
         f'replayed {report.samples} samples ({report.sensor_messages} sensor messages, '
         f'{report.unmatched} unmatched) of {report.bag_duration_s:.1f} s in '
         f'{report.wall_time_s:.2f} s: {report.real_time_factor:.0f}x real time, '
-        f'{report.samples_per_second:.0f} sensor messages/s; wrote {report.messages_written} '
-        f'messages to {args.out_bag}'
+        f'{report.samples_per_second:.0f} sensor messages/s (alerts and friction potential '
+        f'{report.situation_us_per_sample:.0f} us per sample); wrote '
+        f'{report.messages_written} messages to {args.out_bag}'
     )
     return EXIT_OK
 

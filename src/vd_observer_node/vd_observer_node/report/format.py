@@ -150,6 +150,8 @@ def _episode_text(e: Any) -> str:
     wheel = WHEEL_NAMES[e.wheel]
     if e.delay_s is None:
         return f'{e.kind} {wheel}: true onset {e.true_onset_s:.3f} s, NOT DETECTED'
+    if e.already_active:
+        return f'{e.kind} {wheel}: true onset {e.true_onset_s:.3f} s, already active ({e.status})'
     return (
         f'{e.kind} {wheel}: true onset {e.true_onset_s:.3f} s, delay {_ms(e.delay_s)} ({e.status})'
     )
@@ -315,6 +317,8 @@ def _alerts_markdown(section: AlertsSection) -> list[str]:
         ]
         for e in section.episodes:
             delay = '-' if e.delay_s is None else f'{1e3 * e.delay_s:.1f}'
+            if e.already_active:
+                delay = 'already active'
             status = e.status if e.status == 'met' else f'**{e.status}**'
             out.append(
                 f'| {e.kind} | {WHEEL_NAMES[e.wheel]} | {e.true_onset_s:.3f} | '
