@@ -102,3 +102,19 @@ def test_config_errors() -> None:
         SituationConfig(alert_wheel_lipschitz=0.0)
     with pytest.raises(ConfigurationError, match='unknown'):
         SituationConfig.from_mapping({'nope': 1.0})
+
+
+def test_observer_disagreement_gate_keeps_lagging_pairs_out_of_the_fit() -> None:
+    curves = TyreCurves.from_tire(load_vehicle(VEHICLE_FILE).tire)
+    rows = drive(300, np.random.default_rng(4))
+    counts = []
+    for gate in (0.0, 0.5):
+        monitor = SituationMonitor(
+            curves, STATIC, RADIUS, situation=SituationConfig(max_observer_disagreement=gate)
+        )
+        for t, angle, v, torque, omega, mu, load in rows:
+            lagging = omega * 0.9  # the cascade 10 % behind the wheel: off by > 1 m/s
+            monitor.update(t, angle, v, torque, lagging, mu, np.ones(4, bool), load)
+        counts.append(float(monitor.friction.state.count.sum()))
+    assert counts[0] > 0.0
+    assert counts[1] == 0.0

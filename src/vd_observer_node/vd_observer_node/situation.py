@@ -56,16 +56,25 @@ class SituationConfig:
         slip_floor_speed: [m/s] denominator floor of the alerts' slip ratio (the vehicle
             file's ``tire.low_speed_velocity``): at walking pace the ratio of two small
             speeds is not what the tyre reacts to.
+        max_observer_disagreement: [m/s] when > 0, a wheel's (slip, mu) pair is left out of
+            the friction fit while the fast and the cascade's wheel speeds differ by more
+            than this (times R): the cascade lags a wheel transient there. 0 (default) keeps
+            every pair: the gate cleans the dry-road estimate after a wheel spin but also
+            drops the informative samples of a locking wheel (docs/alerts.md, 4.3).
     """
 
     alert_wheel_lipschitz: float = 3000.0
     slip_floor_speed: float = 1.0
+    max_observer_disagreement: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if not (math.isfinite(value) and value > 0.0):
-                raise ConfigurationError(f'{f.name} must be finite and > 0, got {value}')
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ConfigurationError(f'{f.name} must be finite and >= 0, got {value}')
+        for name in ('alert_wheel_lipschitz', 'slip_floor_speed'):
+            if getattr(self, name) <= 0.0:
+                raise ConfigurationError(f'{name} must be > 0, got {getattr(self, name)}')
 
     @classmethod
     def from_mapping(cls, data: dict[str, Any]) -> SituationConfig:
@@ -193,8 +202,13 @@ class SituationMonitor:
         v = float(speed) if math.isfinite(speed) else math.nan
         sv_fast = np.where(fast.valid, slip_velocity(fast.omega, v, self.radius), 0.0)
         slip = floored_slip(sv_fast, v, self.config.slip_floor_speed)
+        sv_cascade = slip_velocity(omega, v, self.radius)
+        # While the two observers disagree the cascade's omega (and its omega-dot, hence mu)
+        # lags a fast wheel transient: such (slip, mu) pairs lie off the tyre's curve.
+        gate = self.config.max_observer_disagreement
+        steady = np.abs(sv_fast - sv_cascade) <= gate if gate > 0.0 else np.ones(4, bool)
         potential = self.friction.update(
-            t, slip_velocity(omega, v, self.radius), v, mu, mu_valid, load
+            t, sv_cascade, v, mu, np.asarray(mu_valid, dtype=bool) & steady, load
         )
         alerts = self.monitor.update(
             t,
