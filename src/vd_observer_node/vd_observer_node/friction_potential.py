@@ -128,6 +128,10 @@ class FrictionPotentialConfig:
             evidence is the mean weighted cost advantage per sample times this. Consecutive
             samples are correlated (one observer filters them) and a small systematic model
             error summed over a thousand samples a second would otherwise become certainty.
+        evidence_hold_time: [s] the confidence decays as exp(-age / this), age = time since
+            the axle's last usable sample: a friction potential measured a kilometre back
+            says little about the road here, and a wrong estimate must not outlive its
+            evidence for minutes of cruising. 0 keeps the confidence forever.
         evidence_low: evidence at and below which the confidence is 0.
         evidence_high: evidence at and above which the confidence is 1.
         class_bounds: mu_max boundaries ice|snow, snow|wet, wet|dry [-], increasing.
@@ -148,6 +152,7 @@ class FrictionPotentialConfig:
     mu_noise_std: float = 0.05
     confidence_margin: float = 0.1
     evidence_samples: float = 100.0
+    evidence_hold_time: float = 5.0
     evidence_low: float = 10.0
     evidence_high: float = 100.0
     class_bounds: tuple[float, float, float] = ROAD_CLASS_BOUNDS
@@ -305,6 +310,7 @@ class FitState:
         load: shape (A,), [N] smoothed wheel load of the used samples.
         direction: shape (A,), smoothed sign of their force (> 0 driving, < 0 braking).
         t: stamp of the last step [s] (nan before the first).
+        last_sample: shape (A,), [s] stamp of the axle's last usable sample (nan if none).
     """
 
     cost: FloatArray
@@ -312,6 +318,7 @@ class FitState:
     load: FloatArray
     direction: FloatArray
     t: float
+    last_sample: FloatArray
 
 
 def initial_fit_state(config: FrictionPotentialConfig, static_load: ArrayLike) -> FitState:
@@ -330,6 +337,7 @@ def initial_fit_state(config: FrictionPotentialConfig, static_load: ArrayLike) -
         load=load.copy(),
         direction=np.ones(2),
         t=math.nan,
+        last_sample=np.full(2, math.nan),
     )
 
 
@@ -441,6 +449,7 @@ def fit_step(
     axle_of = _AXLES[use]
     cost, count = state.cost.copy(), state.count.copy()
     axle_load, direction = state.load.copy(), state.direction.copy()
+    last_sample = state.last_sample.copy()
     lam = math.exp(-dt / config.forgetting_time)
     blend = 1.0 - math.exp(-dt / config.load_time) if dt > 0.0 else 1.0
     for axle in (0, 1):
@@ -451,7 +460,8 @@ def fit_step(
         count[axle] = lam * count[axle] + float(np.count_nonzero(rows))
         axle_load[axle] += blend * (float(np.mean(z[rows])) - axle_load[axle])
         direction[axle] += blend * (float(np.mean(np.sign(s[rows]))) - direction[axle])
-    return FitState(cost, count, axle_load, direction, t)
+        last_sample[axle] = t
+    return FitState(cost, count, axle_load, direction, t, last_sample)
 
 
 def _fitted(
@@ -470,7 +480,8 @@ def fit_confidence(
 
     The least extra weighted cost of a road scale whose peak lies further than the margin
     from the best one's, per sample times ``evidence_samples``, mapped linearly from
-    ``evidence_low`` (0) to ``evidence_high`` (1).
+    ``evidence_low`` (0) to ``evidence_high`` (1), decayed with the time since the axle's last
+    usable sample (``evidence_hold_time``).
 
     Returns:
         shape (2,), [0..1]; 0 for an axle without samples.
@@ -486,6 +497,9 @@ def fit_confidence(
     evidence = advantage / np.maximum(state.count, 1.0) * config.evidence_samples
     span = config.evidence_high - config.evidence_low
     out: FloatArray = np.clip((evidence - config.evidence_low) / span, 0.0, 1.0)
+    if config.evidence_hold_time > 0.0:
+        age = np.where(np.isfinite(state.last_sample), state.t - state.last_sample, 0.0)
+        out *= np.exp(-np.maximum(age, 0.0) / config.evidence_hold_time)
     return out
 
 
@@ -617,10 +631,6 @@ class FrictionPotentialEstimator:
             self.state, t, slip_velocity, speed, mu, mu_valid, load, self.curves, self.config
         )
         if self.state is before:
-            return self.last
-        if self.state.cost is before.cost:
-            # no usable sample: only the stamp moved, the estimate is unchanged
-            self.last = replace(self.last, t=self.state.t)
             return self.last
         result = fit_solution(self.state, self.curves, self.config, self._classes)
         self._classes = result.road_class.copy()
