@@ -11,8 +11,9 @@ from vd_observer_node.alerts import AlertMonitor, slip_velocity
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.friction_potential import FrictionPotentialEstimator, TyreCurves
 from vd_observer_node.observer import ObserverConfig, WheelObserver
-from vd_observer_node.situation import SituationConfig, SituationMonitor, floored_slip
+from vd_observer_node.situation import SituationConfig, SituationMonitor
 from vd_sim_node.vehicle.params import load_vehicle
+from vd_sim_node.vehicle.tire import slip_ratio
 
 VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
 RADIUS = 0.29  # [m]
@@ -51,7 +52,7 @@ def test_monitor_equals_its_parts() -> None:
         out = monitor.update(t, angle, v, torque, omega, mu, valid, load)
         state = fast.update(t, angle)
         sv = np.where(state.valid, slip_velocity(state.omega, v, RADIUS), 0.0)
-        slip = floored_slip(sv, v, config.slip_floor_speed)
+        slip = slip_ratio(sv, v, config.slip_floor_speed)
         pot = friction.update(t, slip_velocity(omega, v, RADIUS), v, mu, valid, load)
         ref = alerts.update(
             t, slip, sv, torque, mu, valid, pot.wheel_mu_max(), pot.wheel_slip_peak()

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from vd_sim_node.vehicle.tire import slip_ratio
 
 from vd_observer_node.alerts import ALERT_KINDS, Alert, AlertConfig, AlertMonitor, slip_velocity
 from vd_observer_node.cascade import CascadeResult
@@ -39,7 +40,6 @@ __all__ = [
     'SituationConfig',
     'SituationMonitor',
     'SituationSeries',
-    'floored_slip',
     'run_situation',
 ]
 
@@ -87,23 +87,6 @@ class SituationConfig:
         if unknown:
             raise ConfigurationError(f'unknown situation settings: {sorted(unknown)}')
         return cls(**{k: float(v) for k, v in data.items()})
-
-
-def floored_slip(slip_vel: ArrayLike, speed: float, floor: float) -> FloatArray:
-    """Slip ratio with a floored denominator, as the tyre model defines it.
-
-    Args:
-        slip_vel: shape (4,), [m/s] omega R - v.
-        speed: body speed v [m/s].
-        floor: [m/s] denominator floor (> 0).
-
-    Returns:
-        shape (4,), [-] (omega R - v) / max(|omega R|, |v|, floor), positive driving.
-    """
-    sv = np.asarray(slip_vel, dtype=float)
-    den = np.maximum(np.maximum(np.abs(sv + speed), abs(speed)), floor)
-    out: FloatArray = sv / den
-    return out
 
 
 @dataclass(frozen=True)
@@ -199,9 +182,9 @@ class SituationMonitor:
             # a looped bag or a restarted source: start again, as the observers do
             self.reset()
         fast = self.fast.update(t, wheel_angle)
-        v = float(speed) if math.isfinite(speed) else math.nan
+        v = float(speed)
         sv_fast = np.where(fast.valid, slip_velocity(fast.omega, v, self.radius), 0.0)
-        slip = floored_slip(sv_fast, v, self.config.slip_floor_speed)
+        slip = slip_ratio(sv_fast, v, self.config.slip_floor_speed)
         sv_cascade = slip_velocity(omega, v, self.radius)
         # While the two observers disagree the cascade's omega (and its omega-dot, hence mu)
         # lags a fast wheel transient: such (slip, mu) pairs lie off the tyre's curve.
