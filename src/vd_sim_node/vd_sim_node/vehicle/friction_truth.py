@@ -47,6 +47,7 @@ __all__ = [
     'road_class',
     'road_class_of',
     'true_friction_potential',
+    'unit_peak',
     'vehicle_road_class',
 ]
 
@@ -164,6 +165,32 @@ def axle_mean(wheel: ArrayLike) -> FloatArray:
     return out
 
 
+def unit_peak(
+    table: FrictionTable, load: ArrayLike, driving: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """Peak μ and the slip magnitude there at ``road_mu`` = 1.
+
+    Args:
+        table: from :func:`friction_table`.
+        load: [N], any shape; clipped to the table's range.
+        driving: same shape, bool; True for the driving side (slip > 0).
+
+    Returns:
+        (peak μ [-], slip at the peak [-]), the shape of ``load``.
+    """
+    z = np.clip(np.asarray(load, dtype=np.float64), table.load[0], table.load[-1])
+    side = np.asarray(driving, dtype=bool)
+    mu: FloatArray = np.where(
+        side, np.interp(z, table.load, table.mu_drive), np.interp(z, table.load, table.mu_brake)
+    )
+    slip: FloatArray = np.where(
+        side,
+        np.interp(z, table.load, table.slip_drive),
+        np.interp(z, table.load, table.slip_brake),
+    )
+    return mu, slip
+
+
 def true_friction_potential(
     table: FrictionTable, fz: ArrayLike, fx: ArrayLike, road_mu: ArrayLike
 ) -> FrictionTruth:
@@ -178,17 +205,8 @@ def true_friction_potential(
     Returns:
         Per-wheel (N, 4) and per-axle (N, 2) peaks, see :class:`FrictionTruth`.
     """
-    z = np.clip(np.asarray(fz, dtype=np.float64), table.load[0], table.load[-1])
-    driving = np.asarray(fx, dtype=np.float64) >= 0.0
     r = np.asarray(road_mu, dtype=np.float64)[..., None]
-    mu = np.where(
-        driving, np.interp(z, table.load, table.mu_drive), np.interp(z, table.load, table.mu_brake)
-    )
-    slip = np.where(
-        driving,
-        np.interp(z, table.load, table.slip_drive),
-        np.interp(z, table.load, table.slip_brake),
-    )
+    mu, slip = unit_peak(table, fz, np.asarray(fx, dtype=np.float64) >= 0.0)
     mu_max = r * mu
     slip_peak = r * slip
     return FrictionTruth(mu_max, slip_peak, axle_mean(mu_max), axle_mean(slip_peak))
