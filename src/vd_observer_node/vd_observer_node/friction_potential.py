@@ -50,6 +50,7 @@ from vd_sim_node.vehicle.friction_truth import (
     ROAD_WET,
     FrictionTable,
     friction_table,
+    unit_peak,
 )
 from vd_sim_node.vehicle.params import TireParams
 from vd_sim_node.vehicle.tire import magic_formula_fx
@@ -289,7 +290,7 @@ class TyreCurves:
         return mu, slope
 
     def peak(self, load: FloatArray, driving: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
-        """Peak mu and its slip at road scale 1.
+        """Peak mu and its slip at road scale 1 (`friction_truth.unit_peak` of the table).
 
         Args:
             load: [N], any shape.
@@ -298,16 +299,7 @@ class TyreCurves:
         Returns:
             (peak mu [-], slip at the peak [-]), same shape.
         """
-        t = self.table
-        mu = np.where(
-            driving, np.interp(load, t.load, t.mu_drive), np.interp(load, t.load, t.mu_brake)
-        )
-        slip = np.where(
-            driving,
-            np.interp(load, t.load, t.slip_drive),
-            np.interp(load, t.load, t.slip_brake),
-        )
-        return mu, slip
+        return unit_peak(self.table, load, driving)
 
 
 @dataclass(frozen=True)
@@ -474,7 +466,7 @@ def fit_step(
 
 
 def _fitted(
-    state: FitState, curves: TyreCurves, config: FrictionPotentialConfig
+    state: FitState, curves: TyreCurves
 ) -> tuple[NDArray[np.int64], FloatArray, FloatArray]:
     """Best scale index, unit peak mu and unit peak slip per axle."""
     best = np.argmin(state.cost, axis=1).astype(np.int64)
@@ -495,7 +487,17 @@ def fit_confidence(
     Returns:
         shape (2,), [0..1]; 0 for an axle without samples.
     """
-    best, unit_mu, _ = _fitted(state, curves, config)
+    best, unit_mu, _ = _fitted(state, curves)
+    return _confidence(state, config, best, unit_mu)
+
+
+def _confidence(
+    state: FitState,
+    config: FrictionPotentialConfig,
+    best: NDArray[np.int64],
+    unit_mu: FloatArray,
+) -> FloatArray:
+    """`fit_confidence` for the winners `_fitted` already found."""
     scales = np.asarray(config.road_scales, dtype=float)
     peaks = scales[None, :] * unit_mu[:, None]
     rows = np.arange(2)
@@ -556,10 +558,10 @@ def fit_solution(
     Returns:
         The estimate for ``state.t``.
     """
-    best, unit_mu, unit_slip = _fitted(state, curves, config)
+    best, unit_mu, unit_slip = _fitted(state, curves)
     scales = np.asarray(config.road_scales, dtype=float)
     fitted = np.where(state.count > 0.0, scales[best], config.prior_road_scale)
-    confidence = fit_confidence(state, curves, config)
+    confidence = _confidence(state, config, best, unit_mu)
     # Unexcited, every scale fits the linear part of the curve: report the prior road there.
     weight = np.clip(confidence / max(config.class_min_confidence, 1e-9), 0.0, 1.0)
     scale = (
