@@ -34,3 +34,17 @@ def test_every_message_type_arrives_intact_in_another_process(procs: RosProcessG
         assert f'INTACT {name} ' in out
     # the content is not trivially zero: random values made it across
     assert '"angle": [0.0, 0.0, 0.0, 0.0]' not in out
+
+
+def test_alert_kind_codes_of_the_core_match_the_message() -> None:
+    """The nodes and replay publish `Alert.kind_code` (the index in ALERT_KINDS) as `kind`."""
+    from vd_observer_node.alerts import ALERT_KINDS
+
+    from vd_msgs.msg import Alert
+
+    codes = {
+        'traction': Alert.KIND_TRACTION,
+        'lock': Alert.KIND_LOCK,
+        'low_friction': Alert.KIND_LOW_FRICTION,
+    }
+    assert {kind: ALERT_KINDS.index(kind) for kind in ALERT_KINDS} == codes

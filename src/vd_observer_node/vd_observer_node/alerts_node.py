@@ -25,7 +25,7 @@ from vd_sim_node.ros_common import (
     ParamSpec,
     dataclass_param_specs,
     declare_parameters,
-    diagnostic_array,
+    node_status,
     ns_to_time,
     run_node,
     time_to_ns,
@@ -83,12 +83,6 @@ PARAMS = [
 ]
 
 TOPICS = ('angles', 'speed', 'torques', 'states', 'friction', 'forces')
-
-_KIND_CODES = {
-    'traction': Alert.KIND_TRACTION,
-    'lock': Alert.KIND_LOCK,
-    'low_friction': Alert.KIND_LOW_FRICTION,
-}
 
 
 def _stamp(t: float) -> Any:
@@ -182,7 +176,7 @@ class AlertsNode(Node):  # type: ignore[misc]
                 header=header,
                 alerts=[
                     Alert(
-                        kind=_KIND_CODES[a.kind],
+                        kind=a.kind_code,
                         wheel=a.wheel,
                         level=a.level,
                         active=a.active,
@@ -209,14 +203,7 @@ class AlertsNode(Node):  # type: ignore[misc]
             'time_jump_back': self.aligner.jump_back_count,
         }
         self.pub_diag.publish(
-            diagnostic_array(
-                self.get_clock().now().to_msg(),
-                'vd: alerts',
-                'alerts_node',
-                level,
-                message,
-                values,
-            )
+            node_status(self, 'vd: alerts', 'alerts_node', level, message, values)
         )
 
 
