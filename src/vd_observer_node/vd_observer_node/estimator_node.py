@@ -23,7 +23,7 @@ from vd_sim_node.ros_common import (
     ParamSpec,
     dataclass_param_specs,
     declare_parameters,
-    diagnostic_array,
+    node_status,
     run_node,
     time_to_ns,
 )
@@ -179,14 +179,7 @@ class EstimatorNode(Node):  # type: ignore[misc]
         }
         level, message = report.level, report.message
         self.pub_diag.publish(
-            diagnostic_array(
-                self.get_clock().now().to_msg(),
-                'vd: estimator',
-                'estimator_node',
-                level,
-                message,
-                values,
-            )
+            node_status(self, 'vd: estimator', 'estimator_node', level, message, values)
         )
 
 

@@ -24,7 +24,7 @@ from vd_sim_node.ros_common import (
     ParamSpec,
     dataclass_param_specs,
     declare_parameters,
-    diagnostic_array,
+    node_status,
     run_node,
     time_to_ns,
 )
@@ -128,14 +128,7 @@ class ObserverNode(Node):  # type: ignore[misc]
             **report.counts,
         }
         self.pub_diag.publish(
-            diagnostic_array(
-                self.get_clock().now().to_msg(),
-                'vd: observer',
-                'observer_node',
-                level,
-                message,
-                values,
-            )
+            node_status(self, 'vd: observer', 'observer_node', level, message, values)
         )
 
 

@@ -29,7 +29,7 @@ from vd_sim_node.ros_common import (
     STREAM_QOS,
     ParamSpec,
     declare_parameters,
-    diagnostic_array,
+    node_status,
     run_node,
 )
 from vd_sim_node.topics import CONTRACT
@@ -175,14 +175,7 @@ class RecorderNode(Node):  # type: ignore[misc]
             'write_errors': self.write_errors,
         }
         self.pub_diag.publish(
-            diagnostic_array(
-                self.get_clock().now().to_msg(),
-                'vd: recorder',
-                'recorder_node',
-                level,
-                message,
-                values,
-            )
+            node_status(self, 'vd: recorder', 'recorder_node', level, message, values)
         )
 
     def close(self) -> None:

@@ -59,6 +59,7 @@ __all__ = [
     'declare_parameters',
     'deliver_pending',
     'diagnostic_array',
+    'node_status',
     'ns_to_time',
     'run_node',
     'time_to_ns',
@@ -240,6 +241,20 @@ def diagnostic_array(
         values=[KeyValue(key=str(k), value=str(v)) for k, v in values.items()],
     )
     return DiagnosticArray(header=_header(stamp), status=[status])
+
+
+def node_status(
+    node: Node,
+    name: str,
+    hardware_id: str,
+    level: bytes | int,
+    message: str,
+    values: Mapping[str, object],
+) -> DiagnosticArray:
+    """`diagnostic_array` stamped with the node's clock now (the nodes' periodic status)."""
+    return diagnostic_array(
+        node.get_clock().now().to_msg(), name, hardware_id, level, message, values
+    )
 
 
 def _header(stamp: Time) -> Any:
