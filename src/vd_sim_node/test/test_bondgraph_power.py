@@ -202,7 +202,10 @@ def test_power_balance_and_codegen_match_the_graph_walk(
         np.testing.assert_allclose(outputs[:, k], scalar_out, rtol=1e-12, atol=1e-12)
     energies = model.stored_energy(X)
     for k in range(n_samples):
-        assert energies[k] == np.float64(model.stored_energy(X[:, k]))
+        # A few ulps, not equality: on AVX-512 numpy's vectorised power/exp (SVML) and the
+        # scalar ones differ in the last bit.
+        scalar = float(model.stored_energy(X[:, k]))
+        assert abs(energies[k] - scalar) <= 8 * np.finfo(float).eps * max(abs(scalar), 1e-300)
 
 
 @settings(max_examples=40, deadline=None, derandomize=True)
