@@ -1,15 +1,15 @@
 """CDR coding of ONE header-stamped fixed-layout message at a time (the live nodes' raw path).
 
-The per-message counterpart of :mod:`.cdr_batch`, from the same layout (:func:`.cdr_batch.flat_fields`
-and its alignment rules), for nodes that subscribe with ``raw=True`` and publish bytes: rclpy's
-conversion of a message to and from a Python object costs tens of microseconds per message,
-``struct`` about a microsecond (measured by ``scripts/bench_message_path.py``).
+The per-message counterpart of :mod:`.cdr_batch`, built from the same layout
+(:func:`.cdr_batch.flat_fields` and its alignment rules), for nodes that subscribe with
+``raw=True`` and publish bytes: rclpy's conversion of a message to and from a Python object
+costs tens of microseconds per message, ``struct`` about a microsecond (measured by
+``scripts/bench_message_path.py``).
 
-A `MessageCodec` is built once per message type. `decode` accepts any ``frame_id`` length (one
-``struct.Struct`` per length, cached); `encode` writes the codec's own ``frame_id``. The bytes are rosbags' CDR
-byte for byte (little endian, XCDR1) and rmw's up to the alignment padding, which rmw leaves
-uninitialised and we zero; both are tested.
-"""
+A `MessageCodec` is built once per message type. `decode` accepts any ``frame_id`` length
+(one ``struct.Struct`` per length, cached); `encode` writes the codec's own ``frame_id``. The
+bytes are rosbags' CDR byte for byte (little endian, XCDR1) and rmw's up to the alignment
+padding, which rmw leaves uninitialised and we zero; both are tested."""
 
 from __future__ import annotations
 
