@@ -33,7 +33,8 @@ format: setup
 	$(RUN) ruff format src tests scripts && ruff check --fix src tests scripts
 
 # strict on the ROS-free core; the thin ROS nodes (rclpy is untyped) are checked leniently
-ROS_FILES := $(wildcard src/*/vd_*/*_node.py) src/vd_sim_node/vd_sim_node/ros_common.py
+ROS_FILES := $(wildcard src/*/vd_*/*_node.py) src/vd_sim_node/vd_sim_node/ros_common.py \
+  src/vd_observer_node/vd_observer_node/node_params.py
 CORE_FILES = $(filter-out $(ROS_FILES),$(shell find $(CORE) -name '*.py'))
 typecheck: setup
 	@echo 'mypy --strict <ROS-free core>; mypy <nodes>'

@@ -21,6 +21,7 @@ NODES = [
     ('vd_observer_node', 'observer_node'),
     ('vd_observer_node', 'estimator_node'),
     ('vd_observer_node', 'alerts_node'),
+    ('vd_observer_node', 'pipeline_node'),
     ('vd_observer_node', 'recorder_node'),
     ('vd_observer_node', 'player_node'),
 ]

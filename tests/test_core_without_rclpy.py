@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-NODE_FILE_SUFFIXES = ('_node.py', 'ros_common.py')  # the ROS side: rclpy allowed
+NODE_FILE_SUFFIXES = ('_node.py', 'ros_common.py', 'node_params.py')  # ROS side: rclpy allowed
 SOURCE_DIRS = [str(ROOT / 'src' / p) for p in ('vd_sim_node', 'vd_observer_node')]
 
 

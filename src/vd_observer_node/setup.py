@@ -31,6 +31,7 @@ setup(
             'alerts_node = vd_observer_node.alerts_node:main',
             'recorder_node = vd_observer_node.recorder_node:main',
             'player_node = vd_observer_node.player_node:main',
+            'pipeline_node = vd_observer_node.pipeline_node:main',
             'vd = vd_observer_node.cli:main',
         ],
     },

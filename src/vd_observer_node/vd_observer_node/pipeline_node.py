@@ -1,0 +1,300 @@
+"""ROS 2 node: the whole estimation chain in one process, for the lowest latency.
+
+Observer, estimator and alerts nodes in one: subscribes the three sensor topics
+(``/vd/sensors/wheel_angles``, ``/vd/sensors/body_velocity``, ``/vd/sensors/wheel_torques``),
+matches them by header stamp, runs :mod:`vd_observer_node.chain` (observers -> estimator ->
+situation monitor; the compiled kernel by default) and publishes, with the sensors' stamp,
+every topic those three nodes publish: ``/vd/observer/{wheel_states, body_accel,
+body_velocity}``, ``/vd/estimates/{tire_forces, friction, resistances, slope,
+friction_potential, alerts}``, and ``/diagnostics`` once per second. Its parameters are the
+union of the three nodes' (one ``max_gap``, ``vehicle_file`` and ``align_capacity``) plus
+``kernel``.
+
+What differs from the three nodes: the observers run on stamp-matched sensor sets only (as
+offline replay does, so the pipeline's output equals ``vd replay``'s on the same stamps), and
+messages travel as CDR bytes (raw subscriptions, :mod:`vd_observer_node.bag.cdr_message`),
+never as Python message objects.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import AccelStamped, TwistStamped
+from rclpy.node import Node
+from vd_sim_node.ros_common import (
+    DIAGNOSTICS_QOS,
+    STREAM_QOS,
+    declare_parameters,
+    node_status,
+    run_node,
+)
+from vd_sim_node.vehicle.params import load_vehicle
+
+from vd_msgs.msg import (
+    Alerts,
+    Friction,
+    FrictionPotential,
+    Resistances,
+    Slope,
+    TireForces,
+    WheelAngles,
+    WheelStates,
+    WheelTorques,
+)
+from vd_observer_node.alerts import ALERT_KINDS, AlertConfig
+from vd_observer_node.alignment import StampAligner
+from vd_observer_node.bag.alerts_cdr import encode_alerts
+from vd_observer_node.bag.cdr_message import MessageCodec
+from vd_observer_node.bag.errors import BagFormatError
+from vd_observer_node.bag.replay import default_vehicle_file
+from vd_observer_node.chain import ChainOutput, ChainSettings, make_chain
+from vd_observer_node.differentiator import LevantGains
+from vd_observer_node.estimator import EstimatorConfig
+from vd_observer_node.faults import ERROR
+from vd_observer_node.friction_potential import FrictionPotentialConfig, TyreCurves
+from vd_observer_node.node_params import PIPELINE_PARAMS
+from vd_observer_node.observer import ObserverConfig
+from vd_observer_node.situation import SituationConfig
+from vd_observer_node.vehicle import load_estimator_vehicle
+
+__all__ = ['PARAMS', 'PipelineNode', 'main']
+
+PARAMS = PIPELINE_PARAMS
+
+_INPUTS = (
+    ('angles', WheelAngles, '/vd/sensors/wheel_angles', 'vd_msgs/msg/WheelAngles'),
+    ('speed', TwistStamped, '/vd/sensors/body_velocity', 'geometry_msgs/msg/TwistStamped'),
+    ('torques', WheelTorques, '/vd/sensors/wheel_torques', 'vd_msgs/msg/WheelTorques'),
+)
+_OUTPUTS = (
+    ('states', WheelStates, '/vd/observer/wheel_states', 'vd_msgs/msg/WheelStates'),
+    ('accel', AccelStamped, '/vd/observer/body_accel', 'geometry_msgs/msg/AccelStamped'),
+    ('velocity', TwistStamped, '/vd/observer/body_velocity', 'geometry_msgs/msg/TwistStamped'),
+    ('forces', TireForces, '/vd/estimates/tire_forces', 'vd_msgs/msg/TireForces'),
+    ('friction', Friction, '/vd/estimates/friction', 'vd_msgs/msg/Friction'),
+    ('resistances', Resistances, '/vd/estimates/resistances', 'vd_msgs/msg/Resistances'),
+    ('slope', Slope, '/vd/estimates/slope', 'vd_msgs/msg/Slope'),
+    (
+        'potential',
+        FrictionPotential,
+        '/vd/estimates/friction_potential',
+        'vd_msgs/msg/FrictionPotential',
+    ),
+    ('alerts', Alerts, '/vd/estimates/alerts', 'vd_msgs/msg/Alerts'),
+)
+_OBSERVER_KEYS = {f for f in ObserverConfig.__dataclass_fields__ if f != 'gains'}
+_GAIN_KEYS = set(LevantGains.__dataclass_fields__)
+
+
+def _settings(values: dict[str, Any]) -> tuple[ChainSettings, str]:
+    """Chain settings from the declared parameters; also the vehicle file used."""
+    vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
+    kernel = values.pop('kernel')
+    speed_source = values.pop('speed_source')
+    estimator_keys = set(EstimatorConfig.__dataclass_fields__)
+    situation_keys = set(SituationConfig.__dataclass_fields__)
+    friction_keys = set(FrictionPotentialConfig.__dataclass_fields__)
+    observer = ObserverConfig.from_mapping(
+        {k: v for k, v in values.items() if k in _OBSERVER_KEYS | _GAIN_KEYS}
+    )
+    taken = _OBSERVER_KEYS | _GAIN_KEYS | estimator_keys | situation_keys | friction_keys
+    settings = ChainSettings(
+        vehicle=load_estimator_vehicle(vehicle_file),
+        curves=TyreCurves.from_tire(load_vehicle(vehicle_file).tire),
+        observer=observer,
+        estimator=EstimatorConfig.from_mapping(
+            {k: v for k, v in values.items() if k in estimator_keys}
+        ),
+        alerts=AlertConfig.from_mapping({k: v for k, v in values.items() if k not in taken}),
+        friction=FrictionPotentialConfig.from_mapping(
+            {k: v for k, v in values.items() if k in friction_keys}
+        ),
+        situation=SituationConfig.from_mapping(
+            {k: v for k, v in values.items() if k in situation_keys}
+        ),
+        estimator_speed=speed_source,
+        kernel=kernel,
+    )
+    return settings, vehicle_file
+
+
+def _stamp_ns(t: float) -> int:
+    return round(t * 1e9) if math.isfinite(t) else 0
+
+
+class PipelineNode(Node):  # type: ignore[misc]
+    """Thin wrapper: raw sensor messages -> stamp matching -> Chain.update -> raw messages."""
+
+    def __init__(self) -> None:
+        super().__init__('pipeline_node')
+        values = declare_parameters(self, PARAMS)
+        capacity = values.pop('align_capacity')
+        settings, vehicle_file = _settings(values)
+        self.kernel = settings.kernel
+        # Builds (or loads from numba's disk cache) the compiled kernel now, before any sample.
+        self.chain = make_chain(settings)
+        self.aligner = StampAligner(
+            tuple(key for key, *_ in _INPUTS),
+            capacity=capacity,
+            max_jump_back_ns=round(settings.estimator.max_gap * 1e9),
+        )
+        self.pubs = {
+            key: self.create_publisher(cls, topic, STREAM_QOS) for key, cls, topic, _ in _OUTPUTS
+        }
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self._types = {key: msgtype for key, _, _, msgtype in _OUTPUTS if key != 'alerts'}
+        self._codecs: dict[tuple[str, bytes], MessageCodec] = {}
+        self._decoders = {key: MessageCodec(msgtype) for key, _, _, msgtype in _INPUTS}
+        for key, cls, topic, _ in _INPUTS:
+            self.create_subscription(cls, topic, self._make_callback(key), STREAM_QOS, raw=True)
+        self.counts = {
+            'estimates': 0,
+            'undecodable': 0,
+            'withheld_non_finite': 0,
+            'alerts_raised': 0,
+        }
+        self._active = 0
+        self._last_alerts = ''
+        self.create_timer(1.0, self.publish_diagnostics)
+        self.get_logger().info(
+            f'pipeline ready: {self.kernel} kernel, vehicle {settings.vehicle.name!r} '
+            f'({vehicle_file})'
+        )
+
+    def _make_callback(self, key: str) -> Any:
+        decoder = self._decoders[key]
+
+        def callback(data: bytes) -> None:
+            try:
+                stamp_ns, frame, values = decoder.decode(data)
+            except BagFormatError:
+                self.counts['undecodable'] += 1
+                return
+            matched = self.aligner.push(key, stamp_ns, (frame, values))
+            if matched is not None:
+                self.process(stamp_ns, matched)
+
+        return callback
+
+    def _codec(self, key: str, frame: bytes) -> MessageCodec:
+        codec = self._codecs.get((key, frame))
+        if codec is None:
+            codec = MessageCodec(self._types[key], frame.decode(errors='replace'))
+            self._codecs[(key, frame)] = codec
+        return codec
+
+    def process(self, stamp_ns: int, m: dict[str, Any]) -> None:
+        frame, (angles,) = m['angles']
+        speed = float(m['speed'][1][0])  # twist.linear.x
+        torques = m['torques'][1][0]
+        out = self.chain.update(stamp_ns * 1e-9, angles, speed, torques)
+        self.counts['estimates'] += 1
+        if not self._finite(out):
+            self.counts['withheld_non_finite'] += 1
+            return
+        self._publish(stamp_ns, frame, out)
+
+    @staticmethod
+    def _finite(out: ChainOutput) -> bool:
+        # One sum: NaN or inf anywhere makes it non-finite (the cores never emit them).
+        w, e = out.wheel, out.estimates
+        total = float(np.sum(w.angle) + np.sum(w.omega) + np.sum(w.omega_dot))
+        total += out.speed.speed + out.speed.accel + e.aero + e.slope
+        total += float(np.sum(e.fx) + np.sum(e.fz) + np.sum(e.mu) + np.sum(e.slip))
+        return math.isfinite(total)
+
+    def _publish(self, stamp_ns: int, frame: bytes, out: ChainOutput) -> None:
+        w, s, e, sit = out.wheel, out.speed, out.estimates, out.situation
+        pubs, codec = self.pubs, self._codec
+        pubs['states'].publish(
+            codec('states', frame).encode(
+                stamp_ns, [*w.angle.tolist(), *w.omega.tolist(), *w.omega_dot.tolist()]
+            )
+        )
+        pubs['accel'].publish(
+            codec('accel', frame).encode(stamp_ns, [s.accel, 0.0, 0.0, 0.0, 0.0, 0.0])
+        )
+        pubs['velocity'].publish(
+            codec('velocity', frame).encode(stamp_ns, [s.speed, 0.0, 0.0, 0.0, 0.0, 0.0])
+        )
+        pubs['forces'].publish(
+            codec('forces', frame).encode(stamp_ns, [*e.fx.tolist(), *e.fz.tolist()])
+        )
+        pubs['friction'].publish(
+            codec('friction', frame).encode(
+                stamp_ns, [*e.mu.tolist(), *e.slip.tolist(), *e.mu_valid.tolist()]
+            )
+        )
+        pubs['resistances'].publish(
+            codec('resistances', frame).encode(stamp_ns, [*e.rolling.tolist(), e.aero])
+        )
+        pubs['slope'].publish(codec('slope', frame).encode(stamp_ns, [e.slope, e.slope_valid]))
+        pot = sit.potential
+        pubs['potential'].publish(
+            codec('potential', frame).encode(
+                stamp_ns,
+                [
+                    *pot.mu_max.tolist(),
+                    *pot.slip_peak.tolist(),
+                    *pot.confidence.tolist(),
+                    *pot.road_class.tolist(),
+                    pot.vehicle_road_class(),
+                ],
+            )
+        )
+        level = np.zeros((1, len(ALERT_KINDS), 4), dtype=np.int64)
+        onset = np.zeros_like(level)
+        detected = np.zeros_like(level)
+        active = 0
+        for i, a in enumerate(sit.alerts):
+            level[0, i // 4, a.wheel] = a.level
+            onset[0, i // 4, a.wheel] = _stamp_ns(a.onset)
+            detected[0, i // 4, a.wheel] = _stamp_ns(a.detected)
+            active += a.active
+        self.counts['alerts_raised'] += max(0, active - self._active)
+        self._active = active
+        if active:
+            self._last_alerts = ', '.join(
+                f'{a.kind} wheel {a.wheel} level {a.level}' for a in sit.alerts if a.active
+            )
+        data = encode_alerts(
+            np.array([stamp_ns]),
+            frame.decode(errors='replace'),
+            {'level': level, 'onset_ns': onset, 'detected_ns': detected},
+        )
+        pubs['alerts'].publish(data[0])
+
+    def publish_diagnostics(self) -> None:
+        # Level and message name the faults of the last period; the counters are totals.
+        report = self.chain.fault_report()
+        level, message = report.level, report.message
+        if self._active:
+            level = max(level, int.from_bytes(DiagnosticStatus.WARN, 'little'))
+            message += f'; alerts: {self._last_alerts}'
+        if self.counts['withheld_non_finite']:
+            level = max(level, ERROR)
+            message += f'; {self.counts["withheld_non_finite"]} non-finite outputs withheld'
+        values = {
+            'kernel': self.kernel,
+            **self.counts,
+            'unmatched_dropped': self.aligner.dropped_count,
+            'stale': self.aligner.stale_count,
+            'time_jump_back': self.aligner.jump_back_count,
+            **report.counts,
+        }
+        self.pub_diag.publish(
+            node_status(self, 'vd: pipeline', 'pipeline_node', level, message, values)
+        )
+
+
+def main(args: list[str] | None = None) -> int:
+    """Entry point of ``ros2 run vd_observer_node pipeline_node``."""
+    return run_node(PipelineNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

