@@ -1,8 +1,10 @@
 #!/usr/bin/env python3
 """The live graph over the real middleware: message loss, latency, CPU and memory (prints figures).
 
-Runs sim_node (real-time factor 1.0, the first `--duration` s of the paper scenario) with
-observer_node and estimator_node, and a second time with recorder_node too, each node its
+Runs sim_node (real-time factor 1.0, the first `--duration` s of the paper scenario) with the
+estimation nodes of each layout (``nodes``: observer_node, estimator_node and alerts_node;
+``pipeline``: pipeline_node) and each kernel (``compiled``, ``python``), with and without
+recorder_node, each node its
 own process (GraphLauncher, like ``ros2 run``), plus a probe process
 (scripts/latency_probe.py) that notes the wall-clock reception time of every message.
 Stamps are simulation time, so the latency of a sample is the probe's reception time of
@@ -65,7 +67,17 @@ DERIVED_TOPICS = [
     '/vd/observer/body_accel',
     '/vd/estimates/tire_forces',
     '/vd/estimates/slope',
+    '/vd/estimates/alerts',
 ]
+#: The estimation nodes of each layout: (executable, name, text it logs when ready).
+LAYOUTS = {
+    'nodes': (
+        ('observer_node', 'observer', 'observer ready'),
+        ('estimator_node', 'estimator', 'estimator ready'),
+        ('alerts_node', 'alerts', 'alerts ready'),
+    ),
+    'pipeline': (('pipeline_node', 'pipeline', 'pipeline ready'),),
+}
 WATCHED = SENSOR_TOPICS + DERIVED_TOPICS
 _FINISHED = re.compile(r'scenario finished: (\d+) samples, ([0-9.]+) s simulated in ([0-9.]+) s')
 _TICK = os.sysconf('SC_CLK_TCK')
@@ -230,6 +242,8 @@ def run_graph(
     executor: str = '',
     salt: int = 0,
     timeout_s: float | None = None,
+    layout: str = 'nodes',
+    kernel: str = '',
 ) -> RunResult:
     """Run the graph once and measure it.
 
@@ -239,10 +253,12 @@ def run_graph(
         recorder: also run recorder_node (bag in `work`).
         publish_truth: the simulator also publishes /vd/truth/*.
         work: scratch folder (logs, probe file, bag).
-        executor: value of VD_ROS_EXECUTOR for observer and estimator ('' = default).
+        executor: value of VD_ROS_EXECUTOR for the estimation nodes ('' = default).
         salt: varies the ROS_DOMAIN_ID between runs.
         timeout_s: give up on the simulator after this wall time [s] (default 3x duration
             + 30 s).
+        layout: 'nodes' (observer, estimator and alerts nodes) or 'pipeline' (pipeline_node).
+        kernel: value of the estimation nodes' ``kernel`` parameter ('' = default).
     """
     result = RunResult(rate_hz, duration_s, recorder)
     work.mkdir(parents=True, exist_ok=True)
@@ -267,9 +283,10 @@ def run_graph(
                     NodeSpec('vd_observer_node', 'recorder_node', 'recorder', {'output': str(bag)})
                 )
                 ready.append((rec, 'recording to'))
-            for name, text in (('observer', 'observer ready'), ('estimator', 'estimator ready')):
+            params: dict[str, object] = {'kernel': kernel} if kernel else {}
+            for executable, name, text in LAYOUTS[layout]:
                 proc = NodeProcess(
-                    NodeSpec('vd_observer_node', f'{name}_node', name), logs, node_env
+                    NodeSpec('vd_observer_node', executable, name, dict(params)), logs, node_env
                 )
                 graph.nodes.append(proc)
                 ready.append((proc, text))
@@ -405,7 +422,9 @@ def _print_runs(title: str, runs: Sequence[RunResult]) -> None:
                 f'{spread([r.latency_ms["sched_" + key] for r in lat], ".2f")} ms'
             )
     names = [
-        n for n in ('sim', 'observer', 'estimator', 'recorder', 'probe') if n in good[0].cpu_pct
+        n
+        for n in ('sim', 'observer', 'estimator', 'alerts', 'pipeline', 'recorder', 'probe')
+        if n in good[0].cpu_pct
     ]
     for name in names:
         cpu = [r.cpu_pct.get(name, float('nan')) for r in good]
@@ -436,6 +455,12 @@ def main(argv: list[str] | None = None) -> int:
         '--skip', nargs='*', default=[], choices=['main', 'rec', 'sweep', 'events']
     )
     parser.add_argument('--keep', type=Path, default=None, help='keep logs/bags in this folder')
+    parser.add_argument(
+        '--layouts', nargs='*', default=['nodes', 'pipeline'], choices=sorted(LAYOUTS)
+    )
+    parser.add_argument(
+        '--kernels', nargs='*', default=['compiled', 'python'], choices=['compiled', 'python']
+    )
     args = parser.parse_args(argv)
     if args.quick:
         args.duration, args.sweep_duration, args.sweep = 5.0, 3.0, [200.0, 1000.0]
@@ -456,21 +481,40 @@ def main(argv: list[str] | None = None) -> int:
             salt += 1
             return run_graph(rate, duration, work=base / f'{tag}_{salt}', salt=salt, **kw)  # type: ignore[arg-type]
 
-        if 'main' not in args.skip:
-            runs = [
-                run('main', args.rate, args.duration, recorder=False, publish_truth=truth)
-                for _ in range(args.repeat)
-            ]
-            _print_runs(f'sim + observer + estimator at {args.rate:g} Hz', runs)
-        if 'rec' not in args.skip:
-            runs = [
-                run('rec', args.rate, args.duration, recorder=True, publish_truth=truth)
-                for _ in range(args.repeat)
-            ]
-            _print_runs(f'sim + observer + estimator + recorder at {args.rate:g} Hz', runs)
+        for layout in args.layouts:
+            for kernel in args.kernels:
+                label = f'{layout} ({kernel} kernel)'
+                if 'main' not in args.skip:
+                    runs = [
+                        run(
+                            f'main_{layout}_{kernel}',
+                            args.rate,
+                            args.duration,
+                            recorder=False,
+                            publish_truth=truth,
+                            layout=layout,
+                            kernel=kernel,
+                        )
+                        for _ in range(args.repeat)
+                    ]
+                    _print_runs(f'sim + {label} at {args.rate:g} Hz', runs)
+                if 'rec' not in args.skip:
+                    runs = [
+                        run(
+                            f'rec_{layout}_{kernel}',
+                            args.rate,
+                            args.duration,
+                            recorder=True,
+                            publish_truth=truth,
+                            layout=layout,
+                            kernel=kernel,
+                        )
+                        for _ in range(args.repeat)
+                    ]
+                    _print_runs(f'sim + {label} + recorder at {args.rate:g} Hz', runs)
         if 'sweep' not in args.skip:
             print(
-                f'\n== rate sweep, {args.sweep_duration:g} s runs, observer + estimator',
+                f'\n== rate sweep, {args.sweep_duration:g} s runs, observer + estimator + alerts',
                 flush=True,
             )
             best = 0.0
