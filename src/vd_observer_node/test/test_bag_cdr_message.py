@@ -7,8 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from vd_observer_node.bag import BagFormatError, BagUsageError, UnknownMessageTypeError
+from vd_observer_node.bag.alerts_cdr import encode_alerts
 from vd_observer_node.bag.cdr_batch import decode_batch, encode_batch, flat_fields
-from vd_observer_node.bag.cdr_message import MessageCodec
+from vd_observer_node.bag.cdr_message import AlertsCodec, MessageCodec
 from vd_observer_node.bag.typestore import VD_MSG_TYPES, deserialize, serialize
 
 FIXED_TYPES = tuple(
@@ -76,3 +77,28 @@ def test_codec_refuses_what_it_cannot_code() -> None:
         codec.decode(good[:-5])
     with pytest.raises(UnknownMessageTypeError):
         MessageCodec('vd_msgs/msg/Alerts')
+
+
+@settings(max_examples=30, deadline=None)
+@given(frame=st.text(alphabet='abz_/09', max_size=9), seed=st.integers(0, 2**32 - 1))
+def test_alerts_codec_equals_the_batch_encoder(frame: str, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    stamp = int(rng.integers(0, 2**31 * 10**9))
+    level = rng.integers(0, 3, size=12)
+    onset = np.where(level > 0, rng.integers(0, 2**31 * 10**9, size=12), 0)
+    detected = np.where(level > 0, rng.integers(0, 2**31 * 10**9, size=12), 0)
+    data = AlertsCodec(frame).encode(stamp, level.tolist(), onset.tolist(), detected.tolist())
+    batch = encode_alerts(
+        np.array([stamp]),
+        frame,
+        {
+            'level': level.reshape(1, 3, 4),
+            'onset_ns': onset.reshape(1, 3, 4),
+            'detected_ns': detected.reshape(1, 3, 4),
+        },
+    )
+    assert data == batch[0]
+    msg = deserialize(data, 'vd_msgs/msg/Alerts')
+    assert [a.level for a in msg.alerts] == level.tolist()
+    with pytest.raises(BagUsageError, match='12 channels'):
+        AlertsCodec(frame).encode(stamp, [0], [0], [0])

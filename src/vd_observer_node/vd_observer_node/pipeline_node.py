@@ -45,10 +45,9 @@ from vd_msgs.msg import (
     WheelStates,
     WheelTorques,
 )
-from vd_observer_node.alerts import ALERT_KINDS, AlertConfig
+from vd_observer_node.alerts import AlertConfig
 from vd_observer_node.alignment import StampAligner
-from vd_observer_node.bag.alerts_cdr import encode_alerts
-from vd_observer_node.bag.cdr_message import MessageCodec
+from vd_observer_node.bag.cdr_message import AlertsCodec, MessageCodec
 from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.bag.replay import default_vehicle_file
 from vd_observer_node.chain import ChainOutput, ChainSettings, make_chain
@@ -148,6 +147,7 @@ class PipelineNode(Node):  # type: ignore[misc]
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._types = {key: msgtype for key, _, _, msgtype in _OUTPUTS if key != 'alerts'}
         self._codecs: dict[tuple[str, bytes], MessageCodec] = {}
+        self._alerts_codecs: dict[bytes, AlertsCodec] = {}
         self._decoders = {key: MessageCodec(msgtype) for key, _, _, msgtype in _INPUTS}
         for key, cls, topic, _ in _INPUTS:
             self.create_subscription(cls, topic, self._make_callback(key), STREAM_QOS, raw=True)
@@ -246,27 +246,26 @@ class PipelineNode(Node):  # type: ignore[misc]
                 ],
             )
         )
-        level = np.zeros((1, len(ALERT_KINDS), 4), dtype=np.int64)
-        onset = np.zeros_like(level)
-        detected = np.zeros_like(level)
-        active = 0
-        for i, a in enumerate(sit.alerts):
-            level[0, i // 4, a.wheel] = a.level
-            onset[0, i // 4, a.wheel] = _stamp_ns(a.onset)
-            detected[0, i // 4, a.wheel] = _stamp_ns(a.detected)
-            active += a.active
+        level = [a.level for a in sit.alerts]
+        active = sum(a.active for a in sit.alerts)
         self.counts['alerts_raised'] += max(0, active - self._active)
         self._active = active
         if active:
             self._last_alerts = ', '.join(
                 f'{a.kind} wheel {a.wheel} level {a.level}' for a in sit.alerts if a.active
             )
-        data = encode_alerts(
-            np.array([stamp_ns]),
-            frame.decode(errors='replace'),
-            {'level': level, 'onset_ns': onset, 'detected_ns': detected},
+        codec_alerts = self._alerts_codecs.get(frame)
+        if codec_alerts is None:
+            codec_alerts = AlertsCodec(frame.decode(errors='replace'))
+            self._alerts_codecs[frame] = codec_alerts
+        pubs['alerts'].publish(
+            codec_alerts.encode(
+                stamp_ns,
+                level,
+                [_stamp_ns(a.onset) for a in sit.alerts],
+                [_stamp_ns(a.detected) for a in sit.alerts],
+            )
         )
-        pubs['alerts'].publish(data[0])
 
     def publish_diagnostics(self) -> None:
         # Level and message name the faults of the last period; the counters are totals.

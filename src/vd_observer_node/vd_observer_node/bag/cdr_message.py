@@ -17,10 +17,11 @@ import struct
 from collections.abc import Sequence
 from typing import Final
 
+from .alerts_cdr import ALERT_CHANNELS
 from .cdr_batch import flat_fields
 from .errors import BagFormatError, BagUsageError
 
-__all__ = ['DecodedMessage', 'MessageCodec']
+__all__ = ['AlertsCodec', 'DecodedMessage', 'MessageCodec']
 
 _STRUCT_CODES: Final = {
     '?': '?',
@@ -137,3 +138,53 @@ class MessageCodec:
         )
         frame = bytes(data[16 : 16 + frame_len]).rstrip(b'\x00')
         return sec * _NS + nanosec, frame, values
+
+
+class AlertsCodec:
+    """Encode vd_msgs/msg/Alerts with all 12 channels, one message per call.
+
+    The per-message counterpart of :func:`.alerts_cdr.encode_alerts` (same bytes, tested): the
+    record sequence is not a fixed layout, but with the channel count fixed at 12 it is one
+    ``struct`` format per ``frame_id``.
+    """
+
+    def __init__(self, frame_id: str = '') -> None:
+        """Prepare the format for `frame_id` (header.frame_id of every message encoded)."""
+        frame = frame_id.encode() + b'\x00'
+        pad = -(12 + len(frame)) % 4  # the sequence length is aligned to 4 from offset 4
+        self._frame = frame
+        self._struct = struct.Struct(f'<4siII{len(frame)}s{pad}xI' + 'BBB?iIiI' * ALERT_CHANNELS)
+        self.frame_id = frame_id
+
+    def encode(
+        self,
+        stamp_ns: int,
+        level: Sequence[int],
+        onset_ns: Sequence[int],
+        detected_ns: Sequence[int],
+    ) -> bytes:
+        """CDR bytes of one Alerts message.
+
+        Args:
+            stamp_ns: header.stamp [ns].
+            level: 12 levels, kind-major (KIND_* code, then FL, FR, RL, RR).
+            onset_ns: 12 onset stamps [ns] (0 while inactive).
+            detected_ns: 12 detection stamps [ns] (0 while inactive).
+
+        Raises:
+            BagUsageError: not 12 channels, or a stamp outside builtin_interfaces/Time.
+        """
+        if not len(level) == len(onset_ns) == len(detected_ns) == ALERT_CHANNELS:
+            raise BagUsageError(f'Alerts: need {ALERT_CHANNELS} channels per message')
+        sec, nanosec = divmod(int(stamp_ns), _NS)
+        fields: list[object] = [_ENCAPSULATION_LE, sec, nanosec, len(self._frame), self._frame]
+        fields.append(ALERT_CHANNELS)
+        for i in range(ALERT_CHANNELS):
+            onset_s, onset_n = divmod(int(onset_ns[i]), _NS)
+            det_s, det_n = divmod(int(detected_ns[i]), _NS)
+            lv = int(level[i])
+            fields += (i // 4, i % 4, lv, lv > 0, onset_s, onset_n, det_s, det_n)
+        try:
+            return self._struct.pack(*fields)
+        except struct.error as exc:
+            raise BagUsageError(f'Alerts: cannot encode: {exc}') from None
