@@ -1,0 +1,522 @@
+"""Compiled estimator: `estimator.Estimator` (with its `filters.LowPass` stages) in numba.
+
+Mirrors :class:`vd_observer_node.estimator.Estimator` step for step: the wheel spin balance,
+load transfer (both sources), utilised friction and its validity, slip, rolling and aero
+resistance, the slope from the filtered force balance (both acceleration sources), held
+inputs, resets and every fault counter. The tests run both on the same inputs and require
+equal outputs (1e-9) and equal fault counts.
+
+Array layouts:
+
+* ``prm`` float64 (`N_PARAMS`,): see `estimator_params`;
+* ``scal`` (3,): stamp of the last sample (nan before the first), slope [rad], 1.0 once an
+  estimate exists; ``held`` (14,): last finite inputs (omega, omega_dot, torque, v, accel);
+* three low-pass filters (force (order, 5), slope (order, 1), speed (order, 1)), each
+  ``stages``, ``prev`` (d,) and ``meta`` (3,): initialised, has a previous output, last dt;
+* ``est`` (`EST_SIZE`,): one estimate packed (see the ``E_*`` offsets): the last one in the
+  state, the output of `estimator_update`;
+* ``counts`` int64 (12,): the `faults.ESTIMATOR_FAULTS` kinds in order, then rejections.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Final
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from vd_observer_node.errors import InputShapeError
+from vd_observer_node.estimator import (
+    LOAD_TRANSFER_SOURCES,
+    SLOPE_ACCEL_SOURCES,
+    Estimates,
+    EstimatorConfig,
+)
+from vd_observer_node.faults import ESTIMATOR_FAULTS, FaultCounter
+from vd_observer_node.vehicle import EstimatorVehicle
+
+from ._jit import jit
+
+__all__ = [
+    'EST_SIZE',
+    'E_AERO',
+    'E_FX',
+    'E_FZ',
+    'E_MU',
+    'E_MU_VALID',
+    'E_ROLL',
+    'E_SLIP',
+    'E_SLOPE',
+    'E_SLOPE_VALID',
+    'E_T',
+    'CompiledEstimator',
+    'EstimatorState',
+    'estimates_from_packed',
+    'estimator_params',
+    'estimator_reset',
+    'estimator_update',
+]
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+# packed estimate
+E_T: Final = 0
+E_FX: Final = 1
+E_FZ: Final = 5
+E_MU: Final = 9
+E_SLIP: Final = 13
+E_ROLL: Final = 17
+E_AERO: Final = 21
+E_SLOPE: Final = 22
+E_SLOPE_VALID: Final = 23
+E_MU_VALID: Final = 24
+EST_SIZE: Final = 28
+
+# parameters
+_MASS, _GRAVITY, _RADIUS, _J_FRONT, _J_REAR, _DRAG, _C0, _C1, _REG = range(9)
+_H, _A, _B, _L, _LT_CODE, _FORCE_TAU, _SLOPE_TAU, _ACC_CODE, _ORDER = range(9, 18)
+_MIN_LOAD, _MIN_EXC, _MAX_SINE, _MIN_SPEED, _SLIP_EPS, _MAX_GAP, _MAX_MU = range(18, 25)
+_STATIC_FRONT, _STATIC_REAR = 25, 26
+N_PARAMS: Final = 27
+
+# fault slots (ESTIMATOR_FAULTS order) and the rejection count
+_NON_FINITE_STAMP, _NON_FINITE_VALUE, _DUPLICATE, _OUT_OF_ORDER, _GAP, _JUMP_BACK = range(6)
+_NON_FINITE_OUTPUT, _WHEEL_LIFT, _MU_RANGE, _SLOPE_RANGE, _ARCSIN, _REJECTED = range(6, 12)
+assert ESTIMATOR_FAULTS == (
+    'non_finite_stamp',
+    'non_finite_value',
+    'duplicate_stamp',
+    'out_of_order',
+    'gap',
+    'time_jump_back',
+    'non_finite_output',
+    'wheel_lift',
+    'mu_out_of_range',
+    'slope_out_of_range',
+    'arcsin_domain',
+)
+_KMH_REFERENCE: Final = 160.0  # [km/h] speed scale of paper eq. 7 (estimators.py)
+
+
+def estimator_params(vehicle: EstimatorVehicle, config: EstimatorConfig) -> FloatArray:
+    """The ``prm`` array of the estimator kernel."""
+    static = vehicle.static_wheel_loads
+    prm = np.zeros(N_PARAMS)
+    prm[_MASS] = vehicle.mass
+    prm[_GRAVITY] = vehicle.gravity
+    prm[_RADIUS] = vehicle.effective_radius
+    prm[_J_FRONT] = vehicle.inertia_front
+    prm[_J_REAR] = vehicle.inertia_rear
+    prm[_DRAG] = vehicle.drag_factor
+    prm[_C0] = vehicle.rolling_c0
+    prm[_C1] = vehicle.rolling_c1
+    prm[_REG] = vehicle.rolling_regularisation_speed
+    prm[_H] = vehicle.cg_height
+    prm[_A] = vehicle.cg_to_front_axle
+    prm[_B] = vehicle.cg_to_rear_axle
+    prm[_L] = vehicle.wheelbase
+    prm[_LT_CODE] = LOAD_TRANSFER_SOURCES.index(config.load_transfer_source)
+    prm[_FORCE_TAU] = config.force_filter_tau
+    prm[_SLOPE_TAU] = config.slope_filter_tau
+    prm[_ACC_CODE] = SLOPE_ACCEL_SOURCES.index(config.slope_accel_source)
+    prm[_ORDER] = config.filter_order
+    prm[_MIN_LOAD] = config.min_load_ratio * float(np.min(static))
+    prm[_MIN_EXC] = config.min_excitation_ratio
+    prm[_MAX_SINE] = math.sin(config.max_slope)
+    prm[_MIN_SPEED] = config.min_speed
+    prm[_SLIP_EPS] = config.slip_eps
+    prm[_MAX_GAP] = config.max_gap
+    prm[_MAX_MU] = config.max_mu
+    prm[_STATIC_FRONT] = static[0]
+    prm[_STATIC_REAR] = static[2]
+    return prm
+
+
+assert LOAD_TRANSFER_SOURCES == ('tire_forces', 'acceleration')
+assert SLOPE_ACCEL_SOURCES == ('speed', 'observer')
+
+
+class EstimatorState:
+    """The estimator kernel's state arrays (see the module docstring)."""
+
+    def __init__(self, order: int) -> None:
+        """Zeroed state for filters of `order` stages."""
+        self.scal = np.zeros(3)
+        self.held = np.zeros(14)
+        self.f_stages = np.zeros((order, 5))
+        self.f_prev = np.zeros(5)
+        self.f_meta = np.zeros(3)
+        self.s_stages = np.zeros((order, 1))
+        self.s_prev = np.zeros(1)
+        self.s_meta = np.zeros(3)
+        self.v_stages = np.zeros((order, 1))
+        self.v_prev = np.zeros(1)
+        self.v_meta = np.zeros(3)
+        self.last = np.zeros(EST_SIZE)
+
+
+# -- low-pass filter (filters.LowPass) -------------------------------------------------------
+
+
+@jit
+def _lp_update(
+    tau: float,
+    stages: FloatArray,
+    prev: FloatArray,
+    meta: FloatArray,
+    dt: float,
+    x: FloatArray,
+    out: FloatArray,
+) -> None:
+    d = x.shape[0]
+    if tau == 0.0:
+        out[:] = x
+        return
+    if meta[0] == 0.0:
+        for j in range(stages.shape[0]):
+            stages[j, :] = x
+        meta[0] = 1.0
+        out[:] = x
+        return
+    alpha = -math.expm1(-max(dt, 0.0) / tau)
+    prev[:] = stages[-1]
+    meta[1] = 1.0
+    meta[2] = dt
+    for i in range(d):
+        signal = x[i]
+        for j in range(stages.shape[0]):
+            stages[j, i] += alpha * (signal - stages[j, i])
+            signal = stages[j, i]
+        out[i] = signal
+
+
+@jit
+def _lp_derivative0(stages: FloatArray, prev: FloatArray, meta: FloatArray) -> float:
+    """`LowPass.derivative` of a one-dimensional filter."""
+    if meta[1] == 0.0 or meta[2] <= 0.0 or meta[0] == 0.0:
+        return 0.0
+    return float((stages[-1, 0] - prev[0]) / meta[2])
+
+
+@jit
+def _empty(prm: FloatArray, t: float, est: FloatArray) -> None:
+    est[:] = 0.0
+    est[E_T] = t if math.isfinite(t) else 0.0
+    est[E_FZ] = prm[_STATIC_FRONT]
+    est[E_FZ + 1] = prm[_STATIC_FRONT]
+    est[E_FZ + 2] = prm[_STATIC_REAR]
+    est[E_FZ + 3] = prm[_STATIC_REAR]
+
+
+@jit
+def estimator_reset(
+    held: FloatArray,
+    scal: FloatArray,
+    f_meta: FloatArray,
+    s_meta: FloatArray,
+    v_meta: FloatArray,
+) -> None:
+    """`Estimator.reset`: slope 0, filters empty, no last estimate (fault counts stay)."""
+    scal[0] = math.nan
+    scal[1] = 0.0
+    scal[2] = 0.0
+    held[:] = 0.0
+    f_meta[:] = 0.0
+    s_meta[:] = 0.0
+    v_meta[:] = 0.0
+
+
+@jit
+def _estimate(
+    prm: FloatArray,
+    scal: FloatArray,
+    f_stages: FloatArray,
+    f_prev: FloatArray,
+    f_meta: FloatArray,
+    s_stages: FloatArray,
+    s_prev: FloatArray,
+    s_meta: FloatArray,
+    v_stages: FloatArray,
+    v_prev: FloatArray,
+    v_meta: FloatArray,
+    counts: NDArray[np.int64],
+    t: float,
+    dt: float,
+    x: FloatArray,
+    wheel_ok: BoolArray,
+    body_ok: bool,
+    est: FloatArray,
+) -> None:
+    """`Estimator._estimate` into the packed estimate ``est``."""
+    mass, gravity, radius = prm[_MASS], prm[_GRAVITY], prm[_RADIUS]
+    v = x[12]
+    accel = x[13]
+    reg = prm[_REG]
+    direction = math.tanh(v / reg) if reg > 0.0 else (1.0 if v > 0 else (-1.0 if v < 0 else v))
+    aero = prm[_DRAG] * v * v
+    aero_signed = math.copysign(aero, v)
+    c_roll = prm[_C0] * (1.0 + prm[_C1] * abs(v) / _KMH_REFERENCE)
+    slope_prev = scal[1]
+    cos_prev, sin_prev = math.cos(slope_prev), math.sin(slope_prev)
+    weight = mass * gravity
+
+    fx_raw = np.empty(4)
+    for i in range(4):
+        inertia = prm[_J_FRONT] if i < 2 else prm[_J_REAR]
+        fx_raw[i] = (x[8 + i] - inertia * x[4 + i]) / radius
+    fx_sum = fx_raw[0] + fx_raw[1] + fx_raw[2] + fx_raw[3]
+    rolling_sum = c_roll * weight * cos_prev
+    if int(prm[_LT_CODE]) == 0:
+        ground = fx_sum - direction * rolling_sum
+    else:
+        ground = mass * accel + weight * sin_prev + aero_signed
+    force_in = np.empty(5)
+    force_in[:4] = fx_raw
+    force_in[4] = ground
+    filtered = np.empty(5)
+    _lp_update(prm[_FORCE_TAU], f_stages, f_prev, f_meta, dt, force_in, filtered)
+    ground_f = filtered[4]
+
+    # wheel_loads, clamped at 0 twice as the reference (inside and outside)
+    weight_normal = mass * gravity * cos_prev
+    transfer = ground_f * prm[_H]
+    front = max(0.5 * (weight_normal * prm[_B] - transfer) / prm[_L], 0.0)
+    rear = max(0.5 * (weight_normal * prm[_A] + transfer) / prm[_L], 0.0)
+    min_load = prm[_MIN_LOAD]
+    lift = False
+    for i in range(4):
+        fz = front if i < 2 else rear
+        fx = filtered[i]
+        est[E_FX + i] = fx
+        est[E_FZ + i] = fz
+        est[E_ROLL + i] = c_roll * fz
+        valid = (fz >= min_load) and (abs(fx) >= prm[_MIN_EXC] * fz) and math.isfinite(fx)
+        mu = fx / fz if valid else 0.0
+        valid = valid and wheel_ok[i]
+        if fz < min_load:
+            lift = True
+        est[E_MU + i] = mu
+        est[E_MU_VALID + i] = 1.0 if valid else 0.0
+        ws = x[i] * radius
+        den = max(max(abs(ws), abs(v)), prm[_SLIP_EPS])
+        est[E_SLIP + i] = (ws - v) / den
+    if lift:
+        counts[_WHEEL_LIFT] += 1
+    implausible = False
+    for i in range(4):
+        if est[E_MU_VALID + i] != 0.0 and abs(est[E_MU + i]) > prm[_MAX_MU]:
+            implausible = True
+            est[E_MU_VALID + i] = 0.0
+    if implausible:
+        counts[_MU_RANGE] += 1
+    for i in range(4):
+        if est[E_MU_VALID + i] == 0.0:
+            est[E_MU + i] = 0.0
+
+    forces = fx_sum - direction * rolling_sum - aero_signed
+    one = np.empty(1)
+    net_out = np.empty(1)
+    if int(prm[_ACC_CODE]) == 0 and prm[_SLOPE_TAU] > 0.0:
+        one[0] = v
+        _lp_update(prm[_SLOPE_TAU], v_stages, v_prev, v_meta, dt, one, net_out)
+        accel_f = _lp_derivative0(v_stages, v_prev, v_meta)
+        one[0] = forces
+        _lp_update(prm[_SLOPE_TAU], s_stages, s_prev, s_meta, dt, one, net_out)
+        net_f = net_out[0] - mass * accel_f
+    else:
+        one[0] = forces - mass * accel
+        _lp_update(prm[_SLOPE_TAU], s_stages, s_prev, s_meta, dt, one, net_out)
+        net_f = net_out[0]
+    sine = net_f / weight
+    in_range = abs(sine) <= prm[_MAX_SINE]
+    usable = body_ok and abs(v) >= prm[_MIN_SPEED]
+    if usable and not in_range:
+        counts[_ARCSIN if abs(sine) > 1.0 else _SLOPE_RANGE] += 1
+    slope_valid = in_range and usable
+    if slope_valid:
+        scal[1] = math.asin(sine)
+    est[E_T] = t
+    est[E_AERO] = aero
+    est[E_SLOPE] = scal[1]
+    est[E_SLOPE_VALID] = 1.0 if slope_valid else 0.0
+
+
+@jit
+def estimator_update(
+    prm: FloatArray,
+    scal: FloatArray,
+    held: FloatArray,
+    f_stages: FloatArray,
+    f_prev: FloatArray,
+    f_meta: FloatArray,
+    s_stages: FloatArray,
+    s_prev: FloatArray,
+    s_meta: FloatArray,
+    v_stages: FloatArray,
+    v_prev: FloatArray,
+    v_meta: FloatArray,
+    last: FloatArray,
+    counts: NDArray[np.int64],
+    t: float,
+    omega: FloatArray,
+    omega_dot: FloatArray,
+    speed: float,
+    accel: float,
+    torque: FloatArray,
+    est: FloatArray,
+) -> None:
+    """Estimate everything for stamp t into ``est`` (`Estimator.update`)."""
+    packed = np.empty(14)
+    packed[0:4] = omega
+    packed[4:8] = omega_dot
+    packed[8:12] = torque
+    packed[12] = speed
+    packed[13] = accel
+    if not math.isfinite(t):
+        counts[_NON_FINITE_STAMP] += 1
+        counts[_REJECTED] += 1
+        if scal[2] != 0.0:
+            est[:] = last
+        else:
+            _empty(prm, t, est)
+        return
+    t_last = scal[0]
+    if not math.isnan(t_last):
+        restart = False
+        if t <= t_last:
+            if t_last - t <= prm[_MAX_GAP]:
+                counts[_DUPLICATE if t == t_last else _OUT_OF_ORDER] += 1
+                counts[_REJECTED] += 1
+                if scal[2] != 0.0:
+                    est[:] = last
+                else:
+                    _empty(prm, t, est)
+                return
+            counts[_JUMP_BACK] += 1
+            restart = True
+        elif t - t_last > prm[_MAX_GAP]:
+            counts[_GAP] += 1
+            restart = True
+        if restart:  # reset, keeping the held inputs
+            kept = held.copy()
+            estimator_reset(held, scal, f_meta, s_meta, v_meta)
+            held[:] = kept
+    dt = 0.0 if math.isnan(scal[0]) else t - scal[0]
+    scal[0] = t
+    ok = np.empty(14, dtype=np.bool_)
+    all_ok = True
+    for j in range(14):
+        ok[j] = math.isfinite(packed[j])
+        all_ok = all_ok and ok[j]
+    wheel_ok = np.ones(4, dtype=np.bool_)
+    body_ok = True
+    if not all_ok:
+        counts[_NON_FINITE_VALUE] += 1
+        for j in range(14):
+            if not ok[j]:
+                packed[j] = held[j]
+        for i in range(4):
+            wheel_ok[i] = ok[i] and ok[4 + i] and ok[8 + i] and ok[12]
+        body_ok = False
+    held[:] = packed
+    _estimate(
+        prm, scal, f_stages, f_prev, f_meta, s_stages, s_prev, s_meta, v_stages, v_prev, v_meta,
+        counts, t, dt, packed, wheel_ok, body_ok, est,
+    )  # fmt: skip
+    total = 0.0
+    for j in range(E_FX, E_AERO):
+        total += est[j]
+    if not math.isfinite(total + est[E_AERO] + est[E_SLOPE]):
+        counts[_NON_FINITE_OUTPUT] += 1
+        estimator_reset(held, scal, f_meta, s_meta, v_meta)
+        scal[0] = t
+        _empty(prm, t, est)
+    last[:] = est
+    scal[2] = 1.0
+
+
+def estimates_from_packed(est: FloatArray) -> Estimates:
+    """The `Estimates` of a packed estimate (copies)."""
+    return Estimates(
+        t=float(est[E_T]),
+        fx=est[E_FX : E_FX + 4].copy(),
+        fz=est[E_FZ : E_FZ + 4].copy(),
+        mu=est[E_MU : E_MU + 4].copy(),
+        slip=est[E_SLIP : E_SLIP + 4].copy(),
+        mu_valid=est[E_MU_VALID : E_MU_VALID + 4] != 0.0,
+        rolling=est[E_ROLL : E_ROLL + 4].copy(),
+        aero=float(est[E_AERO]),
+        slope=float(est[E_SLOPE]),
+        slope_valid=bool(est[E_SLOPE_VALID] != 0.0),
+    )
+
+
+def _wheels(name: str, value: ArrayLike) -> FloatArray:
+    array = np.ascontiguousarray(value, dtype=np.float64)
+    if array.shape != (4,):
+        raise InputShapeError(f'{name} must have shape (4,), got {array.shape}')
+    return array
+
+
+class CompiledEstimator:
+    """Drop-in for `estimator.Estimator` running `estimator_update` (same API)."""
+
+    def __init__(self, vehicle: EstimatorVehicle, config: EstimatorConfig | None = None) -> None:
+        """Create the estimator (arguments as `Estimator`)."""
+        self.vehicle = vehicle
+        self.config = config or EstimatorConfig()
+        self.prm = estimator_params(vehicle, self.config)
+        self.s = EstimatorState(self.config.filter_order)
+        self.counts = np.zeros(len(ESTIMATOR_FAULTS) + 1, dtype=np.int64)
+        self.faults = FaultCounter(ESTIMATOR_FAULTS)
+        self._synced = np.zeros_like(self.counts)
+        self._est = np.zeros(EST_SIZE)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the history (slope back to 0, filters empty); fault counters stay."""
+        s = self.s
+        estimator_reset(s.held, s.scal, s.f_meta, s.s_meta, s.v_meta)
+
+    @property
+    def rejected_count(self) -> int:
+        """Stamps rejected (non-finite, repeated or slightly older)."""
+        return int(self.counts[_REJECTED])
+
+    @property
+    def last(self) -> Estimates | None:
+        """The last estimate (None before the first)."""
+        return estimates_from_packed(self.s.last) if self.s.scal[2] != 0.0 else None
+
+    def sync_faults(self) -> None:
+        """Copy the kernel's fault counts into `faults` (call before `faults.report()`)."""
+        delta = self.counts - self._synced
+        for slot in np.flatnonzero(delta[: len(ESTIMATOR_FAULTS)]).tolist():
+            self.faults.count(ESTIMATOR_FAULTS[slot], int(delta[slot]))
+        self._synced = self.counts.copy()
+
+    def update(
+        self,
+        t: float,
+        omega: ArrayLike,
+        omega_dot: ArrayLike,
+        speed: float,
+        accel: float,
+        torque: ArrayLike,
+    ) -> Estimates:
+        """Estimate everything for stamp t (`Estimator.update`).
+
+        Raises:
+            InputShapeError: a per-wheel input is not of shape (4,).
+        """
+        s = self.s
+        estimator_update(
+            self.prm, s.scal, s.held, s.f_stages, s.f_prev, s.f_meta, s.s_stages, s.s_prev,
+            s.s_meta, s.v_stages, s.v_prev, s.v_meta, s.last, self.counts, float(t),
+            _wheels('omega', omega), _wheels('omega_dot', omega_dot), float(speed), float(accel),
+            _wheels('torque', torque), self._est,
+        )  # fmt: skip
+        self.sync_faults()
+        return estimates_from_packed(self._est)
