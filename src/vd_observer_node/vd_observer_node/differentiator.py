@@ -110,8 +110,25 @@ class LevantGains:
 DEFAULT_GAINS: Final = LevantGains()
 
 
+def _cbrt(x: ArrayLike) -> FloatArray:
+    """Cube root by the C library's ``cbrt``, element by element.
+
+    Not ``np.cbrt``: numpy's vectorised cbrt and pow use SIMD approximations on some CPUs
+    (SVML on AVX-512) that differ from libm in the last bit, and the implicit step turns one
+    bit of the angle into ~ulp/tau^2 of f'' (1e-7 rad/s^2 at 1 kHz for a 200 rad angle): the
+    reference would depend on the CPU it runs on. libm's is also what the compiled kernel
+    (`vd_observer_node.kernel.levant`) calls, so the two agree to the last bits.
+    """
+    a = np.asarray(x, dtype=np.float64)
+    return np.array([math.cbrt(v) for v in a.ravel().tolist()]).reshape(a.shape)
+
+
 def _signed_power(x: FloatArray, exponent: float) -> FloatArray:
-    return np.sign(x) * np.abs(x) ** exponent
+    """sign(x) |x|^exponent with the C library's pow (see `_cbrt`) or, for 1/2, sqrt."""
+    if exponent == 0.5:
+        return np.sign(x) * np.sqrt(np.abs(x))
+    powers = [math.pow(abs(v), exponent) for v in np.ravel(x).tolist()]
+    return np.sign(x) * np.array(powers).reshape(np.shape(x))
 
 
 def euler_step(
@@ -135,7 +152,7 @@ def euler_step(
     """
     lip = np.asarray(lipschitz, dtype=np.float64)
     e0 = z[0] - np.asarray(f, dtype=np.float64)
-    v0 = z[1] - gains.l0 * np.cbrt(lip) * _signed_power(e0, 2.0 / 3.0)
+    v0 = z[1] - gains.l0 * _cbrt(lip) * _signed_power(e0, 2.0 / 3.0)
     v1 = z[2] - gains.l1 * np.sqrt(lip) * _signed_power(z[1] - v0, 0.5)
     z2_rate = -gains.l2 * lip * np.sign(z[2] - v1)
     return np.stack((z[0] + tau * v0, z[1] + tau * v1, z[2] + tau * z2_rate))
@@ -154,14 +171,14 @@ def _positive_cubic_root(a: float, b: float, c: FloatArray) -> FloatArray:
         return np.zeros_like(c)
     p = b - a * a / 3.0
     if p > 0.0:
-        q = 2.0 * a**3 / 27.0 - a * b / 3.0 - c
-        root = np.sqrt(0.25 * q * q + p**3 / 27.0)
-        y = np.maximum(np.cbrt(-0.5 * q + root) + np.cbrt(-0.5 * q - root) - a / 3.0, 0.0)
+        q = 2.0 * (a * a * a) / 27.0 - a * b / 3.0 - c
+        root = np.sqrt(0.25 * q * q + (p * p * p) / 27.0)
+        y = np.maximum(_cbrt(-0.5 * q + root) + _cbrt(-0.5 * q - root) - a / 3.0, 0.0)
         for _ in range(2):
             residual = ((y + a) * y + b) * y - c
             y = np.maximum(y - residual / ((3.0 * y + 2.0 * a) * y + b), 0.0)
         return y
-    y = np.minimum(np.cbrt(c), c / b)
+    y = np.minimum(_cbrt(c), c / b)
     for _ in range(_NEWTON_MAX_ITER):
         residual = ((y + a) * y + b) * y - c
         slope = (3.0 * y + 2.0 * a) * y + b
@@ -217,8 +234,10 @@ def implicit_step(
     k0, k1, k2 = gains.nonrecursive()
     lip = np.asarray(lipschitz, dtype=np.float64)
     target = np.asarray(f_next, dtype=np.float64)
-    scale = tau**3 * lip
-    w = z[0] + tau * z[1] + 0.5 * tau**2 * z[2] - target
+    # integer powers as products: the same bits in numpy, Python floats and the kernel
+    tau2 = tau * tau
+    scale = tau2 * tau * lip
+    w = z[0] + tau * z[1] + 0.5 * tau2 * z[2] - target
     s = np.sign(w)
     excess = np.maximum(np.abs(w) / scale - k2, 0.0)
     y = _positive_cubic_root(k0, k1, excess)
@@ -226,8 +245,8 @@ def implicit_step(
     sign_value = np.where(excess > 0.0, s, w / (scale * k2))
     out = np.empty((3, *np.shape(w)))
     out[2] = z[2] - tau * k2 * lip * sign_value
-    out[1] = z[1] + tau * z[2] - 1.5 * tau**2 * k2 * lip * sign_value - s * k1 * tau**2 * lip * y
-    out[0] = target + s * scale * y**3
+    out[1] = z[1] + tau * z[2] - 1.5 * tau2 * k2 * lip * sign_value - s * k1 * tau2 * lip * y
+    out[0] = target + s * scale * (y * y * y)
     return out
 
 
@@ -255,7 +274,7 @@ def euler_taylor_step(
         shape (3, n), state at t_{k+1}.
     """
     z_next = euler_step(z, f, tau, lipschitz, gains)
-    z_next[0] += 0.5 * tau**2 * z[2]
+    z_next[0] += 0.5 * (tau * tau) * z[2]
     return z_next
 
 
@@ -285,7 +304,7 @@ def step(
 def _open_loop(z: FloatArray, tau: float) -> FloatArray:
     """Taylor prediction used for channels whose sample is missing or non-finite."""
     return np.stack(
-        (z[0] + tau * z[1] + 0.5 * tau**2 * z[2], z[1] + tau * z[2], z[2]),
+        (z[0] + tau * z[1] + 0.5 * (tau * tau) * z[2], z[1] + tau * z[2], z[2]),
     )
 
 

@@ -198,8 +198,8 @@ def _positive_cubic_root(a: float, b: float, c: FloatArray, y: FloatArray) -> No
     p = b - a * a / 3.0
     if p > 0.0:
         for i in range(n):
-            q = 2.0 * a**3 / 27.0 - a * b / 3.0 - c[i]
-            root = math.sqrt(0.25 * q * q + p**3 / 27.0)
+            q = 2.0 * (a * a * a) / 27.0 - a * b / 3.0 - c[i]
+            root = math.sqrt(0.25 * q * q + (p * p * p) / 27.0)
             yi = max(np.cbrt(-0.5 * q + root) + np.cbrt(-0.5 * q - root) - a / 3.0, 0.0)
             for _ in range(2):
                 residual = ((yi + a) * yi + b) * yi - c[i]
@@ -238,36 +238,37 @@ def _corrected(
         excess = np.empty(n)
         y = np.empty(n)
         w = np.empty(n)
+        tau2 = tau * tau
         for i in range(n):
-            scale = tau**3 * lip[i]
-            w[i] = z[0, i] + tau * z[1, i] + 0.5 * tau**2 * z[2, i] - f[i]
+            scale = tau2 * tau * lip[i]
+            w[i] = z[0, i] + tau * z[1, i] + 0.5 * tau2 * z[2, i] - f[i]
             excess[i] = max(abs(w[i]) / scale - k2, 0.0)
         _positive_cubic_root(k0, k1, excess, y)
         for i in range(n):
-            scale = tau**3 * lip[i]
+            scale = tau2 * tau * lip[i]
             s = _sign(w[i])
             sign_value = s if excess[i] > 0.0 else w[i] / (scale * k2)
             out[2, i] = z[2, i] - tau * k2 * lip[i] * sign_value
             out[1, i] = (
                 z[1, i]
                 + tau * z[2, i]
-                - 1.5 * tau**2 * k2 * lip[i] * sign_value
-                - s * k1 * tau**2 * lip[i] * y[i]
+                - 1.5 * tau2 * k2 * lip[i] * sign_value
+                - s * k1 * tau2 * lip[i] * y[i]
             )
-            out[0, i] = f[i] + s * scale * y[i] ** 3
+            out[0, i] = f[i] + s * scale * (y[i] * y[i] * y[i])
         return
     l0, l1, l2 = prm[0], prm[1], prm[2]
     for i in range(n):
         e0 = z[0, i] - f[i]
-        v0 = z[1, i] - l0 * np.cbrt(lip[i]) * (_sign(e0) * abs(e0) ** (2.0 / 3.0))
+        v0 = z[1, i] - l0 * np.cbrt(lip[i]) * (_sign(e0) * math.pow(abs(e0), 2.0 / 3.0))
         d1 = z[1, i] - v0
-        v1 = z[2, i] - l1 * math.sqrt(lip[i]) * (_sign(d1) * abs(d1) ** 0.5)
+        v1 = z[2, i] - l1 * math.sqrt(lip[i]) * (_sign(d1) * math.sqrt(abs(d1)))
         z2_rate = -l2 * lip[i] * _sign(z[2, i] - v1)
         out[0, i] = z[0, i] + tau * v0
         out[1, i] = z[1, i] + tau * v1
         out[2, i] = z[2, i] + tau * z2_rate
         if code == _EULER_TAYLOR:
-            out[0, i] += 0.5 * tau**2 * z[2, i]
+            out[0, i] += 0.5 * (tau * tau) * z[2, i]
 
 
 @jit
@@ -356,7 +357,7 @@ def diff_update(
                     z[2, i] = corrected[2, i]
                 else:
                     z0, z1, z2 = z[0, i], z[1, i], z[2, i]
-                    z[0, i] = z0 + tau * z1 + 0.5 * tau**2 * z2
+                    z[0, i] = z0 + tau * z1 + 0.5 * (tau * tau) * z2
                     z[1, i] = z1 + tau * z2
                     z[2, i] = z2
             _adopt(prm, t, sample, finite, z, active, pend_t, pend_f, scal)

@@ -708,7 +708,8 @@ class CompiledSituationMonitor:
             friction or FrictionPotentialConfig(),
             self.config,
         )
-        self._args = monitor_args(self.arrays)
+        #: the leading (state and parameter) arguments of `monitor_update`
+        self.args = monitor_args(self.arrays)
         self.slip = np.zeros(4)
         self.reset()
 
@@ -733,7 +734,7 @@ class CompiledSituationMonitor:
         """
         kernel: Any = monitor_update  # its leading arguments come as one tuple
         kernel(
-            *self._args, float(t), wheel_angle, float(speed), wheel_torque, omega, mu, mu_valid,
+            *self.args, float(t), wheel_angle, float(speed), wheel_torque, omega, mu, mu_valid,
             load, self.slip,
         )  # fmt: skip
 

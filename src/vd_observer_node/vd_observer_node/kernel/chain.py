@@ -1,0 +1,427 @@
+"""The compiled chain: observers -> estimator -> situation monitor, per stamp and per block.
+
+* `CompiledChain`: the compiled implementation of `vd_observer_node.chain.Chain` (what
+  ``pipeline_node`` runs per stamp), tested equal to `chain.PythonChain`;
+* `run_cascade_compiled` and `run_situation_compiled`: the compiled `cascade.run_cascade` and
+  `situation.run_situation` over a whole record in one call each (offline replay), tested
+  equal to them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from vd_observer_node.cascade import CascadeResult
+from vd_observer_node.chain import ChainOutput, ChainSettings
+from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimator import EstimatorConfig
+from vd_observer_node.faults import FaultReport, merge_reports
+from vd_observer_node.friction_potential import TyreCurves
+from vd_observer_node.observer import ObserverConfig, SpeedState, WheelState
+from vd_observer_node.situation import Situation, SituationSeries
+from vd_observer_node.vehicle import EstimatorVehicle
+
+from ._jit import jit
+from .estimation import (
+    E_AERO,
+    E_FX,
+    E_FZ,
+    E_MU,
+    E_MU_VALID,
+    E_ROLL,
+    E_SLIP,
+    E_SLOPE,
+    E_SLOPE_VALID,
+    EST_SIZE,
+    CompiledEstimator,
+    estimates_from_packed,
+    estimator_update,
+)
+from .levant import CompiledDifferentiator, diff_update
+from .situation import (
+    P_CONFIDENCE,
+    P_MU_MAX,
+    P_ROAD,
+    P_SLIP_PEAK,
+    CompiledSituationMonitor,
+    alerts_from_arrays,
+    monitor_update,
+    potential_from_arrays,
+)
+
+__all__ = ['CompiledChain', 'run_cascade_compiled', 'run_situation_compiled', 'warm_up']
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+
+def _observers(config: ObserverConfig) -> tuple[CompiledDifferentiator, CompiledDifferentiator]:
+    """Wheel (4 channels) and speed (1 channel) differentiators of `observer.Observer`."""
+
+    def make(lipschitz: float, n: int) -> CompiledDifferentiator:
+        return CompiledDifferentiator(
+            lipschitz,
+            n_channels=n,
+            gains=config.gains,
+            discretization=config.discretization,
+            init=config.init,
+            max_gap=config.max_gap,
+            init_baseline=config.init_baseline,
+        )
+
+    return make(config.wheel_lipschitz, 4), make(config.speed_lipschitz, 1)
+
+
+def _diff_args(d: CompiledDifferentiator) -> tuple[Any, ...]:
+    return (d.prm, d.lip, d.z, d.f_last, d.active, d.pend_t, d.pend_f, d.scal, d.counts)
+
+
+def _estimator_args(e: CompiledEstimator) -> tuple[Any, ...]:
+    s = e.s
+    return (
+        e.prm, s.scal, s.held, s.f_stages, s.f_prev, s.f_meta, s.s_stages, s.s_prev, s.s_meta,
+        s.v_stages, s.v_prev, s.v_meta, s.last, e.counts,
+    )  # fmt: skip
+
+
+@jit
+def _cascade_step(
+    wprm: FloatArray, wlip: FloatArray, wz: FloatArray, wfl: FloatArray, wact: BoolArray,
+    wpt: FloatArray, wpf: FloatArray, wsc: FloatArray, wcnt: NDArray[np.int64],
+    sprm: FloatArray, slip_: FloatArray, sz: FloatArray, sfl: FloatArray, sact: BoolArray,
+    spt: FloatArray, spf: FloatArray, ssc: FloatArray, scnt: NDArray[np.int64],
+    eprm: FloatArray, escal: FloatArray, held: FloatArray, fst: FloatArray, fpr: FloatArray,
+    fme: FloatArray, sst: FloatArray, spr: FloatArray, sme: FloatArray, vst: FloatArray,
+    vpr: FloatArray, vme: FloatArray, last: FloatArray, ecnt: NDArray[np.int64],
+    measured: bool, t: float, angle: FloatArray, speed: float, torque: FloatArray,
+    wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray, body_valid: BoolArray,
+    est: FloatArray,
+) -> None:  # fmt: skip
+    """One stamp of `run_cascade`: wheel and speed observers, then the estimator."""
+    diff_update(wprm, wlip, wz, wfl, wact, wpt, wpf, wsc, wcnt, t, angle, wheel, wheel_valid)
+    sample = np.empty(1)
+    sample[0] = speed
+    diff_update(sprm, slip_, sz, sfl, sact, spt, spf, ssc, scnt, t, sample, body, body_valid)
+    v_est = speed if measured else body[0, 0]
+    estimator_update(
+        eprm, escal, held, fst, fpr, fme, sst, spr, sme, vst, vpr, vme, last, ecnt, t,
+        wheel[1], wheel[2], v_est, body[1, 0], torque, est,
+    )  # fmt: skip
+
+
+@jit
+def _cascade_block(
+    wprm: FloatArray, wlip: FloatArray, wz: FloatArray, wfl: FloatArray, wact: BoolArray,
+    wpt: FloatArray, wpf: FloatArray, wsc: FloatArray, wcnt: NDArray[np.int64],
+    sprm: FloatArray, slip_: FloatArray, sz: FloatArray, sfl: FloatArray, sact: BoolArray,
+    spt: FloatArray, spf: FloatArray, ssc: FloatArray, scnt: NDArray[np.int64],
+    eprm: FloatArray, escal: FloatArray, held: FloatArray, fst: FloatArray, fpr: FloatArray,
+    fme: FloatArray, sst: FloatArray, spr: FloatArray, sme: FloatArray, vst: FloatArray,
+    vpr: FloatArray, vme: FloatArray, last: FloatArray, ecnt: NDArray[np.int64],
+    measured: bool, t: FloatArray, angles: FloatArray, speeds: FloatArray, torques: FloatArray,
+    wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray, est: FloatArray,
+) -> None:  # fmt: skip
+    """`_cascade_step` over N stamps; wheel (N, 3, 4), body (N, 3), est (N, EST_SIZE)."""
+    body1 = np.empty((3, 1))
+    body_valid = np.empty(1, dtype=np.bool_)
+    for k in range(t.shape[0]):
+        _cascade_step(
+            wprm, wlip, wz, wfl, wact, wpt, wpf, wsc, wcnt, sprm, slip_, sz, sfl, sact, spt,
+            spf, ssc, scnt, eprm, escal, held, fst, fpr, fme, sst, spr, sme, vst, vpr, vme,
+            last, ecnt, measured, t[k], angles[k], speeds[k], torques[k], wheel[k],
+            wheel_valid[k], body1, body_valid, est[k],
+        )  # fmt: skip
+        body[k, 0] = body1[0, 0]
+        body[k, 1] = body1[1, 0]
+        body[k, 2] = body1[2, 0]
+
+
+def run_cascade_compiled(
+    t: ArrayLike,
+    wheel_angle: ArrayLike,
+    body_speed: ArrayLike,
+    wheel_torque: ArrayLike,
+    vehicle: EstimatorVehicle,
+    observer_config: ObserverConfig | None = None,
+    estimator_config: EstimatorConfig | None = None,
+    estimator_speed: str = 'measured',
+) -> CascadeResult:
+    """`cascade.run_cascade` (same arguments and result) in one compiled loop.
+
+    Raises:
+        InputShapeError: inconsistent shapes.
+        ConfigurationError: unknown estimator_speed.
+    """
+    if estimator_speed not in ('measured', 'observer'):
+        raise ConfigurationError(
+            f'estimator_speed must be measured or observer: {estimator_speed}'
+        )
+    stamps = np.ascontiguousarray(t, dtype=np.float64)
+    angles = np.ascontiguousarray(wheel_angle, dtype=np.float64)
+    speeds = np.ascontiguousarray(body_speed, dtype=np.float64)
+    torques = np.ascontiguousarray(wheel_torque, dtype=np.float64)
+    n = stamps.shape[0]
+    if (
+        stamps.ndim != 1
+        or angles.shape != (n, 4)
+        or speeds.shape != (n,)
+        or torques.shape != (n, 4)
+    ):
+        raise InputShapeError(
+            f'expected t (N,), wheel_angle (N, 4), body_speed (N,), wheel_torque (N, 4); got '
+            f'{stamps.shape}, {angles.shape}, {speeds.shape}, {torques.shape}'
+        )
+    wheels, speed = _observers(observer_config or ObserverConfig())
+    estimator = CompiledEstimator(vehicle, estimator_config)
+    wheel = np.zeros((n, 3, 4))
+    wheel_valid = np.zeros((n, 4), dtype=np.bool_)
+    body = np.zeros((n, 3))
+    est = np.zeros((n, EST_SIZE))
+    _cascade_block(
+        *_diff_args(wheels), *_diff_args(speed), *_estimator_args(estimator),
+        estimator_speed == 'measured', stamps, angles, speeds, torques, wheel, wheel_valid,
+        body, est,
+    )  # fmt: skip
+    for d in (wheels, speed):
+        d.sync_faults()
+    estimator.sync_faults()
+    return CascadeResult(
+        t=stamps.copy(),
+        omega=wheel[:, 1, :].copy(),
+        omega_dot=wheel[:, 2, :].copy(),
+        speed=body[:, 0].copy(),
+        accel=body[:, 1].copy(),
+        fx=est[:, E_FX : E_FX + 4].copy(),
+        fz=est[:, E_FZ : E_FZ + 4].copy(),
+        mu=est[:, E_MU : E_MU + 4].copy(),
+        mu_valid=est[:, E_MU_VALID : E_MU_VALID + 4] != 0.0,
+        slip=est[:, E_SLIP : E_SLIP + 4].copy(),
+        rolling=est[:, E_ROLL : E_ROLL + 4].copy(),
+        aero=est[:, E_AERO].copy(),
+        slope=est[:, E_SLOPE].copy(),
+        slope_valid=est[:, E_SLOPE_VALID] != 0.0,
+        wheel_valid=wheel_valid,
+        faults={
+            f'{part}.{kind}': count
+            for part, counter in (
+                ('wheel', wheels.faults),
+                ('speed', speed.faults),
+                ('estimator', estimator.faults),
+            )
+            for kind, count in counter.counts.items()
+        },
+    )
+
+
+@jit
+def _situation_block(
+    fprm: FloatArray, flip: FloatArray, fz_: FloatArray, f_last: FloatArray,
+    f_active: BoolArray, f_pend_t: FloatArray, f_pend_f: FloatArray, f_scal: FloatArray,
+    f_counts: NDArray[np.int64], prm_f: FloatArray, tp: FloatArray, scales: FloatArray,
+    table: FloatArray, static_load: FloatArray, cost: FloatArray, count: FloatArray,
+    load: FloatArray, direction: FloatArray, fscal: FloatArray, last_sample: FloatArray,
+    classes: NDArray[np.int64], pot: FloatArray, prm_a: FloatArray, thresholds: FloatArray,
+    ch: FloatArray, detected: FloatArray, ascal: FloatArray, prm_s: FloatArray,
+    mscal: FloatArray, t: FloatArray, angles: FloatArray, speeds: FloatArray,
+    torques: FloatArray, omega: FloatArray, mu: FloatArray, mu_valid: BoolArray,
+    fz: FloatArray, level: NDArray[np.int64], onset: FloatArray, det: FloatArray,
+    mu_max: FloatArray, slip_peak: FloatArray, confidence: FloatArray,
+    road: NDArray[np.int64], vehicle_road: NDArray[np.int64],
+) -> None:  # fmt: skip
+    """`monitor_update` over N stamps, writing `SituationSeries`' arrays."""
+    slip = np.empty(4)
+    for k in range(t.shape[0]):
+        monitor_update(
+            fprm, flip, fz_, f_last, f_active, f_pend_t, f_pend_f, f_scal, f_counts, prm_f, tp,
+            scales, table, static_load, cost, count, load, direction, fscal, last_sample,
+            classes, pot, prm_a, thresholds, ch, detected, ascal, prm_s, mscal, t[k],
+            angles[k], speeds[k], torques[k], omega[k], mu[k], mu_valid[k], fz[k], slip,
+        )  # fmt: skip
+        for kind in range(3):
+            for w in range(4):
+                level[k, kind, w] = int(ch[kind, w, 0])
+                onset[k, kind, w] = ch[kind, w, 1]
+                det[k, kind, w] = detected[kind, w]
+        best = -1
+        best_conf = -2.0
+        for a in range(2):
+            mu_max[k, a] = pot[P_MU_MAX + a]
+            slip_peak[k, a] = pot[P_SLIP_PEAK + a]
+            confidence[k, a] = pot[P_CONFIDENCE + a]
+            road[k, a] = int(pot[P_ROAD + a])
+            # vehicle_road_class: the most confident axle with a known class
+            if road[k, a] != 0 and pot[P_CONFIDENCE + a] > best_conf:
+                best, best_conf = a, pot[P_CONFIDENCE + a]
+        vehicle_road[k] = road[k, best] if best >= 0 else 0
+
+
+def run_situation_compiled(
+    monitor: CompiledSituationMonitor,
+    wheel_angle: ArrayLike,
+    speed: ArrayLike,
+    wheel_torque: ArrayLike,
+    cascade: CascadeResult,
+) -> SituationSeries:
+    """`situation.run_situation` (same arguments and result) in one compiled loop.
+
+    Raises:
+        InputShapeError: inconsistent shapes.
+    """
+    angles = np.ascontiguousarray(wheel_angle, dtype=np.float64)
+    speeds = np.ascontiguousarray(speed, dtype=np.float64)
+    torques = np.ascontiguousarray(wheel_torque, dtype=np.float64)
+    n = cascade.t.shape[0]
+    if angles.shape != (n, 4) or speeds.shape != (n,) or torques.shape != (n, 4):
+        raise InputShapeError(
+            f'expected wheel_angle ({n}, 4), speed ({n},), wheel_torque ({n}, 4); got '
+            f'{angles.shape}, {speeds.shape}, {torques.shape}'
+        )
+    level = np.zeros((n, 3, 4), dtype=np.int64)
+    onset = np.full((n, 3, 4), math.nan)
+    detected = np.full((n, 3, 4), math.nan)
+    mu_max, slip_peak, confidence = np.zeros((n, 2)), np.zeros((n, 2)), np.zeros((n, 2))
+    road = np.zeros((n, 2), dtype=np.int64)
+    vehicle_road = np.zeros(n, dtype=np.int64)
+    f64 = np.ascontiguousarray
+    block: Any = _situation_block  # its leading arguments come as one tuple
+    block(
+        *monitor.args, f64(cascade.t, dtype=np.float64), angles, speeds, torques,
+        f64(cascade.omega, dtype=np.float64), f64(cascade.mu, dtype=np.float64),
+        f64(cascade.mu_valid, dtype=np.bool_), f64(cascade.fz, dtype=np.float64), level, onset,
+        detected, mu_max, slip_peak, confidence, road, vehicle_road,
+    )  # fmt: skip
+    return SituationSeries(
+        t=cascade.t.copy(),
+        level=level,
+        onset=onset,
+        detected=detected,
+        mu_max=mu_max,
+        slip_peak=slip_peak,
+        confidence=confidence,
+        road_class=road,
+        vehicle_road_class=vehicle_road,
+    )
+
+
+class CompiledChain:
+    """The compiled `vd_observer_node.chain.Chain`: one compiled call per stamp and part."""
+
+    def __init__(self, settings: ChainSettings) -> None:
+        """Create the kernels' state from `settings` (compiled, or loaded from the cache)."""
+        warm_up(settings.curves)
+        self.settings = settings
+        vehicle = settings.vehicle
+        self.wheels, self.speed = _observers(settings.observer)
+        self.estimator = CompiledEstimator(vehicle, settings.estimator)
+        self.monitor = CompiledSituationMonitor(
+            settings.curves,
+            vehicle.static_wheel_loads[[0, 2]],
+            vehicle.effective_radius,
+            observer=settings.observer,
+            alerts=settings.alerts,
+            friction=settings.friction,
+            situation=settings.situation,
+        )
+        self._args = (
+            *_diff_args(self.wheels),
+            *_diff_args(self.speed),
+            *_estimator_args(self.estimator),
+        )
+        self._measured = settings.estimator_speed == 'measured'
+        self._wheel = np.zeros((3, 4))
+        self._wheel_valid = np.zeros(4, dtype=np.bool_)
+        self._body = np.zeros((3, 1))
+        self._body_valid = np.zeros(1, dtype=np.bool_)
+        self._est = np.zeros(EST_SIZE)
+
+    def update(
+        self, t: float, wheel_angle: ArrayLike, speed: float, wheel_torque: ArrayLike
+    ) -> ChainOutput:
+        """Advance to stamp t (`chain.PythonChain.update`).
+
+        Raises:
+            InputShapeError: an array input has the wrong shape.
+        """
+        angles = np.ascontiguousarray(wheel_angle, dtype=np.float64)
+        torques = np.ascontiguousarray(wheel_torque, dtype=np.float64)
+        if angles.shape != (4,) or torques.shape != (4,):
+            raise InputShapeError(
+                f'wheel_angle and wheel_torque must have shape (4,), got {angles.shape}, '
+                f'{torques.shape}'
+            )
+        step: Any = _cascade_step  # its leading arguments come as one tuple
+        wheel, body, est = self._wheel, self._body, self._est
+        step(
+            *self._args, self._measured, float(t), angles, float(speed), torques, wheel,
+            self._wheel_valid, body, self._body_valid, est,
+        )  # fmt: skip
+        mu_valid = est[E_MU_VALID : E_MU_VALID + 4] != 0.0
+        monitor = self.monitor
+        monitor.update_arrays(
+            float(t),
+            angles,
+            float(speed),
+            torques,
+            wheel[1].copy(),
+            est[E_MU : E_MU + 4].copy(),
+            mu_valid,
+            est[E_FZ : E_FZ + 4].copy(),
+        )
+        a = monitor.arrays
+        return ChainOutput(
+            WheelState(
+                wheel[0].copy(), wheel[1].copy(), wheel[2].copy(), self._wheel_valid.copy()
+            ),
+            SpeedState(float(body[0, 0]), float(body[1, 0]), bool(self._body_valid[0])),
+            estimates_from_packed(est),
+            Situation(
+                float(t),
+                potential_from_arrays(a.pot),
+                alerts_from_arrays(a.ch, a.detected),
+                monitor.slip.copy(),
+            ),
+        )
+
+    def fault_report(self) -> FaultReport:
+        """Faults since the previous call, per part ('wheel', 'speed', 'estimator')."""
+        for part in (self.wheels, self.speed, self.estimator):
+            part.sync_faults()
+        return merge_reports(
+            {
+                'wheel': self.wheels.faults.report(),
+                'speed': self.speed.faults.report(),
+                'estimator': self.estimator.faults.report(),
+            }
+        )
+
+
+_warm = False
+
+
+def warm_up(curves: TyreCurves) -> None:
+    """Compile (or load from numba's disk cache) every kernel now, once per process.
+
+    Nodes call it at start so that the first sample does not pay for compilation; `curves`
+    only gives the tyre arrays their types (any tyre will do).
+    """
+    global _warm
+    if _warm:
+        return
+    vehicle = EstimatorVehicle(
+        mass=1000.0, wheelbase=2.5, cg_to_front_axle=1.0, cg_height=0.5, inertia_front=1.0,
+        inertia_rear=1.0, effective_radius=0.3, drag_coefficient=0.3, frontal_area=2.0,
+        air_density=1.2, rolling_c0=0.01, rolling_c1=0.0, gravity=9.81,
+    )  # fmt: skip
+    t = np.array([0.0, 0.01])
+    angles = np.zeros((2, 4))
+    cascade = run_cascade_compiled(t, angles, np.ones(2), np.zeros((2, 4)), vehicle)
+    monitor = CompiledSituationMonitor(curves, np.array([3000.0, 2500.0]), 0.3)
+    run_situation_compiled(monitor, angles, np.ones(2), np.zeros((2, 4)), cascade)
+    monitor.update(0.02, np.zeros(4), 1.0, np.zeros(4), np.zeros(4), np.zeros(4), [0] * 4, [1] * 4)
+    settings = ChainSettings(vehicle=vehicle, curves=curves)
+    _warm = True
+    CompiledChain(settings).update(0.0, np.zeros(4), 1.0, np.zeros(4))
