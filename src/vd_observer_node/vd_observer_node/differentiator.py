@@ -126,9 +126,11 @@ def _cbrt(x: ArrayLike) -> FloatArray:
 def _signed_power(x: FloatArray, exponent: float) -> FloatArray:
     """sign(x) |x|^exponent with the C library's pow (see `_cbrt`) or, for 1/2, sqrt."""
     if exponent == 0.5:
-        return np.sign(x) * np.sqrt(np.abs(x))
+        root: FloatArray = np.sign(x) * np.sqrt(np.abs(x))
+        return root
     powers = [math.pow(abs(v), exponent) for v in np.ravel(x).tolist()]
-    return np.sign(x) * np.array(powers).reshape(np.shape(x))
+    out: FloatArray = np.sign(x) * np.array(powers).reshape(np.shape(x))
+    return out
 
 
 def euler_step(

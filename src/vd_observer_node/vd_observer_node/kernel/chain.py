@@ -181,7 +181,8 @@ def run_cascade_compiled(
     wheel_valid = np.zeros((n, 4), dtype=np.bool_)
     body = np.zeros((n, 3))
     est = np.zeros((n, EST_SIZE))
-    _cascade_block(
+    block: Any = _cascade_block  # its leading arguments come as tuples
+    block(
         *_diff_args(wheels), *_diff_args(speed), *_estimator_args(estimator),
         estimator_speed == 'measured', stamps, angles, speeds, torques, wheel, wheel_valid,
         body, est,
