@@ -163,7 +163,9 @@ SIM_RATE = 200.0  # [Hz] enough for the launch's spin-up, small enough for a fas
 
 @pytest.fixture(scope='module')
 def launch(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, object]:
-    """launch_low_mu at 200 Hz written as a recording, and its replay."""
+    """launch_low_mu at 200 Hz written as a recording, and its replay with the Python kernel
+    (compared bit for bit with the reference objects below; the compiled replay is compared
+    with this one in `test_compiled_replay_equals_the_python_replay`)."""
     from vd_observer_node.report.devbag import sim_topics, write_topic_arrays_bag
     from vd_sim_node.vehicle.params import load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
@@ -177,8 +179,39 @@ def launch(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, object
     )
     stamps = np.round(sim.t * 1e9).astype(np.int64) + 1_700_000_000 * 10**9
     write_topic_arrays_bag(folder / 'in', stamps, sim_topics(sim))
-    report = replay_bag(folder / 'in', folder / 'out', progress=False)
+    report = replay_bag(folder / 'in', folder / 'out', progress=False, kernel='python')
     return folder / 'in', folder / 'out', report
+
+
+def test_compiled_replay_equals_the_python_replay(
+    launch: tuple[Path, Path, object], tmp_path: Path
+) -> None:
+    """Every replayed topic: the compiled kernel within 1e-9 of the Python reference."""
+    in_bag, python_bag, _ = launch
+    replay_bag(in_bag, tmp_path / 'compiled', progress=False, kernel='compiled')
+    potential = '/vd/estimates/friction_potential'
+    fixed = {**ESTIMATE_TOPICS, potential: ALERT_TOPICS[potential]}
+    ref = BagReader(python_bag).topic_arrays(list(fixed))
+    got = BagReader(tmp_path / 'compiled').topic_arrays(list(fixed))
+    for topic, msgtype in fixed.items():
+        a = decode_batch(msgtype, ref[topic].datas)
+        b = decode_batch(msgtype, got[topic].datas)
+        np.testing.assert_array_equal(a.stamp_ns, b.stamp_ns)
+        for name, values in a.values.items():
+            np.testing.assert_allclose(
+                b.values[name].astype(float),
+                values.astype(float),
+                rtol=1e-9,
+                atol=1e-9 * max(1.0, float(np.max(np.abs(values), initial=0.0))),
+                err_msg=f'{topic}.{name}',
+            )
+    alerts = '/vd/estimates/alerts'
+    for (_, _, _, x), (_, _, _, y) in zip(
+        BagReader(python_bag).messages([alerts]),
+        BagReader(tmp_path / 'compiled').messages([alerts]),
+        strict=True,
+    ):
+        assert x == y
 
 
 def _expected_situation(in_bag: Path, vehicle_file: Path) -> list[object]:

@@ -2,7 +2,7 @@
 
     vd bag info BAG [--recover]
     vd bag repair BAG [--no-backup]
-    vd replay IN_BAG OUT_BAG [--vehicle FILE] [--config FILE] [--no-progress]
+    vd replay IN_BAG OUT_BAG [--vehicle FILE] [--config FILE] [--no-progress] [--kernel K]
 
 Errors (missing paths, corrupt bags, bad vehicle files) print one line on stderr and exit
 with status 2; no traceback.
@@ -90,6 +90,7 @@ def _replay(args: argparse.Namespace) -> int:
         friction_config=config.friction,
         situation_config=config.situation,
         progress=not args.no_progress,
+        kernel=args.kernel,
     )
     print(
         f'replayed {report.samples} samples ({report.sensor_messages} sensor messages, '
@@ -125,6 +126,12 @@ def _parser() -> argparse.ArgumentParser:
         help='YAML with observer / estimator / cascade settings (default: the defaults)',
     )
     replay.add_argument('--no-progress', action='store_true', help='no progress bar')
+    replay.add_argument(
+        '--kernel',
+        choices=('compiled', 'python'),
+        default='compiled',
+        help='per-sample math: the compiled kernel (default) or the Python reference',
+    )
     replay.set_defaults(run=_replay)
     add_report_parser(commands)
     return parser

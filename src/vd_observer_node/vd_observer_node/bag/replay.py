@@ -41,7 +41,7 @@ from ..errors import ConfigurationError, VehicleParameterError
 from ..estimator import EstimatorConfig
 from ..friction_potential import FrictionPotentialConfig, TyreCurves
 from ..observer import ObserverConfig
-from ..situation import SituationConfig, SituationMonitor, run_situation
+from ..situation import SituationConfig, SituationMonitor, SituationSeries, run_situation
 from ..vehicle import EstimatorVehicle, load_estimator_vehicle
 from .alerts_cdr import encode_alerts
 from .cdr_batch import decode_batch, encode_batch
@@ -260,8 +260,10 @@ def situation_topics(
     speed: np.ndarray,
     wheel_torque: np.ndarray,
     result: CascadeResult,
-    monitor: SituationMonitor,
+    monitor: SituationMonitor | Any,
     progress: Callable[[int], object] | None = None,
+    runner: Callable[..., SituationSeries] = run_situation,
+    block: int = _SITUATION_BLOCK,
 ) -> dict[str, dict[str, np.ndarray]]:
     """Friction potential and alerts of every stamp, as the alerts node computes them.
 
@@ -273,8 +275,12 @@ def situation_topics(
         speed: shape (N,), [m/s] MEASURED body speed (what the node receives).
         wheel_torque: shape (N, 4), [N m] measured wheel torques.
         result: the cascade on the same N stamps (t, omega, mu, mu_valid, fz used).
-        monitor: a fresh (or reset) situation monitor.
+        monitor: a fresh (or reset) situation monitor (`runner`'s kind).
         progress: called with the number of stamps done since its last call.
+        runner: `run_situation`, or the compiled
+            :func:`vd_observer_node.kernel.chain.run_situation_compiled` with a
+            :class:`~vd_observer_node.kernel.situation.CompiledSituationMonitor`.
+        block: stamps per call of `runner` (per progress-bar update).
 
     Returns:
         Topic values: ``/vd/estimates/alerts`` ('level', 'onset_ns', 'detected_ns', each
@@ -284,10 +290,10 @@ def situation_topics(
     n = result.t.shape[0]
     parts = []
     # one (empty) block when n == 0: the shapes of the outputs still come out right
-    for start in range(0, max(n, 1), _SITUATION_BLOCK):
-        stop = min(start + _SITUATION_BLOCK, n)
+    for start in range(0, max(n, 1), block):
+        stop = min(start + block, n)
         parts.append(
-            run_situation(
+            runner(
                 monitor,
                 wheel_angle[start:stop],
                 speed[start:stop],
@@ -325,13 +331,14 @@ def replay_bag(
     observer_config: ObserverConfig | None = None,
     estimator_config: EstimatorConfig | None = None,
     progress: bool = True,
-    cascade: Callable[..., CascadeResult] = run_cascade,
+    cascade: Callable[..., CascadeResult] | None = None,
     cascade_kwargs: Mapping[str, Any] | None = None,
     vehicle_file: str | os.PathLike[str] | None = None,
     situation: bool = True,
     alert_config: AlertConfig | None = None,
     friction_config: FrictionPotentialConfig | None = None,
     situation_config: SituationConfig | None = None,
+    kernel: str = 'compiled',
 ) -> ReplayReport:
     """Replay a bag's sensor topics through the cascade and write inputs, truth and estimates.
 
@@ -342,7 +349,8 @@ def replay_bag(
         observer_config: observer settings; default ObserverConfig().
         estimator_config: estimator settings; default EstimatorConfig().
         progress: show a tqdm progress bar on stderr.
-        cascade: the array cascade (injectable for tests); signature of ``run_cascade``.
+        cascade: the array cascade (injectable for tests); signature of ``run_cascade``;
+            default the one of `kernel`.
         cascade_kwargs: further keyword arguments of the cascade (settings added to
             ``run_cascade`` later, so the replay can match the live nodes' parameters).
         vehicle_file: vehicle YAML of the estimator vehicle (unless ``vehicle`` is given) and
@@ -354,6 +362,8 @@ def replay_bag(
         alert_config: alert settings; default AlertConfig().
         friction_config: friction-potential settings; default FrictionPotentialConfig().
         situation_config: fast-observer settings; default SituationConfig().
+        kernel: 'compiled' (the numba kernel, :mod:`vd_observer_node.kernel`) or 'python'
+            (the reference implementation; equal results, ~30x the time).
 
     Raises:
         ReplayInputError: a sensor topic is missing or has the wrong type.
@@ -361,6 +371,16 @@ def replay_bag(
         VehicleParameterError: the vehicle file is unreadable or invalid.
     """
     started = time.perf_counter()
+    if kernel not in ('compiled', 'python'):
+        raise ConfigurationError(f"kernel must be 'compiled' or 'python', got {kernel!r}")
+    compiled = kernel == 'compiled'
+    if cascade is None:
+        if compiled:
+            from ..kernel.chain import run_cascade_compiled
+
+            cascade = run_cascade_compiled
+        else:
+            cascade = run_cascade
     target = Path(out_bag)
     if target.exists() and (not target.is_dir() or any(target.iterdir())):
         # Fail before minutes of work, not when the output is finally written.
@@ -385,7 +405,14 @@ def replay_bag(
             tire = load_vehicle(source).tire
         except ParameterError as exc:
             raise VehicleParameterError(f'vehicle file {source}: {exc}') from exc
-        monitor = SituationMonitor(
+        monitor_class: Any = SituationMonitor
+        if compiled:
+            from ..kernel.chain import warm_up
+            from ..kernel.situation import CompiledSituationMonitor
+
+            monitor_class = CompiledSituationMonitor
+            warm_up(TyreCurves.from_tire(tire))
+        monitor = monitor_class(
             TyreCurves.from_tire(tire),
             estimator_vehicle.static_wheel_loads[[0, 2]],
             estimator_vehicle.effective_radius,
@@ -453,9 +480,23 @@ def replay_bag(
                 position=1,
                 leave=False,
             ) as phase:
-                situation_values = situation_topics(
-                    wheel_angle, body_speed, wheel_torque, result, monitor, phase.update
-                )
+                if compiled:
+                    from ..kernel.chain import run_situation_compiled
+
+                    situation_values = situation_topics(
+                        wheel_angle,
+                        body_speed,
+                        wheel_torque,
+                        result,
+                        monitor,
+                        phase.update,
+                        runner=run_situation_compiled,
+                        block=20 * _SITUATION_BLOCK,
+                    )
+                else:
+                    situation_values = situation_topics(
+                        wheel_angle, body_speed, wheel_torque, result, monitor, phase.update
+                    )
             situation_time = time.perf_counter() - situation_start
         frames = angles.frame_id[ia]
         frame_id = frames[0].decode() if len(frames) else ''
