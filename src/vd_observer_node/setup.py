@@ -26,12 +26,12 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'observer_node = vd_observer_node.observer_node:main',
-            'estimator_node = vd_observer_node.estimator_node:main',
-            'alerts_node = vd_observer_node.alerts_node:main',
-            'recorder_node = vd_observer_node.recorder_node:main',
-            'player_node = vd_observer_node.player_node:main',
-            'pipeline_node = vd_observer_node.pipeline_node:main',
+            'observer_node = vd_observer_node.entry_points:observer_node',
+            'estimator_node = vd_observer_node.entry_points:estimator_node',
+            'alerts_node = vd_observer_node.entry_points:alerts_node',
+            'recorder_node = vd_observer_node.entry_points:recorder_node',
+            'player_node = vd_observer_node.entry_points:player_node',
+            'pipeline_node = vd_observer_node.entry_points:pipeline_node',
             'vd = vd_observer_node.cli:main',
         ],
     },

@@ -27,7 +27,7 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'sim_node = vd_sim_node.sim_node:main',
+            'sim_node = vd_sim_node.entry:sim_node',
         ],
     },
 )

@@ -54,6 +54,7 @@ __all__ = [
     'InvalidParameterError',
     'NodeFinished',
     'ParamSpec',
+    'StopSignals',
     'SubscriberGate',
     'dataclass_param_specs',
     'declare_parameters',
@@ -316,6 +317,8 @@ def deliver_pending(node: Node, timeout_s: float = 2.0) -> bool:
 
 
 EXECUTORS = ('events', 'single_threaded')
+#: [s] longest wait of the spin loop for work: the reaction time to a stop signal.
+_SPIN_TIMEOUT_S = 0.1
 
 
 def _executor(kind: str) -> Any:
@@ -328,21 +331,58 @@ def _executor(kind: str) -> Any:
     return SingleThreadedExecutor()
 
 
-def run_node(factory: Any, args: list[str] | None = None) -> int:
-    """Init rclpy, build the node with `factory()`, spin until shutdown; return the exit code.
+class StopSignals:
+    """SIGINT/SIGTERM as a flag the spin loop checks, instead of rclpy's own handlers.
 
-    The executor is rclpy's SingleThreadedExecutor. ``VD_ROS_EXECUTOR=events`` selects the
-    experimental EventsExecutor instead (less overhead per message), for measurements only:
-    with Kilted's rclpy 9.1 our steady-clock timers never fired under it and the process
-    ignored SIGTERM.
+    rclpy's handlers shut the context down from inside the signal handler, while the executor
+    may be building its wait set on that context: the race ended nodes with a traceback and
+    exit code 1 ('failed to initialize wait set: the given context is not valid'). Here a
+    signal only sets a flag; the loop in `run_node` stops, the node closes its outputs, and
+    the context is shut down after the executor has let go of it.
+    """
+
+    def __init__(self) -> None:
+        """Install the handlers (replacing any earlier ones, e.g. `entry.guarded_main`'s)."""
+        import signal
+
+        self.received: int | None = None
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._on_signal)
+
+    def _on_signal(self, signum: int, _frame: object) -> None:
+        if self.received is None:
+            self.received = signum
+
+    @property
+    def stop(self) -> bool:
+        """True once a stop signal arrived."""
+        return self.received is not None
+
+    def name(self) -> str:
+        """'SIGINT' or 'SIGTERM' (the first signal received)."""
+        import signal
+
+        return signal.Signals(self.received).name if self.received is not None else ''
+
+
+def run_node(factory: Any, args: list[str] | None = None) -> int:
+    """Init rclpy, build the node with `factory()`, spin until done; return the exit code.
+
+    The executor is rclpy's experimental EventsExecutor (a few microseconds per message
+    instead of ~50 us for the SingleThreadedExecutor, scripts/bench_message_path.py);
+    ``VD_ROS_EXECUTOR=single_threaded`` selects the other. Both spin with ``spin_once`` in a
+    loop that checks `StopSignals`, so SIGINT and SIGTERM at any moment end the node with
+    exit code 0, one log line and its outputs closed (``close()`` of the node, e.g. the
+    recorder's bag); a callback raising `NodeFinished` ends it with 0 too.
 
     A refused parameter or a bad configuration file ends the process with ONE line on stderr
-    naming the problem (exit code 2), not a traceback. SIGINT/SIGTERM end it cleanly (0).
+    naming the problem (exit code 2), not a traceback.
     """
     import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
 
-    kind = os.environ.get('VD_ROS_EXECUTOR', 'single_threaded')
+    signals = StopSignals()
+    kind = os.environ.get('VD_ROS_EXECUTOR', 'events')
     if kind not in EXECUTORS:
         print(f'error: VD_ROS_EXECUTOR={kind!r}; use one of {EXECUTORS}', file=sys.stderr)
         return 2
@@ -353,18 +393,23 @@ def run_node(factory: Any, args: list[str] | None = None) -> int:
         print(f'error: {problem}', file=sys.stderr, flush=True)
         return 2
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:  # e.g. a malformed --params-file: one line, not a traceback
         print(f'error: cannot start: {str(exc).splitlines()[0]}', file=sys.stderr, flush=True)
         return 2
     node = None
     executor = None
     try:
-        node = factory()
-        executor = _executor(kind)
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException, NodeFinished):
+        if not signals.stop:
+            node = factory()
+        if node is not None and not signals.stop:
+            executor = _executor(kind)
+            executor.add_node(node)
+            while not signals.stop:
+                executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
+    except NodeFinished:
+        pass
+    except KeyboardInterrupt:  # a SIGINT before our handler was installed
         pass
     except InvalidParameterError as exc:
         print(f'error: {exc}', file=sys.stderr, flush=True)
@@ -378,9 +423,13 @@ def run_node(factory: Any, args: list[str] | None = None) -> int:
             close = getattr(node, 'close', None)
             if callable(close):
                 close()
+            if signals.stop:
+                node.get_logger().info(f'stopped by {signals.name()}')
             if executor is not None:
                 executor.remove_node(node)
                 executor.shutdown()
             node.destroy_node()
+        elif signals.stop:
+            print(f'stopped by {signals.name()} while starting', file=sys.stderr, flush=True)
         rclpy.try_shutdown()
     return 0
