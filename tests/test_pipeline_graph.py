@@ -34,7 +34,7 @@ OUTPUTS = {
 
 
 @pytest.mark.ros
-@pytest.mark.parametrize('kernel', ['python'])
+@pytest.mark.parametrize('kernel', ['compiled', 'python'])
 def test_pipeline_node_publishes_what_offline_replay_computes(
     procs: RosProcessGroup, tmp_path: Path, kernel: str
 ) -> None:

@@ -8,6 +8,8 @@ and ``/vd/estimates/tire_forces`` (Fz). Publishes with that stamp
 road class) and ``/vd/estimates/alerts`` (vd_msgs/Alerts: traction, lock and low-friction
 alerts per wheel, with hysteresis and onset stamps). Health goes to ``/diagnostics``. All logic
 is in :mod:`vd_observer_node.situation` (see docs/alerts.md); offline replay runs the same.
+``kernel`` selects its compiled twin (default) or the Python reference; messages travel as
+CDR bytes (:mod:`vd_observer_node.bag.cdr_message`).
 """
 
 from __future__ import annotations
@@ -22,18 +24,13 @@ from rclpy.node import Node
 from vd_sim_node.ros_common import (
     DIAGNOSTICS_QOS,
     STREAM_QOS,
-    ParamSpec,
-    dataclass_param_specs,
     declare_parameters,
     node_status,
-    ns_to_time,
     run_node,
-    time_to_ns,
 )
 from vd_sim_node.vehicle.params import load_vehicle
 
 from vd_msgs.msg import (
-    Alert,
     Alerts,
     Friction,
     FrictionPotential,
@@ -42,65 +39,54 @@ from vd_msgs.msg import (
     WheelStates,
     WheelTorques,
 )
-from vd_observer_node.alerts import ALERT_KINDS, AlertConfig
+from vd_observer_node.alerts import AlertConfig
 from vd_observer_node.alignment import StampAligner
+from vd_observer_node.bag.cdr_message import AlertsCodec, MessageCodec
+from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.bag.replay import default_vehicle_file
 from vd_observer_node.friction_potential import FrictionPotentialConfig, TyreCurves
+from vd_observer_node.node_params import ALERTS_PARAMS, KERNEL
 from vd_observer_node.situation import SituationConfig, SituationMonitor
 from vd_observer_node.vehicle import load_estimator_vehicle
 
 __all__ = ['PARAMS', 'AlertsNode', 'main']
 
-_THRESHOLD_DEFAULTS = AlertConfig()
-
-PARAMS = [
-    ParamSpec(
-        'vehicle_file',
-        '',
-        "vehicle parameter YAML shared with the simulator ('' = the installed Clio RL 1.1)",
-    ),
-    ParamSpec(
-        'align_capacity',
-        200,
-        'messages buffered per topic while matching stamps',
-        low=1,
-        high=100000,
-    ),
-    *dataclass_param_specs(SituationConfig),
-    *dataclass_param_specs(AlertConfig, skip=ALERT_KINDS),
-    *(
-        ParamSpec(
-            f'{kind}.{name}',
-            float(getattr(getattr(_THRESHOLD_DEFAULTS, kind), name)),
-            f'{kind} alert hysteresis threshold {name} '
-            f'[{"-" if kind != "low_friction" else "utilisation |mu|/mu_max"}] '
-            '(see docs/alerts.md)',
-        )
-        for kind in ALERT_KINDS
-        for name in ('warning_on', 'warning_off', 'critical_on', 'critical_off')
-    ),
-    *dataclass_param_specs(FrictionPotentialConfig, skip=('road_scales', 'class_bounds')),
-]
+PARAMS = [KERNEL, *ALERTS_PARAMS]
 
 TOPICS = ('angles', 'speed', 'torques', 'states', 'friction', 'forces')
+_INPUTS = (
+    ('angles', WheelAngles, '/vd/sensors/wheel_angles', 'vd_msgs/msg/WheelAngles'),
+    ('speed', TwistStamped, '/vd/sensors/body_velocity', 'geometry_msgs/msg/TwistStamped'),
+    ('torques', WheelTorques, '/vd/sensors/wheel_torques', 'vd_msgs/msg/WheelTorques'),
+    ('states', WheelStates, '/vd/observer/wheel_states', 'vd_msgs/msg/WheelStates'),
+    ('friction', Friction, '/vd/estimates/friction', 'vd_msgs/msg/Friction'),
+    ('forces', TireForces, '/vd/estimates/tire_forces', 'vd_msgs/msg/TireForces'),
+)
 
 
-def _stamp(t: float) -> Any:
-    return ns_to_time(round(t * 1e9)) if math.isfinite(t) else ns_to_time(0)
+def _ns(t: float) -> int:
+    return round(t * 1e9) if math.isfinite(t) else 0
 
 
 class AlertsNode(Node):  # type: ignore[misc]
-    """Thin wrapper: stamp-matched messages -> SituationMonitor -> two messages."""
+    """Thin wrapper: stamp-matched raw messages -> SituationMonitor -> two raw messages."""
 
     def __init__(self) -> None:
         super().__init__('alerts_node')
         values = declare_parameters(self, PARAMS)
+        self.kernel = values.pop('kernel')
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')
         vehicle = load_estimator_vehicle(vehicle_file)
         situation_keys = set(SituationConfig.__dataclass_fields__)
         friction_keys = set(FrictionPotentialConfig.__dataclass_fields__)
-        self.monitor = SituationMonitor(
+        monitor_class: Any = SituationMonitor
+        if self.kernel == 'compiled':
+            # compiled (or loaded from numba's cache) when built, not at the first sample
+            from vd_observer_node.kernel.situation import CompiledSituationMonitor
+
+            monitor_class = CompiledSituationMonitor
+        self.monitor = monitor_class(
             TyreCurves.from_tire(load_vehicle(vehicle_file).tire),
             vehicle.static_wheel_loads[[0, 2]],
             vehicle.effective_radius,
@@ -124,72 +110,82 @@ class AlertsNode(Node):  # type: ignore[misc]
             FrictionPotential, '/vd/estimates/friction_potential', STREAM_QOS
         )
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
-        for key, kind, topic in (
-            ('angles', WheelAngles, '/vd/sensors/wheel_angles'),
-            ('speed', TwistStamped, '/vd/sensors/body_velocity'),
-            ('torques', WheelTorques, '/vd/sensors/wheel_torques'),
-            ('states', WheelStates, '/vd/observer/wheel_states'),
-            ('friction', Friction, '/vd/estimates/friction'),
-            ('forces', TireForces, '/vd/estimates/tire_forces'),
-        ):
-            self.create_subscription(kind, topic, self._make_callback(key), STREAM_QOS)
-        self.counts = {'estimates': 0, 'alerts_raised': 0}
+        self._decoders = {key: MessageCodec(msgtype) for key, _, _, msgtype in _INPUTS}
+        self._potential_out: dict[bytes, MessageCodec] = {}
+        self._alerts_out: dict[bytes, AlertsCodec] = {}
+        for key, kind, topic, _ in _INPUTS:
+            self.create_subscription(kind, topic, self._make_callback(key), STREAM_QOS, raw=True)
+        self.counts = {'estimates': 0, 'alerts_raised': 0, 'undecodable': 0}
+        self._active: tuple[Any, ...] = ()
         self.create_timer(1.0, self.publish_diagnostics)
-        self.get_logger().info(f'alerts ready: vehicle {vehicle.name!r} ({vehicle_file})')
+        self.get_logger().info(
+            f'alerts ready: {self.kernel} kernel, vehicle {vehicle.name!r} ({vehicle_file})'
+        )
 
     def _make_callback(self, key: str) -> Any:
-        def callback(msg: Any) -> None:
-            matched = self.aligner.push(key, time_to_ns(msg.header.stamp), msg)
+        decoder = self._decoders[key]
+
+        def callback(data: bytes) -> None:
+            try:
+                stamp_ns, frame, values = decoder.decode(data)
+            except BagFormatError:
+                self.counts['undecodable'] += 1
+                return
+            matched = self.aligner.push(key, stamp_ns, (frame, values))
             if matched is not None:
-                self.evaluate(matched)
+                self.evaluate(stamp_ns, matched)
 
         return callback
 
-    def evaluate(self, m: dict[str, Any]) -> None:
-        friction, header = m['friction'], m['friction'].header
-        active_before = sum(a.active for a in self.monitor.monitor.last)
+    def evaluate(self, stamp_ns: int, m: dict[str, Any]) -> None:
+        frame, (angles,) = m['angles']
+        mu, _, valid = m['friction'][1]
         out = self.monitor.update(
-            time_to_ns(header.stamp) * 1e-9,
-            np.asarray(m['angles'].angle, dtype=np.float64),
-            float(m['speed'].twist.linear.x),
-            np.asarray(m['torques'].torque, dtype=np.float64),
-            np.asarray(m['states'].omega, dtype=np.float64),
-            np.asarray(friction.mu, dtype=np.float64),
-            np.asarray(friction.valid, dtype=bool),
-            np.asarray(m['forces'].fz, dtype=np.float64),
+            stamp_ns * 1e-9,
+            np.array(angles, dtype=np.float64),
+            float(m['speed'][1][0]),  # twist.linear.x
+            np.array(m['torques'][1][0], dtype=np.float64),
+            np.array(m['states'][1][1], dtype=np.float64),  # omega
+            np.array(mu, dtype=np.float64),
+            np.array(valid, dtype=np.bool_),
+            np.array(m['forces'][1][1], dtype=np.float64),  # fz
         )
         self.counts['estimates'] += 1
-        self.counts['alerts_raised'] += max(0, sum(a.active for a in out.alerts) - active_before)
+        active = tuple(a for a in out.alerts if a.active)
+        self.counts['alerts_raised'] += max(0, len(active) - len(self._active))
+        self._active = active
         pot = out.potential
+        potential = self._potential_out.get(frame)
+        if potential is None:
+            potential = MessageCodec('vd_msgs/msg/FrictionPotential', frame.decode(errors='replace'))
+            self._potential_out[frame] = potential
         self.pub_potential.publish(
-            FrictionPotential(
-                header=header,
-                mu_max=[float(x) for x in pot.mu_max],
-                slip_peak=[float(x) for x in pot.slip_peak],
-                confidence=[float(x) for x in pot.confidence],
-                road_class=[int(x) for x in pot.road_class],
-                vehicle_road_class=int(pot.vehicle_road_class()),
+            potential.encode(
+                stamp_ns,
+                [
+                    *pot.mu_max.tolist(),
+                    *pot.slip_peak.tolist(),
+                    *pot.confidence.tolist(),
+                    *pot.road_class.tolist(),
+                    pot.vehicle_road_class(),
+                ],
             )
         )
+        alerts = self._alerts_out.get(frame)
+        if alerts is None:
+            alerts = AlertsCodec(frame.decode(errors='replace'))
+            self._alerts_out[frame] = alerts
         self.pub_alerts.publish(
-            Alerts(
-                header=header,
-                alerts=[
-                    Alert(
-                        kind=a.kind_code,
-                        wheel=a.wheel,
-                        level=a.level,
-                        active=a.active,
-                        onset=_stamp(a.onset),
-                        detected=_stamp(a.detected),
-                    )
-                    for a in out.alerts
-                ],
+            alerts.encode(
+                stamp_ns,
+                [a.level for a in out.alerts],
+                [_ns(a.onset) for a in out.alerts],
+                [_ns(a.detected) for a in out.alerts],
             )
         )
 
     def publish_diagnostics(self) -> None:
-        active = self.monitor.monitor.active()
+        active = self._active
         level = DiagnosticStatus.WARN if active else DiagnosticStatus.OK
         message = (
             ', '.join(f'{a.kind} wheel {a.wheel} level {a.level}' for a in active)
@@ -197,6 +193,7 @@ class AlertsNode(Node):  # type: ignore[misc]
             else 'no alert'
         )
         values = {
+            'kernel': self.kernel,
             **self.counts,
             'unmatched_dropped': self.aligner.dropped_count,
             'stale': self.aligner.stale_count,

@@ -6,7 +6,8 @@ stamp (:class:`vd_observer_node.alignment.StampAligner`) and publishes, with tha
 ``/vd/estimates/tire_forces`` (TireForces), ``/vd/estimates/friction`` (Friction),
 ``/vd/estimates/resistances`` (Resistances) and ``/vd/estimates/slope`` (Slope). Health and
 fault counters go to ``/diagnostics`` once per second. All math is in
-:mod:`vd_observer_node.estimator`.
+:mod:`vd_observer_node.estimator`; ``kernel`` selects its compiled twin (default) or the Python
+reference. Messages travel as CDR bytes (:mod:`vd_observer_node.bag.cdr_message`).
 """
 
 from __future__ import annotations
@@ -20,78 +21,57 @@ from rclpy.node import Node
 from vd_sim_node.ros_common import (
     DIAGNOSTICS_QOS,
     STREAM_QOS,
-    ParamSpec,
-    dataclass_param_specs,
     declare_parameters,
     node_status,
     run_node,
-    time_to_ns,
 )
 
 from vd_msgs.msg import Friction, Resistances, Slope, TireForces, WheelStates, WheelTorques
 from vd_observer_node.alignment import StampAligner
+from vd_observer_node.bag.cdr_message import MessageCodec
+from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.bag.replay import default_vehicle_file
-from vd_observer_node.estimator import (
-    LOAD_TRANSFER_SOURCES,
-    SLOPE_ACCEL_SOURCES,
-    Estimator,
-    EstimatorConfig,
-)
+from vd_observer_node.estimator import Estimator, EstimatorConfig
 from vd_observer_node.faults import merge_reports, summarise
+from vd_observer_node.node_params import ESTIMATOR_PARAMS, KERNEL
 from vd_observer_node.vehicle import load_estimator_vehicle
 
 __all__ = ['EstimatorNode', 'main']
 
-SPEED_TOPICS_CHOICES = ('measured', 'observer')
-
-PARAMS = [
-    ParamSpec(
-        'vehicle_file',
-        '',
-        "vehicle parameter YAML shared with the simulator ('' = the installed Clio RL 1.1 file)",
-    ),
-    ParamSpec(
-        'speed_source',
-        'measured',
-        "body speed fed to the estimator: 'measured' (/vd/sensors/body_velocity; the slope "
-        "low-pass smooths it) or 'observer' (/vd/observer/body_velocity, filtered); must "
-        'match the offline cascade (run_cascade estimator_speed) for identical results',
-        choices=SPEED_TOPICS_CHOICES,
-    ),
-    ParamSpec(
-        'align_capacity',
-        200,
-        'messages buffered per topic while matching stamps',
-        low=1,
-        high=100000,
-    ),
-    *dataclass_param_specs(
-        EstimatorConfig,
-        choices={
-            'load_transfer_source': LOAD_TRANSFER_SOURCES,
-            'slope_accel_source': SLOPE_ACCEL_SOURCES,
-        },
-    ),
-]
+PARAMS = [KERNEL, *ESTIMATOR_PARAMS]
 
 TOPICS = ('states', 'accel', 'speed', 'torques')
 SPEED_TOPICS = {
     'measured': '/vd/sensors/body_velocity',
     'observer': '/vd/observer/body_velocity',
 }
+_INPUT_TYPES = {
+    'states': 'vd_msgs/msg/WheelStates',
+    'accel': 'geometry_msgs/msg/AccelStamped',
+    'speed': 'geometry_msgs/msg/TwistStamped',
+    'torques': 'vd_msgs/msg/WheelTorques',
+}
 
 
 class EstimatorNode(Node):  # type: ignore[misc]
-    """Thin wrapper: stamp-matched messages -> Estimator.update -> four estimate messages."""
+    """Thin wrapper: stamp-matched raw messages -> Estimator.update -> four raw messages."""
 
     def __init__(self) -> None:
         super().__init__('estimator_node')
         values = declare_parameters(self, PARAMS)
+        self.kernel = values.pop('kernel')
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')
         speed_topic = SPEED_TOPICS[values.pop('speed_source')]
         self.vehicle = load_estimator_vehicle(vehicle_file)
-        self.estimator = Estimator(self.vehicle, EstimatorConfig.from_mapping(values))
+        config = EstimatorConfig.from_mapping(values)
+        if self.kernel == 'compiled':
+            from vd_observer_node.kernel.estimation import CompiledEstimator
+
+            # compiled (or loaded from numba's cache) here, not at the first sample
+            self.estimator: Any = CompiledEstimator(self.vehicle, config)
+        else:
+            self.estimator = Estimator(self.vehicle, config)
         self.aligner = StampAligner(
             TOPICS,
             capacity=capacity,
@@ -107,53 +87,82 @@ class EstimatorNode(Node):  # type: ignore[misc]
         )
         self.pub_slope = self.create_publisher(Slope, '/vd/estimates/slope', STREAM_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self._decoders = {key: MessageCodec(msgtype) for key, msgtype in _INPUT_TYPES.items()}
+        self._out: dict[tuple[str, bytes], MessageCodec] = {}
         for key, kind, topic in (
             ('states', WheelStates, '/vd/observer/wheel_states'),
             ('accel', AccelStamped, '/vd/observer/body_accel'),
             ('speed', TwistStamped, speed_topic),
             ('torques', WheelTorques, '/vd/sensors/wheel_torques'),
         ):
-            self.create_subscription(kind, topic, self._make_callback(key), STREAM_QOS)
-        self.counts = {'estimates': 0, 'mu_invalid_wheel_samples': 0, 'slope_invalid': 0}
+            self.create_subscription(kind, topic, self._make_callback(key), STREAM_QOS, raw=True)
+        self.counts = {
+            'estimates': 0,
+            'mu_invalid_wheel_samples': 0,
+            'slope_invalid': 0,
+            'undecodable': 0,
+        }
         self.create_timer(1.0, self.publish_diagnostics)
-        self.get_logger().info(f'estimator ready: vehicle {self.vehicle.name!r} ({vehicle_file})')
+        self.get_logger().info(
+            f'estimator ready: {self.kernel} kernel, vehicle {self.vehicle.name!r} '
+            f'({vehicle_file})'
+        )
 
     def _make_callback(self, key: str) -> Any:
-        def callback(msg: Any) -> None:
-            matched = self.aligner.push(key, time_to_ns(msg.header.stamp), msg)
+        decoder = self._decoders[key]
+
+        def callback(data: bytes) -> None:
+            try:
+                stamp_ns, frame, values = decoder.decode(data)
+            except BagFormatError:
+                self.counts['undecodable'] += 1
+                return
+            matched = self.aligner.push(key, stamp_ns, (frame, values))
             if matched is not None:
-                self.estimate(matched)
+                self.estimate(stamp_ns, matched)
 
         return callback
 
-    def estimate(self, m: dict[str, Any]) -> None:
-        states, header = m['states'], m['states'].header
-        t = time_to_ns(header.stamp) * 1e-9
+    def _codec(self, msgtype: str, frame: bytes) -> MessageCodec:
+        codec = self._out.get((msgtype, frame))
+        if codec is None:
+            codec = MessageCodec(msgtype, frame.decode(errors='replace'))
+            self._out[(msgtype, frame)] = codec
+        return codec
+
+    def estimate(self, stamp_ns: int, m: dict[str, Any]) -> None:
+        frame, (_, omega, omega_dot) = m['states']
         est = self.estimator.update(
-            t,
-            np.asarray(states.omega),
-            np.asarray(states.omega_dot),
-            float(m['speed'].twist.linear.x),
-            float(m['accel'].accel.linear.x),
-            np.asarray(m['torques'].torque),
+            stamp_ns * 1e-9,
+            np.array(omega, dtype=np.float64),
+            np.array(omega_dot, dtype=np.float64),
+            float(m['speed'][1][0]),  # twist.linear.x
+            float(m['accel'][1][0]),  # accel.linear.x
+            np.array(m['torques'][1][0], dtype=np.float64),
         )
         self.counts['estimates'] += 1
         self.counts['mu_invalid_wheel_samples'] += int(4 - np.count_nonzero(est.mu_valid))
         self.counts['slope_invalid'] += int(not est.slope_valid)
-        self.pub_forces.publish(TireForces(header=header, fx=est.fx.tolist(), fz=est.fz.tolist()))
+        codec = self._codec
+        self.pub_forces.publish(
+            codec('vd_msgs/msg/TireForces', frame).encode(
+                stamp_ns, [*est.fx.tolist(), *est.fz.tolist()]
+            )
+        )
         self.pub_friction.publish(
-            Friction(
-                header=header,
-                mu=est.mu.tolist(),
-                slip=est.slip.tolist(),
-                valid=[bool(v) for v in est.mu_valid],
+            codec('vd_msgs/msg/Friction', frame).encode(
+                stamp_ns, [*est.mu.tolist(), *est.slip.tolist(), *est.mu_valid.tolist()]
             )
         )
         self.pub_resist.publish(
-            Resistances(header=header, rolling=est.rolling.tolist(), aero=float(est.aero))
+            codec('vd_msgs/msg/Resistances', frame).encode(
+                stamp_ns, [*est.rolling.tolist(), float(est.aero)]
+            )
         )
         self.pub_slope.publish(
-            Slope(header=header, angle=float(est.slope), valid=bool(est.slope_valid))
+            codec('vd_msgs/msg/Slope', frame).encode(
+                stamp_ns, [float(est.slope), bool(est.slope_valid)]
+            )
         )
 
     def publish_diagnostics(self) -> None:
@@ -172,6 +181,7 @@ class EstimatorNode(Node):  # type: ignore[misc]
         )
         self._align_reported = align
         values = {
+            'kernel': self.kernel,
             **self.counts,
             'unmatched_dropped': self.aligner.dropped_count,
             'stale': self.aligner.stale_count,

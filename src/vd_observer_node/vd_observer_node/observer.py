@@ -126,10 +126,19 @@ class SpeedState(NamedTuple):
 
 
 def _differentiator(
-    config: ObserverConfig, lipschitz: float, n_channels: int
+    config: ObserverConfig, lipschitz: float, n_channels: int, compiled: bool = False
 ) -> LevantDifferentiator:
-    """The Levant differentiator of one signal kind, with the shared settings of `config`."""
-    return LevantDifferentiator(
+    """The Levant differentiator of one signal kind, with the shared settings of `config`.
+
+    ``compiled``: the numba kernel's drop-in (:mod:`vd_observer_node.kernel.levant`), tested
+    equal to the reference.
+    """
+    kind: type[LevantDifferentiator] = LevantDifferentiator
+    if compiled:
+        from vd_observer_node.kernel.levant import CompiledDifferentiator
+
+        kind = CompiledDifferentiator  # type: ignore[assignment]
+    return kind(
         lipschitz,
         n_channels=n_channels,
         gains=config.gains,
@@ -159,9 +168,9 @@ class _DifferentiatorObserver:
 class WheelObserver(_DifferentiatorObserver):
     """Four-wheel Levant differentiator on the unwrapped wheel angles."""
 
-    def __init__(self, config: ObserverConfig) -> None:
-        """Create the observer from its settings."""
-        self._diff = _differentiator(config, config.wheel_lipschitz, n_channels=4)
+    def __init__(self, config: ObserverConfig, *, compiled: bool = False) -> None:
+        """Create the observer from its settings (``compiled``: on the numba kernel)."""
+        self._diff = _differentiator(config, config.wheel_lipschitz, 4, compiled)
         self.last: WheelState | None = None
 
     def update(self, t: float, angles: ArrayLike) -> WheelState:
@@ -185,9 +194,9 @@ class WheelObserver(_DifferentiatorObserver):
 class SpeedObserver(_DifferentiatorObserver):
     """Levant differentiator on the measured body speed."""
 
-    def __init__(self, config: ObserverConfig) -> None:
-        """Create the observer from its settings."""
-        self._diff = _differentiator(config, config.speed_lipschitz, n_channels=1)
+    def __init__(self, config: ObserverConfig, *, compiled: bool = False) -> None:
+        """Create the observer from its settings (``compiled``: on the numba kernel)."""
+        self._diff = _differentiator(config, config.speed_lipschitz, 1, compiled)
         self.last: SpeedState | None = None
 
     def update(self, t: float, speed: float) -> SpeedState:

@@ -7,11 +7,14 @@ measurement's own stamp, ``/vd/observer/wheel_states`` (vd_msgs/WheelStates),
 speed ``/vd/observer/body_velocity`` (geometry_msgs/TwistStamped, which the estimator uses so
 that the live graph computes exactly what the offline cascade does). Health and fault
 counters go to ``/diagnostics`` once per second. All math is in
-:mod:`vd_observer_node.observer`.
+:mod:`vd_observer_node.observer`; ``kernel`` selects its compiled differentiator (default) or
+the Python reference. Messages travel as CDR bytes: raw subscriptions decoded with ``struct``
+and bytes published (:mod:`vd_observer_node.bag.cdr_message`), never Python message objects.
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -21,44 +24,38 @@ from rclpy.node import Node
 from vd_sim_node.ros_common import (
     DIAGNOSTICS_QOS,
     STREAM_QOS,
-    ParamSpec,
-    dataclass_param_specs,
     declare_parameters,
     node_status,
     run_node,
-    time_to_ns,
 )
 
 from vd_msgs.msg import WheelAngles, WheelStates
-from vd_observer_node.differentiator import DEFAULT_GAINS, DISCRETIZATIONS, INIT_POLICIES
+from vd_observer_node.bag.cdr_message import MessageCodec
+from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.faults import ERROR, merge_reports
+from vd_observer_node.node_params import KERNEL, OBSERVER_PARAMS
 from vd_observer_node.observer import ObserverConfig, SpeedObserver, WheelObserver
 
 __all__ = ['ObserverNode', 'main']
 
-PARAMS = [
-    *dataclass_param_specs(
-        ObserverConfig,
-        skip=('gains',),
-        choices={'discretization': DISCRETIZATIONS, 'init': INIT_POLICIES},
-    ),
-    ParamSpec('l0', DEFAULT_GAINS.l0, 'Levant gain lambda0 [-]'),
-    ParamSpec('l1', DEFAULT_GAINS.l1, 'Levant gain lambda1 [-]'),
-    ParamSpec('l2', DEFAULT_GAINS.l2, 'Levant gain lambda2 [-], > 1'),
-]
+PARAMS = [KERNEL, *OBSERVER_PARAMS]
 
 _NS = 1e-9
+_ZEROS5 = (0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 class ObserverNode(Node):  # type: ignore[misc]
-    """Thin wrapper: messages -> numpy -> WheelObserver/SpeedObserver -> messages."""
+    """Thin wrapper: raw CDR messages -> WheelObserver/SpeedObserver -> raw CDR messages."""
 
     def __init__(self) -> None:
         super().__init__('observer_node')
         values = declare_parameters(self, PARAMS)
+        self.kernel = values.pop('kernel')
         self.config = ObserverConfig.from_mapping(values)
-        self.wheels = WheelObserver(self.config)
-        self.speed = SpeedObserver(self.config)
+        compiled = self.kernel == 'compiled'
+        # compiled: built (or loaded from numba's disk cache) here, before the first sample
+        self.wheels = WheelObserver(self.config, compiled=compiled)
+        self.speed = SpeedObserver(self.config, compiled=compiled)
         self.pub_states = self.create_publisher(
             WheelStates, '/vd/observer/wheel_states', STREAM_QOS
         )
@@ -67,49 +64,77 @@ class ObserverNode(Node):  # type: ignore[misc]
             TwistStamped, '/vd/observer/body_velocity', STREAM_QOS
         )
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self._angles_in = MessageCodec('vd_msgs/msg/WheelAngles')
+        self._speed_in = MessageCodec('geometry_msgs/msg/TwistStamped')
+        self._out: dict[tuple[str, bytes], MessageCodec] = {}
+        # raw: the bytes are decoded with struct, never built into Python message objects
         self.create_subscription(
-            WheelAngles, '/vd/sensors/wheel_angles', self.on_wheel_angles, STREAM_QOS
+            WheelAngles, '/vd/sensors/wheel_angles', self.on_wheel_angles, STREAM_QOS, raw=True
         )
         self.create_subscription(
-            TwistStamped, '/vd/sensors/body_velocity', self.on_body_velocity, STREAM_QOS
+            TwistStamped,
+            '/vd/sensors/body_velocity',
+            self.on_body_velocity,
+            STREAM_QOS,
+            raw=True,
         )
-        self.counts = {'wheel_samples': 0, 'speed_samples': 0, 'withheld_non_finite': 0}
+        self.counts = {
+            'wheel_samples': 0,
+            'speed_samples': 0,
+            'withheld_non_finite': 0,
+            'undecodable': 0,
+        }
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
-            f'observer ready: {self.config.discretization} discretization, '
-            f'L_wheel={self.config.wheel_lipschitz:g}, L_speed={self.config.speed_lipschitz:g}'
+            f'observer ready: {self.kernel} kernel, {self.config.discretization} '
+            f'discretization, L_wheel={self.config.wheel_lipschitz:g}, '
+            f'L_speed={self.config.speed_lipschitz:g}'
         )
 
-    def on_wheel_angles(self, msg: Any) -> None:
-        t = time_to_ns(msg.header.stamp) * _NS
-        state = self.wheels.update(t, np.asarray(msg.angle, dtype=np.float64))
-        self.counts['wheel_samples'] += 1
-        if not (
-            np.all(np.isfinite(state.angle))
-            and np.all(np.isfinite(state.omega))
-            and np.all(np.isfinite(state.omega_dot))
-        ):
-            self.counts['withheld_non_finite'] += 1
-            return
-        out = WheelStates(header=msg.header)
-        out.angle = state.angle.tolist()
-        out.omega = state.omega.tolist()
-        out.omega_dot = state.omega_dot.tolist()
-        self.pub_states.publish(out)
+    def _codec(self, msgtype: str, frame: bytes) -> MessageCodec:
+        codec = self._out.get((msgtype, frame))
+        if codec is None:
+            codec = MessageCodec(msgtype, frame.decode(errors='replace'))
+            self._out[(msgtype, frame)] = codec
+        return codec
 
-    def on_body_velocity(self, msg: Any) -> None:
-        t = time_to_ns(msg.header.stamp) * _NS
-        state = self.speed.update(t, float(msg.twist.linear.x))
-        self.counts['speed_samples'] += 1
-        if not (np.isfinite(state.speed) and np.isfinite(state.accel)):
+    def on_wheel_angles(self, data: bytes) -> None:
+        try:
+            stamp_ns, frame, (angles,) = self._angles_in.decode(data)
+        except BagFormatError:
+            self.counts['undecodable'] += 1
+            return
+        state = self.wheels.update(stamp_ns * _NS, np.array(angles, dtype=np.float64))
+        self.counts['wheel_samples'] += 1
+        values = [*state.angle.tolist(), *state.omega.tolist(), *state.omega_dot.tolist()]
+        if not math.isfinite(sum(values)):
             self.counts['withheld_non_finite'] += 1
             return
-        accel = AccelStamped(header=msg.header)
-        accel.accel.linear.x = state.accel
-        self.pub_accel.publish(accel)
-        speed = TwistStamped(header=msg.header)
-        speed.twist.linear.x = state.speed
-        self.pub_speed.publish(speed)
+        self.pub_states.publish(
+            self._codec('vd_msgs/msg/WheelStates', frame).encode(stamp_ns, values)
+        )
+
+    def on_body_velocity(self, data: bytes) -> None:
+        try:
+            stamp_ns, frame, values = self._speed_in.decode(data)
+        except BagFormatError:
+            self.counts['undecodable'] += 1
+            return
+        state = self.speed.update(stamp_ns * _NS, float(values[0]))  # twist.linear.x
+        self.counts['speed_samples'] += 1
+        if not (math.isfinite(state.speed) and math.isfinite(state.accel)):
+            self.counts['withheld_non_finite'] += 1
+            return
+        self.pub_accel.publish(
+            self._codec('geometry_msgs/msg/AccelStamped', frame).encode(
+                stamp_ns, (state.accel, *_ZEROS5)
+            )
+        )
+        self.pub_speed.publish(
+            self._codec('geometry_msgs/msg/TwistStamped', frame).encode(
+                stamp_ns, (state.speed, *_ZEROS5)
+            )
+        )
 
     def publish_diagnostics(self) -> None:
         # Level and message name the faults of the last period; the counters are totals.
@@ -121,7 +146,8 @@ class ObserverNode(Node):  # type: ignore[misc]
         if self.counts['withheld_non_finite']:
             level = max(level, ERROR)
             message += f'; {self.counts["withheld_non_finite"]} non-finite outputs withheld'
-        values = {
+        values: dict[str, Any] = {
+            'kernel': self.kernel,
             **self.counts,
             'rejected_wheel_stamps': self.wheels.rejected_count,
             'rejected_speed_stamps': self.speed.rejected_count,

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Sequence
-from typing import Final
+from typing import Any, Final
 
 from .alerts_cdr import ALERT_CHANNELS
 from .cdr_batch import flat_fields
@@ -43,7 +43,7 @@ _NS: Final = 1_000_000_000
 
 #: One decoded message: (stamp [ns], frame_id, field values in `MessageCodec.fields` order;
 #: a scalar field is a number, an array field a tuple).
-DecodedMessage = tuple[int, bytes, tuple[object, ...]]
+DecodedMessage = tuple[int, bytes, tuple[Any, ...]]
 
 
 def _body_format(msgtype: str, frame_len: int) -> tuple[str, list[tuple[int, int]]]:

@@ -470,10 +470,19 @@ class CompiledEstimator:
         self.prm = estimator_params(vehicle, self.config)
         self.s = EstimatorState(self.config.filter_order)
         self.counts = np.zeros(len(ESTIMATOR_FAULTS) + 1, dtype=np.int64)
-        self.faults = FaultCounter(ESTIMATOR_FAULTS)
+        self._faults = FaultCounter(ESTIMATOR_FAULTS)
         self._synced = np.zeros_like(self.counts)
         self._est = np.zeros(EST_SIZE)
         self.reset()
+        # compile (or load from numba's cache) now, on scratch state, not at the first sample
+        scratch = EstimatorState(self.config.filter_order)
+        zeros = np.zeros(4)
+        estimator_update(
+            self.prm, scratch.scal, scratch.held, scratch.f_stages, scratch.f_prev,
+            scratch.f_meta, scratch.s_stages, scratch.s_prev, scratch.s_meta, scratch.v_stages,
+            scratch.v_prev, scratch.v_meta, scratch.last, self.counts.copy(), 0.0, zeros, zeros,
+            0.0, 0.0, zeros, self._est,
+        )  # fmt: skip
 
     def reset(self) -> None:
         """Forget the history (slope back to 0, filters empty); fault counters stay."""
@@ -490,11 +499,17 @@ class CompiledEstimator:
         """The last estimate (None before the first)."""
         return estimates_from_packed(self.s.last) if self.s.scal[2] != 0.0 else None
 
+    @property
+    def faults(self) -> FaultCounter:
+        """Input faults per kind, as the reference counts them (synced from the kernel)."""
+        self.sync_faults()
+        return self._faults
+
     def sync_faults(self) -> None:
         """Copy the kernel's fault counts into `faults` (call before `faults.report()`)."""
         delta = self.counts - self._synced
         for slot in np.flatnonzero(delta[: len(ESTIMATOR_FAULTS)]).tolist():
-            self.faults.count(ESTIMATOR_FAULTS[slot], int(delta[slot]))
+            self._faults.count(ESTIMATOR_FAULTS[slot], int(delta[slot]))
         self._synced = self.counts.copy()
 
     def update(
@@ -518,5 +533,4 @@ class CompiledEstimator:
             _wheels('omega', omega), _wheels('omega_dot', omega_dot), float(speed), float(accel),
             _wheels('torque', torque), self._est,
         )  # fmt: skip
-        self.sync_faults()
         return estimates_from_packed(self._est)

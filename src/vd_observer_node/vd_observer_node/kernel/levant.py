@@ -453,11 +453,20 @@ class CompiledDifferentiator:
         self.pend_f = np.full(n_channels, np.nan)
         self.scal = np.zeros(2)
         self.counts = np.zeros(len(OBSERVER_FAULTS) + 1, dtype=np.int64)
-        self.faults = FaultCounter(OBSERVER_FAULTS)
+        self._faults = FaultCounter(OBSERVER_FAULTS)
         self._synced = np.zeros_like(self.counts)
         self._out = np.zeros((3, n_channels))
         self._valid = np.zeros(n_channels, dtype=np.bool_)
         self.reset()
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Compile `diff_update` (or load it from numba's cache) before the first sample."""
+        diff_update(
+            self.prm, self.lip, self.z.copy(), self.f_last.copy(), self.active.copy(),
+            self.pend_t.copy(), self.pend_f.copy(), self.scal.copy(), self.counts.copy(), 0.0,
+            np.zeros(self._n), self._out, self._valid,
+        )  # fmt: skip
 
     @property
     def discretization(self) -> str:
@@ -484,11 +493,17 @@ class CompiledDifferentiator:
         """Forget all history (fault counts stay)."""
         diff_reset(self.prm, self.z, self.f_last, self.active, self.pend_t, self.pend_f, self.scal)
 
+    @property
+    def faults(self) -> FaultCounter:
+        """Input faults per kind, as the reference counts them (synced from the kernel)."""
+        self.sync_faults()
+        return self._faults
+
     def sync_faults(self) -> None:
         """Copy the kernel's fault counts into `faults` (call before `faults.report()`)."""
         delta = self.counts - self._synced
         for slot in np.flatnonzero(delta[: len(OBSERVER_FAULTS)]).tolist():
-            self.faults.count(OBSERVER_FAULTS[slot], int(delta[slot]))
+            self._faults.count(OBSERVER_FAULTS[slot], int(delta[slot]))
         self._synced = self.counts.copy()
 
     def update(self, t: float, f: ArrayLike) -> DerivativeEstimate:
@@ -506,5 +521,4 @@ class CompiledDifferentiator:
             self.prm, self.lip, self.z, self.f_last, self.active, self.pend_t, self.pend_f,
             self.scal, self.counts, float(t), np.ascontiguousarray(sample), out, valid,
         )  # fmt: skip
-        self.sync_faults()
         return DerivativeEstimate(out[0].copy(), out[1].copy(), out[2].copy(), valid.copy())

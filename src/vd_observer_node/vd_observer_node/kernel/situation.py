@@ -711,6 +711,10 @@ class CompiledSituationMonitor:
         #: the leading (state and parameter) arguments of `monitor_update`
         self.args = monitor_args(self.arrays)
         self.slip = np.zeros(4)
+        # compile (or load from numba's cache) now, not at the first sample; then start afresh
+        zeros = np.zeros(4)
+        self.update_arrays(0.0, zeros, 1.0, zeros, zeros, zeros, np.zeros(4, np.bool_), zeros)
+        self.arrays.fast.counts[:] = 0
         self.reset()
 
     def reset(self) -> None:
