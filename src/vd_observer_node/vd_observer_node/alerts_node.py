@@ -157,7 +157,9 @@ class AlertsNode(Node):  # type: ignore[misc]
         pot = out.potential
         potential = self._potential_out.get(frame)
         if potential is None:
-            potential = MessageCodec('vd_msgs/msg/FrictionPotential', frame.decode(errors='replace'))
+            potential = MessageCodec(
+                'vd_msgs/msg/FrictionPotential', frame.decode(errors='replace')
+            )
             self._potential_out[frame] = potential
         self.pub_potential.publish(
             potential.encode(

@@ -41,7 +41,11 @@ VEHICLE_FILE: Final = ParamSpec(
     "vehicle parameter YAML shared with the simulator ('' = the installed Clio RL 1.1 file)",
 )
 ALIGN_CAPACITY: Final = ParamSpec(
-    'align_capacity', 200, 'messages buffered per topic while matching stamps', low=1, high=100000
+    'align_capacity',
+    1000,
+    'messages buffered per topic while matching stamps (1000: a 1 s lag between inputs at 1 kHz)',
+    low=1,
+    high=100000,
 )
 KERNEL: Final = ParamSpec(
     'kernel',
