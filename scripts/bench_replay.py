@@ -140,7 +140,8 @@ def bench_replay(folder: Path, seconds: float, rate: float) -> None:
             {'cascade': _null_cascade, 'situation': False},
         ),
         ('cascade without alerts', {'situation': False}),
-        ('full (cascade + alerts and friction potential)', {}),
+        ('full (cascade + alerts and friction potential), compiled kernel', {}),
+        ('full, Python reference kernel', {'kernel': 'python'}),
     )
     for i, (label, kwargs) in enumerate(runs):
         out = folder / f'out_{i}'
@@ -158,7 +159,7 @@ def bench_replay(folder: Path, seconds: float, rate: float) -> None:
             f'    CPU time {cpu:.2f} s (wall time suffers when the 2 cores are shared): '
             f'{seconds / cpu:.0f}x real time, {report.sensor_messages / cpu:,.0f} sensor msg/s'
         )
-        if not kwargs:
+        if 'cascade' not in kwargs and kwargs.get('situation', True):
             per_sample = report.cascade_time_s / report.samples * 1e6
             print(
                 f'  cascade cost: {per_sample:.0f} us per sample (3 sensor messages); alerts '

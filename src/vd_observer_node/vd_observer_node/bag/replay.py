@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields, replace
@@ -464,40 +465,64 @@ def replay_bag(
         )
         cascade_time = time.perf_counter() - cascade_start
         situation_values: dict[str, dict[str, np.ndarray]] = {}
-        situation_time = 0.0
-        if monitor is not None:
+        situation_time = [0.0]
+        failure: list[BaseException] = []
+
+        def run_monitor() -> None:
             # The per-stamp loop costs ~20x a message read or written: a bar of its own in
             # samples, so the message bar's rate and remaining time stay true.
-            bar.set_postfix_str(f'alerts on {len(common)} samples')
             situation_start = time.perf_counter()
-            with tqdm(
-                total=len(common),
-                unit='sample',
-                unit_scale=True,
-                desc='alerts',
-                disable=not progress,
-                file=sys.stderr,
-                position=1,
-                leave=False,
-            ) as phase:
-                if compiled:
-                    from ..kernel.chain import run_situation_compiled
+            try:
+                with tqdm(
+                    total=len(common),
+                    unit='sample',
+                    unit_scale=True,
+                    desc='alerts',
+                    disable=not progress,
+                    file=sys.stderr,
+                    position=1,
+                    leave=False,
+                ) as phase:
+                    if compiled:
+                        from ..kernel.chain import run_situation_compiled
 
-                    situation_values = situation_topics(
-                        wheel_angle,
-                        body_speed,
-                        wheel_torque,
-                        result,
-                        monitor,
-                        phase.update,
-                        runner=run_situation_compiled,
-                        block=20 * _SITUATION_BLOCK,
-                    )
-                else:
-                    situation_values = situation_topics(
-                        wheel_angle, body_speed, wheel_torque, result, monitor, phase.update
-                    )
-            situation_time = time.perf_counter() - situation_start
+                        situation_values.update(
+                            situation_topics(
+                                wheel_angle,
+                                body_speed,
+                                wheel_torque,
+                                result,
+                                monitor,
+                                phase.update,
+                                runner=run_situation_compiled,
+                                block=20 * _SITUATION_BLOCK,
+                            )
+                        )
+                    else:
+                        situation_values.update(
+                            situation_topics(
+                                wheel_angle,
+                                body_speed,
+                                wheel_torque,
+                                result,
+                                monitor,
+                                phase.update,
+                            )
+                        )
+            except BaseException as exc:  # re-raised by the caller after the join
+                failure.append(exc)
+            situation_time[0] = time.perf_counter() - situation_start
+
+        worker = None
+        if monitor is not None:
+            bar.set_postfix_str(f'alerts on {len(common)} samples')
+            if compiled:
+                # The compiled monitor releases the GIL: it runs on the second core while this
+                # thread encodes the cascade's topics.
+                worker = threading.Thread(target=run_monitor, name='replay-monitor')
+                worker.start()
+            else:
+                run_monitor()
         frames = angles.frame_id[ia]
         frame_id = frames[0].decode() if len(frames) else ''
         log_ns = arrays['/vd/sensors/wheel_angles'].log_time_ns[ia]
@@ -508,6 +533,10 @@ def replay_bag(
         for topic, values in _estimates(result, wheel_angle).items():
             datas = encode_batch(ESTIMATE_TOPICS[topic], common, frame_id, values)
             outputs.append((topic, ESTIMATE_TOPICS[topic], log_ns, datas))
+        if worker is not None:
+            worker.join()
+        if failure:
+            raise failure[0]
         for topic, values in situation_values.items():
             msgtype = ALERT_TOPICS[topic]
             if topic == '/vd/estimates/alerts':
@@ -527,7 +556,7 @@ def replay_bag(
         wall_time_s=wall,
         cascade_time_s=cascade_time,
         unmatched=sensor_count - 3 * len(common),
-        situation_time_s=situation_time,
+        situation_time_s=situation_time[0],
     )
 
 
