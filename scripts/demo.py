@@ -26,7 +26,7 @@ _PROGRESS = re.compile(r'progress t=([0-9.]+)/([0-9.]+) s')
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--scenario', default='paper_table1', help='installed name or YAML path')
-    parser.add_argument('--rate-hz', type=float, default=100.0, help='sensor rate [Hz]')
+    parser.add_argument('--rate-hz', type=float, default=1000.0, help='sensor rate [Hz]')
     parser.add_argument(
         '--real-time-factor', type=float, default=1.0, help='simulated s per wall s'
     )
