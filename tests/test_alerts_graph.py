@@ -9,11 +9,11 @@ every alert carrying the stamp of a measurement.
 from __future__ import annotations
 
 import math
-import time
 from pathlib import Path
 
 import pytest
 from rosproc import RosProcessGroup
+from test_graph import wait_for_last_stamp
 from vd_observer_node.bag import BagReader
 
 from vd_msgs.msg import Alert
@@ -38,6 +38,12 @@ def test_lock_alert_on_hard_braking_over_low_friction(
         strict=True,
     ):
         proc.wait_for(text, timeout=30)
+    waiter = wait_for_last_stamp(
+        procs,
+        'waiter',
+        16 * NS,  # braking_low_mu_hard lasts 16 s
+        {'/vd/estimates/alerts': 'vd_msgs.msg/Alerts'},
+    )
     sim = procs.node(
         'sim',
         'vd_sim_node',
@@ -47,7 +53,7 @@ def test_lock_alert_on_hard_braking_over_low_friction(
         real_time_factor=0.5,
     )
     sim.wait_for('scenario finished', timeout=120)
-    time.sleep(1.5)
+    assert waiter.popen.wait(180) == 0, waiter.output()  # the last stamp went through
     for proc in [*reversed(others), rec]:
         assert proc.stop() == 0, proc.output()[-3000:]
 

@@ -23,8 +23,10 @@ from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.replay import replay_bag
 
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
+WAIT_FOR_STAMP = Path(__file__).parent / 'ros_scripts' / 'wait_for_stamp.py'
 RATE_HZ = 100.0
 N_SAMPLES = 401  # 4 s at 100 Hz, t = 0 inclusive
+LAST_STAMP_NS = 4_000_000_000
 ESTIMATE_TOPICS = [
     '/vd/estimates/tire_forces',
     '/vd/estimates/friction',
@@ -53,13 +55,36 @@ def wait_exit(proc: Any, timeout: float) -> int:
     return int(proc.popen.returncode)
 
 
+def wait_for_last_stamp(
+    procs: RosProcessGroup, name: str, stamp_ns: int, topics: dict[str, str]
+) -> Any:
+    """A process that exits 0 once each topic has carried `stamp_ns` (started, subscribed).
+
+    Graph tests wait on it, with a generous bound, instead of sleeping until the last sample
+    has gone through the nodes: on a loaded machine no sleep is long enough.
+    """
+    args = [f'{topic}={kind}' for topic, kind in topics.items()]
+    waiter = procs.python(name, WAIT_FOR_STAMP, str(stamp_ns), '180', *args)
+    waiter.wait_for('SUBSCRIBED', timeout=60)
+    return waiter
+
+
+ESTIMATES_DONE = {
+    '/vd/estimates/slope': 'vd_msgs.msg/Slope',
+    '/vd/estimates/tire_forces': 'vd_msgs.msg/TireForces',
+    '/vd/estimates/friction': 'vd_msgs.msg/Friction',
+    '/vd/estimates/resistances': 'vd_msgs.msg/Resistances',
+}
+
+
 def run_live_graph(procs: RosProcessGroup, bag: Path) -> None:
     rec = procs.node('recorder', 'vd_observer_node', 'recorder_node', output=str(bag))
     obs = procs.node('observer', 'vd_observer_node', 'observer_node')
     est = procs.node('estimator', 'vd_observer_node', 'estimator_node')
     for proc, text in ((rec, 'recording to'), (obs, 'observer ready'), (est, 'estimator ready')):
         proc.wait_for(text, timeout=30)
-    time.sleep(1.0)  # discovery
+    waiter = wait_for_last_stamp(procs, 'waiter', LAST_STAMP_NS, ESTIMATES_DONE)
+    # the simulator itself waits until its streams have subscribers and discovery settled
     sim = procs.node(
         'sim',
         'vd_sim_node',
@@ -70,7 +95,7 @@ def run_live_graph(procs: RosProcessGroup, bag: Path) -> None:
     )
     assert wait_exit(sim, 60) == 0, sim.output()
     assert 'scenario finished' in sim.output()
-    time.sleep(1.5)  # last messages through the cascade, then a chunk flush
+    assert wait_exit(waiter, 180) == 0, waiter.output()  # the last sample went through
     for proc in (est, obs, rec):
         assert proc.stop() == 0, proc.output()[-3000:]
     assert 'bag closed' in rec.output(), rec.output()[-3000:]
@@ -138,6 +163,7 @@ def test_live_graph_estimates_every_sample_and_matches_the_offline_cascade(
     est = procs.node('estimator2', 'vd_observer_node', 'estimator_node', use_sim_time=True)
     for proc, text in ((rec, 'recording to'), (obs, 'observer ready'), (est, 'estimator ready')):
         proc.wait_for(text, timeout=30)
+    waiter = wait_for_last_stamp(procs, 'waiter2', LAST_STAMP_NS, ESTIMATES_DONE)
     # start_delay: time for the observers' publishers and the recorder to discover each other
     player = procs.node(
         'player',
@@ -149,7 +175,7 @@ def test_live_graph_estimates_every_sample_and_matches_the_offline_cascade(
         min_subscribers=2,
     )
     assert wait_exit(player, 60) == 0, player.output()
-    time.sleep(1.5)
+    assert wait_exit(waiter, 180) == 0, waiter.output()
     for proc in (est, obs, rec):
         assert proc.stop() == 0, proc.output()[-3000:]
     again = by_topic(replay, ['/vd/estimates/slope', '/vd/estimates/tire_forces'])

@@ -8,13 +8,20 @@ with the Python reference.
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 from rosproc import RosProcessGroup
-from test_graph import N_SAMPLES, RATE_HZ, SCENARIO, by_topic, wait_exit
+from test_graph import (
+    LAST_STAMP_NS,
+    N_SAMPLES,
+    RATE_HZ,
+    SCENARIO,
+    by_topic,
+    wait_exit,
+    wait_for_last_stamp,
+)
 from vd_observer_node.bag.replay import replay_bag
 
 OUTPUTS = {
@@ -43,6 +50,16 @@ def test_pipeline_node_publishes_what_offline_replay_computes(
     pipe = procs.node('pipeline', 'vd_observer_node', 'pipeline_node', kernel=kernel)
     for proc, text in ((rec, 'recording to'), (pipe, 'pipeline ready')):
         proc.wait_for(text, timeout=60)
+    waiter = wait_for_last_stamp(
+        procs,
+        'waiter',
+        LAST_STAMP_NS,
+        {
+            '/vd/estimates/slope': 'vd_msgs.msg/Slope',
+            '/vd/estimates/alerts': 'vd_msgs.msg/Alerts',
+            '/vd/estimates/friction_potential': 'vd_msgs.msg/FrictionPotential',
+        },
+    )
     sim = procs.node(
         'sim',
         'vd_sim_node',
@@ -52,7 +69,7 @@ def test_pipeline_node_publishes_what_offline_replay_computes(
         real_time_factor=1.0,
     )
     assert wait_exit(sim, 60) == 0, sim.output()
-    time.sleep(3.0)  # the last stamps through the pipeline into the recorder
+    assert wait_exit(waiter, 180) == 0, waiter.output()  # the last stamp went through
     for proc in (pipe, rec):
         assert proc.stop() == 0, proc.output()[-3000:]
     assert 'Traceback' not in pipe.output(), pipe.output()[-3000:]

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import pytest
 from rosproc import RosProcessGroup
+from test_graph import wait_for_last_stamp
 from vd_observer_node.bag import BagReader
 
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
@@ -39,8 +40,17 @@ def test_signal_closes_a_complete_bag(procs: RosProcessGroup, tmp_path: Path, si
         real_time_factor=1.0,
         start_delay=1.5,
     )
+    waiter = wait_for_last_stamp(
+        procs,
+        'waiter',
+        4_000_000_000,
+        {
+            '/vd/sensors/wheel_angles': 'vd_msgs.msg/WheelAngles',
+            '/vd/truth/slope': 'vd_msgs.msg/Slope',
+        },
+    )
     sim.wait_for('scenario finished', timeout=60)
-    time.sleep(1.0)
+    assert waiter.popen.wait(180) == 0, waiter.output()  # the last sample is out
     assert rec.stop(sig) == 0, rec.output()
     assert 'bag closed' in rec.output()
     assert (bag / 'metadata.yaml').is_file()

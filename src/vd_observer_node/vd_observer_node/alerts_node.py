@@ -41,11 +41,10 @@ from vd_msgs.msg import (
 )
 from vd_observer_node.alerts import AlertConfig
 from vd_observer_node.alignment import StampAligner
-from vd_observer_node.bag.cdr_message import AlertsCodec, MessageCodec
-from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.bag.replay import default_vehicle_file
 from vd_observer_node.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.node_params import ALERTS_PARAMS, KERNEL
+from vd_observer_node.raw_io import Encoders, aligned_input
 from vd_observer_node.situation import SituationConfig, SituationMonitor
 from vd_observer_node.vehicle import load_estimator_vehicle
 
@@ -110,32 +109,16 @@ class AlertsNode(Node):  # type: ignore[misc]
             FrictionPotential, '/vd/estimates/friction_potential', STREAM_QOS
         )
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
-        self._decoders = {key: MessageCodec(msgtype) for key, _, _, msgtype in _INPUTS}
-        self._potential_out: dict[bytes, MessageCodec] = {}
-        self._alerts_out: dict[bytes, AlertsCodec] = {}
-        for key, kind, topic, _ in _INPUTS:
-            self.create_subscription(kind, topic, self._make_callback(key), STREAM_QOS, raw=True)
+        self.encoders = Encoders()
         self.counts = {'estimates': 0, 'alerts_raised': 0, 'undecodable': 0}
+        for key, kind, topic, msgtype in _INPUTS:
+            callback = aligned_input(msgtype, key, self.aligner, self.evaluate, self.counts)
+            self.create_subscription(kind, topic, callback, STREAM_QOS, raw=True)
         self._active: tuple[Any, ...] = ()
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
             f'alerts ready: {self.kernel} kernel, vehicle {vehicle.name!r} ({vehicle_file})'
         )
-
-    def _make_callback(self, key: str) -> Any:
-        decoder = self._decoders[key]
-
-        def callback(data: bytes) -> None:
-            try:
-                stamp_ns, frame, values = decoder.decode(data)
-            except BagFormatError:
-                self.counts['undecodable'] += 1
-                return
-            matched = self.aligner.push(key, stamp_ns, (frame, values))
-            if matched is not None:
-                self.evaluate(stamp_ns, matched)
-
-        return callback
 
     def evaluate(self, stamp_ns: int, m: dict[str, Any]) -> None:
         frame, (angles,) = m['angles']
@@ -155,14 +138,8 @@ class AlertsNode(Node):  # type: ignore[misc]
         self.counts['alerts_raised'] += max(0, len(active) - len(self._active))
         self._active = active
         pot = out.potential
-        potential = self._potential_out.get(frame)
-        if potential is None:
-            potential = MessageCodec(
-                'vd_msgs/msg/FrictionPotential', frame.decode(errors='replace')
-            )
-            self._potential_out[frame] = potential
         self.pub_potential.publish(
-            potential.encode(
+            self.encoders('vd_msgs/msg/FrictionPotential', frame).encode(
                 stamp_ns,
                 [
                     *pot.mu_max.tolist(),
@@ -173,12 +150,8 @@ class AlertsNode(Node):  # type: ignore[misc]
                 ],
             )
         )
-        alerts = self._alerts_out.get(frame)
-        if alerts is None:
-            alerts = AlertsCodec(frame.decode(errors='replace'))
-            self._alerts_out[frame] = alerts
         self.pub_alerts.publish(
-            alerts.encode(
+            self.encoders.alerts(frame).encode(
                 stamp_ns,
                 [a.level for a in out.alerts],
                 [_ns(a.onset) for a in out.alerts],

@@ -16,7 +16,7 @@ from vd_observer_node.estimator import Estimator, EstimatorConfig
 from vd_observer_node.observer import Observer, ObserverConfig
 from vd_observer_node.vehicle import EstimatorVehicle
 
-__all__ = ['CascadeResult', 'run_cascade']
+__all__ = ['CascadeResult', 'checked_record', 'run_cascade']
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -64,6 +64,36 @@ class CascadeResult:
     faults: dict[str, int] = field(default_factory=dict)
 
 
+def checked_record(
+    t: ArrayLike,
+    wheel_angle: ArrayLike,
+    body_speed: ArrayLike,
+    wheel_torque: ArrayLike,
+    estimator_speed: str,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The arguments of `run_cascade` as contiguous float64 arrays, checked.
+
+    Raises:
+        InputShapeError: inconsistent shapes.
+        ConfigurationError: unknown estimator_speed.
+    """
+    if estimator_speed not in ('measured', 'observer'):
+        raise ConfigurationError(
+            f'estimator_speed must be measured or observer: {estimator_speed}'
+        )
+    stamps = np.ascontiguousarray(t, dtype=np.float64)
+    angles = np.ascontiguousarray(wheel_angle, dtype=np.float64)
+    speeds = np.ascontiguousarray(body_speed, dtype=np.float64)
+    torques = np.ascontiguousarray(wheel_torque, dtype=np.float64)
+    n = stamps.shape[0] if stamps.ndim == 1 else -1
+    if angles.shape != (n, 4) or speeds.shape != (n,) or torques.shape != (n, 4):
+        raise InputShapeError(
+            f'expected t (N,), wheel_angle (N, 4), body_speed (N,), wheel_torque (N, 4); got '
+            f'{stamps.shape}, {angles.shape}, {speeds.shape}, {torques.shape}'
+        )
+    return stamps, angles, speeds, torques
+
+
 def run_cascade(
     t: ArrayLike,
     wheel_angle: ArrayLike,
@@ -92,25 +122,10 @@ def run_cascade(
         InputShapeError: inconsistent shapes.
         ConfigurationError: unknown estimator_speed.
     """
-    if estimator_speed not in ('measured', 'observer'):
-        raise ConfigurationError(
-            f'estimator_speed must be measured or observer: {estimator_speed}'
-        )
-    stamps = np.asarray(t, dtype=np.float64)
-    angles = np.asarray(wheel_angle, dtype=np.float64)
-    speeds = np.asarray(body_speed, dtype=np.float64)
-    torques = np.asarray(wheel_torque, dtype=np.float64)
+    stamps, angles, speeds, torques = checked_record(
+        t, wheel_angle, body_speed, wheel_torque, estimator_speed
+    )
     n = stamps.shape[0]
-    if (
-        stamps.ndim != 1
-        or angles.shape != (n, 4)
-        or speeds.shape != (n,)
-        or torques.shape != (n, 4)
-    ):
-        raise InputShapeError(
-            f'expected t (N,), wheel_angle (N, 4), body_speed (N,), wheel_torque (N, 4); got '
-            f'{stamps.shape}, {angles.shape}, {speeds.shape}, {torques.shape}'
-        )
     observer = Observer(observer_config or ObserverConfig())
     estimator = Estimator(vehicle, estimator_config)
     wheel4 = np.zeros((n, 4))

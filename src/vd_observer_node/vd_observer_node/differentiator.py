@@ -61,6 +61,7 @@ __all__ = [
     'DerivativeEstimate',
     'LevantDifferentiator',
     'LevantGains',
+    'checked_settings',
     'euler_step',
     'euler_taylor_step',
     'implicit_step',
@@ -327,6 +328,44 @@ class DerivativeEstimate(NamedTuple):
     valid: NDArray[np.bool_]
 
 
+def checked_settings(
+    lipschitz: ArrayLike,
+    n_channels: int,
+    discretization: str,
+    init: str,
+    max_gap: float,
+    init_baseline: float,
+    max_jump_back: float | None,
+) -> tuple[FloatArray, float]:
+    """Check a differentiator's settings (see `LevantDifferentiator`).
+
+    Returns:
+        (L per channel, shape (n,); the jump back [s] that resets, `max_gap` if None).
+
+    Raises:
+        ConfigurationError: invalid L, name or gap.
+    """
+    if discretization not in DISCRETIZATIONS:
+        raise ConfigurationError(
+            f'unknown discretization {discretization!r}; use one of {DISCRETIZATIONS}'
+        )
+    if init not in INIT_POLICIES:
+        raise ConfigurationError(f'unknown init policy {init!r}; use one of {INIT_POLICIES}')
+    if n_channels < 1:
+        raise ConfigurationError(f'n_channels must be >= 1, got {n_channels}')
+    lip = np.broadcast_to(np.asarray(lipschitz, dtype=np.float64), (n_channels,)).copy()
+    if not np.all(np.isfinite(lip) & (lip > 0.0)):
+        raise ConfigurationError(f'Lipschitz bounds L must be finite and > 0: {lip}')
+    if not (math.isfinite(init_baseline) and init_baseline >= 0.0):
+        raise ConfigurationError(f'init_baseline must be finite and >= 0: {init_baseline}')
+    if not max_gap > 0.0:
+        raise ConfigurationError(f'max_gap must be > 0, got {max_gap}')
+    jump = float(max_gap) if max_jump_back is None else float(max_jump_back)
+    if not jump > 0.0:
+        raise ConfigurationError(f'max_jump_back must be > 0, got {max_jump_back}')
+    return lip, jump
+
+
 class LevantDifferentiator:
     """Stateful n-channel second-order Levant differentiator on irregular time stamps.
 
@@ -383,31 +422,16 @@ class LevantDifferentiator:
         Raises:
             ConfigurationError: invalid L, name or gap.
         """
-        if discretization not in DISCRETIZATIONS:
-            raise ConfigurationError(
-                f'unknown discretization {discretization!r}; use one of {DISCRETIZATIONS}'
-            )
-        if init not in INIT_POLICIES:
-            raise ConfigurationError(f'unknown init policy {init!r}; use one of {INIT_POLICIES}')
-        if n_channels < 1:
-            raise ConfigurationError(f'n_channels must be >= 1, got {n_channels}')
-        lip = np.broadcast_to(np.asarray(lipschitz, dtype=np.float64), (n_channels,)).copy()
-        if not np.all(np.isfinite(lip) & (lip > 0.0)):
-            raise ConfigurationError(f'Lipschitz bounds L must be finite and > 0: {lip}')
-        if not (math.isfinite(init_baseline) and init_baseline >= 0.0):
-            raise ConfigurationError(f'init_baseline must be finite and >= 0: {init_baseline}')
+        lip, jump = checked_settings(
+            lipschitz, n_channels, discretization, init, max_gap, init_baseline, max_jump_back
+        )
         self._init_baseline = float(init_baseline)
-        if not max_gap > 0.0:
-            raise ConfigurationError(f'max_gap must be > 0, got {max_gap}')
         self._lipschitz = lip
         self._n = n_channels
         self._gains = gains
         self._discretization = discretization
         self._init = init
         self._max_gap = float(max_gap)
-        jump = self._max_gap if max_jump_back is None else float(max_jump_back)
-        if not jump > 0.0:
-            raise ConfigurationError(f'max_jump_back must be > 0, got {max_jump_back}')
         self._max_jump_back = jump
         self.rejected_count = 0
         self.faults = FaultCounter(OBSERVER_FAULTS)

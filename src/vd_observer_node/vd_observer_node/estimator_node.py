@@ -28,12 +28,11 @@ from vd_sim_node.ros_common import (
 
 from vd_msgs.msg import Friction, Resistances, Slope, TireForces, WheelStates, WheelTorques
 from vd_observer_node.alignment import StampAligner
-from vd_observer_node.bag.cdr_message import MessageCodec
-from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.bag.replay import default_vehicle_file
 from vd_observer_node.estimator import Estimator, EstimatorConfig
 from vd_observer_node.faults import merge_reports, summarise
 from vd_observer_node.node_params import ESTIMATOR_PARAMS, KERNEL
+from vd_observer_node.raw_io import Encoders, aligned_input
 from vd_observer_node.vehicle import load_estimator_vehicle
 
 __all__ = ['EstimatorNode', 'main']
@@ -87,48 +86,28 @@ class EstimatorNode(Node):  # type: ignore[misc]
         )
         self.pub_slope = self.create_publisher(Slope, '/vd/estimates/slope', STREAM_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
-        self._decoders = {key: MessageCodec(msgtype) for key, msgtype in _INPUT_TYPES.items()}
-        self._out: dict[tuple[str, bytes], MessageCodec] = {}
-        for key, kind, topic in (
-            ('states', WheelStates, '/vd/observer/wheel_states'),
-            ('accel', AccelStamped, '/vd/observer/body_accel'),
-            ('speed', TwistStamped, speed_topic),
-            ('torques', WheelTorques, '/vd/sensors/wheel_torques'),
-        ):
-            self.create_subscription(kind, topic, self._make_callback(key), STREAM_QOS, raw=True)
+        self._codec = Encoders()
         self.counts = {
             'estimates': 0,
             'mu_invalid_wheel_samples': 0,
             'slope_invalid': 0,
             'undecodable': 0,
         }
+        for key, kind, topic in (
+            ('states', WheelStates, '/vd/observer/wheel_states'),
+            ('accel', AccelStamped, '/vd/observer/body_accel'),
+            ('speed', TwistStamped, speed_topic),
+            ('torques', WheelTorques, '/vd/sensors/wheel_torques'),
+        ):
+            callback = aligned_input(
+                _INPUT_TYPES[key], key, self.aligner, self.estimate, self.counts
+            )
+            self.create_subscription(kind, topic, callback, STREAM_QOS, raw=True)
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
             f'estimator ready: {self.kernel} kernel, vehicle {self.vehicle.name!r} '
             f'({vehicle_file})'
         )
-
-    def _make_callback(self, key: str) -> Any:
-        decoder = self._decoders[key]
-
-        def callback(data: bytes) -> None:
-            try:
-                stamp_ns, frame, values = decoder.decode(data)
-            except BagFormatError:
-                self.counts['undecodable'] += 1
-                return
-            matched = self.aligner.push(key, stamp_ns, (frame, values))
-            if matched is not None:
-                self.estimate(stamp_ns, matched)
-
-        return callback
-
-    def _codec(self, msgtype: str, frame: bytes) -> MessageCodec:
-        codec = self._out.get((msgtype, frame))
-        if codec is None:
-            codec = MessageCodec(msgtype, frame.decode(errors='replace'))
-            self._out[(msgtype, frame)] = codec
-        return codec
 
     def estimate(self, stamp_ns: int, m: dict[str, Any]) -> None:
         frame, (_, omega, omega_dot) = m['states']

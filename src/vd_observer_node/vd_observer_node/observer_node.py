@@ -35,6 +35,7 @@ from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.faults import ERROR, merge_reports
 from vd_observer_node.node_params import KERNEL, OBSERVER_PARAMS
 from vd_observer_node.observer import ObserverConfig, SpeedObserver, WheelObserver
+from vd_observer_node.raw_io import Encoders
 
 __all__ = ['ObserverNode', 'main']
 
@@ -66,7 +67,7 @@ class ObserverNode(Node):  # type: ignore[misc]
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._angles_in = MessageCodec('vd_msgs/msg/WheelAngles')
         self._speed_in = MessageCodec('geometry_msgs/msg/TwistStamped')
-        self._out: dict[tuple[str, bytes], MessageCodec] = {}
+        self._codec = Encoders()
         # raw: the bytes are decoded with struct, never built into Python message objects
         self.create_subscription(
             WheelAngles, '/vd/sensors/wheel_angles', self.on_wheel_angles, STREAM_QOS, raw=True
@@ -90,13 +91,6 @@ class ObserverNode(Node):  # type: ignore[misc]
             f'discretization, L_wheel={self.config.wheel_lipschitz:g}, '
             f'L_speed={self.config.speed_lipschitz:g}'
         )
-
-    def _codec(self, msgtype: str, frame: bytes) -> MessageCodec:
-        codec = self._out.get((msgtype, frame))
-        if codec is None:
-            codec = MessageCodec(msgtype, frame.decode(errors='replace'))
-            self._out[(msgtype, frame)] = codec
-        return codec
 
     def on_wheel_angles(self, data: bytes) -> None:
         try:

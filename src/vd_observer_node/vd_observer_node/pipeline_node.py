@@ -47,8 +47,7 @@ from vd_msgs.msg import (
 )
 from vd_observer_node.alerts import AlertConfig
 from vd_observer_node.alignment import StampAligner
-from vd_observer_node.bag.cdr_message import AlertsCodec, MessageCodec
-from vd_observer_node.bag.errors import BagFormatError
+from vd_observer_node.bag.cdr_message import MessageCodec
 from vd_observer_node.bag.replay import default_vehicle_file
 from vd_observer_node.chain import ChainOutput, ChainSettings, make_chain
 from vd_observer_node.differentiator import LevantGains
@@ -57,6 +56,7 @@ from vd_observer_node.faults import ERROR
 from vd_observer_node.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.node_params import PIPELINE_PARAMS
 from vd_observer_node.observer import ObserverConfig
+from vd_observer_node.raw_io import Encoders, aligned_input
 from vd_observer_node.situation import SituationConfig
 from vd_observer_node.vehicle import load_estimator_vehicle
 
@@ -146,17 +146,16 @@ class PipelineNode(Node):  # type: ignore[misc]
         }
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._types = {key: msgtype for key, _, _, msgtype in _OUTPUTS if key != 'alerts'}
-        self._codecs: dict[tuple[str, bytes], MessageCodec] = {}
-        self._alerts_codecs: dict[bytes, AlertsCodec] = {}
-        self._decoders = {key: MessageCodec(msgtype) for key, _, _, msgtype in _INPUTS}
-        for key, cls, topic, _ in _INPUTS:
-            self.create_subscription(cls, topic, self._make_callback(key), STREAM_QOS, raw=True)
+        self.encoders = Encoders()
         self.counts = {
             'estimates': 0,
             'undecodable': 0,
             'withheld_non_finite': 0,
             'alerts_raised': 0,
         }
+        for key, cls, topic, msgtype in _INPUTS:
+            callback = aligned_input(msgtype, key, self.aligner, self.process, self.counts)
+            self.create_subscription(cls, topic, callback, STREAM_QOS, raw=True)
         self._active = 0
         self._last_alerts = ''
         self.create_timer(1.0, self.publish_diagnostics)
@@ -165,27 +164,8 @@ class PipelineNode(Node):  # type: ignore[misc]
             f'({vehicle_file})'
         )
 
-    def _make_callback(self, key: str) -> Any:
-        decoder = self._decoders[key]
-
-        def callback(data: bytes) -> None:
-            try:
-                stamp_ns, frame, values = decoder.decode(data)
-            except BagFormatError:
-                self.counts['undecodable'] += 1
-                return
-            matched = self.aligner.push(key, stamp_ns, (frame, values))
-            if matched is not None:
-                self.process(stamp_ns, matched)
-
-        return callback
-
     def _codec(self, key: str, frame: bytes) -> MessageCodec:
-        codec = self._codecs.get((key, frame))
-        if codec is None:
-            codec = MessageCodec(self._types[key], frame.decode(errors='replace'))
-            self._codecs[(key, frame)] = codec
-        return codec
+        return self.encoders(self._types[key], frame)
 
     def process(self, stamp_ns: int, m: dict[str, Any]) -> None:
         frame, (angles,) = m['angles']
@@ -254,10 +234,7 @@ class PipelineNode(Node):  # type: ignore[misc]
             self._last_alerts = ', '.join(
                 f'{a.kind} wheel {a.wheel} level {a.level}' for a in sit.alerts if a.active
             )
-        codec_alerts = self._alerts_codecs.get(frame)
-        if codec_alerts is None:
-            codec_alerts = AlertsCodec(frame.decode(errors='replace'))
-            self._alerts_codecs[frame] = codec_alerts
+        codec_alerts = self.encoders.alerts(frame)
         pubs['alerts'].publish(
             codec_alerts.encode(
                 stamp_ns,

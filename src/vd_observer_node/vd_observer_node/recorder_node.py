@@ -84,6 +84,8 @@ class RecorderNode(Node):  # type: ignore[misc]
 
     def __init__(self) -> None:
         super().__init__('recorder_node')
+        #: [s] run_node spins this long after a stop signal, so what was delivered is written
+        self.drain_on_stop_s = 0.3
         v = declare_parameters(self, PARAMS)
         output = v['output'] or time.strftime('vd_%Y%m%d_%H%M%S')
         self.pattern = re.compile(v['topic_regex'])

@@ -2,8 +2,9 @@
 
 Importing rclpy, numpy and a node module takes about a second. A SIGINT in that time would end
 the process with a KeyboardInterrupt traceback, a SIGTERM with the signal's default exit code;
-`guarded_main` turns either into one line and exit code 0, then hands over to the node's
-``main`` (whose `ros_common.run_node` installs its own handlers at once). Only the standard
+`guarded_main` notes the signal, lets the imports finish and exits with one line and code 0,
+or hands over to the node's ``main``, whose `ros_common.run_node` installs its own handlers at
+once and picks up a signal noted in between. Only the standard
 library is imported here, so the guard is in place within milliseconds of the interpreter
 starting (what remains unguarded is Python's own start-up).
 """
@@ -17,12 +18,21 @@ import sys
 __all__ = ['guarded_main', 'sim_node']
 
 
-class _Stopped(Exception):  # noqa: N818 (a signal, not an error)
-    """A stop signal arrived before the node's own handlers were installed."""
+#: Stop signals received before the node's own handlers took over (`ros_common.StopSignals`
+#: reads it, so none is lost in between).
+received: list[int] = []
 
 
 def _early(signum: int, _frame: object) -> None:
-    raise _Stopped(signal.Signals(signum).name)
+    # Only note it: raising here could land inside a C extension's initialisation (rclpy's),
+    # which turns any exception into an ImportError with a traceback.
+    received.append(signum)
+
+
+def _stopped() -> int:
+    name = signal.Signals(received[0]).name
+    print(f'stopped by {name} while starting', file=sys.stderr, flush=True)
+    return 0
 
 
 def guarded_main(module: str, args: list[str] | None = None) -> int:
@@ -36,14 +46,13 @@ def guarded_main(module: str, args: list[str] | None = None) -> int:
         signal.signal(sig, _early)
     try:
         main = importlib.import_module(module).main
-    except _Stopped as stopped:
-        print(f'stopped by {stopped} while starting', file=sys.stderr, flush=True)
-        return 0
-    try:
-        result: int = main(args)
-    except _Stopped as stopped:  # between the import and run_node's own handlers
-        print(f'stopped by {stopped} while starting', file=sys.stderr, flush=True)
-        return 0
+    except ImportError:
+        if received:  # an import cut short by the signal: stopping was asked for anyway
+            return _stopped()
+        raise
+    if received:
+        return _stopped()
+    result: int = main(args)
     return result
 
 

@@ -21,6 +21,7 @@ import gc
 import os
 import re
 import sys
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -346,7 +347,10 @@ class StopSignals:
         """Install the handlers (replacing any earlier ones, e.g. `entry.guarded_main`'s)."""
         import signal
 
-        self.received: int | None = None
+        from vd_sim_node import entry
+
+        # a signal the entry point's guard noted before these handlers took over
+        self.received: int | None = entry.received[0] if entry.received else None
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, self._on_signal)
 
@@ -411,6 +415,11 @@ def run_node(factory: Any, args: list[str] | None = None) -> int:
             executor.add_node(node)
             while not signals.stop:
                 executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
+            # A node that records (drain_on_stop_s > 0) first takes what the middleware has
+            # already delivered to it, so a stop does not drop the messages just received.
+            drain_until = time.monotonic() + float(getattr(node, 'drain_on_stop_s', 0.0))
+            while time.monotonic() < drain_until:
+                executor.spin_once(timeout_sec=0.02)
     except NodeFinished:
         pass
     except KeyboardInterrupt:  # a SIGINT before our handler was installed

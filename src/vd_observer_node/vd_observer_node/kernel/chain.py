@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node.cascade import CascadeResult
+from vd_observer_node.cascade import CascadeResult, checked_record
 from vd_observer_node.chain import ChainOutput, ChainSettings
-from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.errors import InputShapeError
 from vd_observer_node.estimator import EstimatorConfig
 from vd_observer_node.faults import FaultReport, merge_reports
 from vd_observer_node.friction_potential import TyreCurves
@@ -156,25 +156,10 @@ def run_cascade_compiled(
         InputShapeError: inconsistent shapes.
         ConfigurationError: unknown estimator_speed.
     """
-    if estimator_speed not in ('measured', 'observer'):
-        raise ConfigurationError(
-            f'estimator_speed must be measured or observer: {estimator_speed}'
-        )
-    stamps = np.ascontiguousarray(t, dtype=np.float64)
-    angles = np.ascontiguousarray(wheel_angle, dtype=np.float64)
-    speeds = np.ascontiguousarray(body_speed, dtype=np.float64)
-    torques = np.ascontiguousarray(wheel_torque, dtype=np.float64)
+    stamps, angles, speeds, torques = checked_record(
+        t, wheel_angle, body_speed, wheel_torque, estimator_speed
+    )
     n = stamps.shape[0]
-    if (
-        stamps.ndim != 1
-        or angles.shape != (n, 4)
-        or speeds.shape != (n,)
-        or torques.shape != (n, 4)
-    ):
-        raise InputShapeError(
-            f'expected t (N,), wheel_angle (N, 4), body_speed (N,), wheel_torque (N, 4); got '
-            f'{stamps.shape}, {angles.shape}, {speeds.shape}, {torques.shape}'
-        )
     wheels, speed = _observers(observer_config or ObserverConfig())
     estimator = CompiledEstimator(vehicle, estimator_config)
     wheel = np.zeros((n, 3, 4))
@@ -187,9 +172,6 @@ def run_cascade_compiled(
         estimator_speed == 'measured', stamps, angles, speeds, torques, wheel, wheel_valid,
         body, est,
     )  # fmt: skip
-    for d in (wheels, speed):
-        d.sync_faults()
-    estimator.sync_faults()
     return CascadeResult(
         t=stamps.copy(),
         omega=wheel[:, 1, :].copy(),
@@ -389,8 +371,6 @@ class CompiledChain:
 
     def fault_report(self) -> FaultReport:
         """Faults since the previous call, per part ('wheel', 'speed', 'estimator')."""
-        for part in (self.wheels, self.speed, self.estimator):
-            part.sync_faults()
         return merge_reports(
             {
                 'wheel': self.wheels.faults.report(),

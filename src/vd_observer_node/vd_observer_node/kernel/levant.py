@@ -32,8 +32,9 @@ from vd_observer_node.differentiator import (
     INIT_POLICIES,
     DerivativeEstimate,
     LevantGains,
+    checked_settings,
 )
-from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.errors import InputShapeError
 from vd_observer_node.faults import OBSERVER_FAULTS, FaultCounter
 
 from ._jit import jit
@@ -424,24 +425,9 @@ class CompiledDifferentiator:
         Raises:
             ConfigurationError: invalid L, name or gap.
         """
-        if discretization not in DISCRETIZATIONS:
-            raise ConfigurationError(
-                f'unknown discretization {discretization!r}; use one of {DISCRETIZATIONS}'
-            )
-        if init not in INIT_POLICIES:
-            raise ConfigurationError(f'unknown init policy {init!r}; use one of {INIT_POLICIES}')
-        if n_channels < 1:
-            raise ConfigurationError(f'n_channels must be >= 1, got {n_channels}')
-        lip = np.broadcast_to(np.asarray(lipschitz, dtype=np.float64), (n_channels,)).copy()
-        if not np.all(np.isfinite(lip) & (lip > 0.0)):
-            raise ConfigurationError(f'Lipschitz bounds L must be finite and > 0: {lip}')
-        if not (math.isfinite(init_baseline) and init_baseline >= 0.0):
-            raise ConfigurationError(f'init_baseline must be finite and >= 0: {init_baseline}')
-        if not max_gap > 0.0:
-            raise ConfigurationError(f'max_gap must be > 0, got {max_gap}')
-        jump = float(max_gap) if max_jump_back is None else float(max_jump_back)
-        if not jump > 0.0:
-            raise ConfigurationError(f'max_jump_back must be > 0, got {max_jump_back}')
+        lip, jump = checked_settings(
+            lipschitz, n_channels, discretization, init, max_gap, init_baseline, max_jump_back
+        )
         self._n = n_channels
         self._discretization = discretization
         self.lip = lip
