@@ -22,8 +22,9 @@ Figures per run:
   RSS at the end and its peak (VmHWM) [MiB];
 * the real-time factor the simulator achieved (from its log).
 Then a sweep of sensor rates with shorter runs: the highest rate with no loss on any
-watched topic and the simulator keeping real time. Finally one short run with
-``VD_ROS_EXECUTOR=events`` on the observer and estimator, with timeouts.
+watched topic and the simulator keeping real time. Finally one short run with the old
+``VD_ROS_EXECUTOR=single_threaded`` on the estimation nodes (the EventsExecutor is the
+default), for comparison.
 
 Every run uses its own ROS_DOMAIN_ID and localhost-only discovery, so graphs started by
 tests or other people on the same machine do not mix in.
@@ -538,15 +539,17 @@ def main(argv: list[str] | None = None) -> int:
             print(f'  highest rate without loss at real time: {best:g} Hz')
         if 'events' not in args.skip:
             print(
-                '\n== VD_ROS_EXECUTOR=events on observer and estimator (200 Hz, 5 s)', flush=True
+                '\n== VD_ROS_EXECUTOR=single_threaded (the old executor) on the estimation nodes '
+                f'({args.rate:g} Hz, 5 s)',
+                flush=True,
             )
             r = run(
                 'events',
-                200.0,
+                args.rate,
                 5.0,
                 recorder=False,
                 publish_truth=truth,
-                executor='events',
+                executor='single_threaded',
                 timeout_s=40.0,
             )
             print(
