@@ -22,7 +22,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 
-from vd_observer_node.differentiator import DISCRETIZATIONS, LevantDifferentiator  # noqa: E402
+from vd_observer_node.estimation.differentiator import DISCRETIZATIONS, LevantDifferentiator  # noqa: E402
 
 
 def _time_per_update(disc: str, samples: int) -> float:

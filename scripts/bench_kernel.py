@@ -27,10 +27,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from vd_observer_node.bag.replay import default_vehicle_file
-from vd_observer_node.cascade import run_cascade
 from vd_observer_node.chain import ChainSettings, PythonChain
-from vd_observer_node.friction_potential import TyreCurves
+from vd_observer_node.estimation.cascade import run_cascade
+from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.kernel.chain import (
     CompiledChain,
     run_cascade_compiled,
@@ -38,9 +37,10 @@ from vd_observer_node.kernel.chain import (
     warm_up,
 )
 from vd_observer_node.kernel.situation import CompiledSituationMonitor
-from vd_observer_node.launcher import NodeSpec
-from vd_observer_node.situation import SituationMonitor, run_situation
-from vd_observer_node.vehicle import load_estimator_vehicle
+from vd_observer_node.situation.friction_potential import TyreCurves
+from vd_observer_node.situation.monitor import SituationMonitor, run_situation
+from vd_observer_node.testing.launcher import NodeSpec
+from vd_observer_node.tools.replay import default_vehicle_file
 from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.scenario import SensorSettings, load_scenario
 from vd_sim_node.vehicle.simulation import simulate

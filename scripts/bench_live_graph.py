@@ -51,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from vd_observer_node.launcher import GraphLauncher, NodeProcess, NodeSpec
+from vd_observer_node.testing.launcher import GraphLauncher, NodeProcess, NodeSpec
 
 __all__ = ['RunResult', 'main', 'run_graph']
 

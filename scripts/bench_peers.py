@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """vd side by side with peer packages from PyPI, in the same process (prints figures).
 
-1. Our Levant differentiator (`vd_observer_node.differentiator`) vs `opensmc`'s
+1. Our Levant differentiator (`vd_observer_node.estimation.differentiator`) vs `opensmc`'s
    `opensmc.estimators.LevantDifferentiator` (order 2, explicit Euler, Levant's gains
    2.0 / 1.5 / 1.1 like ours): the same signal f = sin(t) (|f'''| <= 1, L = 1.5), the same
    step tau, both started from z = 0. Errors are max |z_i - f^(i)| after convergence
@@ -40,7 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 
-from vd_observer_node.differentiator import LevantDifferentiator, euler_step  # noqa: E402
+from vd_observer_node.estimation.differentiator import LevantDifferentiator, euler_step  # noqa: E402
 from vd_sim_node.vehicle.params import load_vehicle  # noqa: E402
 from vd_sim_node.vehicle.scenario import load_scenario  # noqa: E402
 from vd_sim_node.vehicle.simulation import Simulator  # noqa: E402

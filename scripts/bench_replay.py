@@ -27,10 +27,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_observe
 
 from vd_observer_node.bag import BagReader, BagWriter
 from vd_observer_node.bag.cdr_batch import decode_batch, encode_batch, flat_fields
-from vd_observer_node.bag.replay import ESTIMATE_TOPICS, replay_bag
-from vd_observer_node.bag.synthetic import write_synthetic_drive_bag
 from vd_observer_node.bag.writer import DEFAULT_CHUNK_DURATION_S, DEFAULT_CHUNK_SIZE
-from vd_observer_node.cascade import CascadeResult
+from vd_observer_node.estimation.cascade import CascadeResult
+from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
+from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
 
 
 def _null_cascade(t: np.ndarray, angle: np.ndarray, *_: object) -> CascadeResult:

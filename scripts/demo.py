@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 from tqdm import tqdm
-from vd_observer_node.launcher import GraphLauncher, NodeSpec
+from vd_observer_node.testing.launcher import GraphLauncher, NodeSpec
 
 ROOT = Path(__file__).resolve().parents[1]
 _PROGRESS = re.compile(r'progress t=([0-9.]+)/([0-9.]+) s')
@@ -103,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         codes = graph.stop_all()
     if any(codes.values()):
         print(f'demo: exit codes {codes}; logs in {args.out / "logs"}')
-    from vd_observer_node.cli import main as vd
+    from vd_observer_node.tools.cli import main as vd
 
     print(f'\ndemo: bag {bag}', flush=True)
     vd(['bag', 'info', str(bag)])

@@ -16,7 +16,8 @@ the simulator's truth (definitions in docs/alerts.md):
   error against the Magic Formula peak at the true road_mu and load (goal |err| <= 0.1).
 
 The truth (``SimResult.peak_mu`` / ``peak_slip``, from ``vd_sim_node.vehicle.friction_truth``)
-and the metrics (``vd_observer_node.report.alerts``) are the ones ``vd report`` uses on a bag.
+and the metrics (``vd_observer_node.tools.report.alerts``) are the ones ``vd report`` uses on a
+bag.
 
 Usage:
     python scripts/eval_alerts.py [--scenarios launch_low_mu,braking_low_mu_hard,paper_table1]
@@ -39,16 +40,22 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 
-from vd_observer_node.alerts import ALERT_KINDS, AlertConfig  # noqa: E402
-from vd_observer_node.cascade import run_cascade  # noqa: E402
-from vd_observer_node.estimator import EstimatorConfig  # noqa: E402
-from vd_observer_node.friction_potential import (  # noqa: E402
+from vd_observer_node.estimation.cascade import run_cascade  # noqa: E402
+from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
+from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
+from vd_observer_node.estimation.vehicle import load_estimator_vehicle  # noqa: E402
+from vd_observer_node.situation.alerts import ALERT_KINDS, AlertConfig  # noqa: E402
+from vd_observer_node.situation.friction_potential import (  # noqa: E402
     ROAD_CLASS_NAMES,
     FrictionPotentialConfig,
     TyreCurves,
 )
-from vd_observer_node.observer import ObserverConfig  # noqa: E402
-from vd_observer_node.report.alerts import (  # noqa: E402
+from vd_observer_node.situation.monitor import (  # noqa: E402
+    SituationConfig,
+    SituationMonitor,
+    run_situation,
+)
+from vd_observer_node.tools.report.alerts import (  # noqa: E402
     AlertSettings,
     axle_utilisation,
     evaluate_alerts,
@@ -56,12 +63,6 @@ from vd_observer_node.report.alerts import (  # noqa: E402
     segments_from_road,
     truth_conditions,
 )
-from vd_observer_node.situation import (  # noqa: E402
-    SituationConfig,
-    SituationMonitor,
-    run_situation,
-)
-from vd_observer_node.vehicle import load_estimator_vehicle  # noqa: E402
 from vd_sim_node.vehicle.friction_truth import axle_mean, road_class  # noqa: E402
 
 VEHICLE_FILE = ROOT / 'src' / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
@@ -81,7 +82,7 @@ SETTINGS = AlertSettings()
 
 def run_detectors(est: Any, sim: Any, monitor: SituationMonitor) -> dict[str, np.ndarray]:
     """Friction potential and alerts per stamp, as the alerts node computes them
-    (`vd_observer_node.situation.run_situation`, the loop `vd replay` runs too).
+    (`vd_observer_node.situation.monitor.run_situation`, the loop `vd replay` runs too).
 
     Args:
         est: the cascade on the simulator's sensors (t, omega, mu, mu_valid, fz used).
@@ -118,7 +119,7 @@ def report_alerts(
     """Print delays and false alarms per (kind, wheel); return counts.
 
     Definitions in docs/alerts.md 4.1, computed by the report's shared
-    ``vd_observer_node.report.alerts.evaluate_alerts``.
+    ``vd_observer_node.tools.report.alerts.evaluate_alerts``.
     """
     episodes, alarms = evaluate_alerts(sim.t, truth, relaxed, det['level'], det['onset'], SETTINGS)
     counts = {

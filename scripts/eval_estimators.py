@@ -3,8 +3,8 @@
 
 Runs `vd_sim_node.vehicle.simulation.simulate` on a scenario (default paper_table1) with
 ideal sensors and with a 96 counts/rev encoder plus body-speed noise, feeds the sensor
-signals through `vd_observer_node.cascade.run_cascade` and prints the error figures of the
-issue's accuracy targets. Evaluation window: t >= 1 s, excluding +-0.5 s around slope steps
+signals through `vd_observer_node.estimation.cascade.run_cascade` and prints the error figures of
+the issue's accuracy targets. Evaluation window: t >= 1 s, excluding +-0.5 s around slope steps
 and gear shifts (the scenario's events whose description mentions 'slope' or 'shift').
 
 Usage:
@@ -28,10 +28,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 
-from vd_observer_node.cascade import CascadeResult, run_cascade  # noqa: E402
-from vd_observer_node.estimator import EstimatorConfig  # noqa: E402
-from vd_observer_node.observer import ObserverConfig  # noqa: E402
-from vd_observer_node.vehicle import EstimatorVehicle, load_estimator_vehicle  # noqa: E402
+from vd_observer_node.estimation.cascade import CascadeResult, run_cascade  # noqa: E402
+from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
+from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
+from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_estimator_vehicle  # noqa: E402
 
 VEHICLE_FILE = ROOT / 'src' / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
 SCENARIO_FILE = ROOT / 'src' / 'vd_sim_node' / 'config' / 'scenarios' / 'paper_table1.yaml'
@@ -99,7 +99,7 @@ def figures(
 
 def _quasi_static_fz(sim: Any, vehicle: EstimatorVehicle) -> np.ndarray:
     """Textbook loads from the TRUE accel and slope: the best any quasi-static Fz can do."""
-    from vd_observer_node.estimators import wheel_loads
+    from vd_observer_node.estimation.formulas import wheel_loads
 
     ground = vehicle.mass * sim.accel_true + vehicle.mass * vehicle.gravity * np.sin(sim.slope)
     ground = ground + sim.aero * np.sign(sim.speed_true)

@@ -74,7 +74,7 @@ class RosProcessGroup:
 
     def node(self, name: str, package: str, executable: str, **params: object) -> RosProcess:
         """Start a node as `ros2 run` would, with `-p key:=value` for each parameter."""
-        from vd_observer_node.launcher import NodeSpec
+        from vd_observer_node.testing.launcher import NodeSpec
 
         return self.start(name, NodeSpec(package, executable, name, params).argv())
 

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from rosproc import RosProcessGroup
 from vd_observer_node.bag import BagReader
-from vd_observer_node.bag.replay import replay_bag
+from vd_observer_node.tools.replay import replay_bag
 
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
 WAIT_FOR_STAMP = Path(__file__).parent / 'ros_scripts' / 'wait_for_stamp.py'

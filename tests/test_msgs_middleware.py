@@ -38,7 +38,7 @@ def test_every_message_type_arrives_intact_in_another_process(procs: RosProcessG
 
 def test_alert_kind_codes_of_the_core_match_the_message() -> None:
     """The nodes and replay publish `Alert.kind_code` (the index in ALERT_KINDS) as `kind`."""
-    from vd_observer_node.alerts import ALERT_KINDS
+    from vd_observer_node.situation.alerts import ALERT_KINDS
 
     from vd_msgs.msg import Alert
 

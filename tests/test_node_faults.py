@@ -29,9 +29,9 @@ FEED_AND_CAPTURE = textwrap.dedent(
     from geometry_msgs.msg import TwistStamped
     from rclpy.node import Node
     from vd_msgs.msg import Friction, Slope, TireForces, WheelAngles, WheelStates, WheelTorques
-    from vd_observer_node.bag.replay import default_vehicle_file
-    from vd_observer_node.synthetic import synthetic_trajectory
-    from vd_observer_node.vehicle import load_estimator_vehicle
+    from vd_observer_node.tools.replay import default_vehicle_file
+    from vd_observer_node.testing.synthetic import synthetic_trajectory
+    from vd_observer_node.estimation.vehicle import load_estimator_vehicle
     from vd_sim_node.ros_common import DIAGNOSTICS_QOS, STREAM_QOS, ns_to_time
 
     T0, DT = 100.0, 0.005
@@ -184,8 +184,8 @@ def test_sensor_faults_through_the_live_nodes(procs: RosProcessGroup, tmp_path: 
     assert _last_diag(got['diag'], 'vd: observer')['level'] == 0  # the faults are over
     # Recovery: after the loop the live estimates are exactly the offline cascade's on the
     # same messages, and the flags are set again.
-    from vd_observer_node.cascade import run_cascade
-    from vd_observer_node.vehicle import load_estimator_vehicle
+    from vd_observer_node.estimation.cascade import run_cascade
+    from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 
     offline = run_cascade(
         [round(r['t'] * 1e9) * 1e-9 for r in sent],  # the nodes' stamp -> seconds
@@ -262,7 +262,7 @@ def test_bad_parameters_refuse_to_start_with_one_line(
         (procs.node(f'case{i}', 'vd_observer_node', exe, **params), words)
         for i, ((exe, params), words) in enumerate(cases)
     ]
-    from vd_observer_node.launcher import NodeSpec
+    from vd_observer_node.testing.launcher import NodeSpec
 
     bad_params = tmp_path / 'params.yaml'
     bad_params.write_text('observer_node:\n  ros__parameters: {max_gap: [1,\n', encoding='utf-8')

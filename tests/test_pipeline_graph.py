@@ -22,7 +22,7 @@ from test_graph import (
     wait_exit,
     wait_for_last_stamp,
 )
-from vd_observer_node.bag.replay import replay_bag
+from vd_observer_node.tools.replay import replay_bag
 
 OUTPUTS = {
     '/vd/observer/wheel_states': ('omega', 'omega_dot'),

@@ -100,7 +100,7 @@ def test_sigkill_loses_at_most_the_open_chunk_and_repair_recovers_the_rest(
     assert not (bag / 'metadata.yaml').exists()
 
     result = subprocess.run(
-        [sys.executable, '-m', 'vd_observer_node.cli', 'bag', 'repair', str(bag)],
+        [sys.executable, '-m', 'vd_observer_node.tools.cli', 'bag', 'repair', str(bag)],
         capture_output=True,
         text=True,
     )

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from vd_observer_node.bag import BagReader
-from vd_observer_node.bag.replay import replay_bag
+from vd_observer_node.tools.replay import replay_bag
 
 BAG = Path(__file__).resolve().parents[1] / 'bags' / 'paper_table1_100hz'
 NS = 1_000_000_000

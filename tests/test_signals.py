@@ -20,7 +20,7 @@ from typing import Any
 import pytest
 from rosproc import RosProcess, RosProcessGroup
 from vd_observer_node.bag import BagReader
-from vd_observer_node.bag.synthetic import write_synthetic_drive_bag
+from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
 
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
 ROUNDS = int(os.environ.get('VD_SIGNAL_ROUNDS', '2'))

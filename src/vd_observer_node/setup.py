@@ -32,7 +32,7 @@ setup(
             'recorder_node = vd_observer_node.entry_points:recorder_node',
             'player_node = vd_observer_node.entry_points:player_node',
             'pipeline_node = vd_observer_node.entry_points:pipeline_node',
-            'vd = vd_observer_node.cli:main',
+            'vd = vd_observer_node.tools.cli:main',
         ],
     },
 )

@@ -11,12 +11,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from vd_observer_node.cascade import run_cascade
-from vd_observer_node.estimator import EstimatorConfig
-from vd_observer_node.observer import ObserverConfig
-from vd_observer_node.vehicle import load_estimator_vehicle
-
-from vd_observer_node import estimators as phys
+from vd_observer_node.estimation import formulas as phys
+from vd_observer_node.estimation.cascade import run_cascade
+from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 
 simulation = pytest.importorskip('vd_sim_node.vehicle.simulation')
 scenario_module = pytest.importorskip('vd_sim_node.vehicle.scenario')

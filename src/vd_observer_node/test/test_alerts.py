@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from vd_observer_node.alerts import (
+from vd_observer_node.errors import InputShapeError, ObserverError
+from vd_observer_node.situation.alerts import (
     ALERT_KINDS,
     LEVEL_CRITICAL,
     LEVEL_OK,
@@ -27,7 +28,6 @@ from vd_observer_node.alerts import (
     slip_velocity,
     step_channel,
 )
-from vd_observer_node.errors import InputShapeError, ObserverError
 
 SIM_CONFIG = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config'
 TH = LevelThresholds(warning_on=0.12, warning_off=0.08, critical_on=0.25, critical_off=0.18)
@@ -206,12 +206,12 @@ def scenario_run(name: str, duration: float | None = None, noisy: bool = False) 
     Ideal sensors with the ideal-sensor tuning of scripts/eval_estimators.py, or (noisy) a
     96 counts/rev encoder and 0.05 m/s speed noise with the default observer settings.
     """
-    from vd_observer_node.cascade import run_cascade
-    from vd_observer_node.estimator import EstimatorConfig
-    from vd_observer_node.friction_potential import TyreCurves
-    from vd_observer_node.observer import ObserverConfig
-    from vd_observer_node.situation import SituationConfig, SituationMonitor, run_situation
-    from vd_observer_node.vehicle import load_estimator_vehicle
+    from vd_observer_node.estimation.cascade import run_cascade
+    from vd_observer_node.estimation.estimator import EstimatorConfig
+    from vd_observer_node.estimation.observer import ObserverConfig
+    from vd_observer_node.estimation.vehicle import load_estimator_vehicle
+    from vd_observer_node.situation.friction_potential import TyreCurves
+    from vd_observer_node.situation.monitor import SituationConfig, SituationMonitor, run_situation
     from vd_sim_node.vehicle.params import load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
-from vd_observer_node.alignment import StampAligner
 from vd_observer_node.errors import ConfigurationError
+from vd_observer_node.estimation.alignment import StampAligner
 
 TOPICS = ('wheel_states', 'body_accel', 'wheel_torques')
 

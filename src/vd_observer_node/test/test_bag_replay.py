@@ -8,16 +8,16 @@ import numpy as np
 import pytest
 from vd_observer_node.bag import BagReader, BagWriter, ReplayInputError
 from vd_observer_node.bag.cdr_batch import decode_batch
-from vd_observer_node.bag.replay import (
+from vd_observer_node.estimation.cascade import run_cascade
+from vd_observer_node.estimation.vehicle import load_estimator_vehicle
+from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
+from vd_observer_node.tools.replay import (
     ALERT_TOPICS,
     ESTIMATE_TOPICS,
     SENSOR_TOPICS,
     default_vehicle_file,
     replay_bag,
 )
-from vd_observer_node.bag.synthetic import write_synthetic_drive_bag
-from vd_observer_node.cascade import run_cascade
-from vd_observer_node.vehicle import load_estimator_vehicle
 
 
 @pytest.fixture(scope='module')
@@ -121,9 +121,9 @@ def test_missing_sensor_topic(tmp_path: Path) -> None:
 
 
 def test_replay_config_reaches_the_cascade(tmp_path: Path) -> None:
-    from vd_observer_node.bag.replay import load_replay_config
     from vd_observer_node.errors import ConfigurationError
-    from vd_observer_node.observer import ObserverConfig
+    from vd_observer_node.estimation.observer import ObserverConfig
+    from vd_observer_node.tools.replay import load_replay_config
 
     write_synthetic_drive_bag(tmp_path / 'in', duration_s=1.0, rate_hz=100.0, with_truth=False)
     settings = tmp_path / 'settings.yaml'
@@ -166,7 +166,7 @@ def launch(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, object
     """launch_low_mu at 200 Hz written as a recording, and its replay with the Python kernel
     (compared bit for bit with the reference objects below; the compiled replay is compared
     with this one in `test_compiled_replay_equals_the_python_replay`)."""
-    from vd_observer_node.report.devbag import sim_topics, write_topic_arrays_bag
+    from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
     from vd_sim_node.vehicle.params import load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
@@ -216,8 +216,8 @@ def test_compiled_replay_equals_the_python_replay(
 
 def _expected_situation(in_bag: Path, vehicle_file: Path) -> list[object]:
     """SituationMonitor fed per stamp, independently of replay's batch code."""
-    from vd_observer_node.friction_potential import TyreCurves
-    from vd_observer_node.situation import SituationMonitor
+    from vd_observer_node.situation.friction_potential import TyreCurves
+    from vd_observer_node.situation.monitor import SituationMonitor
     from vd_sim_node.vehicle.params import load_vehicle
 
     raw = BagReader(in_bag).topic_arrays(SENSOR_TOPICS)
@@ -299,8 +299,8 @@ def test_traction_alert_on_the_launch_reaches_the_report(
     launch: tuple[Path, Path, object], tmp_path: Path
 ) -> None:
     """`vd report` of the replayed recording has the alerts section with figures."""
-    from vd_observer_node.report.evaluate import evaluate
-    from vd_observer_node.report.load import load_bag_series
+    from vd_observer_node.tools.report.evaluate import evaluate
+    from vd_observer_node.tools.report.load import load_bag_series
 
     _, out_bag, _ = launch
     report, _ = evaluate(load_bag_series(out_bag, progress=False))
@@ -341,10 +341,10 @@ def test_vehicle_file_supplies_the_tyre(tmp_path: Path) -> None:
 
 
 def test_replay_config_reads_the_alert_sections(tmp_path: Path) -> None:
-    from vd_observer_node.alerts import AlertConfig
-    from vd_observer_node.bag.replay import load_replay_config
     from vd_observer_node.errors import ConfigurationError
-    from vd_observer_node.situation import SituationConfig
+    from vd_observer_node.situation.alerts import AlertConfig
+    from vd_observer_node.situation.monitor import SituationConfig
+    from vd_observer_node.tools.replay import load_replay_config
 
     settings = tmp_path / 'settings.yaml'
     settings.write_text('situation:\n  alert_wheel_lipschitz: 10000.0\nalerts: {}\n')

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 from vd_observer_node.bag import BagReader
-from vd_observer_node.bag.synthetic import write_synthetic_drive_bag
-from vd_observer_node.cli import main
+from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
+from vd_observer_node.tools.cli import main
 
 
 @pytest.fixture

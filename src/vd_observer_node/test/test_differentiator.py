@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from vd_observer_node.differentiator import (
+from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimation.differentiator import (
     DEFAULT_GAINS,
     DISCRETIZATIONS,
     LevantDifferentiator,
@@ -17,7 +18,6 @@ from vd_observer_node.differentiator import (
     implicit_step,
     step,
 )
-from vd_observer_node.errors import ConfigurationError, InputShapeError
 
 ACCURATE = ('euler_taylor', 'implicit')
 

@@ -10,11 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.estimator import Estimator, EstimatorConfig
-from vd_observer_node.synthetic import synthetic_trajectory
-from vd_observer_node.vehicle import load_estimator_vehicle
-
-from vd_observer_node import estimators as phys
+from vd_observer_node.estimation import formulas as phys
+from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
+from vd_observer_node.estimation.vehicle import load_estimator_vehicle
+from vd_observer_node.testing.synthetic import synthetic_trajectory
 
 VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
 VEHICLE = load_estimator_vehicle(VEHICLE_FILE)

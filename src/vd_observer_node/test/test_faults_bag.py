@@ -11,8 +11,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from vd_observer_node.bag import BagError, BagReader
-from vd_observer_node.bag.replay import replay_bag
-from vd_observer_node.bag.synthetic import write_synthetic_drive_bag
+from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
+from vd_observer_node.tools.replay import replay_bag
 
 ESTIMATES = ('/vd/estimates/tire_forces', '/vd/estimates/friction', '/vd/estimates/slope')
 
@@ -83,7 +83,7 @@ def test_replay_of_any_damage_is_a_bag_error_or_finite_estimates(
 def test_messy_bag_with_non_finite_values_and_a_loop_replays_finite(tmp_path: Path) -> None:
     from vd_observer_node.bag import BagWriter
     from vd_observer_node.bag.cdr_batch import encode_batch
-    from vd_observer_node.bag.synthetic import synthetic_drive
+    from vd_observer_node.testing.synthetic_bags import synthetic_drive
 
     drive = synthetic_drive(1.0, 100.0, seed=5)
     n = drive.stamp_ns.shape[0]

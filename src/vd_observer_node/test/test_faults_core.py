@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from vd_observer_node.alignment import StampAligner
-from vd_observer_node.cascade import CascadeResult, run_cascade
-from vd_observer_node.estimator import Estimates, Estimator, EstimatorConfig
-from vd_observer_node.faults import (
+from vd_observer_node.estimation.alignment import StampAligner
+from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.estimation.estimator import Estimates, Estimator, EstimatorConfig
+from vd_observer_node.estimation.faults import (
     ERROR,
     ESTIMATOR_FAULTS,
     OBSERVER_FAULTS,
@@ -20,9 +20,9 @@ from vd_observer_node.faults import (
     FaultCounter,
     merge_reports,
 )
-from vd_observer_node.observer import ObserverConfig, SpeedObserver, WheelObserver
-from vd_observer_node.synthetic import SyntheticTrajectory, synthetic_trajectory
-from vd_observer_node.vehicle import load_estimator_vehicle
+from vd_observer_node.estimation.observer import ObserverConfig, SpeedObserver, WheelObserver
+from vd_observer_node.estimation.vehicle import load_estimator_vehicle
+from vd_observer_node.testing.synthetic import SyntheticTrajectory, synthetic_trajectory
 
 VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
 VEHICLE = load_estimator_vehicle(VEHICLE_FILE)

@@ -7,13 +7,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from vd_observer_node.cascade import run_cascade
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.estimator import EstimatorConfig
-from vd_observer_node.filters import LowPass
-from vd_observer_node.observer import Observer, ObserverConfig
-from vd_observer_node.synthetic import synthetic_trajectory
-from vd_observer_node.vehicle import load_estimator_vehicle
+from vd_observer_node.estimation.cascade import run_cascade
+from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.estimation.filters import LowPass
+from vd_observer_node.estimation.observer import Observer, ObserverConfig
+from vd_observer_node.estimation.vehicle import load_estimator_vehicle
+from vd_observer_node.testing.synthetic import synthetic_trajectory
 
 VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
 VEHICLE = load_estimator_vehicle(VEHICLE_FILE)

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from vd_observer_node.errors import InputShapeError, ObserverError
-from vd_observer_node.friction_potential import (
+from vd_observer_node.situation.friction_potential import (
     ROAD_DRY,
     ROAD_ICE,
     ROAD_SNOW,

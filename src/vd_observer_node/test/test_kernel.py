@@ -20,12 +20,16 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from vd_observer_node.alerts import AlertConfig
-from vd_observer_node.cascade import CascadeResult, run_cascade
 from vd_observer_node.chain import ChainSettings, PythonChain
-from vd_observer_node.differentiator import DISCRETIZATIONS, INIT_POLICIES, LevantDifferentiator
-from vd_observer_node.estimator import Estimator, EstimatorConfig
-from vd_observer_node.friction_potential import FrictionPotentialConfig, TyreCurves
+from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.estimation.differentiator import (
+    DISCRETIZATIONS,
+    INIT_POLICIES,
+    LevantDifferentiator,
+)
+from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
+from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.kernel.chain import (
     CompiledChain,
     run_cascade_compiled,
@@ -34,9 +38,9 @@ from vd_observer_node.kernel.chain import (
 from vd_observer_node.kernel.estimation import CompiledEstimator
 from vd_observer_node.kernel.levant import CompiledDifferentiator
 from vd_observer_node.kernel.situation import CompiledSituationMonitor
-from vd_observer_node.observer import ObserverConfig
-from vd_observer_node.situation import SituationConfig, SituationMonitor, run_situation
-from vd_observer_node.vehicle import load_estimator_vehicle
+from vd_observer_node.situation.alerts import AlertConfig
+from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
+from vd_observer_node.situation.monitor import SituationConfig, SituationMonitor, run_situation
 from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.scenario import SensorSettings, load_scenario
 from vd_sim_node.vehicle.simulation import simulate

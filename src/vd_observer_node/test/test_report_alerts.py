@@ -14,7 +14,13 @@ from hypothesis import strategies as st
 from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.bag.typestore import deserialize, message_class, serialize
-from vd_observer_node.report.alerts import (
+from vd_observer_node.testing.devbag import (
+    alerts_topics,
+    encode_alerts,
+    sim_topics,
+    write_topic_arrays_bag,
+)
+from vd_observer_node.tools.report.alerts import (
     AlertSettings,
     activation_indices,
     already_active,
@@ -28,15 +34,9 @@ from vd_observer_node.report.alerts import (
     truth_conditions,
     truth_episodes,
 )
-from vd_observer_node.report.cli import add_report_parser
-from vd_observer_node.report.devbag import (
-    alerts_topics,
-    encode_alerts,
-    sim_topics,
-    write_topic_arrays_bag,
-)
-from vd_observer_node.report.evaluate import evaluate
-from vd_observer_node.report.load import decode_alerts, load_bag_series
+from vd_observer_node.tools.report.cli import add_report_parser
+from vd_observer_node.tools.report.evaluate import evaluate
+from vd_observer_node.tools.report.load import decode_alerts, load_bag_series
 
 RATE = 100.0  # [Hz]
 CFG = AlertSettings()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from vd_observer_node.report.figures import envelope
+from vd_observer_node.tools.report.figures import envelope
 
 
 def test_short_series_is_returned_unchanged() -> None:

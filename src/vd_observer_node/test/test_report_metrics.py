@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from vd_observer_node.report.metrics import (
+from vd_observer_node.tools.report.metrics import (
     change_times,
     convergence_time,
     convergence_times,

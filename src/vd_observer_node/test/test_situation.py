@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from vd_observer_node.alerts import AlertMonitor, slip_velocity
 from vd_observer_node.errors import ConfigurationError
-from vd_observer_node.friction_potential import FrictionPotentialEstimator, TyreCurves
-from vd_observer_node.observer import ObserverConfig, WheelObserver
-from vd_observer_node.situation import SituationConfig, SituationMonitor
+from vd_observer_node.estimation.observer import ObserverConfig, WheelObserver
+from vd_observer_node.situation.alerts import AlertMonitor, slip_velocity
+from vd_observer_node.situation.friction_potential import FrictionPotentialEstimator, TyreCurves
+from vd_observer_node.situation.monitor import SituationConfig, SituationMonitor
 from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.tire import slip_ratio
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 from vd_observer_node.errors import VehicleParameterError
-from vd_observer_node.vehicle import EstimatorVehicle, load_estimator_vehicle
+from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_estimator_vehicle
 
 VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
 

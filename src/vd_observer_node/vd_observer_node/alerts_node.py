@@ -7,7 +7,7 @@ and ``/vd/estimates/tire_forces`` (Fz). Publishes with that stamp
 ``/vd/estimates/friction_potential`` (vd_msgs/FrictionPotential: mu_max per axle, confidence,
 road class) and ``/vd/estimates/alerts`` (vd_msgs/Alerts: traction, lock and low-friction
 alerts per wheel, with hysteresis and onset stamps). Health goes to ``/diagnostics``. All logic
-is in :mod:`vd_observer_node.situation` (see docs/alerts.md); offline replay runs the same.
+is in :mod:`vd_observer_node.situation.monitor` (see docs/alerts.md); offline replay runs the same.
 ``kernel`` selects its compiled twin (default) or the Python reference; messages travel as
 CDR bytes (:mod:`vd_observer_node.bag.cdr_message`).
 """
@@ -39,14 +39,14 @@ from vd_msgs.msg import (
     WheelStates,
     WheelTorques,
 )
-from vd_observer_node.alerts import AlertConfig
-from vd_observer_node.alignment import StampAligner
-from vd_observer_node.bag.replay import default_vehicle_file
-from vd_observer_node.friction_potential import FrictionPotentialConfig, TyreCurves
+from vd_observer_node.estimation.alignment import StampAligner
+from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.node_params import ALERTS_PARAMS, KERNEL
 from vd_observer_node.raw_io import Encoders, aligned_input
-from vd_observer_node.situation import SituationConfig, SituationMonitor
-from vd_observer_node.vehicle import load_estimator_vehicle
+from vd_observer_node.situation.alerts import AlertConfig
+from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
+from vd_observer_node.situation.monitor import SituationConfig, SituationMonitor
+from vd_observer_node.tools.replay import default_vehicle_file
 
 __all__ = ['PARAMS', 'AlertsNode', 'main']
 

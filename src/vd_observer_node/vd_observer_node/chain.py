@@ -2,10 +2,10 @@
 
 What ``pipeline_node`` runs per stamp-matched set of sensor messages (wheel angles, body speed,
 wheel torques), ROS-free. It computes exactly what offline replay computes on the same stamps
-(:func:`vd_observer_node.cascade.run_cascade` followed by
-:func:`vd_observer_node.situation.run_situation`): the wheel and speed observers, the estimator
-fed the measured (or the observer's) speed, and the situation monitor fed the sensors and the
-cascade's omega, mu and Fz.
+(:func:`vd_observer_node.estimation.cascade.run_cascade` followed by
+:func:`vd_observer_node.situation.monitor.run_situation`): the wheel and speed observers, the
+estimator fed the measured (or the observer's) speed, and the situation monitor fed the sensors and
+the cascade's omega, mu and Fz.
 
 Two implementations behind one interface, chosen by `ChainSettings.kernel`:
 
@@ -22,20 +22,20 @@ from typing import Final, NamedTuple, Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-from vd_observer_node.alerts import AlertConfig
 from vd_observer_node.errors import ConfigurationError
-from vd_observer_node.estimator import Estimates, Estimator, EstimatorConfig
-from vd_observer_node.faults import FaultReport, merge_reports
-from vd_observer_node.friction_potential import FrictionPotentialConfig, TyreCurves
-from vd_observer_node.observer import (
+from vd_observer_node.estimation.estimator import Estimates, Estimator, EstimatorConfig
+from vd_observer_node.estimation.faults import FaultReport, merge_reports
+from vd_observer_node.estimation.observer import (
     ObserverConfig,
     SpeedObserver,
     SpeedState,
     WheelObserver,
     WheelState,
 )
-from vd_observer_node.situation import Situation, SituationConfig, SituationMonitor
-from vd_observer_node.vehicle import EstimatorVehicle
+from vd_observer_node.estimation.vehicle import EstimatorVehicle
+from vd_observer_node.situation.alerts import AlertConfig
+from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
+from vd_observer_node.situation.monitor import Situation, SituationConfig, SituationMonitor
 
 __all__ = [
     'ESTIMATOR_SPEEDS',

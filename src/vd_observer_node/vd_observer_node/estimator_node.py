@@ -2,12 +2,12 @@
 
 Subscribes ``/vd/observer/wheel_states``, ``/vd/observer/body_accel``,
 ``/vd/observer/body_velocity`` and ``/vd/sensors/wheel_torques``, matches them by header
-stamp (:class:`vd_observer_node.alignment.StampAligner`) and publishes, with that stamp,
+stamp (:class:`vd_observer_node.estimation.alignment.StampAligner`) and publishes, with that stamp,
 ``/vd/estimates/tire_forces`` (TireForces), ``/vd/estimates/friction`` (Friction),
 ``/vd/estimates/resistances`` (Resistances) and ``/vd/estimates/slope`` (Slope). Health and
 fault counters go to ``/diagnostics`` once per second. All math is in
-:mod:`vd_observer_node.estimator`; ``kernel`` selects its compiled twin (default) or the Python
-reference. Messages travel as CDR bytes (:mod:`vd_observer_node.bag.cdr_message`).
+:mod:`vd_observer_node.estimation.estimator`; ``kernel`` selects its compiled twin (default) or the
+Python reference. Messages travel as CDR bytes (:mod:`vd_observer_node.bag.cdr_message`).
 """
 
 from __future__ import annotations
@@ -27,13 +27,13 @@ from vd_sim_node.ros_common import (
 )
 
 from vd_msgs.msg import Friction, Resistances, Slope, TireForces, WheelStates, WheelTorques
-from vd_observer_node.alignment import StampAligner
-from vd_observer_node.bag.replay import default_vehicle_file
-from vd_observer_node.estimator import Estimator, EstimatorConfig
-from vd_observer_node.faults import merge_reports, summarise
+from vd_observer_node.estimation.alignment import StampAligner
+from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
+from vd_observer_node.estimation.faults import merge_reports, summarise
+from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.node_params import ESTIMATOR_PARAMS, KERNEL
 from vd_observer_node.raw_io import Encoders, aligned_input
-from vd_observer_node.vehicle import load_estimator_vehicle
+from vd_observer_node.tools.replay import default_vehicle_file
 
 __all__ = ['EstimatorNode', 'main']
 

@@ -13,17 +13,21 @@ from typing import Final
 
 from vd_sim_node.ros_common import ParamSpec, dataclass_param_specs
 
-from vd_observer_node.alerts import ALERT_KINDS, AlertConfig
 from vd_observer_node.chain import ESTIMATOR_SPEEDS, KERNELS
-from vd_observer_node.differentiator import DEFAULT_GAINS, DISCRETIZATIONS, INIT_POLICIES
-from vd_observer_node.estimator import (
+from vd_observer_node.estimation.differentiator import (
+    DEFAULT_GAINS,
+    DISCRETIZATIONS,
+    INIT_POLICIES,
+)
+from vd_observer_node.estimation.estimator import (
     LOAD_TRANSFER_SOURCES,
     SLOPE_ACCEL_SOURCES,
     EstimatorConfig,
 )
-from vd_observer_node.friction_potential import FrictionPotentialConfig
-from vd_observer_node.observer import ObserverConfig
-from vd_observer_node.situation import SituationConfig
+from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.situation.alerts import ALERT_KINDS, AlertConfig
+from vd_observer_node.situation.friction_potential import FrictionPotentialConfig
+from vd_observer_node.situation.monitor import SituationConfig
 
 __all__ = [
     'ALERTS_PARAMS',

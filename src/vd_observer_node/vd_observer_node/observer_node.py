@@ -7,9 +7,10 @@ measurement's own stamp, ``/vd/observer/wheel_states`` (vd_msgs/WheelStates),
 speed ``/vd/observer/body_velocity`` (geometry_msgs/TwistStamped, which the estimator uses so
 that the live graph computes exactly what the offline cascade does). Health and fault
 counters go to ``/diagnostics`` once per second. All math is in
-:mod:`vd_observer_node.observer`; ``kernel`` selects its compiled differentiator (default) or
-the Python reference. Messages travel as CDR bytes: raw subscriptions decoded with ``struct``
-and bytes published (:mod:`vd_observer_node.bag.cdr_message`), never Python message objects.
+:mod:`vd_observer_node.estimation.observer`; ``kernel`` selects its compiled differentiator
+(default) or the Python reference. Messages travel as CDR bytes: raw subscriptions decoded with
+``struct`` and bytes published (:mod:`vd_observer_node.bag.cdr_message`), never Python message
+objects.
 """
 
 from __future__ import annotations
@@ -32,9 +33,9 @@ from vd_sim_node.ros_common import (
 from vd_msgs.msg import WheelAngles, WheelStates
 from vd_observer_node.bag.cdr_message import MessageCodec
 from vd_observer_node.bag.errors import BagFormatError
-from vd_observer_node.faults import ERROR, merge_reports
+from vd_observer_node.estimation.faults import ERROR, merge_reports
+from vd_observer_node.estimation.observer import ObserverConfig, SpeedObserver, WheelObserver
 from vd_observer_node.node_params import KERNEL, OBSERVER_PARAMS
-from vd_observer_node.observer import ObserverConfig, SpeedObserver, WheelObserver
 from vd_observer_node.raw_io import Encoders
 
 __all__ = ['ObserverNode', 'main']

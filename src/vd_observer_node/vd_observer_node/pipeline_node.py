@@ -45,20 +45,20 @@ from vd_msgs.msg import (
     WheelStates,
     WheelTorques,
 )
-from vd_observer_node.alerts import AlertConfig
-from vd_observer_node.alignment import StampAligner
 from vd_observer_node.bag.cdr_message import MessageCodec
-from vd_observer_node.bag.replay import default_vehicle_file
 from vd_observer_node.chain import ChainOutput, ChainSettings, make_chain
-from vd_observer_node.differentiator import LevantGains
-from vd_observer_node.estimator import EstimatorConfig
-from vd_observer_node.faults import ERROR
-from vd_observer_node.friction_potential import FrictionPotentialConfig, TyreCurves
+from vd_observer_node.estimation.alignment import StampAligner
+from vd_observer_node.estimation.differentiator import LevantGains
+from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.estimation.faults import ERROR
+from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.node_params import PIPELINE_PARAMS
-from vd_observer_node.observer import ObserverConfig
 from vd_observer_node.raw_io import Encoders, aligned_input
-from vd_observer_node.situation import SituationConfig
-from vd_observer_node.vehicle import load_estimator_vehicle
+from vd_observer_node.situation.alerts import AlertConfig
+from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
+from vd_observer_node.situation.monitor import SituationConfig
+from vd_observer_node.tools.replay import default_vehicle_file
 
 __all__ = ['PARAMS', 'PipelineNode', 'main']
 

@@ -11,9 +11,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from vd_observer_node.alignment import StampAligner
 from vd_observer_node.bag.cdr_message import AlertsCodec, MessageCodec
 from vd_observer_node.bag.errors import BagFormatError
+from vd_observer_node.estimation.alignment import StampAligner
 
 __all__ = ['Encoders', 'aligned_input']
 

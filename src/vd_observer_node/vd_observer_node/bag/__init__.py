@@ -8,7 +8,7 @@ Public API (see docs/bags.md):
 - :mod:`.typestore` serializes/deserializes vd_msgs and standard types to CDR.
 """
 
-from .errors import (
+from vd_observer_node.bag.errors import (
     BagCorruptError,
     BagDiskFullError,
     BagError,
@@ -20,8 +20,8 @@ from .errors import (
     ReplayInputError,
     UnknownMessageTypeError,
 )
-from .reader import BagReader, RawMessage, TopicArrays, TopicInfo
-from .writer import BagWriter
+from vd_observer_node.bag.reader import BagReader, RawMessage, TopicArrays, TopicInfo
+from vd_observer_node.bag.writer import BagWriter
 
 __all__ = [
     'BagCorruptError',

@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import BagFormatError, BagUsageError, UnknownMessageTypeError
-from .typestore import vd_typestore
+from vd_observer_node.bag.errors import BagFormatError, BagUsageError, UnknownMessageTypeError
+from vd_observer_node.bag.typestore import vd_typestore
 
 __all__ = ['BatchFields', 'decode_batch', 'encode_batch', 'flat_fields']
 

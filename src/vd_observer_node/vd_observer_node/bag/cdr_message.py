@@ -17,9 +17,9 @@ import struct
 from collections.abc import Sequence
 from typing import Any, Final
 
-from .alerts_cdr import ALERT_CHANNELS
-from .cdr_batch import flat_fields
-from .errors import BagFormatError, BagUsageError
+from vd_observer_node.bag.alerts_cdr import ALERT_CHANNELS
+from vd_observer_node.bag.cdr_batch import flat_fields
+from vd_observer_node.bag.errors import BagFormatError, BagUsageError
 
 __all__ = ['AlertsCodec', 'DecodedMessage', 'MessageCodec']
 

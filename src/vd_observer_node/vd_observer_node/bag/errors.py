@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import ObserverError
+from vd_observer_node.errors import ObserverError
 
 __all__ = [
     'BagCorruptError',

@@ -15,7 +15,7 @@ from typing import Any
 import yaml
 from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReliability
 
-from .errors import BagFormatError, BagUsageError
+from vd_observer_node.bag.errors import BagFormatError, BagUsageError
 
 __all__ = [
     'METADATA_FILE',

@@ -24,10 +24,10 @@ import lz4.frame
 import numpy as np
 import zstandard
 
-from . import mcap_format as fmt
-from .errors import BagCorruptError, BagFormatError, BagNotFoundError
-from .metadata import read_metadata_file_paths
-from .typestore import deserialize, register_definition
+from vd_observer_node.bag import mcap_format as fmt
+from vd_observer_node.bag.errors import BagCorruptError, BagFormatError, BagNotFoundError
+from vd_observer_node.bag.metadata import read_metadata_file_paths
+from vd_observer_node.bag.typestore import deserialize, register_definition
 
 __all__ = [
     'BagReader',

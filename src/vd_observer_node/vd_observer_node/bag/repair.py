@@ -13,10 +13,10 @@ import shutil
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from .errors import BagNotFoundError, BagUsageError
-from .metadata import write_metadata
-from .reader import BagReader, find_mcap_files
-from .writer import BagWriter
+from vd_observer_node.bag.errors import BagNotFoundError, BagUsageError
+from vd_observer_node.bag.metadata import write_metadata
+from vd_observer_node.bag.reader import BagReader, find_mcap_files
+from vd_observer_node.bag.writer import BagWriter
 
 __all__ = ['RepairReport', 'repair_bag']
 

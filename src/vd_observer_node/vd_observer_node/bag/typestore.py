@@ -18,7 +18,7 @@ from typing import Any
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-from .errors import BagFormatError, UnknownMessageTypeError
+from vd_observer_node.bag.errors import BagFormatError, UnknownMessageTypeError
 
 __all__ = [
     'BASE_STORE',

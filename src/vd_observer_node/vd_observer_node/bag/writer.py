@@ -26,22 +26,22 @@ from typing import IO
 import numpy as np
 import zstandard
 
-from . import mcap_format as fmt
-from .errors import (
+from vd_observer_node.bag import mcap_format as fmt
+from vd_observer_node.bag.errors import (
     BagDiskFullError,
     BagError,
     BagExistsError,
     BagPathError,
     BagUsageError,
 )
-from .metadata import (
+from vd_observer_node.bag.metadata import (
     BagSummary,
     TopicSummary,
     normalize_qos_profiles,
     render_metadata,
     write_metadata,
 )
-from .typestore import message_definition, type_hash
+from vd_observer_node.bag.typestore import message_definition, type_hash
 
 __all__ = [
     'DEFAULT_CHUNK_DURATION_S',

@@ -15,18 +15,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node.cascade import CascadeResult, checked_record
 from vd_observer_node.chain import ChainOutput, ChainSettings
 from vd_observer_node.errors import InputShapeError
-from vd_observer_node.estimator import EstimatorConfig
-from vd_observer_node.faults import FaultReport, merge_reports
-from vd_observer_node.friction_potential import TyreCurves
-from vd_observer_node.observer import ObserverConfig, SpeedState, WheelState
-from vd_observer_node.situation import Situation, SituationSeries
-from vd_observer_node.vehicle import EstimatorVehicle
-
-from ._jit import jit
-from .estimation import (
+from vd_observer_node.estimation.cascade import CascadeResult, checked_record
+from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.estimation.faults import FaultReport, merge_reports
+from vd_observer_node.estimation.observer import ObserverConfig, SpeedState, WheelState
+from vd_observer_node.estimation.vehicle import EstimatorVehicle
+from vd_observer_node.kernel._jit import jit
+from vd_observer_node.kernel.estimation import (
     E_AERO,
     E_FX,
     E_FZ,
@@ -41,8 +38,8 @@ from .estimation import (
     estimates_from_packed,
     estimator_update,
 )
-from .levant import CompiledDifferentiator, diff_update
-from .situation import (
+from vd_observer_node.kernel.levant import CompiledDifferentiator, diff_update
+from vd_observer_node.kernel.situation import (
     P_CONFIDENCE,
     P_MU_MAX,
     P_ROAD,
@@ -52,6 +49,8 @@ from .situation import (
     monitor_update,
     potential_from_arrays,
 )
+from vd_observer_node.situation.friction_potential import TyreCurves
+from vd_observer_node.situation.monitor import Situation, SituationSeries
 
 __all__ = ['CompiledChain', 'run_cascade_compiled', 'run_situation_compiled', 'warm_up']
 

@@ -1,7 +1,7 @@
 """Compiled estimator: `estimator.Estimator` (with its `filters.LowPass` stages) in numba.
 
-Mirrors :class:`vd_observer_node.estimator.Estimator` step for step: the wheel spin balance,
-load transfer (both sources), utilised friction and its validity, slip, rolling and aero
+Mirrors :class:`vd_observer_node.estimation.estimator.Estimator` step for step: the wheel spin
+balance, load transfer (both sources), utilised friction and its validity, slip, rolling and aero
 resistance, the slope from the filtered force balance (both acceleration sources), held
 inputs, resets and every fault counter. The tests run both on the same inputs and require
 equal outputs (1e-9) and equal fault counts.
@@ -27,16 +27,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import InputShapeError
-from vd_observer_node.estimator import (
+from vd_observer_node.estimation.estimator import (
     LOAD_TRANSFER_SOURCES,
     SLOPE_ACCEL_SOURCES,
     Estimates,
     EstimatorConfig,
 )
-from vd_observer_node.faults import ESTIMATOR_FAULTS, FaultCounter
-from vd_observer_node.vehicle import EstimatorVehicle
-
-from ._jit import jit
+from vd_observer_node.estimation.faults import ESTIMATOR_FAULTS, FaultCounter
+from vd_observer_node.estimation.vehicle import EstimatorVehicle
+from vd_observer_node.kernel._jit import jit
 
 __all__ = [
     'EST_SIZE',

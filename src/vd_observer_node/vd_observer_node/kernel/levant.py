@@ -1,7 +1,7 @@
 """Compiled Levant differentiator: `LevantDifferentiator` of `estimation`'s reference, in numba.
 
-Mirrors :class:`vd_observer_node.differentiator.LevantDifferentiator` step for step (the three
-discretizations, the three initialisation policies, every fault rule and counter); the tests
+Mirrors :class:`vd_observer_node.estimation.differentiator.LevantDifferentiator` step for step (the
+three discretizations, the three initialisation policies, every fault rule and counter); the tests
 run both on the same inputs and require equal outputs (1e-9) and equal fault counts.
 
 The state lives in numpy arrays owned by `CompiledDifferentiator`; `diff_update` advances one
@@ -26,7 +26,8 @@ from typing import Final
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node.differentiator import (
+from vd_observer_node.errors import InputShapeError
+from vd_observer_node.estimation.differentiator import (
     DEFAULT_GAINS,
     DISCRETIZATIONS,
     INIT_POLICIES,
@@ -34,10 +35,8 @@ from vd_observer_node.differentiator import (
     LevantGains,
     checked_settings,
 )
-from vd_observer_node.errors import InputShapeError
-from vd_observer_node.faults import OBSERVER_FAULTS, FaultCounter
-
-from ._jit import jit
+from vd_observer_node.estimation.faults import OBSERVER_FAULTS, FaultCounter
+from vd_observer_node.kernel._jit import jit
 
 __all__ = [
     'COUNT_REJECTED',

@@ -1,10 +1,10 @@
 """Compiled situation monitor: fast wheel observer, friction potential and alerts, in numba.
 
-Mirrors :class:`vd_observer_node.situation.SituationMonitor` with its parts
-(:class:`~vd_observer_node.friction_potential.FrictionPotentialEstimator`: the similarity fit
-on the Magic Formula at every road scale, its confidence and road classes;
-:class:`~vd_observer_node.alerts.AlertMonitor`: metrics, hysteresis and debounce) step for
-step; the tests run both on the same inputs and require equal outputs (1e-9; levels and road
+Mirrors :class:`vd_observer_node.situation.monitor.SituationMonitor` with its parts
+(:class:`~vd_observer_node.situation.friction_potential.FrictionPotentialEstimator`: the similarity
+fit on the Magic Formula at every road scale, its confidence and road classes;
+:class:`~vd_observer_node.situation.alerts.AlertMonitor`: metrics, hysteresis and debounce) step
+for step; the tests run both on the same inputs and require equal outputs (1e-9; levels and road
 classes exactly).
 
 The Magic Formula of one sample is evaluated at all road scales with its per-sample terms
@@ -29,19 +29,18 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node.alerts import ALERT_KINDS, Alert, AlertConfig
 from vd_observer_node.errors import InputShapeError
-from vd_observer_node.friction_potential import (
+from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.kernel._jit import jit
+from vd_observer_node.kernel.levant import CompiledDifferentiator, diff_reset, diff_update
+from vd_observer_node.situation.alerts import ALERT_KINDS, Alert, AlertConfig
+from vd_observer_node.situation.friction_potential import (
     ROAD_UNKNOWN,
     FrictionPotential,
     FrictionPotentialConfig,
     TyreCurves,
 )
-from vd_observer_node.observer import ObserverConfig
-from vd_observer_node.situation import Situation, SituationConfig
-
-from ._jit import jit
-from .levant import CompiledDifferentiator, diff_reset, diff_update
+from vd_observer_node.situation.monitor import Situation, SituationConfig
 
 __all__ = [
     'POT_SIZE',

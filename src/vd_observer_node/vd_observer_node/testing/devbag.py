@@ -14,11 +14,16 @@ from typing import Any
 
 import numpy as np
 
-from ..bag.alerts_cdr import ALERTS_TYPE as _ALERTS_TYPE
-from ..bag.alerts_cdr import encode_alerts
-from ..bag.cdr_batch import encode_batch
-from ..bag.writer import BagWriter
-from .topics import ALERT_TOPICS, ESTIMATE_TOPICS, SENSOR_TOPICS, TRUTH_TOPICS
+from vd_observer_node.bag.alerts_cdr import ALERTS_TYPE as _ALERTS_TYPE
+from vd_observer_node.bag.alerts_cdr import encode_alerts
+from vd_observer_node.bag.cdr_batch import encode_batch
+from vd_observer_node.bag.writer import BagWriter
+from vd_observer_node.tools.report.topics import (
+    ALERT_TOPICS,
+    ESTIMATE_TOPICS,
+    SENSOR_TOPICS,
+    TRUTH_TOPICS,
+)
 
 __all__ = [
     'TopicValues',
@@ -37,7 +42,7 @@ _TYPES = {**SENSOR_TOPICS, **ESTIMATE_TOPICS, **ALERT_TOPICS, **TRUTH_TOPICS}
 
 
 def _full_fields(msgtype: str, n: int, given: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
-    from ..bag.cdr_batch import flat_fields
+    from vd_observer_node.bag.cdr_batch import flat_fields
 
     out: dict[str, np.ndarray] = {}
     for field in flat_fields(msgtype):

@@ -34,8 +34,12 @@ from typing import Final
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .load import BagSeries
-from .topics import ALERT_TOPIC, ESTIMATED_POTENTIAL_TOPIC, TRUE_POTENTIAL_TOPIC
+from vd_observer_node.tools.report.load import BagSeries
+from vd_observer_node.tools.report.topics import (
+    ALERT_TOPIC,
+    ESTIMATED_POTENTIAL_TOPIC,
+    TRUE_POTENTIAL_TOPIC,
+)
 
 __all__ = [
     'ALERT_KINDS',

@@ -22,11 +22,11 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node import estimators as phys
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.faults import ESTIMATOR_FAULTS, FaultCounter
-from vd_observer_node.filters import LowPass
-from vd_observer_node.vehicle import EstimatorVehicle
+from vd_observer_node.estimation import formulas as phys
+from vd_observer_node.estimation.faults import ESTIMATOR_FAULTS, FaultCounter
+from vd_observer_node.estimation.filters import LowPass
+from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
 __all__ = [
     'LOAD_TRANSFER_SOURCES',

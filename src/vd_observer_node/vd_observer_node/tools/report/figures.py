@@ -23,7 +23,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from .alerts import (
+from vd_observer_node.tools.report.alerts import (
     ALERT_KINDS,
     AXLE_NAMES,
     AlertData,
@@ -31,9 +31,9 @@ from .alerts import (
     axle_utilisation,
     truth_conditions,
 )
-from .evaluate import AccuracyReport, Comparison
-from .metrics import error_stats
-from .topics import WHEEL_NAMES
+from vd_observer_node.tools.report.evaluate import AccuracyReport, Comparison
+from vd_observer_node.tools.report.metrics import error_stats
+from vd_observer_node.tools.report.topics import WHEEL_NAMES
 
 __all__ = ['DPI', 'envelope', 'write_alert_figures', 'write_figures']
 
@@ -222,7 +222,7 @@ def write_figures(
     """Write one PNG per quantity and ``summary.png`` into ``out_dir``.
 
     Args:
-        comparisons: from :func:`~vd_observer_node.report.evaluate.evaluate`.
+        comparisons: from :func:`~vd_observer_node.tools.report.evaluate.evaluate`.
         report: the metrics (for excluded windows and titles).
         out_dir: existing directory.
 
@@ -388,7 +388,7 @@ def write_alert_figures(
     """Write ``alerts.png`` and ``friction_potential.png`` (each only if its estimate exists).
 
     Args:
-        data: paired arrays from :func:`~vd_observer_node.report.alerts.alert_data`.
+        data: paired arrays from :func:`~vd_observer_node.tools.report.alerts.alert_data`.
         section: the metrics of the same data.
         out_dir: existing directory.
 

@@ -52,7 +52,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.faults import OBSERVER_FAULTS, FaultCounter
+from vd_observer_node.estimation.faults import OBSERVER_FAULTS, FaultCounter
 
 __all__ = [
     'DEFAULT_GAINS',
@@ -370,7 +370,7 @@ class LevantDifferentiator:
     """Stateful n-channel second-order Levant differentiator on irregular time stamps.
 
     Invalid input never poisons the state (every case counted in `faults`, see
-    `vd_observer_node.faults`):
+    `vd_observer_node.estimation.faults`):
 
     * a non-finite stamp, a duplicate stamp or a stamp slightly older than the last one is
       rejected (state unchanged, also counted in `rejected_count`);

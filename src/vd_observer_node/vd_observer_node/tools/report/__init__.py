@@ -6,9 +6,9 @@ ROS-free. Pipeline: :func:`load_bag_series` (batch-decoded topics) -> :func:`eva
 ``vd report`` sub-command is in :mod:`.cli`. See docs/report.md.
 """
 
-from .alerts import AlertSettings, AlertsSection
-from .errors import ReportError, ReportInputError
-from .evaluate import (
+from vd_observer_node.tools.report.alerts import AlertSettings, AlertsSection
+from vd_observer_node.tools.report.errors import ReportError, ReportInputError
+from vd_observer_node.tools.report.evaluate import (
     AccuracyReport,
     Comparison,
     EvaluationSettings,
@@ -16,9 +16,9 @@ from .evaluate import (
     SlopeConvergence,
     evaluate,
 )
-from .format import report_json, report_markdown, report_text
-from .load import BagSeries, TopicSeries, load_bag_series
-from .metrics import ErrorStats
+from vd_observer_node.tools.report.format import report_json, report_markdown, report_text
+from vd_observer_node.tools.report.load import BagSeries, TopicSeries, load_bag_series
+from vd_observer_node.tools.report.metrics import ErrorStats
 
 __all__ = [
     'AccuracyReport',

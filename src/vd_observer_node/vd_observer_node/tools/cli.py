@@ -16,7 +16,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from vd_observer_node.errors import ObserverError
-from vd_observer_node.report.cli import add_report_parser
+from vd_observer_node.tools.report.cli import add_report_parser
 
 __all__ = ['main']
 
@@ -73,8 +73,8 @@ def _repair(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from vd_observer_node.bag.replay import ReplayConfig, load_replay_config, replay_bag
-    from vd_observer_node.vehicle import load_estimator_vehicle
+    from vd_observer_node.estimation.vehicle import load_estimator_vehicle
+    from vd_observer_node.tools.replay import ReplayConfig, load_replay_config, replay_bag
 
     vehicle = load_estimator_vehicle(args.vehicle) if args.vehicle else None
     config = load_replay_config(args.config) if args.config else ReplayConfig()

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node import estimators as phys
-from vd_observer_node.vehicle import EstimatorVehicle
+from vd_observer_node.estimation import formulas as phys
+from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
 __all__ = ['SyntheticTrajectory', 'synthetic_trajectory']
 

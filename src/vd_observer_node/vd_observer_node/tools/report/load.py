@@ -16,10 +16,15 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from ..bag.cdr_batch import BatchFields, decode_batch
-from ..bag.errors import BagFormatError
-from ..bag.reader import BagReader
-from .topics import ALERT_TOPICS, ESTIMATE_TOPICS, SENSOR_TOPICS, TRUTH_TOPICS
+from vd_observer_node.bag.cdr_batch import BatchFields, decode_batch
+from vd_observer_node.bag.errors import BagFormatError
+from vd_observer_node.bag.reader import BagReader
+from vd_observer_node.tools.report.topics import (
+    ALERT_TOPICS,
+    ESTIMATE_TOPICS,
+    SENSOR_TOPICS,
+    TRUTH_TOPICS,
+)
 
 __all__ = ['BagSeries', 'TopicSeries', 'decode_alerts', 'load_bag_series']
 

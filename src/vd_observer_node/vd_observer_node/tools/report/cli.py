@@ -11,7 +11,7 @@ import sys
 import time
 from pathlib import Path
 
-from ..errors import ObserverError
+from vd_observer_node.errors import ObserverError
 
 __all__ = ['add_report_parser', 'default_out_dir', 'run_report']
 
@@ -67,14 +67,14 @@ def run_report(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .evaluate import evaluate
-    from .format import report_json, report_markdown, report_text
-    from .load import load_bag_series
+    from vd_observer_node.tools.report.evaluate import evaluate
+    from vd_observer_node.tools.report.format import report_json, report_markdown, report_text
+    from vd_observer_node.tools.report.load import load_bag_series
 
     started = time.perf_counter()
     static = None
     if getattr(args, 'vehicle', None):
-        from ..vehicle import load_estimator_vehicle
+        from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 
         static = load_estimator_vehicle(args.vehicle).static_wheel_loads
     series = load_bag_series(args.bag, progress=not getattr(args, 'no_progress', False))
@@ -85,12 +85,12 @@ def _run(args: argparse.Namespace) -> int:
     (out / 'metrics.md').write_text(report_markdown(report))
     figures: list[Path] = []
     if not getattr(args, 'no_figures', False):
-        from .figures import write_figures
+        from vd_observer_node.tools.report.figures import write_figures
 
         figures = write_figures(comparisons, report, out)
         if report.alerts is not None:
-            from .alerts import alert_data
-            from .figures import write_alert_figures
+            from vd_observer_node.tools.report.alerts import alert_data
+            from vd_observer_node.tools.report.figures import write_alert_figures
 
             data, _ = alert_data(series)
             if data is not None:

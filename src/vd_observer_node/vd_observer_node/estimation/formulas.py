@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node.vehicle import EstimatorVehicle
+from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
 __all__ = [
     'aero_drag',

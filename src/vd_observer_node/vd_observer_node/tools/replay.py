@@ -5,9 +5,10 @@ Pipeline (whole arrays, no per-message decoding in Python):
 1. read the three sensor topics and every ``/vd/truth/*`` topic as raw CDR;
 2. batch-decode the sensors to numpy (:mod:`.cdr_batch`);
 3. align them on exact header stamps (a stamp present on all three topics, as the live
-   estimator node's ``StampAligner`` does) and call :func:`vd_observer_node.cascade.run_cascade`;
-4. run :class:`vd_observer_node.situation.SituationMonitor` per aligned stamp on the sensors
-   and the cascade's wheel speed, μ and loads, as the live alerts node does: the friction
+   estimator node's ``StampAligner`` does) and call
+:func:`vd_observer_node.estimation.cascade.run_cascade`;
+4. run :class:`vd_observer_node.situation.monitor.SituationMonitor` per aligned stamp on the
+   sensors and the cascade's wheel speed, μ and loads, as the live alerts node does: the friction
    potential (``/vd/estimates/friction_potential``) and the 12 alert records
    (``/vd/estimates/alerts``). The tyre curves come from the same vehicle file as the
    estimator vehicle;
@@ -36,19 +37,24 @@ import yaml
 from tqdm import tqdm
 from vd_sim_node.topics import ALERTS, ESTIMATES, OBSERVER, SENSORS
 
-from ..alerts import AlertConfig
-from ..cascade import CascadeResult, run_cascade
-from ..errors import ConfigurationError, VehicleParameterError
-from ..estimator import EstimatorConfig
-from ..friction_potential import FrictionPotentialConfig, TyreCurves
-from ..observer import ObserverConfig
-from ..situation import SituationConfig, SituationMonitor, SituationSeries, run_situation
-from ..vehicle import EstimatorVehicle, load_estimator_vehicle
-from .alerts_cdr import encode_alerts
-from .cdr_batch import decode_batch, encode_batch
-from .errors import BagExistsError, BagNotFoundError, ReplayInputError
-from .reader import BagReader, TopicArrays
-from .writer import BagWriter
+from vd_observer_node.bag.alerts_cdr import encode_alerts
+from vd_observer_node.bag.cdr_batch import decode_batch, encode_batch
+from vd_observer_node.bag.errors import BagExistsError, BagNotFoundError, ReplayInputError
+from vd_observer_node.bag.reader import BagReader, TopicArrays
+from vd_observer_node.bag.writer import BagWriter
+from vd_observer_node.errors import ConfigurationError, VehicleParameterError
+from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_estimator_vehicle
+from vd_observer_node.situation.alerts import AlertConfig
+from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
+from vd_observer_node.situation.monitor import (
+    SituationConfig,
+    SituationMonitor,
+    SituationSeries,
+    run_situation,
+)
 
 __all__ = [
     'ALERT_TOPICS',
@@ -268,8 +274,8 @@ def situation_topics(
 ) -> dict[str, dict[str, np.ndarray]]:
     """Friction potential and alerts of every stamp, as the alerts node computes them.
 
-    Runs :func:`vd_observer_node.situation.run_situation` in blocks of stamps (the monitor's
-    state carries across them), so a progress bar can follow.
+    Runs :func:`vd_observer_node.situation.monitor.run_situation` in blocks of stamps (the
+    monitor's state carries across them), so a progress bar can follow.
 
     Args:
         wheel_angle: shape (N, 4), [rad] measured wheel angles.
@@ -377,7 +383,7 @@ def replay_bag(
     compiled = kernel == 'compiled'
     if cascade is None:
         if compiled:
-            from ..kernel.chain import run_cascade_compiled
+            from vd_observer_node.kernel.chain import run_cascade_compiled
 
             cascade = run_cascade_compiled
         else:
@@ -408,8 +414,8 @@ def replay_bag(
             raise VehicleParameterError(f'vehicle file {source}: {exc}') from exc
         monitor_class: Any = SituationMonitor
         if compiled:
-            from ..kernel.chain import warm_up
-            from ..kernel.situation import CompiledSituationMonitor
+            from vd_observer_node.kernel.chain import warm_up
+            from vd_observer_node.kernel.situation import CompiledSituationMonitor
 
             monitor_class = CompiledSituationMonitor
             warm_up(TyreCurves.from_tire(tire))
@@ -484,7 +490,7 @@ def replay_bag(
                     leave=False,
                 ) as phase:
                     if compiled:
-                        from ..kernel.chain import run_situation_compiled
+                        from vd_observer_node.kernel.chain import run_situation_compiled
 
                         situation_values.update(
                             situation_topics(

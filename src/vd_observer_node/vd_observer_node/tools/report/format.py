@@ -8,9 +8,9 @@ import math
 import unicodedata
 from typing import Any
 
-from .alerts import AXLE_NAMES, AlertsSection, road_name
-from .evaluate import AccuracyReport, QuantityMetrics
-from .topics import WHEEL_NAMES
+from vd_observer_node.tools.report.alerts import AXLE_NAMES, AlertsSection, road_name
+from vd_observer_node.tools.report.evaluate import AccuracyReport, QuantityMetrics
+from vd_observer_node.tools.report.topics import WHEEL_NAMES
 
 __all__ = ['report_json', 'report_markdown', 'report_text']
 

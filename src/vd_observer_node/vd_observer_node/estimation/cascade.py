@@ -12,9 +12,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.estimator import Estimator, EstimatorConfig
-from vd_observer_node.observer import Observer, ObserverConfig
-from vd_observer_node.vehicle import EstimatorVehicle
+from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
+from vd_observer_node.estimation.observer import Observer, ObserverConfig
+from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
 __all__ = ['CascadeResult', 'checked_record', 'run_cascade']
 

@@ -13,10 +13,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .alerts import AlertSettings, AlertsSection, alert_data, evaluate_alerts_section
-from .errors import ReportInputError
-from .load import BagSeries, TopicSeries
-from .metrics import (
+from vd_observer_node.tools.report.alerts import (
+    AlertSettings,
+    AlertsSection,
+    alert_data,
+    evaluate_alerts_section,
+)
+from vd_observer_node.tools.report.errors import ReportInputError
+from vd_observer_node.tools.report.load import BagSeries, TopicSeries
+from vd_observer_node.tools.report.metrics import (
     ErrorStats,
     change_times,
     convergence_times,
@@ -25,7 +30,7 @@ from .metrics import (
     relative_error_stats,
     step_times,
 )
-from .topics import ESTIMATE_TOPICS, GEAR_TOPIC, TRUTH_TOPICS
+from vd_observer_node.tools.report.topics import ESTIMATE_TOPICS, GEAR_TOPIC, TRUTH_TOPICS
 
 __all__ = [
     'TARGETS',

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from ..errors import ObserverError
+from vd_observer_node.errors import ObserverError
 
 __all__ = ['ReportError', 'ReportInputError']
 
 
 class ReportError(ObserverError):
-    """Base class of every error raised by :mod:`vd_observer_node.report`."""
+    """Base class of every error raised by :mod:`vd_observer_node.tools.report`."""
 
 
 class ReportInputError(ReportError):

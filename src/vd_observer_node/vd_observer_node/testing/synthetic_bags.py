@@ -10,8 +10,8 @@ import os
 
 import numpy as np
 
-from .cdr_batch import encode_batch
-from .writer import BagWriter
+from vd_observer_node.bag.cdr_batch import encode_batch
+from vd_observer_node.bag.writer import BagWriter
 
 __all__ = ['SyntheticDrive', 'synthetic_drive', 'write_synthetic_drive_bag']
 

@@ -24,16 +24,22 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from vd_sim_node.vehicle.tire import slip_ratio
 
-from vd_observer_node.alerts import ALERT_KINDS, Alert, AlertConfig, AlertMonitor, slip_velocity
-from vd_observer_node.cascade import CascadeResult
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.friction_potential import (
+from vd_observer_node.estimation.cascade import CascadeResult
+from vd_observer_node.estimation.observer import ObserverConfig, WheelObserver
+from vd_observer_node.situation.alerts import (
+    ALERT_KINDS,
+    Alert,
+    AlertConfig,
+    AlertMonitor,
+    slip_velocity,
+)
+from vd_observer_node.situation.friction_potential import (
     FrictionPotential,
     FrictionPotentialConfig,
     FrictionPotentialEstimator,
     TyreCurves,
 )
-from vd_observer_node.observer import ObserverConfig, WheelObserver
 
 __all__ = [
     'Situation',

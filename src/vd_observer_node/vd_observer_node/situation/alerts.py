@@ -14,9 +14,9 @@ Three alert kinds per wheel (FL=0, FR=1, RL=2, RR=3):
   wheel cannot spin.
 * ``low_friction`` (code 2): the utilised friction approaches the available one. Metric: the
   utilisation ``|mu| / mu_max`` of a wheel with a valid ``mu`` (``mu_max`` of its axle from
-  `vd_observer_node.friction_potential`), and 1 for a wheel past its peak slip (slip beyond
-  ``slip_peak`` with a force of the same sign and the slip-velocity gate open): past the peak
-  the tyre uses all the friction there is, even though its mu has dropped below the peak.
+  `vd_observer_node.situation.friction_potential`), and 1 for a wheel past its peak slip (slip
+  beyond ``slip_peak`` with a force of the same sign and the slip-velocity gate open): past the
+  peak the tyre uses all the friction there is, even though its mu has dropped below the peak.
 
 Each metric goes through `classify_level` (two thresholds per level, ``*_on`` to enter,
 ``*_off`` to leave: a hysteresis band) and then `step_channel` (debounce in time: a higher

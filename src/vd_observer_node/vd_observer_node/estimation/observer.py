@@ -15,15 +15,15 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node.differentiator import (
+from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimation.differentiator import (
     DEFAULT_GAINS,
     DISCRETIZATIONS,
     INIT_POLICIES,
     LevantDifferentiator,
     LevantGains,
 )
-from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.faults import FaultCounter
+from vd_observer_node.estimation.faults import FaultCounter
 
 __all__ = [
     'Observer',
