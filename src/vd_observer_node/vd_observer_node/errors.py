@@ -1,5 +1,7 @@
 """Exception types of the observer / estimator core."""
 
+from vd_sim_node.errors import VdError
+
 __all__ = [
     'ConfigurationError',
     'InputShapeError',
@@ -8,7 +10,7 @@ __all__ = [
 ]
 
 
-class ObserverError(Exception):
+class ObserverError(VdError):
     """Base class of every error raised by vd_observer_node."""
 
 

@@ -14,7 +14,8 @@ import time
 from typing import Any
 
 from rclpy._rclpy_pybind11 import RCLError
-from rclpy.clock import Clock, ClockType
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from vd_sim_node.ros_common import (
@@ -26,12 +27,12 @@ from vd_sim_node.ros_common import (
     declare_parameters,
     deliver_pending,
     ns_to_time,
+    ros_message_class,
     run_node,
 )
 
 from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.errors import ReplayInputError
-from vd_observer_node.recorder_node import message_class
 
 __all__ = ['SENSOR_TOPICS', 'PlayerNode', 'main']
 
@@ -69,7 +70,7 @@ PARAMS = [
 _PERIOD = 0.002  # [s] publishing timer period
 
 
-class PlayerNode(Node):  # type: ignore[misc]
+class PlayerNode(Node):
     """Holds the selected messages in memory and publishes each when its time has come."""
 
     def __init__(self) -> None:
@@ -89,7 +90,7 @@ class PlayerNode(Node):  # type: ignore[misc]
         if not self.messages:
             raise ReplayInputError(f'{v["bag"]}: the selected topics hold no message')
         self.publishers_by_topic = {
-            t: self.create_publisher(message_class(available[t].msgtype), t, STREAM_QOS)
+            t: self.create_publisher(ros_message_class(available[t].msgtype), t, STREAM_QOS)
             for t in wanted
         }
         self.p_clock = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS) if v['clock'] else None

@@ -13,7 +13,6 @@ writes a chunk when it is that old, and this node checks every 0.1 s).
 
 from __future__ import annotations
 
-import importlib
 import re
 import sys
 import time
@@ -21,7 +20,8 @@ from pathlib import Path
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.clock import Clock, ClockType
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from vd_sim_node.ros_common import (
     CLOCK_QOS,
@@ -30,6 +30,7 @@ from vd_sim_node.ros_common import (
     ParamSpec,
     declare_parameters,
     node_status,
+    ros_message_class,
     run_node,
 )
 from vd_sim_node.topics import CONTRACT
@@ -72,14 +73,7 @@ _STREAM_QOS_YAML = format_qos_profiles(
 )
 
 
-def message_class(type_name: str) -> Any:
-    """The Python class of 'pkg/msg/Type' (what rosidl_runtime_py.get_message does)."""
-    package, _, name = type_name.rpartition('/')
-    module = importlib.import_module(package.replace('/', '.'))
-    return getattr(module, name)
-
-
-class RecorderNode(Node):  # type: ignore[misc]
+class RecorderNode(Node):
     """Discovers topics, subscribes with raw=True, hands the bytes to the bag writer."""
 
     def __init__(self) -> None:
@@ -114,7 +108,7 @@ class RecorderNode(Node):  # type: ignore[misc]
 
     def wanted(self, topic: str) -> bool:
         if topic in self.extra:
-            return self.extra[topic]
+            return bool(self.extra[topic])
         return bool(self.pattern.search(topic))
 
     def discover(self) -> None:
@@ -128,7 +122,7 @@ class RecorderNode(Node):  # type: ignore[misc]
         """Declare `topic` in the bag and subscribe to it, serialized."""
         try:
             self.writer.add_topic(topic, type_name, _STREAM_QOS_YAML)
-            kind = message_class(type_name)
+            kind = ros_message_class(type_name)
         except (UnknownMessageTypeError, ImportError, AttributeError) as exc:
             self.skipped.add(topic)
             self.get_logger().warning(f'not recording {topic} ({type_name}): {exc}')

@@ -10,11 +10,21 @@ __all__ = [
     'ParameterError',
     'ScenarioError',
     'SimulationError',
+    'VdError',
     'VehicleSimError',
 ]
 
 
-class VehicleSimError(Exception):
+class VdError(Exception):
+    """Base class of every error a vd package raises for bad input, files or settings.
+
+    vd_observer_node's errors derive from it too, so the node plumbing
+    (`vd_sim_node.ros_common.run_node`) reports any of them as one line without importing
+    the packages built on top of this one.
+    """
+
+
+class VehicleSimError(VdError):
     """Base class of every error raised by the vehicle simulator package."""
 
 

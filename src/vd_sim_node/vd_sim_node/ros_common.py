@@ -18,9 +18,11 @@ from __future__ import annotations
 
 import dataclasses
 import gc
+import importlib
 import os
 import re
 import sys
+import threading
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -33,37 +35,28 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from vd_sim_node.errors import VehicleSimError
+from vd_sim_node.errors import VdError
 from vd_sim_node.params_file import params_file_problem
-
-try:  # vd_observer_node depends on this package, not the other way round
-    from vd_observer_node.bag.errors import BagError
-    from vd_observer_node.errors import ObserverError
-except ImportError:  # pragma: no cover - simulator installed alone
-
-    class ObserverError(Exception):  # type: ignore[no-redef]
-        """Placeholder: vd_observer_node is not installed."""
-
-    class BagError(Exception):  # type: ignore[no-redef]
-        """Placeholder: vd_observer_node is not installed."""
-
 
 __all__ = [
     'CLOCK_QOS',
     'DIAGNOSTICS_QOS',
     'EXECUTORS',
     'STREAM_QOS',
+    'TEARDOWN_TIMEOUT_S',
     'InvalidParameterError',
     'NodeFinished',
     'ParamSpec',
     'StopSignals',
     'SubscriberGate',
+    'TeardownWatchdog',
     'dataclass_param_specs',
     'declare_parameters',
     'deliver_pending',
     'diagnostic_array',
     'node_status',
     'ns_to_time',
+    'ros_message_class',
     'run_node',
     'time_to_ns',
 ]
@@ -93,6 +86,18 @@ def ns_to_time(ns: int) -> Time:
 def time_to_ns(stamp: Time) -> int:
     """Convert a builtin_interfaces/Time to integer nanoseconds."""
     return int(stamp.sec) * _NS + int(stamp.nanosec)
+
+
+def ros_message_class(type_name: str) -> Any:
+    """The rclpy message class of ``'pkg/msg/Type'`` (what rosidl_runtime_py.get_message does).
+
+    Raises:
+        ImportError: the interface package is not installed.
+        AttributeError: the package has no such message.
+    """
+    package, _, name = type_name.rpartition('/')
+    module = importlib.import_module(package.replace('/', '.'))
+    return getattr(module, name)
 
 
 class NodeFinished(Exception):  # noqa: N818 (a signal, not an error)
@@ -325,7 +330,7 @@ _SPIN_TIMEOUT_S = 0.1
 
 def _executor(kind: str) -> Any:
     if kind == 'events':
-        from rclpy.experimental import EventsExecutor
+        from rclpy.experimental.events_executor import EventsExecutor
 
         return EventsExecutor()
     from rclpy.executors import SingleThreadedExecutor
@@ -368,6 +373,49 @@ class StopSignals:
         import signal
 
         return signal.Signals(self.received).name if self.received is not None else ''
+
+
+#: [s] the middleware teardown after a node closed its outputs may take this long at most
+TEARDOWN_TIMEOUT_S = 5.0
+
+
+class TeardownWatchdog:
+    """Ends the process with exit code 0 if the middleware teardown hangs.
+
+    Runs around what `run_node` does after the node's outputs are closed (executor shutdown,
+    node destruction, rclpy shutdown). On a 2-core machine with both cores busy, a recorder
+    once closed its bag and logged its stop, then stayed inside that teardown until its
+    supervisor killed it 10 s later. Nothing is left to lose by then, so a teardown that
+    overruns `timeout_s` is cut short: one line naming where it was stuck, stdio flushed,
+    ``os._exit(0)``.
+    """
+
+    def __init__(self, timeout_s: float) -> None:
+        """Arm for `timeout_s` [s] on entering the ``with`` block."""
+        self.timeout_s = timeout_s
+        self._timer: threading.Timer | None = None
+        self._main = threading.get_ident()
+
+    def __enter__(self) -> TeardownWatchdog:
+        self._timer = threading.Timer(self.timeout_s, self._expire)
+        self._timer.daemon = True
+        self._timer.start()
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        if self._timer is not None:
+            self._timer.cancel()
+
+    def _expire(self) -> None:
+        frame = sys._current_frames().get(self._main)
+        where = f'{frame.f_code.co_name} ({frame.f_code.co_filename})' if frame else 'unknown'
+        print(
+            f'teardown still running after {self.timeout_s:.0f} s, in {where}: exiting',
+            file=sys.stderr,
+            flush=True,
+        )
+        sys.stdout.flush()
+        os._exit(0)
 
 
 def run_node(factory: Any, args: list[str] | None = None) -> int:
@@ -427,7 +475,7 @@ def run_node(factory: Any, args: list[str] | None = None) -> int:
     except InvalidParameterError as exc:
         print(f'error: {exc}', file=sys.stderr, flush=True)
         return 2
-    except (VehicleSimError, ObserverError, BagError) as exc:
+    except VdError as exc:
         # configuration/file problems: one line naming the parameter, not a traceback
         print(f'error: {exc}', file=sys.stderr, flush=True)
         return 2
@@ -438,11 +486,13 @@ def run_node(factory: Any, args: list[str] | None = None) -> int:
                 close()
             if signals.stop:
                 node.get_logger().info(f'stopped by {signals.name()}')
-            if executor is not None:
-                executor.remove_node(node)
-                executor.shutdown()
-            node.destroy_node()
         elif signals.stop:
             print(f'stopped by {signals.name()} while starting', file=sys.stderr, flush=True)
-        rclpy.try_shutdown()
+        with TeardownWatchdog(TEARDOWN_TIMEOUT_S):
+            if node is not None:
+                if executor is not None:
+                    executor.remove_node(node)
+                    executor.shutdown()
+                node.destroy_node()
+            rclpy.try_shutdown()
     return 0
