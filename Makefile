@@ -3,7 +3,6 @@
 SHELL := /bin/bash
 .SHELLFLAGS := -e -o pipefail -c
 RUN := . ./env.sh &&
-CORE := src/vd_sim_node/vd_sim_node src/vd_observer_node/vd_observer_node
 
 .PHONY: setup build demo test pytest lint typecheck format bench clean help
 
@@ -32,13 +31,10 @@ lint: setup
 format: setup
 	$(RUN) ruff format src tests scripts && ruff check --fix src tests scripts
 
-# strict on the ROS-free core; the thin ROS nodes (rclpy is untyped) are checked leniently
-ROS_FILES := $(wildcard src/*/vd_*/*_node.py) src/vd_sim_node/vd_sim_node/ros_common.py \
-  src/vd_observer_node/vd_observer_node/node_params.py
-CORE_FILES = $(filter-out $(ROS_FILES),$(shell find $(CORE) -name '*.py'))
+# mypy --strict on both packages, nodes included: the settings are in pyproject.toml
 typecheck: setup
-	@echo 'mypy --strict <ROS-free core>; mypy <nodes>'
-	@$(RUN) mypy --strict $(CORE_FILES) && mypy $(ROS_FILES)
+	@echo 'mypy --strict (pyproject.toml: both packages)'
+	@$(RUN) mypy
 
 # the peers compared in bench_peers.py (opensmc, commonroad-vehicle-models) are bench-only
 bench: setup

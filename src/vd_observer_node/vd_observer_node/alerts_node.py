@@ -67,7 +67,7 @@ def _ns(t: float) -> int:
     return round(t * 1e9) if math.isfinite(t) else 0
 
 
-class AlertsNode(Node):  # type: ignore[misc]
+class AlertsNode(Node):
     """Thin wrapper: stamp-matched raw messages -> SituationMonitor -> two raw messages."""
 
     def __init__(self) -> None:

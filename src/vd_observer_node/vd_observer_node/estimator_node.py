@@ -52,7 +52,7 @@ _INPUT_TYPES = {
 }
 
 
-class EstimatorNode(Node):  # type: ignore[misc]
+class EstimatorNode(Node):
     """Thin wrapper: stamp-matched raw messages -> Estimator.update -> four raw messages."""
 
     def __init__(self) -> None:

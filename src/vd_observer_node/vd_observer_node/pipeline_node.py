@@ -125,7 +125,7 @@ def _stamp_ns(t: float) -> int:
     return round(t * 1e9) if math.isfinite(t) else 0
 
 
-class PipelineNode(Node):  # type: ignore[misc]
+class PipelineNode(Node):
     """Thin wrapper: raw sensor messages -> stamp matching -> Chain.update -> raw messages."""
 
     def __init__(self) -> None:

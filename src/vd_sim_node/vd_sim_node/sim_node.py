@@ -26,7 +26,8 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import AccelStamped, TwistStamped
 from rclpy._rclpy_pybind11 import RCLError
-from rclpy.clock import Clock, ClockType
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from std_msgs.msg import Header
@@ -158,7 +159,7 @@ def _with_sensor_overrides(scenario: Scenario, values: dict[str, Any]) -> Scenar
     return dataclasses.replace(scenario, sensors=dataclasses.replace(sensors, **changes))
 
 
-class SimNode(Node):  # type: ignore[misc]
+class SimNode(Node):
     """Steps :class:`Simulator` against the wall clock and publishes each sample."""
 
     def __init__(self) -> None:

@@ -448,7 +448,7 @@ class Simulator:
             tout = np.concatenate([tout, [t_end]])
         if len(tout) < 2:  # final sample exactly at the current time
             tout = np.array([self._t, self._t + 1e-9])
-        Y, info = odeint(
+        Y, info = odeint(  # type: ignore[call-overload]  # scipy-stubs reject Callable[..., X]
             self.model.rhs,
             self._x,
             tout,
