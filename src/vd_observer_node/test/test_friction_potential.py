@@ -28,7 +28,7 @@ from vd_observer_node.situation.friction_potential import (
     fit_solution,
     fit_step,
     initial_fit_state,
-    slip_ratio,
+    unfloored_slip,
 )
 from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.tire import magic_formula_fx
@@ -103,10 +103,10 @@ def test_config_errors_are_specific() -> None:
 
 
 def test_slip_ratio() -> None:
-    slip, den = slip_ratio(np.array([10.0, -19.0, 0.0, 1.0]), 20.0)
+    slip, den = unfloored_slip(np.array([10.0, -19.0, 0.0, 1.0]), 20.0)
     np.testing.assert_allclose(slip, [10.0 / 30.0, -19.0 / 20.0, 0.0, 1.0 / 21.0])
     np.testing.assert_allclose(den, [30.0, 20.0, 20.0, 21.0])
-    slip, _ = slip_ratio(np.zeros(4), 0.0)
+    slip, _ = unfloored_slip(np.zeros(4), 0.0)
     assert np.all(np.isnan(slip))  # standing still: no slip at all, not 0/0
 
 

@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from vd_observer_node.bag import BagReader
+from vd_observer_node.bag.alerts_cdr import decode_alerts
 from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.bag.typestore import deserialize, message_class, serialize
 from vd_observer_node.testing.devbag import (
@@ -36,7 +37,7 @@ from vd_observer_node.tools.report.alerts import (
 )
 from vd_observer_node.tools.report.cli import add_report_parser
 from vd_observer_node.tools.report.evaluate import evaluate
-from vd_observer_node.tools.report.load import decode_alerts, load_bag_series
+from vd_observer_node.tools.report.load import load_bag_series
 
 RATE = 100.0  # [Hz]
 CFG = AlertSettings()
