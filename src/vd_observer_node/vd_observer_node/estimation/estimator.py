@@ -182,7 +182,6 @@ class Estimator:
         self._slope_filter = LowPass(self.config.slope_filter_tau, self.config.filter_order)
         self._speed_filter = LowPass(self.config.slope_filter_tau, self.config.filter_order)
         self._min_load = self.config.min_load_ratio * float(np.min(vehicle.static_wheel_loads))
-        self._max_sine = math.sin(self.config.max_slope)
         self.rejected_count = 0
         self.faults = FaultCounter(ESTIMATOR_FAULTS)
         self.reset()
@@ -322,15 +321,16 @@ class Estimator:
             net_f = float(self._slope_filter.update(dt, forces)) - veh.mass * accel_f
         else:
             net_f = float(self._slope_filter.update(dt, forces - veh.mass * accel))
-        # Scalar form of estimators.slope_from_forces (this runs at the sensor rate).
-        sine = net_f / weight
-        in_range = abs(sine) <= self._max_sine
+        slope, in_range = phys.slope_from_forces(net_f, veh, cfg.max_slope)
         usable = body_ok and abs(v) >= cfg.min_speed
         if usable and not in_range:
+            # |N| > m g has no arcsin at all; below that the slope is only implausible.
+            sine = net_f / weight
             self.faults.count('arcsin_domain' if abs(sine) > 1.0 else 'slope_out_of_range')
-        slope_valid = in_range and usable
+        slope_valid = bool(in_range) and usable
         if slope_valid:
-            self._slope = math.asin(sine)
+            # An invalid stamp keeps the last valid slope (it is published as invalid).
+            self._slope = float(slope)
         self.last = Estimates(
             t=t,
             fx=fx,

@@ -10,8 +10,11 @@ scalars per stamp shape (...).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from vd_sim_node.vehicle.tire import slip_ratio as tire_slip_ratio
 
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
@@ -169,8 +172,8 @@ def slip_ratio(
     """
     wheel_speed = np.asarray(omega, dtype=np.float64) * vehicle.effective_radius
     v = np.asarray(speed, dtype=np.float64)[..., np.newaxis]
-    denominator = np.maximum(np.maximum(np.abs(wheel_speed), np.abs(v)), eps)
-    return (wheel_speed - v) / denominator
+    # The tyre model's own definition, so estimate and simulation mean the same slip.
+    return tire_slip_ratio(wheel_speed - v, v, eps)
 
 
 def slope_from_forces(
@@ -189,7 +192,10 @@ def slope_from_forces(
     """
     n = np.asarray(net_force, dtype=np.float64)
     sine = n / (vehicle.mass * vehicle.gravity)
-    bound = np.sin(max_slope)
+    bound = math.sin(max_slope)
     valid = np.isfinite(sine) & (np.abs(sine) <= bound)
     clipped = np.clip(np.nan_to_num(sine, nan=0.0), -bound, bound)
-    return np.arcsin(clipped), valid
+    # libm's asin, not numpy's SIMD loop (which differs in the last bit on some CPUs): the
+    # compiled kernel calls libm, and the two must agree bit for bit.
+    alpha = np.array([math.asin(s) for s in clipped.ravel().tolist()]).reshape(clipped.shape)
+    return alpha, valid

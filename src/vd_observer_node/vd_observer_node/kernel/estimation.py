@@ -298,9 +298,10 @@ def _estimate(
             lift = True
         est[E_MU + i] = mu
         est[E_MU_VALID + i] = 1.0 if valid else 0.0
-        ws = x[i] * radius
-        den = max(max(abs(ws), abs(v)), prm[_SLIP_EPS])
-        est[E_SLIP + i] = (ws - v) / den
+        # vd_sim_node.vehicle.tire.slip_ratio on the slip velocity, as the reference calls it
+        sv = x[i] * radius - v
+        den = max(max(abs(sv + v), abs(v)), prm[_SLIP_EPS])
+        est[E_SLIP + i] = sv / den
     if lift:
         counts[_WHEEL_LIFT] += 1
     implausible = False

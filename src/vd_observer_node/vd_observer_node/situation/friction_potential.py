@@ -76,7 +76,7 @@ __all__ = [
     'fit_solution',
     'fit_step',
     'initial_fit_state',
-    'slip_ratio',
+    'unfloored_slip',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -221,8 +221,11 @@ class FrictionPotentialConfig:
         return cls(**clean)
 
 
-def slip_ratio(slip_velocity: ArrayLike, speed: float) -> tuple[FloatArray, FloatArray]:
-    """Slip ratio and its denominator.
+def unfloored_slip(slip_velocity: ArrayLike, speed: float) -> tuple[FloatArray, FloatArray]:
+    """Slip ratio without the floor of `vd_sim_node.vehicle.tire.slip_ratio`, and its denominator.
+
+    The fit gates samples on the denominator itself (``min_slip_speed``) and weights them by
+    the slip noise it implies, so it needs the true denominator, not a floored one.
 
     Args:
         slip_velocity: shape (4,), [m/s] omega R - v.
@@ -431,7 +434,7 @@ def fit_step(
         return state
     if not math.isfinite(speed):
         return replace(state, t=t)
-    slip, den = slip_ratio(sv, speed)
+    slip, den = unfloored_slip(sv, speed)
     with np.errstate(invalid='ignore', divide='ignore'):
         sigma_s = config.slip_velocity_noise / den
         use = ok & np.isfinite(slip) & np.isfinite(m) & np.isfinite(fz) & (fz > 0.0)
