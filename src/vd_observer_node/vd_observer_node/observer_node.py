@@ -33,6 +33,7 @@ from vd_sim_node.ros_common import (
 from vd_msgs.msg import WheelAngles, WheelStates
 from vd_observer_node.bag.cdr_message import MessageCodec
 from vd_observer_node.bag.errors import BagFormatError
+from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.faults import ERROR, merge_reports
 from vd_observer_node.estimation.observer import ObserverConfig, SpeedObserver, WheelObserver
 from vd_observer_node.node_params import KERNEL, OBSERVER_PARAMS
@@ -46,7 +47,7 @@ _NS = 1e-9
 _ZEROS5 = (0.0, 0.0, 0.0, 0.0, 0.0)
 
 
-class ObserverNode(Node):  # type: ignore[misc]
+class ObserverNode(Node):
     """Thin wrapper: raw CDR messages -> WheelObserver/SpeedObserver -> raw CDR messages."""
 
     def __init__(self) -> None:
@@ -54,10 +55,15 @@ class ObserverNode(Node):  # type: ignore[misc]
         values = declare_parameters(self, PARAMS)
         self.kernel = values.pop('kernel')
         self.config = ObserverConfig.from_mapping(values)
-        compiled = self.kernel == 'compiled'
-        # compiled: built (or loaded from numba's disk cache) here, before the first sample
-        self.wheels = WheelObserver(self.config, compiled=compiled)
-        self.speed = SpeedObserver(self.config, compiled=compiled)
+        differentiator = LevantDifferentiator
+        if self.kernel == 'compiled':
+            # numba is imported only then; the kernel is built (or loaded from numba's disk
+            # cache) here, before the first sample
+            from vd_observer_node.kernel.levant import CompiledDifferentiator
+
+            differentiator = CompiledDifferentiator  # type: ignore[assignment]  # a drop-in
+        self.wheels = WheelObserver(self.config, differentiator=differentiator)
+        self.speed = SpeedObserver(self.config, differentiator=differentiator)
         self.pub_states = self.create_publisher(
             WheelStates, '/vd/observer/wheel_states', STREAM_QOS
         )

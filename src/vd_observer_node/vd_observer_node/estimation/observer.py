@@ -126,18 +126,12 @@ class SpeedState(NamedTuple):
 
 
 def _differentiator(
-    config: ObserverConfig, lipschitz: float, n_channels: int, compiled: bool = False
+    config: ObserverConfig,
+    lipschitz: float,
+    n_channels: int,
+    kind: type[LevantDifferentiator],
 ) -> LevantDifferentiator:
-    """The Levant differentiator of one signal kind, with the shared settings of `config`.
-
-    ``compiled``: the numba kernel's drop-in (:mod:`vd_observer_node.kernel.levant`), tested
-    equal to the reference.
-    """
-    kind: type[LevantDifferentiator] = LevantDifferentiator
-    if compiled:
-        from vd_observer_node.kernel.levant import CompiledDifferentiator
-
-        kind = CompiledDifferentiator  # type: ignore[assignment]
+    """The Levant differentiator of one signal kind, with the shared settings of `config`."""
     return kind(
         lipschitz,
         n_channels=n_channels,
@@ -168,9 +162,18 @@ class _DifferentiatorObserver:
 class WheelObserver(_DifferentiatorObserver):
     """Four-wheel Levant differentiator on the unwrapped wheel angles."""
 
-    def __init__(self, config: ObserverConfig, *, compiled: bool = False) -> None:
-        """Create the observer from its settings (``compiled``: on the numba kernel)."""
-        self._diff = _differentiator(config, config.wheel_lipschitz, 4, compiled)
+    def __init__(
+        self,
+        config: ObserverConfig,
+        *,
+        differentiator: type[LevantDifferentiator] = LevantDifferentiator,
+    ) -> None:
+        """Create the observer from its settings.
+
+        ``differentiator``: the reference class, or a drop-in with its constructor and
+        ``update`` (the compiled `vd_observer_node.kernel.levant.CompiledDifferentiator`).
+        """
+        self._diff = _differentiator(config, config.wheel_lipschitz, 4, differentiator)
         self.last: WheelState | None = None
 
     def update(self, t: float, angles: ArrayLike) -> WheelState:
@@ -194,9 +197,18 @@ class WheelObserver(_DifferentiatorObserver):
 class SpeedObserver(_DifferentiatorObserver):
     """Levant differentiator on the measured body speed."""
 
-    def __init__(self, config: ObserverConfig, *, compiled: bool = False) -> None:
-        """Create the observer from its settings (``compiled``: on the numba kernel)."""
-        self._diff = _differentiator(config, config.speed_lipschitz, 1, compiled)
+    def __init__(
+        self,
+        config: ObserverConfig,
+        *,
+        differentiator: type[LevantDifferentiator] = LevantDifferentiator,
+    ) -> None:
+        """Create the observer from its settings.
+
+        ``differentiator``: the reference class, or a drop-in with its constructor and
+        ``update`` (the compiled `vd_observer_node.kernel.levant.CompiledDifferentiator`).
+        """
+        self._diff = _differentiator(config, config.speed_lipschitz, 1, differentiator)
         self.last: SpeedState | None = None
 
     def update(self, t: float, speed: float) -> SpeedState:
