@@ -52,6 +52,17 @@ from pathlib import Path
 import numpy as np
 import yaml
 from vd_observer_node.testing.launcher import GraphLauncher, NodeProcess, NodeSpec
+from vd_sim_node.topics import (
+    ESTIMATES_ALERTS,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    OBSERVER_BODY_ACCEL,
+    OBSERVER_WHEEL_STATES,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+    TRUTH_NAMESPACE,
+)
 
 __all__ = ['RunResult', 'main', 'run_graph']
 
@@ -59,16 +70,16 @@ ROOT = Path(__file__).resolve().parents[1]
 PROBE = ROOT / 'scripts' / 'latency_probe.py'
 SCENARIO = ROOT / 'src' / 'vd_sim_node' / 'config' / 'scenarios' / 'paper_table1.yaml'
 SENSOR_TOPICS = [
-    '/vd/sensors/wheel_angles',
-    '/vd/sensors/body_velocity',
-    '/vd/sensors/wheel_torques',
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_TORQUES,
 ]
 DERIVED_TOPICS = [
-    '/vd/observer/wheel_states',
-    '/vd/observer/body_accel',
-    '/vd/estimates/tire_forces',
-    '/vd/estimates/slope',
-    '/vd/estimates/alerts',
+    OBSERVER_WHEEL_STATES,
+    OBSERVER_BODY_ACCEL,
+    ESTIMATES_TIRE_FORCES,
+    ESTIMATES_SLOPE,
+    ESTIMATES_ALERTS,
 ]
 #: The estimation nodes of each layout: (executable, name, text it logs when ready).
 LAYOUTS = {
@@ -208,7 +219,7 @@ def _analyse_probe(result: RunResult, npz: Path) -> None:
         stamps, idx = np.unique(sel[:, 1], return_index=True)
         result.received[topic] = len(stamps)
         first[topic] = dict(zip(stamps.tolist(), sel[idx, 2].tolist(), strict=True))
-    src, dst = first['/vd/sensors/wheel_angles'], first['/vd/estimates/slope']
+    src, dst = first[SENSORS_WHEEL_ANGLES], first[ESTIMATES_SLOPE]
     common = sorted(set(src) & set(dst))
     if common:
         lat = np.array([dst[s] - src[s] for s in common], dtype=float) / 1e6
@@ -451,7 +462,7 @@ def main(argv: list[str] | None = None) -> int:
         '--sweep', type=float, nargs='*', default=[100.0, 200.0, 500.0, 1000.0], help='[Hz]'
     )
     parser.add_argument('--sweep-duration', type=float, default=5.0, help='[s] per sweep run')
-    parser.add_argument('--no-truth', action='store_true', help='sim without /vd/truth/*')
+    parser.add_argument('--no-truth', action='store_true', help=f'sim without {TRUTH_NAMESPACE}*')
     parser.add_argument(
         '--skip', nargs='*', default=[], choices=['main', 'rec', 'sweep', 'events']
     )

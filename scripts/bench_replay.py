@@ -31,6 +31,13 @@ from vd_observer_node.bag.writer import DEFAULT_CHUNK_DURATION_S, DEFAULT_CHUNK_
 from vd_observer_node.estimation.cascade import CascadeResult
 from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
 from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
+from vd_sim_node.topics import (
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+    TRUTH_BODY_ACCEL,
+    TRUTH_WHEEL_STATES,
+)
 
 
 def _null_cascade(t: np.ndarray, angle: np.ndarray, *_: object) -> CascadeResult:
@@ -46,11 +53,11 @@ def _demo_stream(n: int) -> dict[str, tuple[str, list[bytes]]]:
     rng = np.random.default_rng(0)
     stamps = np.arange(n, dtype=np.int64) * 1_000_000
     topics = {
-        '/vd/sensors/wheel_angles': 'vd_msgs/msg/WheelAngles',
-        '/vd/sensors/body_velocity': 'geometry_msgs/msg/TwistStamped',
-        '/vd/sensors/wheel_torques': 'vd_msgs/msg/WheelTorques',
-        '/vd/truth/wheel_states': 'vd_msgs/msg/WheelStates',
-        '/vd/truth/body_accel': 'geometry_msgs/msg/AccelStamped',
+        SENSORS_WHEEL_ANGLES: 'vd_msgs/msg/WheelAngles',
+        SENSORS_BODY_VELOCITY: 'geometry_msgs/msg/TwistStamped',
+        SENSORS_WHEEL_TORQUES: 'vd_msgs/msg/WheelTorques',
+        TRUTH_WHEEL_STATES: 'vd_msgs/msg/WheelStates',
+        TRUTH_BODY_ACCEL: 'geometry_msgs/msg/AccelStamped',
         **ESTIMATE_TOPICS,
     }
     stream = {}
@@ -118,7 +125,7 @@ def bench_reader(path: Path) -> None:
     started = time.perf_counter()
     count = sum(1 for _ in reader.raw_messages())
     elapsed = time.perf_counter() - started
-    arrays = reader.topic_arrays(['/vd/sensors/wheel_torques'])['/vd/sensors/wheel_torques']
+    arrays = reader.topic_arrays([SENSORS_WHEEL_TORQUES])[SENSORS_WHEEL_TORQUES]
     started = time.perf_counter()
     decode_batch(arrays.msgtype, arrays.datas)
     decode = time.perf_counter() - started

@@ -23,15 +23,27 @@ import time
 from pathlib import Path
 from typing import Any
 
+from vd_sim_node.topics import (
+    ESTIMATES_FRICTION,
+    ESTIMATES_RESISTANCES,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    OBSERVER_BODY_ACCEL,
+    OBSERVER_WHEEL_STATES,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+)
+
 ROOT = Path(__file__).resolve().parents[1]
 LIB = ROOT / 'install' / 'vd_observer_node' / 'lib' / 'vd_observer_node'
 COUNTED = {
-    '/vd/observer/wheel_states': 'WheelStates',
-    '/vd/observer/body_accel': 'AccelStamped',
-    '/vd/estimates/tire_forces': 'TireForces',
-    '/vd/estimates/friction': 'Friction',
-    '/vd/estimates/resistances': 'Resistances',
-    '/vd/estimates/slope': 'Slope',
+    OBSERVER_WHEEL_STATES: 'WheelStates',
+    OBSERVER_BODY_ACCEL: 'AccelStamped',
+    ESTIMATES_TIRE_FORCES: 'TireForces',
+    ESTIMATES_FRICTION: 'Friction',
+    ESTIMATES_RESISTANCES: 'Resistances',
+    ESTIMATES_SLOPE: 'Slope',
 }
 
 
@@ -112,9 +124,9 @@ def feed(minutes: float, rate_hz: float, node_pids: dict[str, int]) -> dict[str,
     distance_per_cycle = traj.angle[-1] - traj.angle[0] + traj.omega[-1] * period
     rclpy.init()
     node = Node('soak_feed')
-    pub_a = node.create_publisher(WheelAngles, '/vd/sensors/wheel_angles', STREAM_QOS)
-    pub_v = node.create_publisher(TwistStamped, '/vd/sensors/body_velocity', STREAM_QOS)
-    pub_t = node.create_publisher(WheelTorques, '/vd/sensors/wheel_torques', STREAM_QOS)
+    pub_a = node.create_publisher(WheelAngles, SENSORS_WHEEL_ANGLES, STREAM_QOS)
+    pub_v = node.create_publisher(TwistStamped, SENSORS_BODY_VELOCITY, STREAM_QOS)
+    pub_t = node.create_publisher(WheelTorques, SENSORS_WHEEL_TORQUES, STREAM_QOS)
     deadline = time.monotonic() + 30
     while time.monotonic() < deadline and not (
         pub_a.get_subscription_count() >= 1

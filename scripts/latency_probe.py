@@ -23,23 +23,37 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from vd_sim_node.topics import (
+    ESTIMATES_ALERTS,
+    ESTIMATES_FRICTION,
+    ESTIMATES_FRICTION_POTENTIAL,
+    ESTIMATES_RESISTANCES,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    OBSERVER_BODY_ACCEL,
+    OBSERVER_BODY_VELOCITY,
+    OBSERVER_WHEEL_STATES,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+)
 
 __all__ = ['TOPIC_TYPES', 'main', 'stamp_from_cdr']
 
 # topic -> (module, type) of every stream the benchmark may watch
 TOPIC_TYPES: dict[str, tuple[str, str]] = {
-    '/vd/sensors/wheel_angles': ('vd_msgs.msg', 'WheelAngles'),
-    '/vd/sensors/body_velocity': ('geometry_msgs.msg', 'TwistStamped'),
-    '/vd/sensors/wheel_torques': ('vd_msgs.msg', 'WheelTorques'),
-    '/vd/observer/wheel_states': ('vd_msgs.msg', 'WheelStates'),
-    '/vd/observer/body_accel': ('geometry_msgs.msg', 'AccelStamped'),
-    '/vd/observer/body_velocity': ('geometry_msgs.msg', 'TwistStamped'),
-    '/vd/estimates/tire_forces': ('vd_msgs.msg', 'TireForces'),
-    '/vd/estimates/friction': ('vd_msgs.msg', 'Friction'),
-    '/vd/estimates/resistances': ('vd_msgs.msg', 'Resistances'),
-    '/vd/estimates/slope': ('vd_msgs.msg', 'Slope'),
-    '/vd/estimates/alerts': ('vd_msgs.msg', 'Alerts'),
-    '/vd/estimates/friction_potential': ('vd_msgs.msg', 'FrictionPotential'),
+    SENSORS_WHEEL_ANGLES: ('vd_msgs.msg', 'WheelAngles'),
+    SENSORS_BODY_VELOCITY: ('geometry_msgs.msg', 'TwistStamped'),
+    SENSORS_WHEEL_TORQUES: ('vd_msgs.msg', 'WheelTorques'),
+    OBSERVER_WHEEL_STATES: ('vd_msgs.msg', 'WheelStates'),
+    OBSERVER_BODY_ACCEL: ('geometry_msgs.msg', 'AccelStamped'),
+    OBSERVER_BODY_VELOCITY: ('geometry_msgs.msg', 'TwistStamped'),
+    ESTIMATES_TIRE_FORCES: ('vd_msgs.msg', 'TireForces'),
+    ESTIMATES_FRICTION: ('vd_msgs.msg', 'Friction'),
+    ESTIMATES_RESISTANCES: ('vd_msgs.msg', 'Resistances'),
+    ESTIMATES_SLOPE: ('vd_msgs.msg', 'Slope'),
+    ESTIMATES_ALERTS: ('vd_msgs.msg', 'Alerts'),
+    ESTIMATES_FRICTION_POTENTIAL: ('vd_msgs.msg', 'FrictionPotential'),
 }
 
 _STAMP = struct.Struct('<iI')

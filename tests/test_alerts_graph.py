@@ -15,6 +15,7 @@ import pytest
 from rosproc import RosProcessGroup
 from test_graph import wait_for_last_stamp
 from vd_observer_node.bag import BagReader
+from vd_sim_node.topics import ESTIMATES_ALERTS, ESTIMATES_FRICTION_POTENTIAL, SENSORS_WHEEL_ANGLES
 
 from vd_msgs.msg import Alert
 
@@ -42,7 +43,7 @@ def test_lock_alert_on_hard_braking_over_low_friction(
         procs,
         'waiter',
         16 * NS,  # braking_low_mu_hard lasts 16 s
-        {'/vd/estimates/alerts': 'vd_msgs.msg/Alerts'},
+        {ESTIMATES_ALERTS: 'vd_msgs.msg/Alerts'},
     )
     sim = procs.node(
         'sim',
@@ -60,10 +61,10 @@ def test_lock_alert_on_hard_braking_over_low_friction(
     reader = BagReader(bag)
     sensor_stamps = {
         m.header.stamp.sec * NS + m.header.stamp.nanosec
-        for _, _, _, m in reader.messages(['/vd/sensors/wheel_angles'])
+        for _, _, _, m in reader.messages([SENSORS_WHEEL_ANGLES])
     }
-    alerts = [m for _, _, _, m in reader.messages(['/vd/estimates/alerts'])]
-    potential = [m for _, _, _, m in reader.messages(['/vd/estimates/friction_potential'])]
+    alerts = [m for _, _, _, m in reader.messages([ESTIMATES_ALERTS])]
+    potential = [m for _, _, _, m in reader.messages([ESTIMATES_FRICTION_POTENTIAL])]
     assert len(alerts) > 0.9 * len(sensor_stamps)
     assert all(a.header.stamp.sec * NS + a.header.stamp.nanosec in sensor_stamps for a in alerts)
     assert all(math.isfinite(x) for p in potential for x in [*p.mu_max, *p.confidence])

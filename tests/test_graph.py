@@ -21,6 +21,16 @@ import pytest
 from rosproc import RosProcessGroup
 from vd_observer_node.bag import BagReader
 from vd_observer_node.tools.replay import replay_bag
+from vd_sim_node.topics import (
+    ESTIMATES_FRICTION,
+    ESTIMATES_RESISTANCES,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+    TRUTH_SLOPE,
+    TRUTH_TIRE_FORCES,
+)
 
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
 WAIT_FOR_STAMP = Path(__file__).parent / 'ros_scripts' / 'wait_for_stamp.py'
@@ -28,10 +38,10 @@ RATE_HZ = 100.0
 N_SAMPLES = 401  # 4 s at 100 Hz, t = 0 inclusive
 LAST_STAMP_NS = 4_000_000_000
 ESTIMATE_TOPICS = [
-    '/vd/estimates/tire_forces',
-    '/vd/estimates/friction',
-    '/vd/estimates/resistances',
-    '/vd/estimates/slope',
+    ESTIMATES_TIRE_FORCES,
+    ESTIMATES_FRICTION,
+    ESTIMATES_RESISTANCES,
+    ESTIMATES_SLOPE,
 ]
 
 
@@ -70,10 +80,10 @@ def wait_for_last_stamp(
 
 
 ESTIMATES_DONE = {
-    '/vd/estimates/slope': 'vd_msgs.msg/Slope',
-    '/vd/estimates/tire_forces': 'vd_msgs.msg/TireForces',
-    '/vd/estimates/friction': 'vd_msgs.msg/Friction',
-    '/vd/estimates/resistances': 'vd_msgs.msg/Resistances',
+    ESTIMATES_SLOPE: 'vd_msgs.msg/Slope',
+    ESTIMATES_TIRE_FORCES: 'vd_msgs.msg/TireForces',
+    ESTIMATES_FRICTION: 'vd_msgs.msg/Friction',
+    ESTIMATES_RESISTANCES: 'vd_msgs.msg/Resistances',
 }
 
 
@@ -109,25 +119,25 @@ def test_live_graph_estimates_every_sample_and_matches_the_offline_cascade(
     run_live_graph(procs, bag)
 
     topics = [
-        '/vd/sensors/wheel_angles',
-        '/vd/sensors/wheel_torques',
-        '/vd/truth/slope',
-        '/vd/truth/tire_forces',
+        SENSORS_WHEEL_ANGLES,
+        SENSORS_WHEEL_TORQUES,
+        TRUTH_SLOPE,
+        TRUTH_TIRE_FORCES,
         *ESTIMATE_TOPICS,
     ]
     live = by_topic(bag, topics)
-    sensor_stamps = sorted(live['/vd/sensors/wheel_angles'])
+    sensor_stamps = sorted(live[SENSORS_WHEEL_ANGLES])
     assert len(sensor_stamps) == N_SAMPLES, 'the recorder lost sensor samples'
     assert sensor_stamps[0] == 0 and sensor_stamps[-1] == 4_000_000_000
     for topic in ESTIMATE_TOPICS:
         # every estimate carries the stamp of a measurement, and none is missing
         assert sorted(live[topic]) == sensor_stamps, topic
 
-    for msg in live['/vd/estimates/tire_forces'].values():
+    for msg in live[ESTIMATES_TIRE_FORCES].values():
         assert all(math.isfinite(v) for v in [*msg.fx, *msg.fz])
     # after the slope step (2.0 s) and settling, the slope estimate follows the truth,
     # away from gear shifts (torque interruptions), as in the accuracy targets
-    gears = live['/vd/sensors/wheel_torques']
+    gears = live[SENSORS_WHEEL_TORQUES]
     shifts = [s for a, s in itertools.pairwise(sensor_stamps) if gears[s].gear != gears[a].gear]
     late = [
         s
@@ -135,13 +145,12 @@ def test_live_graph_estimates_every_sample_and_matches_the_offline_cascade(
         if s >= 3_000_000_000 and all(abs(s - k) > 500_000_000 for k in shifts)
     ]
     assert len(late) > 20
-    err = [live['/vd/estimates/slope'][s].angle - live['/vd/truth/slope'][s].angle for s in late]
+    err = [live[ESTIMATES_SLOPE][s].angle - live[TRUTH_SLOPE][s].angle for s in late]
     assert max(abs(e) for e in err) < math.radians(1.0), np.degrees(err)
     fx_err = [
-        np.subtract(live['/vd/estimates/tire_forces'][s].fx, live['/vd/truth/tire_forces'][s].fx)
-        for s in late
+        np.subtract(live[ESTIMATES_TIRE_FORCES][s].fx, live[TRUTH_TIRE_FORCES][s].fx) for s in late
     ]
-    fx_scale = max(abs(v) for s in late for v in live['/vd/truth/tire_forces'][s].fx)
+    fx_scale = max(abs(v) for s in late for v in live[TRUTH_TIRE_FORCES][s].fx)
     assert np.max(np.abs(fx_err)) < 0.05 * fx_scale
 
     # offline replay of the recorded sensors computes exactly the live estimates
@@ -149,10 +158,10 @@ def test_live_graph_estimates_every_sample_and_matches_the_offline_cascade(
     replay_bag(bag, offline_bag, progress=False)
     offline = by_topic(offline_bag, ESTIMATE_TOPICS)
     for s in sensor_stamps:
-        a, b = live['/vd/estimates/tire_forces'][s], offline['/vd/estimates/tire_forces'][s]
+        a, b = live[ESTIMATES_TIRE_FORCES][s], offline[ESTIMATES_TIRE_FORCES][s]
         np.testing.assert_allclose(a.fx, b.fx, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(a.fz, b.fz, rtol=1e-9, atol=1e-9)
-        a, b = live['/vd/estimates/slope'][s], offline['/vd/estimates/slope'][s]
+        a, b = live[ESTIMATES_SLOPE][s], offline[ESTIMATES_SLOPE][s]
         assert a.angle == pytest.approx(b.angle, rel=1e-9, abs=1e-12)
         assert a.valid == b.valid
 
@@ -178,8 +187,8 @@ def test_live_graph_estimates_every_sample_and_matches_the_offline_cascade(
     assert wait_exit(waiter, 180) == 0, waiter.output()
     for proc in (est, obs, rec):
         assert proc.stop() == 0, proc.output()[-3000:]
-    again = by_topic(replay, ['/vd/estimates/slope', '/vd/estimates/tire_forces'])
-    assert sorted(again['/vd/estimates/slope']) == sensor_stamps
+    again = by_topic(replay, [ESTIMATES_SLOPE, ESTIMATES_TIRE_FORCES])
+    assert sorted(again[ESTIMATES_SLOPE]) == sensor_stamps
     for s in sensor_stamps:
-        a, b = live['/vd/estimates/slope'][s], again['/vd/estimates/slope'][s]
+        a, b = live[ESTIMATES_SLOPE][s], again[ESTIMATES_SLOPE][s]
         assert a.angle == pytest.approx(b.angle, rel=1e-9, abs=1e-12)

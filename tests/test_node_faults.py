@@ -33,6 +33,7 @@ FEED_AND_CAPTURE = textwrap.dedent(
     from vd_observer_node.testing.synthetic import synthetic_trajectory
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
     from vd_sim_node.ros_common import DIAGNOSTICS_QOS, STREAM_QOS, ns_to_time
+    from vd_sim_node import topics
 
     T0, DT = 100.0, 0.005
     vehicle = load_estimator_vehicle(default_vehicle_file())
@@ -68,12 +69,12 @@ FEED_AND_CAPTURE = textwrap.dedent(
         return msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
     def keep(key, topic, kind, row):
         node.create_subscription(kind, topic, lambda m: got[key].append(row(m)), STREAM_QOS)
-    keep('states', '/vd/observer/wheel_states', WheelStates,
+    keep('states', topics.OBSERVER_WHEEL_STATES, WheelStates,
          lambda m: [stamp(m), *m.angle, *m.omega, *m.omega_dot])
-    keep('forces', '/vd/estimates/tire_forces', TireForces, lambda m: [stamp(m), *m.fx, *m.fz])
-    keep('friction', '/vd/estimates/friction', Friction,
+    keep('forces', topics.ESTIMATES_TIRE_FORCES, TireForces, lambda m: [stamp(m), *m.fx, *m.fz])
+    keep('friction', topics.ESTIMATES_FRICTION, Friction,
          lambda m: [stamp(m), *m.mu, *m.slip, *[float(v) for v in m.valid]])
-    keep('slope', '/vd/estimates/slope', Slope, lambda m: [stamp(m), m.angle, float(m.valid)])
+    keep('slope', topics.ESTIMATES_SLOPE, Slope, lambda m: [stamp(m), m.angle, float(m.valid)])
     def on_diag(m):
         for s in m.status:
             level = s.level[0] if isinstance(s.level, bytes) else int(s.level)
@@ -81,9 +82,9 @@ FEED_AND_CAPTURE = textwrap.dedent(
             got['diag'].append(
                 {'name': s.name, 'level': level, 'message': s.message, 'values': values})
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, DIAGNOSTICS_QOS)
-    pub_a = node.create_publisher(WheelAngles, '/vd/sensors/wheel_angles', STREAM_QOS)
-    pub_v = node.create_publisher(TwistStamped, '/vd/sensors/body_velocity', STREAM_QOS)
-    pub_t = node.create_publisher(WheelTorques, '/vd/sensors/wheel_torques', STREAM_QOS)
+    pub_a = node.create_publisher(WheelAngles, topics.SENSORS_WHEEL_ANGLES, STREAM_QOS)
+    pub_v = node.create_publisher(TwistStamped, topics.SENSORS_BODY_VELOCITY, STREAM_QOS)
+    pub_t = node.create_publisher(WheelTorques, topics.SENSORS_WHEEL_TORQUES, STREAM_QOS)
     # Receive in a thread of its own, so that publishing never starves the subscriptions.
     executor = rclpy.executors.SingleThreadedExecutor()
     executor.add_node(node)
@@ -92,7 +93,7 @@ FEED_AND_CAPTURE = textwrap.dedent(
     while time.monotonic() < deadline and not (
         pub_a.get_subscription_count() >= 1 and pub_v.get_subscription_count() >= 2
         and pub_t.get_subscription_count() >= 1
-        and node.count_publishers('/vd/estimates/slope') >= 1):
+        and node.count_publishers(topics.ESTIMATES_SLOPE) >= 1):
         time.sleep(0.05)
     time.sleep(0.5)
     print('feeding', len(seq), flush=True)

@@ -23,14 +23,24 @@ from test_graph import (
     wait_for_last_stamp,
 )
 from vd_observer_node.tools.replay import replay_bag
+from vd_sim_node.topics import (
+    ESTIMATES_ALERTS,
+    ESTIMATES_FRICTION,
+    ESTIMATES_FRICTION_POTENTIAL,
+    ESTIMATES_RESISTANCES,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    OBSERVER_WHEEL_STATES,
+    SENSORS_WHEEL_ANGLES,
+)
 
 OUTPUTS = {
-    '/vd/observer/wheel_states': ('omega', 'omega_dot'),
-    '/vd/estimates/tire_forces': ('fx', 'fz'),
-    '/vd/estimates/friction': ('mu', 'slip', 'valid'),
-    '/vd/estimates/resistances': ('rolling', 'aero'),
-    '/vd/estimates/slope': ('angle', 'valid'),
-    '/vd/estimates/friction_potential': (
+    OBSERVER_WHEEL_STATES: ('omega', 'omega_dot'),
+    ESTIMATES_TIRE_FORCES: ('fx', 'fz'),
+    ESTIMATES_FRICTION: ('mu', 'slip', 'valid'),
+    ESTIMATES_RESISTANCES: ('rolling', 'aero'),
+    ESTIMATES_SLOPE: ('angle', 'valid'),
+    ESTIMATES_FRICTION_POTENTIAL: (
         'mu_max',
         'slip_peak',
         'confidence',
@@ -55,9 +65,9 @@ def test_pipeline_node_publishes_what_offline_replay_computes(
         'waiter',
         LAST_STAMP_NS,
         {
-            '/vd/estimates/slope': 'vd_msgs.msg/Slope',
-            '/vd/estimates/alerts': 'vd_msgs.msg/Alerts',
-            '/vd/estimates/friction_potential': 'vd_msgs.msg/FrictionPotential',
+            ESTIMATES_SLOPE: 'vd_msgs.msg/Slope',
+            ESTIMATES_ALERTS: 'vd_msgs.msg/Alerts',
+            ESTIMATES_FRICTION_POTENTIAL: 'vd_msgs.msg/FrictionPotential',
         },
     )
     sim = procs.node(
@@ -74,15 +84,15 @@ def test_pipeline_node_publishes_what_offline_replay_computes(
         assert proc.stop() == 0, proc.output()[-3000:]
     assert 'Traceback' not in pipe.output(), pipe.output()[-3000:]
 
-    live = by_topic(bag, ['/vd/sensors/wheel_angles', *OUTPUTS, '/vd/estimates/alerts'])
-    stamps = sorted(live['/vd/sensors/wheel_angles'])
+    live = by_topic(bag, [SENSORS_WHEEL_ANGLES, *OUTPUTS, ESTIMATES_ALERTS])
+    stamps = sorted(live[SENSORS_WHEEL_ANGLES])
     assert len(stamps) == N_SAMPLES, 'the recorder lost sensor samples'
-    for topic in (*OUTPUTS, '/vd/estimates/alerts'):
+    for topic in (*OUTPUTS, ESTIMATES_ALERTS):
         assert sorted(live[topic]) == stamps, topic
 
     offline_bag = tmp_path / 'offline'
     replay_bag(bag, offline_bag, progress=False)
-    offline = by_topic(offline_bag, [*OUTPUTS, '/vd/estimates/alerts'])
+    offline = by_topic(offline_bag, [*OUTPUTS, ESTIMATES_ALERTS])
     for topic, fields in OUTPUTS.items():
         for s in stamps:
             for name in fields:
@@ -90,7 +100,7 @@ def test_pipeline_node_publishes_what_offline_replay_computes(
                 b = np.asarray(getattr(offline[topic][s], name), dtype=float)
                 np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9, err_msg=f'{topic}.{name}')
     for s in stamps:
-        a, b = live['/vd/estimates/alerts'][s].alerts, offline['/vd/estimates/alerts'][s].alerts
+        a, b = live[ESTIMATES_ALERTS][s].alerts, offline[ESTIMATES_ALERTS][s].alerts
         assert [(r.kind, r.wheel, r.level, r.onset) for r in a] == [
             (r.kind, r.wheel, r.level, r.onset) for r in b
         ]

@@ -17,6 +17,7 @@ import pytest
 from rosproc import RosProcessGroup
 from test_graph import wait_for_last_stamp
 from vd_observer_node.bag import BagReader
+from vd_sim_node.topics import SENSORS_WHEEL_ANGLES, TRUTH_SLOPE
 
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
 
@@ -45,8 +46,8 @@ def test_signal_closes_a_complete_bag(procs: RosProcessGroup, tmp_path: Path, si
         'waiter',
         4_000_000_000,
         {
-            '/vd/sensors/wheel_angles': 'vd_msgs.msg/WheelAngles',
-            '/vd/truth/slope': 'vd_msgs.msg/Slope',
+            SENSORS_WHEEL_ANGLES: 'vd_msgs.msg/WheelAngles',
+            TRUTH_SLOPE: 'vd_msgs.msg/Slope',
         },
     )
     sim.wait_for('scenario finished', timeout=60)
@@ -54,13 +55,13 @@ def test_signal_closes_a_complete_bag(procs: RosProcessGroup, tmp_path: Path, si
     assert rec.stop(sig) == 0, rec.output()
     assert 'bag closed' in rec.output()
     assert (bag / 'metadata.yaml').is_file()
-    assert count(bag, '/vd/sensors/wheel_angles') == 401
+    assert count(bag, SENSORS_WHEEL_ANGLES) == 401
 
     from rosbags.rosbag2 import Reader
 
     with Reader(bag) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-    assert counts['/vd/truth/slope'] == 401
+    assert counts[TRUTH_SLOPE] == 401
 
     from mcap.reader import make_reader
 
@@ -106,10 +107,10 @@ def test_sigkill_loses_at_most_the_open_chunk_and_repair_recovers_the_rest(
     )
     assert result.returncode == 0, result.stdout + result.stderr
     assert (bag / 'metadata.yaml').is_file()
-    recovered = count(bag, '/vd/sensors/wheel_angles')
+    recovered = count(bag, SENSORS_WHEEL_ANGLES)
     # at 100 Hz, the open chunk holds at most chunk_duration (0.5 s) + the 0.1 s flush timer
     assert recovered >= (sim_t - 0.6 - 0.5) * 100, (recovered, sim_t)
-    assert count(bag, '/vd/sensors/wheel_angles', recover=False) == recovered
+    assert count(bag, SENSORS_WHEEL_ANGLES, recover=False) == recovered
 
 
 def _sim_time_now(log: str) -> float:

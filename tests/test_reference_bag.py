@@ -14,6 +14,12 @@ import numpy as np
 import pytest
 from vd_observer_node.bag import BagReader
 from vd_observer_node.tools.replay import replay_bag
+from vd_sim_node.topics import (
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    SENSORS_WHEEL_ANGLES,
+    TRUTH_SLOPE,
+)
 
 BAG = Path(__file__).resolve().parents[1] / 'bags' / 'paper_table1_100hz'
 NS = 1_000_000_000
@@ -22,7 +28,7 @@ NS = 1_000_000_000
 def slopes_by_stamp(bag: Path) -> dict[int, tuple[float, bool]]:
     return {
         m.header.stamp.sec * NS + m.header.stamp.nanosec: (float(m.angle), bool(m.valid))
-        for _, _, _, m in BagReader(bag).messages(['/vd/estimates/slope'])
+        for _, _, _, m in BagReader(bag).messages([ESTIMATES_SLOPE])
     }
 
 
@@ -36,7 +42,7 @@ def test_offline_replay_reproduces_the_live_estimates(tmp_path: Path) -> None:
     out = tmp_path / 'replayed'
     replay_bag(BAG, out, progress=False)
     live, offline = slopes_by_stamp(BAG), slopes_by_stamp(out)
-    sensors = sum(1 for _ in BagReader(BAG).raw_messages(['/vd/sensors/wheel_angles']))
+    sensors = sum(1 for _ in BagReader(BAG).raw_messages([SENSORS_WHEEL_ANGLES]))
     assert len(offline) == sensors
     common = sorted(set(live) & set(offline))
     assert len(common) == len(live), 'live estimates at stamps without recorded sensors'
@@ -46,6 +52,6 @@ def test_offline_replay_reproduces_the_live_estimates(tmp_path: Path) -> None:
     assert [live[s][1] for s in common] == [offline[s][1] for s in common]
 
 
-@pytest.mark.parametrize('topic', ['/vd/truth/slope', '/vd/estimates/tire_forces'])
+@pytest.mark.parametrize('topic', [TRUTH_SLOPE, ESTIMATES_TIRE_FORCES])
 def test_reference_bag_holds_truth_and_estimates(topic: str) -> None:
     assert BagReader(BAG).topics[topic].message_count == 15_001

@@ -23,9 +23,10 @@ from vd_observer_node.bag import (
 )
 from vd_observer_node.bag.cdr_batch import encode_batch
 from vd_observer_node.bag.repair import repair_bag
+from vd_sim_node.topics import SENSORS_WHEEL_ANGLES
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
-TOPIC = '/vd/sensors/wheel_angles'
+TOPIC = SENSORS_WHEEL_ANGLES
 MSGTYPE = 'vd_msgs/msg/WheelAngles'
 
 

@@ -18,6 +18,20 @@ from vd_observer_node.tools.replay import (
     default_vehicle_file,
     replay_bag,
 )
+from vd_sim_node.topics import (
+    ESTIMATES_ALERTS,
+    ESTIMATES_FRICTION,
+    ESTIMATES_FRICTION_POTENTIAL,
+    ESTIMATES_RESISTANCES,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    OBSERVER_BODY_ACCEL,
+    OBSERVER_BODY_VELOCITY,
+    OBSERVER_WHEEL_STATES,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+)
 
 
 @pytest.fixture(scope='module')
@@ -49,9 +63,9 @@ def test_estimates_equal_run_cascade_on_the_same_arrays(
 ) -> None:
     in_bag, out_bag, report = replayed
     raw = BagReader(in_bag).topic_arrays(SENSOR_TOPICS)
-    angles = decode_batch('vd_msgs/msg/WheelAngles', raw['/vd/sensors/wheel_angles'].datas)
-    speed = decode_batch('geometry_msgs/msg/TwistStamped', raw['/vd/sensors/body_velocity'].datas)
-    torque = decode_batch('vd_msgs/msg/WheelTorques', raw['/vd/sensors/wheel_torques'].datas)
+    angles = decode_batch('vd_msgs/msg/WheelAngles', raw[SENSORS_WHEEL_ANGLES].datas)
+    speed = decode_batch('geometry_msgs/msg/TwistStamped', raw[SENSORS_BODY_VELOCITY].datas)
+    torque = decode_batch('vd_msgs/msg/WheelTorques', raw[SENSORS_WHEEL_TORQUES].datas)
     expected = run_cascade(
         angles.stamp_ns * 1e-9,
         angles.values['angle'],
@@ -60,7 +74,7 @@ def test_estimates_equal_run_cascade_on_the_same_arrays(
         load_estimator_vehicle(default_vehicle_file()),
     )
     out = BagReader(out_bag).topic_arrays(ESTIMATE_TOPICS)
-    log_angles = raw['/vd/sensors/wheel_angles'].log_time_ns
+    log_angles = raw[SENSORS_WHEEL_ANGLES].log_time_ns
     for topic, msgtype in ESTIMATE_TOPICS.items():
         assert out[topic].msgtype == msgtype
         decoded = decode_batch(msgtype, out[topic].datas)
@@ -68,20 +82,16 @@ def test_estimates_equal_run_cascade_on_the_same_arrays(
         np.testing.assert_array_equal(out[topic].log_time_ns, log_angles)
         assert set(decoded.frame_id.tolist()) == {b'base_link'}
     est = {t: decode_batch(ESTIMATE_TOPICS[t], out[t].datas).values for t in ESTIMATE_TOPICS}
-    np.testing.assert_array_equal(est['/vd/observer/wheel_states']['omega'], expected.omega)
-    np.testing.assert_array_equal(
-        est['/vd/observer/wheel_states']['omega_dot'], expected.omega_dot
-    )
-    np.testing.assert_array_equal(est['/vd/observer/body_accel']['accel.linear.x'], expected.accel)
-    np.testing.assert_array_equal(
-        est['/vd/observer/body_velocity']['twist.linear.x'], expected.speed
-    )
-    np.testing.assert_array_equal(est['/vd/estimates/tire_forces']['fx'], expected.fx)
-    np.testing.assert_array_equal(est['/vd/estimates/tire_forces']['fz'], expected.fz)
-    np.testing.assert_array_equal(est['/vd/estimates/friction']['mu'], expected.mu)
-    np.testing.assert_array_equal(est['/vd/estimates/friction']['valid'], expected.mu_valid)
-    np.testing.assert_array_equal(est['/vd/estimates/resistances']['aero'], expected.aero)
-    np.testing.assert_array_equal(est['/vd/estimates/slope']['angle'], expected.slope)
+    np.testing.assert_array_equal(est[OBSERVER_WHEEL_STATES]['omega'], expected.omega)
+    np.testing.assert_array_equal(est[OBSERVER_WHEEL_STATES]['omega_dot'], expected.omega_dot)
+    np.testing.assert_array_equal(est[OBSERVER_BODY_ACCEL]['accel.linear.x'], expected.accel)
+    np.testing.assert_array_equal(est[OBSERVER_BODY_VELOCITY]['twist.linear.x'], expected.speed)
+    np.testing.assert_array_equal(est[ESTIMATES_TIRE_FORCES]['fx'], expected.fx)
+    np.testing.assert_array_equal(est[ESTIMATES_TIRE_FORCES]['fz'], expected.fz)
+    np.testing.assert_array_equal(est[ESTIMATES_FRICTION]['mu'], expected.mu)
+    np.testing.assert_array_equal(est[ESTIMATES_FRICTION]['valid'], expected.mu_valid)
+    np.testing.assert_array_equal(est[ESTIMATES_RESISTANCES]['aero'], expected.aero)
+    np.testing.assert_array_equal(est[ESTIMATES_SLOPE]['angle'], expected.slope)
     assert report.samples == 300  # type: ignore[attr-defined]
     assert report.unmatched == 0  # type: ignore[attr-defined]
 
@@ -101,7 +111,7 @@ def test_only_common_stamps_are_estimated(tmp_path: Path) -> None:
         dropped = 0
         for m in reader.raw_messages():
             # Every 10th speed sample lost: those stamps cannot be estimated.
-            if m.topic == '/vd/sensors/body_velocity' and (m.log_time_ns // 10_000_000) % 10 == 3:
+            if m.topic == SENSORS_BODY_VELOCITY and (m.log_time_ns // 10_000_000) % 10 == 3:
                 dropped += 1
                 continue
             writer.write(m.topic, m.data, m.log_time_ns)
@@ -110,12 +120,12 @@ def test_only_common_stamps_are_estimated(tmp_path: Path) -> None:
     assert report.samples == 90
     assert report.unmatched == 2 * dropped
     counts = {t: i.message_count for t, i in BagReader(tmp_path / 'out').topics.items()}
-    assert counts['/vd/estimates/slope'] == 90
+    assert counts[ESTIMATES_SLOPE] == 90
 
 
 def test_missing_sensor_topic(tmp_path: Path) -> None:
     with BagWriter(tmp_path / 'empty') as writer:
-        writer.add_topic('/vd/sensors/wheel_angles', 'vd_msgs/msg/WheelAngles')
+        writer.add_topic(SENSORS_WHEEL_ANGLES, 'vd_msgs/msg/WheelAngles')
     with pytest.raises(ReplayInputError, match='no messages on sensor topic'):
         replay_bag(tmp_path / 'empty', tmp_path / 'out', progress=False)
 
@@ -189,7 +199,7 @@ def test_compiled_replay_equals_the_python_replay(
     """Every replayed topic: the compiled kernel within 1e-9 of the Python reference."""
     in_bag, python_bag, _ = launch
     replay_bag(in_bag, tmp_path / 'compiled', progress=False, kernel='compiled')
-    potential = '/vd/estimates/friction_potential'
+    potential = ESTIMATES_FRICTION_POTENTIAL
     fixed = {**ESTIMATE_TOPICS, potential: ALERT_TOPICS[potential]}
     ref = BagReader(python_bag).topic_arrays(list(fixed))
     got = BagReader(tmp_path / 'compiled').topic_arrays(list(fixed))
@@ -205,7 +215,7 @@ def test_compiled_replay_equals_the_python_replay(
                 atol=1e-9 * max(1.0, float(np.max(np.abs(values), initial=0.0))),
                 err_msg=f'{topic}.{name}',
             )
-    alerts = '/vd/estimates/alerts'
+    alerts = ESTIMATES_ALERTS
     for (_, _, _, x), (_, _, _, y) in zip(
         BagReader(python_bag).messages([alerts]),
         BagReader(tmp_path / 'compiled').messages([alerts]),
@@ -221,9 +231,9 @@ def _expected_situation(in_bag: Path, vehicle_file: Path) -> list[object]:
     from vd_sim_node.vehicle.params import load_vehicle
 
     raw = BagReader(in_bag).topic_arrays(SENSOR_TOPICS)
-    angles = decode_batch('vd_msgs/msg/WheelAngles', raw['/vd/sensors/wheel_angles'].datas)
-    speed = decode_batch('geometry_msgs/msg/TwistStamped', raw['/vd/sensors/body_velocity'].datas)
-    torque = decode_batch('vd_msgs/msg/WheelTorques', raw['/vd/sensors/wheel_torques'].datas)
+    angles = decode_batch('vd_msgs/msg/WheelAngles', raw[SENSORS_WHEEL_ANGLES].datas)
+    speed = decode_batch('geometry_msgs/msg/TwistStamped', raw[SENSORS_BODY_VELOCITY].datas)
+    torque = decode_batch('vd_msgs/msg/WheelTorques', raw[SENSORS_WHEEL_TORQUES].datas)
     vehicle = load_estimator_vehicle(vehicle_file)
     t = angles.stamp_ns * 1e-9
     v = speed.values['twist.linear.x']
@@ -261,10 +271,10 @@ def test_alerts_and_potential_equal_the_situation_monitor(
     expected = _expected_situation(in_bag, default_vehicle_file())
     sensor_stamps = [
         _time_ns(m.header.stamp)
-        for _, _, _, m in BagReader(in_bag).messages(['/vd/sensors/wheel_angles'])
+        for _, _, _, m in BagReader(in_bag).messages([SENSORS_WHEEL_ANGLES])
     ]
-    alerts = list(BagReader(out_bag).messages(['/vd/estimates/alerts']))
-    potentials = list(BagReader(out_bag).messages(['/vd/estimates/friction_potential']))
+    alerts = list(BagReader(out_bag).messages([ESTIMATES_ALERTS]))
+    potentials = list(BagReader(out_bag).messages([ESTIMATES_FRICTION_POTENTIAL]))
     assert len(alerts) == len(potentials) == len(expected) == report.samples  # type: ignore[attr-defined]
     active = 0
     for k, (sit, (_, _, _, msg), (_, _, _, pot)) in enumerate(
@@ -331,8 +341,8 @@ def test_vehicle_file_supplies_the_tyre(tmp_path: Path) -> None:
     replay_bag(tmp_path / 'in', tmp_path / 'low', progress=False, vehicle_file=low)
 
     def mu_max(bag: Path) -> np.ndarray:
-        arr = BagReader(bag).topic_arrays(['/vd/estimates/friction_potential'])
-        msgs = arr['/vd/estimates/friction_potential'].datas
+        arr = BagReader(bag).topic_arrays([ESTIMATES_FRICTION_POTENTIAL])
+        msgs = arr[ESTIMATES_FRICTION_POTENTIAL].datas
         return decode_batch('vd_msgs/msg/FrictionPotential', msgs).values['mu_max']
 
     default, lowered = mu_max(tmp_path / 'default'), mu_max(tmp_path / 'low')

@@ -24,6 +24,13 @@ from vd_observer_node.bag.typestore import (
     serialize,
     vd_typestore,
 )
+from vd_sim_node.topics import (
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    SENSORS_WHEEL_ANGLES,
+    TRUTH_NAMESPACE,
+    TRUTH_SLOPE,
+)
 
 STANDARD_TYPES = (
     'geometry_msgs/msg/TwistStamped',
@@ -228,18 +235,18 @@ def test_definitions_embed_dependencies() -> None:
 def test_qos_profiles_are_kept(tmp_path: Path) -> None:
     qos = '- history: keep_last\n  depth: 10\n  reliability: reliable\n  durability: volatile\n'
     with BagWriter(tmp_path / 'q') as writer:
-        writer.add_topic('/vd/sensors/wheel_angles', 'vd_msgs/msg/WheelAngles', qos)
+        writer.add_topic(SENSORS_WHEEL_ANGLES, 'vd_msgs/msg/WheelAngles', qos)
     info = yaml.safe_load((tmp_path / 'q' / 'metadata.yaml').read_text())
     meta = info['rosbag2_bagfile_information']['topics_with_message_count'][0]['topic_metadata']
     assert meta['offered_qos_profiles'][0]['depth'] == 10
-    stored = BagReader(tmp_path / 'q').topics['/vd/sensors/wheel_angles'].qos_profiles_yaml
+    stored = BagReader(tmp_path / 'q').topics[SENSORS_WHEEL_ANGLES].qos_profiles_yaml
     assert yaml.safe_load(stored)[0].items() >= yaml.safe_load(qos)[0].items()
 
 
 def test_integer_qos_policies_become_version_9_names(tmp_path: Path) -> None:
     qos = '- history: 1\n  depth: 100\n  reliability: 2\n  durability: 1\n  liveliness: 1\n'
     with BagWriter(tmp_path / 'iq') as writer:
-        writer.add_topic('/vd/sensors/wheel_angles', 'vd_msgs/msg/WheelAngles', qos)
+        writer.add_topic(SENSORS_WHEEL_ANGLES, 'vd_msgs/msg/WheelAngles', qos)
     info = yaml.safe_load((tmp_path / 'iq' / 'metadata.yaml').read_text())
     meta = info['rosbag2_bagfile_information']['topics_with_message_count'][0]['topic_metadata']
     (profile,) = meta['offered_qos_profiles']
@@ -284,12 +291,12 @@ def test_reads_bag_written_by_rosbags_writer(tmp_path: Path) -> None:
     writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
     with writer:
         conn = writer.add_connection(
-            '/vd/estimates/tire_forces', 'vd_msgs/msg/TireForces', typestore=vd_typestore()
+            ESTIMATES_TIRE_FORCES, 'vd_msgs/msg/TireForces', typestore=vd_typestore()
         )
         for k, msg in enumerate(sent):
             writer.write(conn, 1000 * k, serialize(msg))
     reader = BagReader(tmp_path / 'rb')
-    assert reader.topics['/vd/estimates/tire_forces'].message_count == 50
+    assert reader.topics[ESTIMATES_TIRE_FORCES].message_count == 50
     got = list(reader.messages())
     assert [log for _, _, log, _ in got] == [1000 * k for k in range(50)]
     for a, (_, _, _, b) in zip(sent, got, strict=True):
@@ -308,12 +315,12 @@ def test_reads_bag_written_by_mcap_ros2_writer(tmp_path: Path) -> None:
         for k in range(30):
             msg = {'header': {'stamp': {'sec': k, 'nanosec': 5}, 'frame_id': 'base_link'}}
             msg |= {'angle': 0.01 * k, 'valid': bool(k % 2)}
-            writer.write_message('/vd/estimates/slope', schema, msg, log_time=k, publish_time=k)
+            writer.write_message(ESTIMATES_SLOPE, schema, msg, log_time=k, publish_time=k)
         writer.finish()
     got = list(BagReader(path).messages())
     assert len(got) == 30
     for k, (topic, msgtype, log, msg) in enumerate(got):
-        assert (topic, msgtype, log) == ('/vd/estimates/slope', 'vd_msgs/msg/Slope', k)
+        assert (topic, msgtype, log) == (ESTIMATES_SLOPE, 'vd_msgs/msg/Slope', k)
         assert msg.angle == 0.01 * k and msg.valid == bool(k % 2)
         assert msg.header.stamp.sec == k and msg.header.frame_id == 'base_link'
 
@@ -324,12 +331,12 @@ def test_format_qos_profiles_round_trips_through_rosbags(tmp_path: Path) -> None
 
     text = format_qos_profiles([{'reliability': 'best_effort', 'depth': 5}])
     with BagWriter(tmp_path / 'q2') as writer:
-        writer.add_topic('/vd/truth/slope', 'vd_msgs/msg/Slope', text)
-        writer.add_topic('/vd/truth/other', 'vd_msgs/msg/Slope')
+        writer.add_topic(TRUTH_SLOPE, 'vd_msgs/msg/Slope', text)
+        writer.add_topic(f'{TRUTH_NAMESPACE}other', 'vd_msgs/msg/Slope')
     with Rosbag2Reader(tmp_path / 'q2') as reader:
         qos = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
-    assert qos['/vd/truth/other'] == []
-    (profile,) = qos['/vd/truth/slope']
+    assert qos[f'{TRUTH_NAMESPACE}other'] == []
+    (profile,) = qos[TRUTH_SLOPE]
     assert profile.depth == 5
     assert profile.reliability.name == 'BEST_EFFORT'
     assert profile.durability.name == 'VOLATILE'

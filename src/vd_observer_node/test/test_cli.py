@@ -8,6 +8,7 @@ import pytest
 from vd_observer_node.bag import BagReader
 from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
 from vd_observer_node.tools.cli import main
+from vd_sim_node.topics import ESTIMATES_TIRE_FORCES, SENSORS_WHEEL_ANGLES
 
 
 @pytest.fixture
@@ -20,7 +21,7 @@ def test_bag_info(drive_bag: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(['bag', 'info', str(drive_bag)]) == 0
     out = capsys.readouterr().out
     assert 'Messages:  500' in out
-    assert '/vd/sensors/wheel_angles' in out and 'vd_msgs/msg/WheelAngles' in out
+    assert SENSORS_WHEEL_ANGLES in out and 'vd_msgs/msg/WheelAngles' in out
     assert 'Duration:  0.990 s' in out
 
 
@@ -45,7 +46,7 @@ def test_replay(drive_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[s
     out_bag = tmp_path / 'est'
     assert main(['replay', '--no-progress', str(drive_bag), str(out_bag)]) == 0
     assert 'replayed 100 samples' in capsys.readouterr().out
-    assert BagReader(out_bag).topics['/vd/estimates/tire_forces'].message_count == 100
+    assert BagReader(out_bag).topics[ESTIMATES_TIRE_FORCES].message_count == 100
 
 
 @pytest.mark.parametrize(

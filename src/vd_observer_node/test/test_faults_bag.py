@@ -13,8 +13,16 @@ from hypothesis import strategies as st
 from vd_observer_node.bag import BagError, BagReader
 from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
 from vd_observer_node.tools.replay import replay_bag
+from vd_sim_node.topics import (
+    ESTIMATES_FRICTION,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+)
 
-ESTIMATES = ('/vd/estimates/tire_forces', '/vd/estimates/friction', '/vd/estimates/slope')
+ESTIMATES = (ESTIMATES_TIRE_FORCES, ESTIMATES_FRICTION, ESTIMATES_SLOPE)
 
 
 @pytest.fixture(scope='module')
@@ -95,8 +103,8 @@ def test_messy_bag_with_non_finite_values_and_a_loop_replays_finite(tmp_path: Pa
     twice = {'angle': np.concatenate([angle, angle])}
     zeros = np.zeros(2 * n)
     topics = {
-        '/vd/sensors/wheel_angles': ('vd_msgs/msg/WheelAngles', twice),
-        '/vd/sensors/body_velocity': (
+        SENSORS_WHEEL_ANGLES: ('vd_msgs/msg/WheelAngles', twice),
+        SENSORS_BODY_VELOCITY: (
             'geometry_msgs/msg/TwistStamped',
             {'twist.linear.x': np.concatenate([speed, speed])}
             | {
@@ -106,7 +114,7 @@ def test_messy_bag_with_non_finite_values_and_a_loop_replays_finite(tmp_path: Pa
                 if (a, x) != ('linear', 'x')
             },
         ),
-        '/vd/sensors/wheel_torques': (
+        SENSORS_WHEEL_TORQUES: (
             'vd_msgs/msg/WheelTorques',
             {
                 'torque': np.concatenate([torque, torque]),

@@ -38,6 +38,7 @@ from vd_observer_node.tools.report.alerts import (
 from vd_observer_node.tools.report.cli import add_report_parser
 from vd_observer_node.tools.report.evaluate import evaluate
 from vd_observer_node.tools.report.load import load_bag_series
+from vd_sim_node.topics import ESTIMATES_ALERTS, TRUTH_FRICTION, TRUTH_FRICTION_POTENTIAL
 
 RATE = 100.0  # [Hz]
 CFG = AlertSettings()
@@ -311,7 +312,7 @@ def _synthetic_topics(t: np.ndarray, with_truth_potential: bool = True) -> dict[
     onset = np.where(level > 0, 3.04, np.nan)
     mu_max = np.tile([1.0, 1.05], (n, 1))
     topics: dict[str, dict] = {
-        '/vd/truth/friction': {'slip': slip, 'mu': mu, 'valid': np.ones((n, 4), bool)},
+        TRUTH_FRICTION: {'slip': slip, 'mu': mu, 'valid': np.ones((n, 4), bool)},
         **alerts_topics(
             0,
             level,
@@ -323,7 +324,7 @@ def _synthetic_topics(t: np.ndarray, with_truth_potential: bool = True) -> dict[
         ),
     }
     if with_truth_potential:
-        topics['/vd/truth/friction_potential'] = {
+        topics[TRUTH_FRICTION_POTENTIAL] = {
             'mu_max': mu_max,
             'slip_peak': np.full((n, 2), 0.15),
             'confidence': np.ones((n, 2)),
@@ -374,22 +375,22 @@ def test_section_skipped_with_a_note_without_the_true_potential(tmp_path: Path) 
 def test_only_the_friction_potential_estimate_gives_mu_max_only(tmp_path: Path) -> None:
     t = _t(5.0)
     topics = _synthetic_topics(t)
-    del topics['/vd/estimates/alerts']
+    del topics[ESTIMATES_ALERTS]
     bag = tmp_path / 'bag'
     write_topic_arrays_bag(bag, np.round(t * 1e9).astype(np.int64), topics)
     report, _ = evaluate(load_bag_series(bag, progress=False))
     assert report.alerts is not None
     assert report.alerts.episodes == () and len(report.alerts.mu_max) == 1
-    assert any('/vd/estimates/alerts missing' in note for note in report.alerts.notes)
+    assert any(f'{ESTIMATES_ALERTS} missing' in note for note in report.alerts.notes)
 
 
 def test_reference_bag_has_alerts_but_no_true_potential() -> None:
     """Recorded before the simulator published /vd/truth/friction_potential: skipped."""
-    assert '/vd/estimates/alerts' in BagReader(REFERENCE_BAG).topics
+    assert ESTIMATES_ALERTS in BagReader(REFERENCE_BAG).topics
     report, _ = evaluate(load_bag_series(REFERENCE_BAG, progress=False))
     assert report.alerts is None
     assert any(
-        'alerts section skipped' in note and '/vd/truth/friction_potential' in note
+        'alerts section skipped' in note and TRUTH_FRICTION_POTENTIAL in note
         for note in report.notes
     )
 

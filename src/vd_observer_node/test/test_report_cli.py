@@ -13,6 +13,18 @@ from vd_observer_node.testing.devbag import write_topic_arrays_bag
 from vd_observer_node.tools.report.cli import add_report_parser, default_out_dir, run_report
 from vd_observer_node.tools.report.evaluate import evaluate
 from vd_observer_node.tools.report.load import load_bag_series
+from vd_sim_node.topics import (
+    ESTIMATES_FRICTION,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    OBSERVER_WHEEL_STATES,
+    SENSORS_WHEEL_TORQUES,
+    TRUTH_FRICTION,
+    TRUTH_NAMESPACE,
+    TRUTH_SLOPE,
+    TRUTH_TIRE_FORCES,
+    TRUTH_WHEEL_STATES,
+)
 
 RATE = 100.0  # [Hz]
 DURATION = 20.0  # [s]
@@ -45,18 +57,18 @@ def _known_topics(t: np.ndarray, rng: np.random.Generator) -> dict[str, dict[str
     slope_err = np.where((t >= STEP_S) & (t < STEP_S + SLOPE_SETTLE_S), 3.0, 0.1)
     gear = np.select([t < SHIFT_S[0], t < SHIFT_S[1]], [3, 0], 4).astype(np.int8)
     return {
-        '/vd/sensors/wheel_torques': {'gear': gear},
-        '/vd/truth/wheel_states': {'omega': omega, 'omega_dot': np.zeros((n, 4))},
-        '/vd/observer/wheel_states': {
+        SENSORS_WHEEL_TORQUES: {'gear': gear},
+        TRUTH_WHEEL_STATES: {'omega': omega, 'omega_dot': np.zeros((n, 4))},
+        OBSERVER_WHEEL_STATES: {
             'omega': omega * 1.001 + wild,
             'omega_dot': np.full((n, 4), 0.5) + wild,
         },
-        '/vd/truth/tire_forces': {'fx': fx_true, 'fz': fz_true},
-        '/vd/estimates/tire_forces': {'fx': fx_true + 10.0 + wild, 'fz': fz_true + 30.0 + wild},
-        '/vd/truth/friction': {'mu': mu_true, 'valid': np.ones((n, 4), bool)},
-        '/vd/estimates/friction': {'mu': mu_est + wild, 'valid': valid},
-        '/vd/truth/slope': {'angle': slope_true, 'valid': np.ones(n, bool)},
-        '/vd/estimates/slope': {
+        TRUTH_TIRE_FORCES: {'fx': fx_true, 'fz': fz_true},
+        ESTIMATES_TIRE_FORCES: {'fx': fx_true + 10.0 + wild, 'fz': fz_true + 30.0 + wild},
+        TRUTH_FRICTION: {'mu': mu_true, 'valid': np.ones((n, 4), bool)},
+        ESTIMATES_FRICTION: {'mu': mu_est + wild, 'valid': valid},
+        TRUTH_SLOPE: {'angle': slope_true, 'valid': np.ones(n, bool)},
+        ESTIMATES_SLOPE: {
             'angle': slope_true + np.radians(slope_err) + np.where(excluded, 1.0, 0.0),
             'valid': np.ones(n, bool),
         },
@@ -71,7 +83,7 @@ def known_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
     topics = _known_topics(t, np.random.default_rng(7))
     # Estimates logged 30 ms late (an estimator publishes after the measurement): pairing
     # must use the header stamp, not the log time.
-    late = {name: 30_000_000 for name in topics if not name.startswith('/vd/truth/')}
+    late = {name: 30_000_000 for name in topics if not name.startswith(TRUTH_NAMESPACE)}
     write_topic_arrays_bag(path, stamp, topics, log_delay_ns=late)
     return path
 
@@ -167,7 +179,7 @@ def test_bag_without_truth_is_a_one_line_error(
     write_topic_arrays_bag(
         bag,
         np.round(t * 1e9).astype(np.int64),
-        {'/vd/estimates/slope': {'angle': np.zeros(t.size), 'valid': np.ones(t.size, bool)}},
+        {ESTIMATES_SLOPE: {'angle': np.zeros(t.size), 'valid': np.ones(t.size, bool)}},
     )
     assert _vd(['report', str(bag), '--out', str(tmp_path / 'out')]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -193,19 +205,19 @@ def test_partial_truth_reports_what_exists_and_says_what_is_missing(tmp_path: Pa
         bag,
         np.round(t * 1e9).astype(np.int64),
         {
-            '/vd/truth/slope': {'angle': slope, 'valid': np.ones(t.size, bool)},
-            '/vd/estimates/slope': {
+            TRUTH_SLOPE: {'angle': slope, 'valid': np.ones(t.size, bool)},
+            ESTIMATES_SLOPE: {
                 'angle': slope + np.radians(0.2),
                 'valid': np.ones(t.size, bool),
             },
-            '/vd/estimates/tire_forces': {'fx': np.ones((t.size, 4)), 'fz': np.ones((t.size, 4))},
+            ESTIMATES_TIRE_FORCES: {'fx': np.ones((t.size, 4)), 'fz': np.ones((t.size, 4))},
         },
     )
     report, comparisons = evaluate(load_bag_series(bag, progress=False))
     assert [q.key for q in report.quantities] == ['slope']
     assert report.quantities[0].overall.rms == pytest.approx(0.2, rel=1e-9)
     notes = ' '.join(report.notes)
-    assert '/vd/truth/tire_forces missing' in notes and 'gear shifts not excluded' in notes
+    assert f'{TRUTH_TIRE_FORCES} missing' in notes and 'gear shifts not excluded' in notes
     forces = [c for c in comparisons if c.key == 'fx']
     assert forces and forces[0].truth is None  # still plotted, without truth
 
@@ -216,7 +228,7 @@ def test_truth_only_bag_says_there_is_nothing_to_compare(tmp_path: Path) -> None
     write_topic_arrays_bag(
         bag,
         np.round(t * 1e9).astype(np.int64),
-        {'/vd/truth/slope': {'angle': np.zeros(t.size), 'valid': np.ones(t.size, bool)}},
+        {TRUTH_SLOPE: {'angle': np.zeros(t.size), 'valid': np.ones(t.size, bool)}},
     )
     report, _ = evaluate(load_bag_series(bag, progress=False))
     assert report.quantities == ()
@@ -234,8 +246,8 @@ def test_estimates_with_foreign_stamps_are_reported_not_crashed(
     write_topic_arrays_bag(
         bag,
         stamp,
-        {'/vd/truth/tire_forces': forces, '/vd/estimates/tire_forces': forces},
-        stamps={'/vd/estimates/tire_forces': stamp + 1_234_567},
+        {TRUTH_TIRE_FORCES: forces, ESTIMATES_TIRE_FORCES: forces},
+        stamps={ESTIMATES_TIRE_FORCES: stamp + 1_234_567},
     )
     out = tmp_path / 'out'
     assert _vd(['report', str(bag), '--out', str(out), '--no-progress']) == 0

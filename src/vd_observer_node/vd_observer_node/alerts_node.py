@@ -28,6 +28,16 @@ from vd_sim_node.ros_common import (
     node_status,
     run_node,
 )
+from vd_sim_node.topics import (
+    ESTIMATES_ALERTS,
+    ESTIMATES_FRICTION,
+    ESTIMATES_FRICTION_POTENTIAL,
+    ESTIMATES_TIRE_FORCES,
+    OBSERVER_WHEEL_STATES,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+)
 from vd_sim_node.vehicle.params import load_vehicle
 
 from vd_msgs.msg import (
@@ -54,12 +64,12 @@ PARAMS = [KERNEL, *ALERTS_PARAMS]
 
 TOPICS = ('angles', 'speed', 'torques', 'states', 'friction', 'forces')
 _INPUTS = (
-    ('angles', WheelAngles, '/vd/sensors/wheel_angles', 'vd_msgs/msg/WheelAngles'),
-    ('speed', TwistStamped, '/vd/sensors/body_velocity', 'geometry_msgs/msg/TwistStamped'),
-    ('torques', WheelTorques, '/vd/sensors/wheel_torques', 'vd_msgs/msg/WheelTorques'),
-    ('states', WheelStates, '/vd/observer/wheel_states', 'vd_msgs/msg/WheelStates'),
-    ('friction', Friction, '/vd/estimates/friction', 'vd_msgs/msg/Friction'),
-    ('forces', TireForces, '/vd/estimates/tire_forces', 'vd_msgs/msg/TireForces'),
+    ('angles', WheelAngles, SENSORS_WHEEL_ANGLES, 'vd_msgs/msg/WheelAngles'),
+    ('speed', TwistStamped, SENSORS_BODY_VELOCITY, 'geometry_msgs/msg/TwistStamped'),
+    ('torques', WheelTorques, SENSORS_WHEEL_TORQUES, 'vd_msgs/msg/WheelTorques'),
+    ('states', WheelStates, OBSERVER_WHEEL_STATES, 'vd_msgs/msg/WheelStates'),
+    ('friction', Friction, ESTIMATES_FRICTION, 'vd_msgs/msg/Friction'),
+    ('forces', TireForces, ESTIMATES_TIRE_FORCES, 'vd_msgs/msg/TireForces'),
 )
 
 
@@ -104,9 +114,9 @@ class AlertsNode(Node):
             capacity=capacity,
             max_jump_back_ns=round(self.monitor.observer_config.max_gap * 1e9),
         )
-        self.pub_alerts = self.create_publisher(Alerts, '/vd/estimates/alerts', STREAM_QOS)
+        self.pub_alerts = self.create_publisher(Alerts, ESTIMATES_ALERTS, STREAM_QOS)
         self.pub_potential = self.create_publisher(
-            FrictionPotential, '/vd/estimates/friction_potential', STREAM_QOS
+            FrictionPotential, ESTIMATES_FRICTION_POTENTIAL, STREAM_QOS
         )
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self.encoders = Encoders()

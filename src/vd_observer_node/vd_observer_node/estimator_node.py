@@ -25,6 +25,17 @@ from vd_sim_node.ros_common import (
     node_status,
     run_node,
 )
+from vd_sim_node.topics import (
+    ESTIMATES_FRICTION,
+    ESTIMATES_RESISTANCES,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    OBSERVER_BODY_ACCEL,
+    OBSERVER_BODY_VELOCITY,
+    OBSERVER_WHEEL_STATES,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_TORQUES,
+)
 
 from vd_msgs.msg import Friction, Resistances, Slope, TireForces, WheelStates, WheelTorques
 from vd_observer_node.estimation.alignment import StampAligner
@@ -41,8 +52,8 @@ PARAMS = [KERNEL, *ESTIMATOR_PARAMS]
 
 TOPICS = ('states', 'accel', 'speed', 'torques')
 SPEED_TOPICS = {
-    'measured': '/vd/sensors/body_velocity',
-    'observer': '/vd/observer/body_velocity',
+    'measured': SENSORS_BODY_VELOCITY,
+    'observer': OBSERVER_BODY_VELOCITY,
 }
 _INPUT_TYPES = {
     'states': 'vd_msgs/msg/WheelStates',
@@ -77,14 +88,10 @@ class EstimatorNode(Node):
             max_jump_back_ns=round(self.estimator.config.max_gap * 1e9),
         )
         self._align_reported: dict[str, int] = {}
-        self.pub_forces = self.create_publisher(
-            TireForces, '/vd/estimates/tire_forces', STREAM_QOS
-        )
-        self.pub_friction = self.create_publisher(Friction, '/vd/estimates/friction', STREAM_QOS)
-        self.pub_resist = self.create_publisher(
-            Resistances, '/vd/estimates/resistances', STREAM_QOS
-        )
-        self.pub_slope = self.create_publisher(Slope, '/vd/estimates/slope', STREAM_QOS)
+        self.pub_forces = self.create_publisher(TireForces, ESTIMATES_TIRE_FORCES, STREAM_QOS)
+        self.pub_friction = self.create_publisher(Friction, ESTIMATES_FRICTION, STREAM_QOS)
+        self.pub_resist = self.create_publisher(Resistances, ESTIMATES_RESISTANCES, STREAM_QOS)
+        self.pub_slope = self.create_publisher(Slope, ESTIMATES_SLOPE, STREAM_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._codec = Encoders()
         self.counts = {
@@ -94,10 +101,10 @@ class EstimatorNode(Node):
             'undecodable': 0,
         }
         for key, kind, topic in (
-            ('states', WheelStates, '/vd/observer/wheel_states'),
-            ('accel', AccelStamped, '/vd/observer/body_accel'),
+            ('states', WheelStates, OBSERVER_WHEEL_STATES),
+            ('accel', AccelStamped, OBSERVER_BODY_ACCEL),
             ('speed', TwistStamped, speed_topic),
-            ('torques', WheelTorques, '/vd/sensors/wheel_torques'),
+            ('torques', WheelTorques, SENSORS_WHEEL_TORQUES),
         ):
             callback = aligned_input(
                 _INPUT_TYPES[key], key, self.aligner, self.estimate, self.counts

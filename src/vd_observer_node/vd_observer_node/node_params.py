@@ -12,6 +12,7 @@ from __future__ import annotations
 from typing import Final
 
 from vd_sim_node.ros_common import ParamSpec, dataclass_param_specs
+from vd_sim_node.topics import OBSERVER_BODY_VELOCITY, SENSORS_BODY_VELOCITY
 
 from vd_observer_node.chain import ESTIMATOR_SPEEDS, KERNELS
 from vd_observer_node.estimation.differentiator import (
@@ -83,8 +84,8 @@ ESTIMATOR_PARAMS: Final = [
     ParamSpec(
         'speed_source',
         'measured',
-        "body speed fed to the estimator: 'measured' (/vd/sensors/body_velocity; the slope "
-        "low-pass smooths it) or 'observer' (/vd/observer/body_velocity, filtered); must "
+        f"body speed fed to the estimator: 'measured' ({SENSORS_BODY_VELOCITY}; the slope "
+        f"low-pass smooths it) or 'observer' ({OBSERVER_BODY_VELOCITY}, filtered); must "
         'match the offline cascade (run_cascade estimator_speed) for identical results',
         choices=ESTIMATOR_SPEEDS,
     ),

@@ -29,6 +29,13 @@ from vd_sim_node.ros_common import (
     node_status,
     run_node,
 )
+from vd_sim_node.topics import (
+    OBSERVER_BODY_ACCEL,
+    OBSERVER_BODY_VELOCITY,
+    OBSERVER_WHEEL_STATES,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+)
 
 from vd_msgs.msg import WheelAngles, WheelStates
 from vd_observer_node.bag.cdr_message import MessageCodec
@@ -64,24 +71,20 @@ class ObserverNode(Node):
             differentiator = CompiledDifferentiator  # type: ignore[assignment]  # a drop-in
         self.wheels = WheelObserver(self.config, differentiator=differentiator)
         self.speed = SpeedObserver(self.config, differentiator=differentiator)
-        self.pub_states = self.create_publisher(
-            WheelStates, '/vd/observer/wheel_states', STREAM_QOS
-        )
-        self.pub_accel = self.create_publisher(AccelStamped, '/vd/observer/body_accel', STREAM_QOS)
-        self.pub_speed = self.create_publisher(
-            TwistStamped, '/vd/observer/body_velocity', STREAM_QOS
-        )
+        self.pub_states = self.create_publisher(WheelStates, OBSERVER_WHEEL_STATES, STREAM_QOS)
+        self.pub_accel = self.create_publisher(AccelStamped, OBSERVER_BODY_ACCEL, STREAM_QOS)
+        self.pub_speed = self.create_publisher(TwistStamped, OBSERVER_BODY_VELOCITY, STREAM_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._angles_in = MessageCodec('vd_msgs/msg/WheelAngles')
         self._speed_in = MessageCodec('geometry_msgs/msg/TwistStamped')
         self._codec = Encoders()
         # raw: the bytes are decoded with struct, never built into Python message objects
         self.create_subscription(
-            WheelAngles, '/vd/sensors/wheel_angles', self.on_wheel_angles, STREAM_QOS, raw=True
+            WheelAngles, SENSORS_WHEEL_ANGLES, self.on_wheel_angles, STREAM_QOS, raw=True
         )
         self.create_subscription(
             TwistStamped,
-            '/vd/sensors/body_velocity',
+            SENSORS_BODY_VELOCITY,
             self.on_body_velocity,
             STREAM_QOS,
             raw=True,

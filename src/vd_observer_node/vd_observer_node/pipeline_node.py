@@ -32,6 +32,20 @@ from vd_sim_node.ros_common import (
     node_status,
     run_node,
 )
+from vd_sim_node.topics import (
+    ESTIMATES_ALERTS,
+    ESTIMATES_FRICTION,
+    ESTIMATES_FRICTION_POTENTIAL,
+    ESTIMATES_RESISTANCES,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    OBSERVER_BODY_ACCEL,
+    OBSERVER_BODY_VELOCITY,
+    OBSERVER_WHEEL_STATES,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+)
 from vd_sim_node.vehicle.params import load_vehicle
 
 from vd_msgs.msg import (
@@ -65,25 +79,25 @@ __all__ = ['PARAMS', 'PipelineNode', 'main']
 PARAMS = PIPELINE_PARAMS
 
 _INPUTS = (
-    ('angles', WheelAngles, '/vd/sensors/wheel_angles', 'vd_msgs/msg/WheelAngles'),
-    ('speed', TwistStamped, '/vd/sensors/body_velocity', 'geometry_msgs/msg/TwistStamped'),
-    ('torques', WheelTorques, '/vd/sensors/wheel_torques', 'vd_msgs/msg/WheelTorques'),
+    ('angles', WheelAngles, SENSORS_WHEEL_ANGLES, 'vd_msgs/msg/WheelAngles'),
+    ('speed', TwistStamped, SENSORS_BODY_VELOCITY, 'geometry_msgs/msg/TwistStamped'),
+    ('torques', WheelTorques, SENSORS_WHEEL_TORQUES, 'vd_msgs/msg/WheelTorques'),
 )
 _OUTPUTS = (
-    ('states', WheelStates, '/vd/observer/wheel_states', 'vd_msgs/msg/WheelStates'),
-    ('accel', AccelStamped, '/vd/observer/body_accel', 'geometry_msgs/msg/AccelStamped'),
-    ('velocity', TwistStamped, '/vd/observer/body_velocity', 'geometry_msgs/msg/TwistStamped'),
-    ('forces', TireForces, '/vd/estimates/tire_forces', 'vd_msgs/msg/TireForces'),
-    ('friction', Friction, '/vd/estimates/friction', 'vd_msgs/msg/Friction'),
-    ('resistances', Resistances, '/vd/estimates/resistances', 'vd_msgs/msg/Resistances'),
-    ('slope', Slope, '/vd/estimates/slope', 'vd_msgs/msg/Slope'),
+    ('states', WheelStates, OBSERVER_WHEEL_STATES, 'vd_msgs/msg/WheelStates'),
+    ('accel', AccelStamped, OBSERVER_BODY_ACCEL, 'geometry_msgs/msg/AccelStamped'),
+    ('velocity', TwistStamped, OBSERVER_BODY_VELOCITY, 'geometry_msgs/msg/TwistStamped'),
+    ('forces', TireForces, ESTIMATES_TIRE_FORCES, 'vd_msgs/msg/TireForces'),
+    ('friction', Friction, ESTIMATES_FRICTION, 'vd_msgs/msg/Friction'),
+    ('resistances', Resistances, ESTIMATES_RESISTANCES, 'vd_msgs/msg/Resistances'),
+    ('slope', Slope, ESTIMATES_SLOPE, 'vd_msgs/msg/Slope'),
     (
         'potential',
         FrictionPotential,
-        '/vd/estimates/friction_potential',
+        ESTIMATES_FRICTION_POTENTIAL,
         'vd_msgs/msg/FrictionPotential',
     ),
-    ('alerts', Alerts, '/vd/estimates/alerts', 'vd_msgs/msg/Alerts'),
+    ('alerts', Alerts, ESTIMATES_ALERTS, 'vd_msgs/msg/Alerts'),
 )
 _OBSERVER_KEYS = {f for f in ObserverConfig.__dataclass_fields__ if f != 'gains'}
 _GAIN_KEYS = set(LevantGains.__dataclass_fields__)

@@ -30,6 +30,7 @@ from vd_sim_node.ros_common import (
     ros_message_class,
     run_node,
 )
+from vd_sim_node.topics import SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES, SENSORS_WHEEL_TORQUES
 
 from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.errors import ReplayInputError
@@ -37,9 +38,9 @@ from vd_observer_node.bag.errors import ReplayInputError
 __all__ = ['SENSOR_TOPICS', 'PlayerNode', 'main']
 
 SENSOR_TOPICS = [
-    '/vd/sensors/wheel_angles',
-    '/vd/sensors/body_velocity',
-    '/vd/sensors/wheel_torques',
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_TORQUES,
 ]
 
 PARAMS = [

@@ -33,7 +33,7 @@ from vd_sim_node.ros_common import (
     ros_message_class,
     run_node,
 )
-from vd_sim_node.topics import CONTRACT
+from vd_sim_node.topics import CONTRACT, NAMESPACE
 
 from vd_observer_node.bag import BagWriter
 from vd_observer_node.bag.errors import BagError, UnknownMessageTypeError
@@ -43,7 +43,9 @@ __all__ = ['RecorderNode', 'main']
 
 PARAMS = [
     ParamSpec('output', '', "bag folder to create ('' = vd_<date>_<time> in the working dir)"),
-    ParamSpec('topic_regex', '^/vd/', 'record topics whose name matches this regex'),
+    ParamSpec(
+        'topic_regex', '^' + re.escape(NAMESPACE), 'record topics whose name matches this regex'
+    ),
     ParamSpec(
         'contract_topics',
         True,

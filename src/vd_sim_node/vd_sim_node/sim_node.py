@@ -56,6 +56,20 @@ from vd_sim_node.ros_common import (
     ns_to_time,
     run_node,
 )
+from vd_sim_node.topics import (
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+    TRUTH_BODY_ACCEL,
+    TRUTH_BODY_VELOCITY,
+    TRUTH_FRICTION,
+    TRUTH_FRICTION_POTENTIAL,
+    TRUTH_NAMESPACE,
+    TRUTH_RESISTANCES,
+    TRUTH_SLOPE,
+    TRUTH_TIRE_FORCES,
+    TRUTH_WHEEL_STATES,
+)
 from vd_sim_node.vehicle.friction_truth import road_class_of
 from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.scenario import Scenario, load_scenario
@@ -93,7 +107,7 @@ PARAMS = [
         high=100.0,
     ),
     ParamSpec('seed', -1, 'noise seed (-1 = scenario setting)', low=-1, high=2**31 - 1),
-    ParamSpec('publish_truth', True, 'publish the /vd/truth/* topics'),
+    ParamSpec('publish_truth', True, f'publish the {TRUTH_NAMESPACE}* topics'),
     ParamSpec('frame_id', 'base_link', 'frame_id of every header'),
     ParamSpec(
         'start_delay',
@@ -181,18 +195,18 @@ class SimNode(Node):
             self.streams.append(self.create_publisher(kind, topic, STREAM_QOS))
             return self.streams[-1]
 
-        self.p_angles = pub(WheelAngles, '/vd/sensors/wheel_angles')
-        self.p_speed = pub(TwistStamped, '/vd/sensors/body_velocity')
-        self.p_torques = pub(WheelTorques, '/vd/sensors/wheel_torques')
+        self.p_angles = pub(WheelAngles, SENSORS_WHEEL_ANGLES)
+        self.p_speed = pub(TwistStamped, SENSORS_BODY_VELOCITY)
+        self.p_torques = pub(WheelTorques, SENSORS_WHEEL_TORQUES)
         if self.publish_truth:
-            self.t_states = pub(WheelStates, '/vd/truth/wheel_states')
-            self.t_accel = pub(AccelStamped, '/vd/truth/body_accel')
-            self.t_speed = pub(TwistStamped, '/vd/truth/body_velocity')
-            self.t_forces = pub(TireForces, '/vd/truth/tire_forces')
-            self.t_friction = pub(Friction, '/vd/truth/friction')
-            self.t_resist = pub(Resistances, '/vd/truth/resistances')
-            self.t_slope = pub(Slope, '/vd/truth/slope')
-            self.t_potential = pub(FrictionPotential, '/vd/truth/friction_potential')
+            self.t_states = pub(WheelStates, TRUTH_WHEEL_STATES)
+            self.t_accel = pub(AccelStamped, TRUTH_BODY_ACCEL)
+            self.t_speed = pub(TwistStamped, TRUTH_BODY_VELOCITY)
+            self.t_forces = pub(TireForces, TRUTH_TIRE_FORCES)
+            self.t_friction = pub(Friction, TRUTH_FRICTION)
+            self.t_resist = pub(Resistances, TRUTH_RESISTANCES)
+            self.t_slope = pub(Slope, TRUTH_SLOPE)
+            self.t_potential = pub(FrictionPotential, TRUTH_FRICTION_POTENTIAL)
         self.p_clock = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
         self.p_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
 

@@ -1,43 +1,113 @@
 """The topic contract of the vd stack: every topic name and its message type.
 
-One table, used by the nodes that publish, subscribe or record these topics, so a name is
-written once. Types are ROS 2 type names ('pkg/msg/Type'). See the README's topic contract.
+One table, used by the nodes that publish, subscribe or record these topics and by the tools,
+tests and scripts that read them, so a name is written once: here. Code elsewhere uses the
+constants below, never a literal ``/vd/...`` string (src/vd_sim_node/test/test_topics.py
+fails on one). A constant is named after its topic: the part after ``/vd/`` in upper case,
+``/`` written ``_`` (``/vd/truth/slope`` is ``TRUTH_SLOPE``). Types are ROS 2 type names
+('pkg/msg/Type'). See the README's topic contract.
 """
 
 from __future__ import annotations
 
 from typing import Final
 
-__all__ = ['ALERTS', 'CONTRACT', 'ESTIMATES', 'OBSERVER', 'SENSORS', 'TRUTH']
+__all__ = [
+    'ALERTS',
+    'CONTRACT',
+    'ESTIMATES',
+    'ESTIMATES_ALERTS',
+    'ESTIMATES_FRICTION',
+    'ESTIMATES_FRICTION_POTENTIAL',
+    'ESTIMATES_NAMESPACE',
+    'ESTIMATES_RESISTANCES',
+    'ESTIMATES_SLOPE',
+    'ESTIMATES_TIRE_FORCES',
+    'NAMESPACE',
+    'OBSERVER',
+    'OBSERVER_BODY_ACCEL',
+    'OBSERVER_BODY_VELOCITY',
+    'OBSERVER_NAMESPACE',
+    'OBSERVER_WHEEL_STATES',
+    'SENSORS',
+    'SENSORS_BODY_VELOCITY',
+    'SENSORS_NAMESPACE',
+    'SENSORS_WHEEL_ANGLES',
+    'SENSORS_WHEEL_TORQUES',
+    'TRUTH',
+    'TRUTH_BODY_ACCEL',
+    'TRUTH_BODY_VELOCITY',
+    'TRUTH_FRICTION',
+    'TRUTH_FRICTION_POTENTIAL',
+    'TRUTH_NAMESPACE',
+    'TRUTH_RESISTANCES',
+    'TRUTH_SLOPE',
+    'TRUTH_TIRE_FORCES',
+    'TRUTH_WHEEL_STATES',
+]
+
+#: Every vd topic starts with this (the recorder records all of them).
+NAMESPACE: Final = '/vd/'
+#: The groups' namespaces (the alerts and the friction potential are estimates too).
+SENSORS_NAMESPACE: Final = '/vd/sensors/'
+OBSERVER_NAMESPACE: Final = '/vd/observer/'
+ESTIMATES_NAMESPACE: Final = '/vd/estimates/'
+TRUTH_NAMESPACE: Final = '/vd/truth/'
+
+# The simulator's measurements (or a bag's), the inputs of the observer and estimator.
+SENSORS_WHEEL_ANGLES: Final = '/vd/sensors/wheel_angles'
+SENSORS_BODY_VELOCITY: Final = '/vd/sensors/body_velocity'
+SENSORS_WHEEL_TORQUES: Final = '/vd/sensors/wheel_torques'
+# The observer's outputs.
+OBSERVER_WHEEL_STATES: Final = '/vd/observer/wheel_states'
+OBSERVER_BODY_ACCEL: Final = '/vd/observer/body_accel'
+OBSERVER_BODY_VELOCITY: Final = '/vd/observer/body_velocity'
+# The estimator's outputs.
+ESTIMATES_TIRE_FORCES: Final = '/vd/estimates/tire_forces'
+ESTIMATES_FRICTION: Final = '/vd/estimates/friction'
+ESTIMATES_RESISTANCES: Final = '/vd/estimates/resistances'
+ESTIMATES_SLOPE: Final = '/vd/estimates/slope'
+# The alerts node's outputs.
+ESTIMATES_ALERTS: Final = '/vd/estimates/alerts'
+ESTIMATES_FRICTION_POTENTIAL: Final = '/vd/estimates/friction_potential'
+# The simulator's true values, the references of the estimates.
+TRUTH_WHEEL_STATES: Final = '/vd/truth/wheel_states'
+TRUTH_BODY_ACCEL: Final = '/vd/truth/body_accel'
+TRUTH_BODY_VELOCITY: Final = '/vd/truth/body_velocity'
+TRUTH_TIRE_FORCES: Final = '/vd/truth/tire_forces'
+TRUTH_FRICTION: Final = '/vd/truth/friction'
+TRUTH_RESISTANCES: Final = '/vd/truth/resistances'
+TRUTH_SLOPE: Final = '/vd/truth/slope'
+TRUTH_FRICTION_POTENTIAL: Final = '/vd/truth/friction_potential'
 
 SENSORS: Final = {
-    '/vd/sensors/wheel_angles': 'vd_msgs/msg/WheelAngles',
-    '/vd/sensors/body_velocity': 'geometry_msgs/msg/TwistStamped',
-    '/vd/sensors/wheel_torques': 'vd_msgs/msg/WheelTorques',
+    SENSORS_WHEEL_ANGLES: 'vd_msgs/msg/WheelAngles',
+    SENSORS_BODY_VELOCITY: 'geometry_msgs/msg/TwistStamped',
+    SENSORS_WHEEL_TORQUES: 'vd_msgs/msg/WheelTorques',
 }
 OBSERVER: Final = {
-    '/vd/observer/wheel_states': 'vd_msgs/msg/WheelStates',
-    '/vd/observer/body_accel': 'geometry_msgs/msg/AccelStamped',
-    '/vd/observer/body_velocity': 'geometry_msgs/msg/TwistStamped',
+    OBSERVER_WHEEL_STATES: 'vd_msgs/msg/WheelStates',
+    OBSERVER_BODY_ACCEL: 'geometry_msgs/msg/AccelStamped',
+    OBSERVER_BODY_VELOCITY: 'geometry_msgs/msg/TwistStamped',
 }
 ESTIMATES: Final = {
-    '/vd/estimates/tire_forces': 'vd_msgs/msg/TireForces',
-    '/vd/estimates/friction': 'vd_msgs/msg/Friction',
-    '/vd/estimates/resistances': 'vd_msgs/msg/Resistances',
-    '/vd/estimates/slope': 'vd_msgs/msg/Slope',
+    ESTIMATES_TIRE_FORCES: 'vd_msgs/msg/TireForces',
+    ESTIMATES_FRICTION: 'vd_msgs/msg/Friction',
+    ESTIMATES_RESISTANCES: 'vd_msgs/msg/Resistances',
+    ESTIMATES_SLOPE: 'vd_msgs/msg/Slope',
 }
 ALERTS: Final = {
-    '/vd/estimates/alerts': 'vd_msgs/msg/Alerts',
-    '/vd/estimates/friction_potential': 'vd_msgs/msg/FrictionPotential',
+    ESTIMATES_ALERTS: 'vd_msgs/msg/Alerts',
+    ESTIMATES_FRICTION_POTENTIAL: 'vd_msgs/msg/FrictionPotential',
 }
 TRUTH: Final = {
-    '/vd/truth/wheel_states': 'vd_msgs/msg/WheelStates',
-    '/vd/truth/body_accel': 'geometry_msgs/msg/AccelStamped',
-    '/vd/truth/body_velocity': 'geometry_msgs/msg/TwistStamped',
-    '/vd/truth/tire_forces': 'vd_msgs/msg/TireForces',
-    '/vd/truth/friction': 'vd_msgs/msg/Friction',
-    '/vd/truth/resistances': 'vd_msgs/msg/Resistances',
-    '/vd/truth/slope': 'vd_msgs/msg/Slope',
-    '/vd/truth/friction_potential': 'vd_msgs/msg/FrictionPotential',
+    TRUTH_WHEEL_STATES: 'vd_msgs/msg/WheelStates',
+    TRUTH_BODY_ACCEL: 'geometry_msgs/msg/AccelStamped',
+    TRUTH_BODY_VELOCITY: 'geometry_msgs/msg/TwistStamped',
+    TRUTH_TIRE_FORCES: 'vd_msgs/msg/TireForces',
+    TRUTH_FRICTION: 'vd_msgs/msg/Friction',
+    TRUTH_RESISTANCES: 'vd_msgs/msg/Resistances',
+    TRUTH_SLOPE: 'vd_msgs/msg/Slope',
+    TRUTH_FRICTION_POTENTIAL: 'vd_msgs/msg/FrictionPotential',
 }
 CONTRACT: Final = {**SENSORS, **OBSERVER, **ESTIMATES, **ALERTS, **TRUTH}

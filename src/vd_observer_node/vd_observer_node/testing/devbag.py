@@ -13,6 +13,28 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
+from vd_sim_node.topics import (
+    ESTIMATES_ALERTS,
+    ESTIMATES_FRICTION,
+    ESTIMATES_FRICTION_POTENTIAL,
+    ESTIMATES_RESISTANCES,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    OBSERVER_BODY_ACCEL,
+    OBSERVER_BODY_VELOCITY,
+    OBSERVER_WHEEL_STATES,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+    TRUTH_BODY_ACCEL,
+    TRUTH_BODY_VELOCITY,
+    TRUTH_FRICTION,
+    TRUTH_FRICTION_POTENTIAL,
+    TRUTH_RESISTANCES,
+    TRUTH_SLOPE,
+    TRUTH_TIRE_FORCES,
+    TRUTH_WHEEL_STATES,
+)
 
 from vd_observer_node.bag.alerts_cdr import ALERTS_TYPE as _ALERTS_TYPE
 from vd_observer_node.bag.alerts_cdr import encode_alerts
@@ -107,9 +129,9 @@ def sim_topics(sim: Any, *, truth: bool = True) -> dict[str, dict[str, np.ndarra
         truth: include the ``/vd/truth/*`` topics.
     """
     topics: dict[str, dict[str, np.ndarray]] = {
-        '/vd/sensors/wheel_angles': {'angle': sim.wheel_angle},
-        '/vd/sensors/body_velocity': {'twist.linear.x': sim.body_speed},
-        '/vd/sensors/wheel_torques': {
+        SENSORS_WHEEL_ANGLES: {'angle': sim.wheel_angle},
+        SENSORS_BODY_VELOCITY: {'twist.linear.x': sim.body_speed},
+        SENSORS_WHEEL_TORQUES: {
             'torque': sim.wheel_torque,
             'engine_torque': sim.engine_torque,
             'engine_speed': sim.engine_speed,
@@ -119,23 +141,21 @@ def sim_topics(sim: Any, *, truth: bool = True) -> dict[str, dict[str, np.ndarra
     if truth:
         topics.update(
             {
-                '/vd/truth/wheel_states': {
+                TRUTH_WHEEL_STATES: {
                     'angle': sim.angle_true,
                     'omega': sim.omega,
                     'omega_dot': sim.omega_dot,
                 },
-                '/vd/truth/body_accel': {'accel.linear.x': sim.accel_true},
-                '/vd/truth/body_velocity': {'twist.linear.x': sim.speed_true},
-                '/vd/truth/tire_forces': {'fx': sim.fx, 'fz': sim.fz},
-                '/vd/truth/friction': {'mu': sim.mu, 'slip': sim.slip, 'valid': sim.fz > 0.0},
-                '/vd/truth/resistances': {'rolling': sim.rolling, 'aero': sim.aero},
-                '/vd/truth/slope': {'angle': sim.slope, 'valid': np.ones(sim.t.shape, bool)},
+                TRUTH_BODY_ACCEL: {'accel.linear.x': sim.accel_true},
+                TRUTH_BODY_VELOCITY: {'twist.linear.x': sim.speed_true},
+                TRUTH_TIRE_FORCES: {'fx': sim.fx, 'fz': sim.fz},
+                TRUTH_FRICTION: {'mu': sim.mu, 'slip': sim.slip, 'valid': sim.fz > 0.0},
+                TRUTH_RESISTANCES: {'rolling': sim.rolling, 'aero': sim.aero},
+                TRUTH_SLOPE: {'angle': sim.slope, 'valid': np.ones(sim.t.shape, bool)},
             }
         )
         if hasattr(sim, 'peak_mu'):
-            topics['/vd/truth/friction_potential'] = true_potential_values(
-                sim.peak_mu, sim.peak_slip
-            )
+            topics[TRUTH_FRICTION_POTENTIAL] = true_potential_values(sim.peak_mu, sim.peak_slip)
     return topics
 
 
@@ -190,7 +210,7 @@ def alerts_topics(
         )
 
     out: dict[str, dict[str, np.ndarray]] = {
-        '/vd/estimates/alerts': {
+        ESTIMATES_ALERTS: {
             'level': np.asarray(level),
             'onset_ns': ns(onset),
             'detected_ns': ns(detected),
@@ -199,7 +219,7 @@ def alerts_topics(
     if mu_max is not None:
         m = np.asarray(mu_max, dtype=np.float64)
         classes = np.zeros(m.shape, np.uint8) if road_class is None else np.asarray(road_class)
-        out['/vd/estimates/friction_potential'] = {
+        out[ESTIMATES_FRICTION_POTENTIAL] = {
             'mu_max': m,
             'slip_peak': np.zeros_like(m) if slip_peak is None else np.asarray(slip_peak),
             'confidence': np.zeros_like(m) if confidence is None else np.asarray(confidence),
@@ -216,15 +236,15 @@ def cascade_topics(result: Any, wheel_angle: np.ndarray) -> dict[str, dict[str, 
         wheel_angle: shape (N, 4), [rad], measured angles echoed in ``wheel_states.angle``.
     """
     return {
-        '/vd/observer/wheel_states': {
+        OBSERVER_WHEEL_STATES: {
             'angle': wheel_angle,
             'omega': result.omega,
             'omega_dot': result.omega_dot,
         },
-        '/vd/observer/body_accel': {'accel.linear.x': result.accel},
-        '/vd/observer/body_velocity': {'twist.linear.x': result.speed},
-        '/vd/estimates/tire_forces': {'fx': result.fx, 'fz': result.fz},
-        '/vd/estimates/friction': {'mu': result.mu, 'slip': result.slip, 'valid': result.mu_valid},
-        '/vd/estimates/resistances': {'rolling': result.rolling, 'aero': result.aero},
-        '/vd/estimates/slope': {'angle': result.slope, 'valid': result.slope_valid},
+        OBSERVER_BODY_ACCEL: {'accel.linear.x': result.accel},
+        OBSERVER_BODY_VELOCITY: {'twist.linear.x': result.speed},
+        ESTIMATES_TIRE_FORCES: {'fx': result.fx, 'fz': result.fz},
+        ESTIMATES_FRICTION: {'mu': result.mu, 'slip': result.slip, 'valid': result.mu_valid},
+        ESTIMATES_RESISTANCES: {'rolling': result.rolling, 'aero': result.aero},
+        ESTIMATES_SLOPE: {'angle': result.slope, 'valid': result.slope_valid},
     }

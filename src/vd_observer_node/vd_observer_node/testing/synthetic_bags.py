@@ -9,6 +9,13 @@ from __future__ import annotations
 import os
 
 import numpy as np
+from vd_sim_node.topics import (
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+    TRUTH_BODY_ACCEL,
+    TRUTH_WHEEL_STATES,
+)
 
 from vd_observer_node.bag.cdr_batch import encode_batch
 from vd_observer_node.bag.writer import BagWriter
@@ -74,8 +81,8 @@ def write_synthetic_drive_bag(
     zeros = np.zeros(n)
     stamps = drive.stamp_ns
     topics: dict[str, tuple[str, dict[str, np.ndarray]]] = {
-        '/vd/sensors/wheel_angles': ('vd_msgs/msg/WheelAngles', {'angle': drive.angle}),
-        '/vd/sensors/body_velocity': (
+        SENSORS_WHEEL_ANGLES: ('vd_msgs/msg/WheelAngles', {'angle': drive.angle}),
+        SENSORS_BODY_VELOCITY: (
             'geometry_msgs/msg/TwistStamped',
             {
                 'twist.linear.x': drive.speed,
@@ -86,7 +93,7 @@ def write_synthetic_drive_bag(
                 'twist.angular.z': zeros,
             },
         ),
-        '/vd/sensors/wheel_torques': (
+        SENSORS_WHEEL_TORQUES: (
             'vd_msgs/msg/WheelTorques',
             {
                 'torque': drive.torque,
@@ -97,11 +104,11 @@ def write_synthetic_drive_bag(
         ),
     }
     if with_truth:
-        topics['/vd/truth/wheel_states'] = (
+        topics[TRUTH_WHEEL_STATES] = (
             'vd_msgs/msg/WheelStates',
             {'angle': drive.angle, 'omega': drive.omega, 'omega_dot': drive.omega_dot},
         )
-        topics['/vd/truth/body_accel'] = (
+        topics[TRUTH_BODY_ACCEL] = (
             'geometry_msgs/msg/AccelStamped',
             {
                 'accel.linear.x': drive.accel,

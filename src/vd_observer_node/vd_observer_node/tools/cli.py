@@ -15,6 +15,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from vd_sim_node.topics import SENSORS_NAMESPACE
+
 from vd_observer_node.errors import ObserverError
 from vd_observer_node.tools.report.cli import add_report_parser
 
@@ -117,7 +119,9 @@ def _parser() -> argparse.ArgumentParser:
     repair.add_argument('--no-backup', action='store_true', help='delete the damaged file')
     repair.set_defaults(run=_repair)
     replay = commands.add_parser('replay', help='run the estimator cascade over a bag offline')
-    replay.add_argument('in_bag', type=Path, help='input bag with the /vd/sensors/* topics')
+    replay.add_argument(
+        'in_bag', type=Path, help=f'input bag with the {SENSORS_NAMESPACE}* topics'
+    )
     replay.add_argument('out_bag', type=Path, help='output bag folder to create')
     replay.add_argument('--vehicle', type=Path, help='vehicle YAML (default: the Clio file)')
     replay.add_argument(

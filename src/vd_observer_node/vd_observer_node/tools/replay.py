@@ -35,7 +35,25 @@ from typing import Any
 import numpy as np
 import yaml
 from tqdm import tqdm
-from vd_sim_node.topics import ALERTS, ESTIMATES, OBSERVER, SENSORS
+from vd_sim_node.topics import (
+    ALERTS,
+    ESTIMATES,
+    ESTIMATES_ALERTS,
+    ESTIMATES_FRICTION,
+    ESTIMATES_FRICTION_POTENTIAL,
+    ESTIMATES_RESISTANCES,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    OBSERVER,
+    OBSERVER_BODY_ACCEL,
+    OBSERVER_BODY_VELOCITY,
+    OBSERVER_WHEEL_STATES,
+    SENSORS,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+    TRUTH_NAMESPACE,
+)
 
 from vd_observer_node.bag.alerts_cdr import encode_alerts
 from vd_observer_node.bag.cdr_batch import decode_batch, encode_batch
@@ -70,7 +88,7 @@ __all__ = [
 ]
 
 SENSOR_TOPICS = SENSORS
-TRUTH_PREFIX = '/vd/truth/'
+TRUTH_PREFIX = TRUTH_NAMESPACE
 ESTIMATE_TOPICS = {**OBSERVER, **ESTIMATES}
 #: Written by the situation monitor phase (``situation=True``), as the alerts node publishes.
 ALERT_TOPICS = dict(ALERTS)
@@ -212,12 +230,12 @@ def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str,
     n = result.t.shape[0]
     zeros = np.zeros(n)
     return {
-        '/vd/observer/wheel_states': {
+        OBSERVER_WHEEL_STATES: {
             'angle': angles,
             'omega': result.omega,
             'omega_dot': result.omega_dot,
         },
-        '/vd/observer/body_accel': {
+        OBSERVER_BODY_ACCEL: {
             'accel.linear.x': result.accel,
             'accel.linear.y': zeros,
             'accel.linear.z': zeros,
@@ -225,7 +243,7 @@ def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str,
             'accel.angular.y': zeros,
             'accel.angular.z': zeros,
         },
-        '/vd/observer/body_velocity': {
+        OBSERVER_BODY_VELOCITY: {
             'twist.linear.x': result.speed,
             'twist.linear.y': zeros,
             'twist.linear.z': zeros,
@@ -233,14 +251,14 @@ def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str,
             'twist.angular.y': zeros,
             'twist.angular.z': zeros,
         },
-        '/vd/estimates/tire_forces': {'fx': result.fx, 'fz': result.fz},
-        '/vd/estimates/friction': {
+        ESTIMATES_TIRE_FORCES: {'fx': result.fx, 'fz': result.fz},
+        ESTIMATES_FRICTION: {
             'mu': result.mu,
             'slip': result.slip,
             'valid': result.mu_valid,
         },
-        '/vd/estimates/resistances': {'rolling': result.rolling, 'aero': result.aero},
-        '/vd/estimates/slope': {'angle': result.slope, 'valid': result.slope_valid},
+        ESTIMATES_RESISTANCES: {'rolling': result.rolling, 'aero': result.aero},
+        ESTIMATES_SLOPE: {'angle': result.slope, 'valid': result.slope_valid},
     }
 
 
@@ -315,12 +333,12 @@ def situation_topics(
         return np.concatenate([getattr(p, name) for p in parts])
 
     return {
-        '/vd/estimates/alerts': {
+        ESTIMATES_ALERTS: {
             'level': cat('level').astype(np.uint8),
             'onset_ns': _stamp_ns(cat('onset')),
             'detected_ns': _stamp_ns(cat('detected')),
         },
-        '/vd/estimates/friction_potential': {
+        ESTIMATES_FRICTION_POTENTIAL: {
             'mu_max': cat('mu_max'),
             'slip_peak': cat('slip_peak'),
             'confidence': cat('confidence'),
@@ -443,13 +461,13 @@ def replay_bag(
             arrays[topic] = arr
             bar.update(len(arr.datas))
         angles = decode_batch(
-            SENSOR_TOPICS['/vd/sensors/wheel_angles'], arrays['/vd/sensors/wheel_angles'].datas
+            SENSOR_TOPICS[SENSORS_WHEEL_ANGLES], arrays[SENSORS_WHEEL_ANGLES].datas
         )
         speed = decode_batch(
-            SENSOR_TOPICS['/vd/sensors/body_velocity'], arrays['/vd/sensors/body_velocity'].datas
+            SENSOR_TOPICS[SENSORS_BODY_VELOCITY], arrays[SENSORS_BODY_VELOCITY].datas
         )
         torque = decode_batch(
-            SENSOR_TOPICS['/vd/sensors/wheel_torques'], arrays['/vd/sensors/wheel_torques'].datas
+            SENSOR_TOPICS[SENSORS_WHEEL_TORQUES], arrays[SENSORS_WHEEL_TORQUES].datas
         )
         common, (ia, iv, it) = _align([angles.stamp_ns, speed.stamp_ns, torque.stamp_ns])
         sensor_count = len(angles.stamp_ns) + len(speed.stamp_ns) + len(torque.stamp_ns)
@@ -531,7 +549,7 @@ def replay_bag(
                 run_monitor()
         frames = angles.frame_id[ia]
         frame_id = frames[0].decode() if len(frames) else ''
-        log_ns = arrays['/vd/sensors/wheel_angles'].log_time_ns[ia]
+        log_ns = arrays[SENSORS_WHEEL_ANGLES].log_time_ns[ia]
         outputs: list[tuple[str, str, np.ndarray, list[bytes]]] = []
         for topic in [*SENSOR_TOPICS, *truth]:
             arr = arrays[topic]
@@ -545,7 +563,7 @@ def replay_bag(
             raise failure[0]
         for topic, values in situation_values.items():
             msgtype = ALERT_TOPICS[topic]
-            if topic == '/vd/estimates/alerts':
+            if topic == ESTIMATES_ALERTS:
                 datas = encode_alerts(common, frame_id, values)
             else:
                 datas = encode_batch(msgtype, common, frame_id, values)

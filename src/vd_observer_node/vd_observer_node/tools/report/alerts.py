@@ -33,6 +33,7 @@ from typing import Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from vd_sim_node.topics import TRUTH_FRICTION
 
 from vd_observer_node.tools.report.load import BagSeries
 from vd_observer_node.tools.report.topics import (
@@ -640,7 +641,7 @@ def alert_data(series: BagSeries) -> tuple[AlertData | None, list[str]]:
         (no true friction potential, or neither alerts nor a friction-potential estimate).
     """
     topics = series.topics
-    need = [TRUE_POTENTIAL_TOPIC, '/vd/truth/friction']
+    need = [TRUE_POTENTIAL_TOPIC, TRUTH_FRICTION]
     missing = [name for name in need if name not in topics]
     if missing:
         return None, [
@@ -663,7 +664,7 @@ def alert_data(series: BagSeries) -> tuple[AlertData | None, list[str]]:
         return None, ['alerts section skipped: no stamp common to the alerts and the truth']
     t0 = min(int(s.stamp_ns[0]) for s in topics.values())
     t = (stamps - t0) * 1e-9
-    fric = topics['/vd/truth/friction']
+    fric = topics[TRUTH_FRICTION]
     fr = _rows(fric.stamp_ns, stamps)
     pot = topics[TRUE_POTENTIAL_TOPIC]
     pr = _rows(pot.stamp_ns, stamps)

@@ -11,6 +11,13 @@ import sys
 import time
 from pathlib import Path
 
+from vd_sim_node.topics import (
+    ESTIMATES_NAMESPACE,
+    OBSERVER_NAMESPACE,
+    TRUTH_FRICTION_POTENTIAL,
+    TRUTH_NAMESPACE,
+)
+
 from vd_observer_node.errors import ObserverError
 
 __all__ = ['add_report_parser', 'default_out_dir', 'run_report']
@@ -31,9 +38,10 @@ def add_report_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentPa
     parser = subparsers.add_parser(
         'report',
         help='accuracy of the estimates against the truth in a bag (metrics + figures)',
-        description='Compare /vd/observer/* and /vd/estimates/* with /vd/truth/* (paired by '
-        'header stamp); judge the alerts and the friction potential against '
-        '/vd/truth/friction_potential; write metrics.json, metrics.md and PNG figures.',
+        description=f'Compare {OBSERVER_NAMESPACE}* and {ESTIMATES_NAMESPACE}* with '
+        f'{TRUTH_NAMESPACE}* (paired by header stamp); judge the alerts and the friction '
+        f'potential against {TRUTH_FRICTION_POTENTIAL}; write metrics.json, metrics.md and '
+        'PNG figures.',
     )
     parser.add_argument('bag', type=Path, help='bag folder or .mcap file with truth topics')
     parser.add_argument(

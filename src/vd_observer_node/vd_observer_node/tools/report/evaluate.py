@@ -12,6 +12,25 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from vd_sim_node.topics import (
+    ESTIMATES_FRICTION,
+    ESTIMATES_NAMESPACE,
+    ESTIMATES_RESISTANCES,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    OBSERVER_BODY_ACCEL,
+    OBSERVER_BODY_VELOCITY,
+    OBSERVER_NAMESPACE,
+    OBSERVER_WHEEL_STATES,
+    TRUTH_BODY_ACCEL,
+    TRUTH_BODY_VELOCITY,
+    TRUTH_FRICTION,
+    TRUTH_NAMESPACE,
+    TRUTH_RESISTANCES,
+    TRUTH_SLOPE,
+    TRUTH_TIRE_FORCES,
+    TRUTH_WHEEL_STATES,
+)
 
 from vd_observer_node.tools.report.alerts import (
     AlertSettings,
@@ -206,32 +225,31 @@ class _Spec:
     symbol: str
 
 
-_OBS, _EST, _TRUTH = '/vd/observer/', '/vd/estimates/', '/vd/truth/'
 # fmt: off
 _SPECS = tuple(_Spec(*row) for row in (
     # key, title, unit, estimate topic, truth topic, field, factor, legends, axis symbol
-    ('omega', 'Wheel speed ω', 'rad/s', _OBS + 'wheel_states', _TRUTH + 'wheel_states',
+    ('omega', 'Wheel speed ω', 'rad/s', OBSERVER_WHEEL_STATES, TRUTH_WHEEL_STATES,
      'omega', 1.0, 'estimated (differentiator)', 'true (simulator)', 'ω'),
-    ('omega_dot', 'Wheel acceleration ω̇', 'rad/s²', _OBS + 'wheel_states',
-     _TRUTH + 'wheel_states', 'omega_dot', 1.0, 'estimated (differentiator)',
+    ('omega_dot', 'Wheel acceleration ω̇', 'rad/s²', OBSERVER_WHEEL_STATES,
+     TRUTH_WHEEL_STATES, 'omega_dot', 1.0, 'estimated (differentiator)',
      'true (simulator)', 'dω/dt'),
-    ('accel', 'Body acceleration', 'm/s²', _OBS + 'body_accel', _TRUTH + 'body_accel',
+    ('accel', 'Body acceleration', 'm/s²', OBSERVER_BODY_ACCEL, TRUTH_BODY_ACCEL,
      'accel.linear.x', 1.0, 'estimated', 'true (simulator)', 'acceleration'),
-    ('speed', 'Body speed', 'm/s', _OBS + 'body_velocity', _TRUTH + 'body_velocity',
+    ('speed', 'Body speed', 'm/s', OBSERVER_BODY_VELOCITY, TRUTH_BODY_VELOCITY,
      'twist.linear.x', 1.0, 'estimated', 'true (simulator)', 'speed'),
-    ('fx', 'Longitudinal tyre force Fx', 'N', _EST + 'tire_forces', _TRUTH + 'tire_forces',
+    ('fx', 'Longitudinal tyre force Fx', 'N', ESTIMATES_TIRE_FORCES, TRUTH_TIRE_FORCES,
      'fx', 1.0, 'estimated', 'simulated', 'Fx'),
-    ('fz', 'Normal tyre load Fz', 'N', _EST + 'tire_forces', _TRUTH + 'tire_forces',
+    ('fz', 'Normal tyre load Fz', 'N', ESTIMATES_TIRE_FORCES, TRUTH_TIRE_FORCES,
      'fz', 1.0, 'estimated', 'simulated', 'Fz'),
-    ('mu', 'Utilised friction μ', '-', _EST + 'friction', _TRUTH + 'friction',
+    ('mu', 'Utilised friction μ', '-', ESTIMATES_FRICTION, TRUTH_FRICTION,
      'mu', 1.0, 'estimated (where valid)', 'Pacejka (simulator)', 'μ = Fx/Fz'),
-    ('slip', 'Longitudinal slip', '-', _EST + 'friction', _TRUTH + 'friction',
+    ('slip', 'Longitudinal slip', '-', ESTIMATES_FRICTION, TRUTH_FRICTION,
      'slip', 1.0, 'estimated', 'simulated', 'slip'),
-    ('rolling', 'Rolling resistance', 'N', _EST + 'resistances', _TRUTH + 'resistances',
+    ('rolling', 'Rolling resistance', 'N', ESTIMATES_RESISTANCES, TRUTH_RESISTANCES,
      'rolling', 1.0, 'estimated', 'simulated', 'rolling resistance'),
-    ('aero', 'Aerodynamic drag', 'N', _EST + 'resistances', _TRUTH + 'resistances',
+    ('aero', 'Aerodynamic drag', 'N', ESTIMATES_RESISTANCES, TRUTH_RESISTANCES,
      'aero', 1.0, 'estimated', 'simulated', 'drag force'),
-    ('slope', 'Road slope', 'deg', _EST + 'slope', _TRUTH + 'slope',
+    ('slope', 'Road slope', 'deg', ESTIMATES_SLOPE, TRUTH_SLOPE,
      'angle', float(np.degrees(1.0)), 'estimated', 'true (scenario, Table 1)', 'slope'),
 ))
 # fmt: on
@@ -256,7 +274,7 @@ def _events(
     steps = np.zeros(0)
     slope_t: FloatArray | None = None
     slope_deg: FloatArray | None = None
-    truth_slope = series.topics.get('/vd/truth/slope')
+    truth_slope = series.topics.get(TRUTH_SLOPE)
     if truth_slope is not None:
         slope_t = (truth_slope.stamp_ns - t0) * 1e-9
         slope_deg = np.degrees(truth_slope.values['angle'].astype(np.float64))
@@ -352,12 +370,12 @@ def _mu_mask(
     notes: list[str],
 ) -> BoolArray:
     """mu counts where the wheel is excited (|Fx| > k Fz, true forces) and the estimate valid."""
-    est = series.topics['/vd/estimates/friction']
+    est = series.topics[ESTIMATES_FRICTION]
     valid = est.values['valid'][np.searchsorted(est.stamp_ns, stamps)].astype(bool)
-    forces = series.topics.get('/vd/truth/tire_forces')
+    forces = series.topics.get(TRUTH_TIRE_FORCES)
     excited = np.zeros(valid.shape, dtype=bool)
     if forces is None:
-        notes.append('μ: /vd/truth/tire_forces missing, cannot select excited samples')
+        notes.append(f'μ: {TRUTH_TIRE_FORCES} missing, cannot select excited samples')
     else:
         _, ia, ib = np.intersect1d(stamps, forces.stamp_ns, return_indices=True)
         fx, fz = forces.values['fx'][ib], forces.values['fz'][ib]
@@ -412,7 +430,7 @@ def _extras(
 
 def _static_loads(series: BagSeries, settle_s: float) -> FloatArray | None:
     """Median true Fz over the first ``settle_s`` seconds, per wheel [N]."""
-    forces = series.topics.get('/vd/truth/tire_forces')
+    forces = series.topics.get(TRUTH_TIRE_FORCES)
     if forces is None:
         return None
     first = forces.stamp_ns <= forces.stamp_ns[0] + round(settle_s * 1e9)
@@ -448,7 +466,7 @@ def evaluate(
     present_truth = [t for t in TRUTH_TOPICS if t in series.topics]
     if not present_truth:
         raise ReportInputError(
-            f'{series.path}: no truth topics (need at least one of /vd/truth/*: '
+            f'{series.path}: no truth topics (need at least one of {TRUTH_NAMESPACE}*: '
             + ', '.join(name.rsplit('/', 1)[1] for name in TRUTH_TOPICS)
             + ')'
         )
@@ -488,11 +506,11 @@ def evaluate(
     )
     if GEAR_TOPIC not in series.topics:
         notes.append(f'{GEAR_TOPIC} missing: gear shifts not excluded')
-    if '/vd/truth/slope' not in series.topics:
-        notes.append('/vd/truth/slope missing: slope steps not excluded, no convergence times')
+    if TRUTH_SLOPE not in series.topics:
+        notes.append(f'{TRUTH_SLOPE} missing: slope steps not excluded, no convergence times')
     if not any(t in series.topics for t in ESTIMATE_TOPICS):
         notes.append(
-            'no /vd/observer/* or /vd/estimates/* topic: nothing to compare '
+            f'no {OBSERVER_NAMESPACE}* or {ESTIMATES_NAMESPACE}* topic: nothing to compare '
             '(compute them offline with `vd replay IN OUT`)'
         )
     missing_truth = [t for t in TRUTH_TOPICS if t not in series.topics]

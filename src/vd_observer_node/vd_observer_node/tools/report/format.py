@@ -10,7 +10,7 @@ from typing import Any
 
 from vd_observer_node.tools.report.alerts import AXLE_NAMES, AlertsSection, road_name
 from vd_observer_node.tools.report.evaluate import AccuracyReport, QuantityMetrics
-from vd_observer_node.tools.report.topics import WHEEL_NAMES
+from vd_observer_node.tools.report.topics import TRUE_POTENTIAL_TOPIC, WHEEL_NAMES
 
 __all__ = ['report_json', 'report_markdown', 'report_text']
 
@@ -300,7 +300,7 @@ def _alerts_markdown(section: AlertsSection) -> list[str]:
         '',
         f'Truth (docs/alerts.md 4.1): traction at true slip >= the MF peak slip, lock at '
         f'slip <= -peak slip, low_friction at |mu| >= {cfg.low_friction_ratio:g} x peak mu '
-        f'(peak at the true load and road mu, /vd/truth/friction_potential); onsets from '
+        f'(peak at the true load and road mu, {TRUE_POTENTIAL_TOPIC}); onsets from '
         f'{cfg.settle_s:g} s, merged within {cfg.merge_s:g} s; an activation up to '
         f'{cfg.early_s:g} s early counts; false alarm: no relaxed truth '
         f'({cfg.relaxed_scale:g} x thresholds) within [-{cfg.false_before_s:g}, '

@@ -2,7 +2,17 @@
 
 from __future__ import annotations
 
-from vd_sim_node.topics import ALERTS, ESTIMATES, OBSERVER, SENSORS, TRUTH
+from vd_sim_node.topics import (
+    ALERTS,
+    ESTIMATES,
+    ESTIMATES_ALERTS,
+    ESTIMATES_FRICTION_POTENTIAL,
+    OBSERVER,
+    SENSORS,
+    SENSORS_WHEEL_TORQUES,
+    TRUTH,
+    TRUTH_FRICTION_POTENTIAL,
+)
 
 __all__ = [
     'ALERT_TOPIC',
@@ -21,12 +31,12 @@ WHEEL_NAMES = ('FL', 'FR', 'RL', 'RR')
 
 SENSOR_TOPICS = SENSORS
 #: Gear changes (``gear`` field) mark the shift windows excluded from the metrics.
-GEAR_TOPIC = '/vd/sensors/wheel_torques'
+GEAR_TOPIC = SENSORS_WHEEL_TORQUES
 ESTIMATE_TOPICS = {**OBSERVER, **ESTIMATES}
 TRUTH_TOPICS = TRUTH
 #: Alerts and the friction-potential estimate (the alerts section of the report).
 ALERT_TOPICS = ALERTS
-ALERT_TOPIC = '/vd/estimates/alerts'
-ESTIMATED_POTENTIAL_TOPIC = '/vd/estimates/friction_potential'
+ALERT_TOPIC = ESTIMATES_ALERTS
+ESTIMATED_POTENTIAL_TOPIC = ESTIMATES_FRICTION_POTENTIAL
 #: The simulator's true friction potential (MF peak at the true load and road mu).
-TRUE_POTENTIAL_TOPIC = '/vd/truth/friction_potential'
+TRUE_POTENTIAL_TOPIC = TRUTH_FRICTION_POTENTIAL
