@@ -15,9 +15,9 @@ from vd_observer_node.tools.replay import (
     ALERT_TOPICS,
     ESTIMATE_TOPICS,
     SENSOR_TOPICS,
-    default_vehicle_file,
     replay_bag,
 )
+from vd_sim_node.vehicle.params import default_vehicle_file
 
 
 @pytest.fixture(scope='module')

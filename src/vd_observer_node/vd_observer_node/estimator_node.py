@@ -25,6 +25,7 @@ from vd_sim_node.ros_common import (
     node_status,
     run_node,
 )
+from vd_sim_node.vehicle.params import default_vehicle_file
 
 from vd_msgs.msg import Friction, Resistances, Slope, TireForces, WheelStates, WheelTorques
 from vd_observer_node.estimation.alignment import StampAligner
@@ -33,7 +34,6 @@ from vd_observer_node.estimation.faults import merge_reports, summarise
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.node_params import ESTIMATOR_PARAMS, KERNEL
 from vd_observer_node.raw_io import Encoders, aligned_input
-from vd_observer_node.tools.replay import default_vehicle_file
 
 __all__ = ['EstimatorNode', 'main']
 
