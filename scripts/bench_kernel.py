@@ -40,8 +40,7 @@ from vd_observer_node.kernel.situation import CompiledSituationMonitor
 from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_observer_node.situation.monitor import SituationMonitor, run_situation
 from vd_observer_node.testing.launcher import NodeSpec
-from vd_observer_node.tools.replay import default_vehicle_file
-from vd_sim_node.vehicle.params import load_vehicle
+from vd_sim_node.vehicle.params import default_vehicle_file, load_vehicle
 from vd_sim_node.vehicle.scenario import SensorSettings, load_scenario
 from vd_sim_node.vehicle.simulation import simulate
 

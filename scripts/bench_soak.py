@@ -112,8 +112,8 @@ def feed(minutes: float, rate_hz: float, node_pids: dict[str, int]) -> dict[str,
     from rclpy.node import Node
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
     from vd_observer_node.testing.synthetic import synthetic_trajectory
-    from vd_observer_node.tools.replay import default_vehicle_file
     from vd_sim_node.ros_common import STREAM_QOS, ns_to_time
+    from vd_sim_node.vehicle.params import default_vehicle_file
 
     from vd_msgs.msg import WheelAngles, WheelTorques
 

@@ -29,11 +29,11 @@ FEED_AND_CAPTURE = textwrap.dedent(
     from geometry_msgs.msg import TwistStamped
     from rclpy.node import Node
     from vd_msgs.msg import Friction, Slope, TireForces, WheelAngles, WheelStates, WheelTorques
-    from vd_observer_node.tools.replay import default_vehicle_file
     from vd_observer_node.testing.synthetic import synthetic_trajectory
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
     from vd_sim_node.ros_common import DIAGNOSTICS_QOS, STREAM_QOS, ns_to_time
     from vd_sim_node import topics
+    from vd_sim_node.vehicle.params import default_vehicle_file
 
     T0, DT = 100.0, 0.005
     vehicle = load_estimator_vehicle(default_vehicle_file())

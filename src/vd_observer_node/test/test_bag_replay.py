@@ -15,7 +15,6 @@ from vd_observer_node.tools.replay import (
     ALERT_TOPICS,
     ESTIMATE_TOPICS,
     SENSOR_TOPICS,
-    default_vehicle_file,
     replay_bag,
 )
 from vd_sim_node.topics import (
@@ -32,6 +31,7 @@ from vd_sim_node.topics import (
     SENSORS_WHEEL_ANGLES,
     SENSORS_WHEEL_TORQUES,
 )
+from vd_sim_node.vehicle.params import default_vehicle_file
 
 
 @pytest.fixture(scope='module')

@@ -38,7 +38,7 @@ from vd_sim_node.topics import (
     SENSORS_WHEEL_ANGLES,
     SENSORS_WHEEL_TORQUES,
 )
-from vd_sim_node.vehicle.params import load_vehicle
+from vd_sim_node.vehicle.params import default_vehicle_file
 
 from vd_msgs.msg import (
     Alerts,
@@ -50,13 +50,12 @@ from vd_msgs.msg import (
     WheelTorques,
 )
 from vd_observer_node.estimation.alignment import StampAligner
-from vd_observer_node.estimation.vehicle import load_estimator_vehicle
+from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.node_params import ALERTS_PARAMS, KERNEL
 from vd_observer_node.raw_io import Encoders, aligned_input
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.situation.monitor import SituationConfig, SituationMonitor
-from vd_observer_node.tools.replay import default_vehicle_file
 
 __all__ = ['PARAMS', 'AlertsNode', 'main']
 
@@ -86,7 +85,9 @@ class AlertsNode(Node):
         self.kernel = values.pop('kernel')
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')
-        vehicle = load_estimator_vehicle(vehicle_file)
+        # One read of the file gives the estimator vehicle and the tyre alike.
+        params = load_vehicle_params(vehicle_file)
+        vehicle = EstimatorVehicle.from_params(params)
         situation_keys = set(SituationConfig.__dataclass_fields__)
         friction_keys = set(FrictionPotentialConfig.__dataclass_fields__)
         monitor_class: Any = SituationMonitor
@@ -96,7 +97,7 @@ class AlertsNode(Node):
 
             monitor_class = CompiledSituationMonitor
         self.monitor = monitor_class(
-            TyreCurves.from_tire(load_vehicle(vehicle_file).tire),
+            TyreCurves.from_tire(params.tire),
             vehicle.static_wheel_loads[[0, 2]],
             vehicle.effective_radius,
             situation=SituationConfig.from_mapping(

@@ -36,6 +36,7 @@ from vd_sim_node.topics import (
     SENSORS_BODY_VELOCITY,
     SENSORS_WHEEL_TORQUES,
 )
+from vd_sim_node.vehicle.params import default_vehicle_file
 
 from vd_msgs.msg import Friction, Resistances, Slope, TireForces, WheelStates, WheelTorques
 from vd_observer_node.estimation.alignment import StampAligner
@@ -44,7 +45,6 @@ from vd_observer_node.estimation.faults import merge_reports, summarise
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.node_params import ESTIMATOR_PARAMS, KERNEL
 from vd_observer_node.raw_io import Encoders, aligned_input
-from vd_observer_node.tools.replay import default_vehicle_file
 
 __all__ = ['EstimatorNode', 'main']
 

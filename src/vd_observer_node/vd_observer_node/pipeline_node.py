@@ -46,7 +46,7 @@ from vd_sim_node.topics import (
     SENSORS_WHEEL_ANGLES,
     SENSORS_WHEEL_TORQUES,
 )
-from vd_sim_node.vehicle.params import load_vehicle
+from vd_sim_node.vehicle.params import default_vehicle_file
 
 from vd_msgs.msg import (
     Alerts,
@@ -66,13 +66,12 @@ from vd_observer_node.estimation.differentiator import LevantGains
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import ERROR
 from vd_observer_node.estimation.observer import ObserverConfig
-from vd_observer_node.estimation.vehicle import load_estimator_vehicle
+from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.node_params import PIPELINE_PARAMS
 from vd_observer_node.raw_io import Encoders, aligned_input
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.situation.monitor import SituationConfig
-from vd_observer_node.tools.replay import default_vehicle_file
 
 __all__ = ['PARAMS', 'PipelineNode', 'main']
 
@@ -114,10 +113,12 @@ def _settings(values: dict[str, Any]) -> tuple[ChainSettings, str]:
     observer = ObserverConfig.from_mapping(
         {k: v for k, v in values.items() if k in _OBSERVER_KEYS | _GAIN_KEYS}
     )
+    # One read of the file gives the estimator vehicle and the tyre alike.
+    params = load_vehicle_params(vehicle_file)
     taken = _OBSERVER_KEYS | _GAIN_KEYS | estimator_keys | situation_keys | friction_keys
     settings = ChainSettings(
-        vehicle=load_estimator_vehicle(vehicle_file),
-        curves=TyreCurves.from_tire(load_vehicle(vehicle_file).tire),
+        vehicle=EstimatorVehicle.from_params(params),
+        curves=TyreCurves.from_tire(params.tire),
         observer=observer,
         estimator=EstimatorConfig.from_mapping(
             {k: v for k, v in values.items() if k in estimator_keys}

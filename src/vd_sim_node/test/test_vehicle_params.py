@@ -11,7 +11,8 @@ import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from vd_sim_node.errors import ParameterError
-from vd_sim_node.vehicle.params import load_vehicle, parse_vehicle
+from vd_sim_node.vehicle import params as params_module
+from vd_sim_node.vehicle.params import default_vehicle_file, load_vehicle, parse_vehicle
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'clio_rl_1_1.yaml'
 RAW: dict[str, Any] = yaml.safe_load(CONFIG.read_text())
@@ -122,9 +123,42 @@ def test_unsprung_heavier_than_car_is_refused() -> None:
 
 
 def test_unreadable_file_is_a_parameter_error(tmp_path: Path) -> None:
-    with pytest.raises(ParameterError, match='cannot read'):
+    with pytest.raises(ParameterError, match=r'^cannot read vehicle file .*missing\.yaml'):
         load_vehicle(tmp_path / 'missing.yaml')
     bad = tmp_path / 'bad.yaml'
     bad.write_text('chassis: [1, 2\n')
-    with pytest.raises(ParameterError, match='not valid YAML'):
+    malformed = r'^vehicle file .*bad\.yaml is not valid YAML'
+    with pytest.raises(ParameterError, match=malformed) as info:
         load_vehicle(bad)
+    # A node refusing to start prints the message as its one error line.
+    assert '\n' not in str(info.value)
+
+
+def test_file_errors_name_the_file_and_the_key(tmp_path: Path) -> None:
+    path = tmp_path / 'neg.yaml'
+    path.write_text(yaml.safe_dump(_set(RAW, 'chassis.mass', -1200.0)))
+    with pytest.raises(ParameterError) as info:
+        load_vehicle(path)
+    assert str(info.value) == f'vehicle file {path}: chassis.mass must be > 0 kg, got -1200.0'
+
+
+def test_default_vehicle_file_is_the_shipped_clio() -> None:
+    path = default_vehicle_file()
+    assert path.name == 'clio_rl_1_1.yaml'
+    assert load_vehicle(path).name == 'Renault Clio RL 1.1'
+
+
+def test_default_vehicle_file_without_ros_is_the_source_tree(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import ament_index_python.packages as ament
+
+    def not_installed(package: str) -> str:
+        raise LookupError(package)
+
+    monkeypatch.setattr(ament, 'get_package_share_directory', not_installed)
+    assert default_vehicle_file() == CONFIG.resolve()
+    # Neither copy found: the parser's own error, naming the file.
+    monkeypatch.setattr(params_module, '_CLIO_FILE', 'absent.yaml')
+    with pytest.raises(ParameterError, match=r'absent\.yaml not found'):
+        default_vehicle_file()

@@ -1,23 +1,33 @@
 """The estimators' view of the vehicle parameter file shared with the simulator.
 
-Only the keys the estimators need are read from `vd_sim_node/config/clio_rl_1_1.yaml`;
-extra keys are ignored so the simulator may add its own.
+The file (`vd_sim_node/config/clio_rl_1_1.yaml`) has one parser,
+:mod:`vd_sim_node.vehicle.params`: it reads, range-checks and names every key, for the
+simulator and for the estimators alike. :class:`EstimatorVehicle` is the subset the
+estimators need, taken from its typed :class:`~vd_sim_node.vehicle.params.VehicleParams`
+by :meth:`EstimatorVehicle.from_params`; there is no second key table here.
 """
 
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
-import yaml
 from numpy.typing import NDArray
+from vd_sim_node.errors import ParameterError
+from vd_sim_node.vehicle.params import VehicleParams, default_vehicle_file, load_vehicle
 
 from vd_observer_node.errors import VehicleParameterError
 
-__all__ = ['EstimatorVehicle', 'load_estimator_vehicle', 'vehicle_from_mapping']
+__all__ = ['EstimatorVehicle', 'load_estimator_vehicle', 'load_vehicle_params']
+
+# c0 = 0, c1 = 0, Cx = 0, A = 0 or rho = 0 switch a resistance off, as the simulator's
+# parser allows; every other quantity is a divisor or a physical size and must be > 0.
+_ZERO_ALLOWED = frozenset(
+    ('rolling_c0', 'rolling_c1', 'drag_coefficient', 'frontal_area', 'air_density')
+)
 
 
 @dataclass(frozen=True)
@@ -60,25 +70,62 @@ class EstimatorVehicle:
     name: str = ''
 
     def __post_init__(self) -> None:
+        # The file's values are checked by the shared parser (with their YAML names); this
+        # guards vehicles built directly, e.g. by tests and the kernel's warm-up.
         for key, value in self.__dict__.items():
             if key == 'name':
                 continue
-            # c0 = 0 or Cx = 0 switch a resistance off; every other quantity must be > 0.
-            zero_ok = key in ('rolling_c0', 'rolling_c1', 'drag_coefficient')
+            zero_ok = key in _ZERO_ALLOWED
             allowed = 'a finite number >= 0' if zero_ok else 'a finite number > 0'
-            # Name the key as it is written in the YAML file, so the user finds it.
-            where = '.'.join(_KEYS.get(key, ('rolling_resistance', 'regularisation_speed')))
             if (
                 not (isinstance(value, int | float) and math.isfinite(value))
                 or value < 0.0
                 or (value == 0.0 and not zero_ok)
             ):
-                raise VehicleParameterError(f'{where} ({key}) must be {allowed}, got {value!r}')
+                raise VehicleParameterError(
+                    f'EstimatorVehicle.{key} must be {allowed}, got {value!r}'
+                )
         if self.cg_to_front_axle >= self.wheelbase:
             raise VehicleParameterError(
                 f'cg_to_front_axle ({self.cg_to_front_axle}) must be < '
                 f'wheelbase ({self.wheelbase})'
             )
+
+    @classmethod
+    def from_params(cls, params: VehicleParams) -> EstimatorVehicle:
+        """The estimators' subset of the simulator's validated parameters.
+
+        The file already holds whole-vehicle quantities (``chassis.mass`` includes the
+        unsprung masses, ``chassis.cg_to_front_axle`` and ``cg_height`` locate the
+        whole-vehicle CG), so every field is the parsed value itself, unchanged: the
+        estimators and the simulator see the same numbers bit for bit.
+
+        Args:
+            params: parameters from :func:`vd_sim_node.vehicle.params.load_vehicle` or
+                ``parse_vehicle``.
+
+        Returns:
+            The estimator vehicle.
+        """
+        chassis, wheel, aero = params.chassis, params.wheel, params.aero
+        rolling = params.rolling_resistance
+        return cls(
+            mass=chassis.mass,
+            wheelbase=chassis.wheelbase,
+            cg_to_front_axle=chassis.cg_to_front_axle,
+            cg_height=chassis.cg_height,
+            inertia_front=wheel.inertia_front,
+            inertia_rear=wheel.inertia_rear,
+            effective_radius=wheel.effective_radius,
+            drag_coefficient=aero.drag_coefficient,
+            frontal_area=aero.frontal_area,
+            air_density=aero.air_density,
+            rolling_c0=rolling.c0,
+            rolling_c1=rolling.c1,
+            gravity=params.environment.gravity,
+            rolling_regularisation_speed=rolling.regularisation_speed,
+            name=params.name,
+        )
 
     @property
     def cg_to_rear_axle(self) -> float:
@@ -105,66 +152,41 @@ class EstimatorVehicle:
         return np.array([front, front, rear, rear])
 
 
-_KEYS = {
-    'mass': ('chassis', 'mass'),
-    'wheelbase': ('chassis', 'wheelbase'),
-    'cg_to_front_axle': ('chassis', 'cg_to_front_axle'),
-    'cg_height': ('chassis', 'cg_height'),
-    'inertia_front': ('wheel', 'inertia_front'),
-    'inertia_rear': ('wheel', 'inertia_rear'),
-    'effective_radius': ('wheel', 'effective_radius'),
-    'drag_coefficient': ('aero', 'drag_coefficient'),
-    'frontal_area': ('aero', 'frontal_area'),
-    'air_density': ('aero', 'air_density'),
-    'rolling_c0': ('rolling_resistance', 'c0'),
-    'rolling_c1': ('rolling_resistance', 'c1'),
-    'gravity': ('environment', 'gravity'),
-}
+def load_vehicle_params(path: str | os.PathLike[str] | None = None) -> VehicleParams:
+    """Read the vehicle file with the shared parser, refusing it as vd_observer_node does.
 
+    For callers that need more than :class:`EstimatorVehicle` from the same file (the tyre
+    of the friction potential): one read gives both.
 
-def vehicle_from_mapping(data: Any) -> EstimatorVehicle:
-    """Build the parameters from the parsed YAML mapping.
+    Args:
+        path: YAML file; None: the shipped Clio file
+            (:func:`vd_sim_node.vehicle.params.default_vehicle_file`).
+
+    Returns:
+        The simulator's validated parameters.
 
     Raises:
-        VehicleParameterError: a key is missing or a value is not a positive finite number.
+        VehicleParameterError: the parser's one-line message, e.g. ``vehicle file x.yaml:
+            chassis.mass must be > 0 kg, got -1200.0`` (an ObserverError, so the nodes and
+            the vd tool report it as one line like their other refusals).
     """
-    if not isinstance(data, dict):
-        raise VehicleParameterError('vehicle file must hold a mapping at top level')
-    values: dict[str, float] = {}
-    for field, (section, key) in _KEYS.items():
-        block = data.get(section)
-        if not isinstance(block, dict) or key not in block:
-            raise VehicleParameterError(f'missing key {section}.{key}')
-        raw = block[key]
-        if isinstance(raw, bool) or not isinstance(raw, int | float):
-            raise VehicleParameterError(f'{section}.{key} must be a number, got {raw!r}')
-        values[field] = float(raw)
-    rolling = data.get('rolling_resistance')
-    if isinstance(rolling, dict) and 'regularisation_speed' in rolling:
-        raw = rolling['regularisation_speed']
-        if isinstance(raw, bool) or not isinstance(raw, int | float):
-            raise VehicleParameterError(f'rolling_resistance.regularisation_speed: {raw!r}')
-        values['rolling_regularisation_speed'] = float(raw)
-    return EstimatorVehicle(**values, name=str(data.get('name', '')))
+    try:
+        return load_vehicle(default_vehicle_file() if path is None else Path(path))
+    except ParameterError as exc:
+        raise VehicleParameterError(str(exc)) from exc
 
 
-def load_estimator_vehicle(path: str | Path) -> EstimatorVehicle:
+def load_estimator_vehicle(path: str | os.PathLike[str]) -> EstimatorVehicle:
     """Read the vehicle parameter file (the simulator's YAML) for the estimators.
 
     Args:
         path: YAML file, e.g. vd_sim_node/config/clio_rl_1_1.yaml.
 
+    Returns:
+        The estimator vehicle.
+
     Raises:
-        VehicleParameterError: unreadable file, missing key or invalid value.
+        VehicleParameterError: unreadable file, missing key or invalid value (one line that
+            names the file and the dotted key).
     """
-    try:
-        text = Path(path).read_text(encoding='utf-8')
-        data = yaml.safe_load(text)
-    except (OSError, yaml.YAMLError) as exc:
-        # One line: a node refusing to start prints exactly this (YAML errors span lines).
-        reason = ' '.join(str(exc).split())
-        raise VehicleParameterError(f'cannot read vehicle file {path}: {reason}') from exc
-    try:
-        return vehicle_from_mapping(data)
-    except VehicleParameterError as exc:
-        raise VehicleParameterError(f'vehicle file {path}: {exc}') from exc
+    return EstimatorVehicle.from_params(load_vehicle_params(path))

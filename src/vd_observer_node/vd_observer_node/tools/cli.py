@@ -75,16 +75,13 @@ def _repair(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from vd_observer_node.estimation.vehicle import load_estimator_vehicle
     from vd_observer_node.tools.replay import ReplayConfig, load_replay_config, replay_bag
 
-    vehicle = load_estimator_vehicle(args.vehicle) if args.vehicle else None
     config = load_replay_config(args.config) if args.config else ReplayConfig()
     report = replay_bag(
         args.in_bag,
         args.out_bag,
-        vehicle=vehicle,
-        vehicle_file=args.vehicle,
+        vehicle_file=args.vehicle,  # the estimator vehicle and the tyre, from one read
         observer_config=config.observer,
         estimator_config=config.estimator,
         cascade_kwargs=config.cascade_kwargs,

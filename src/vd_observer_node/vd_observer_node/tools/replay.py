@@ -57,14 +57,14 @@ from vd_sim_node.topics import (
 
 from vd_observer_node.bag.alerts_cdr import encode_alerts
 from vd_observer_node.bag.cdr_batch import decode_batch, encode_batch
-from vd_observer_node.bag.errors import BagExistsError, BagNotFoundError, ReplayInputError
+from vd_observer_node.bag.errors import BagExistsError, ReplayInputError
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
-from vd_observer_node.errors import ConfigurationError, VehicleParameterError
+from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
-from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_estimator_vehicle
+from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.situation.monitor import (
@@ -81,7 +81,6 @@ __all__ = [
     'TRUTH_PREFIX',
     'ReplayConfig',
     'ReplayReport',
-    'default_vehicle_file',
     'load_replay_config',
     'replay_bag',
     'situation_topics',
@@ -193,23 +192,6 @@ def load_replay_config(path: str | os.PathLike[str]) -> ReplayConfig:
         if sections['situation'] is not None
         else None,
     )
-
-
-def default_vehicle_file() -> Path:
-    """The Clio parameter file: installed ``share/vd_sim_node/config`` or the source tree."""
-    name = 'clio_rl_1_1.yaml'
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        installed = Path(get_package_share_directory('vd_sim_node')) / 'config' / name
-        if installed.is_file():
-            return installed
-    except (ImportError, LookupError, ValueError, OSError):
-        pass  # not installed / no ROS environment: use the source tree
-    source = Path(__file__).resolve().parents[3] / 'vd_sim_node' / 'config' / name
-    if source.is_file():
-        return source
-    raise BagNotFoundError(f'vehicle file {name} not found (not installed, no {source})')
 
 
 def _align(stamps: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -380,8 +362,8 @@ def replay_bag(
             ``run_cascade`` later, so the replay can match the live nodes' parameters).
         vehicle_file: vehicle YAML of the estimator vehicle (unless ``vehicle`` is given) and
             of the tyre curves of the friction potential; default the Clio file
-            (:func:`default_vehicle_file`). Pass the file ``vehicle`` was read from, or the
-            tyre of the default file is used with it.
+            (:func:`vd_sim_node.vehicle.params.default_vehicle_file`). Pass the file
+            ``vehicle`` was read from, or the tyre of the default file is used with it.
         situation: also compute and write the friction potential and the alerts
             (:data:`ALERT_TOPICS`) with :class:`SituationMonitor`, as the alerts node does.
         alert_config: alert settings; default AlertConfig().
@@ -419,17 +401,12 @@ def replay_bag(
         if info.msgtype != msgtype:
             raise ReplayInputError(f'{in_bag}: {name} has type {info.msgtype}, need {msgtype}')
     truth = [t for t in topics if t.startswith(TRUTH_PREFIX)]
-    source = Path(vehicle_file) if vehicle_file is not None else default_vehicle_file()
-    estimator_vehicle = vehicle or load_estimator_vehicle(source)
+    # One read of the file gives the estimator vehicle and the tyre alike (a millisecond).
+    params = load_vehicle_params(vehicle_file)
+    estimator_vehicle = vehicle or EstimatorVehicle.from_params(params)
     monitor = None
     if situation:
-        from vd_sim_node.errors import ParameterError
-        from vd_sim_node.vehicle.params import load_vehicle
-
-        try:
-            tire = load_vehicle(source).tire
-        except ParameterError as exc:
-            raise VehicleParameterError(f'vehicle file {source}: {exc}') from exc
+        tire = params.tire
         monitor_class: Any = SituationMonitor
         if compiled:
             from vd_observer_node.kernel.chain import warm_up

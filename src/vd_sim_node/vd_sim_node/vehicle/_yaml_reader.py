@@ -17,27 +17,34 @@ import yaml
 __all__ = ['MappingReader', 'load_yaml_mapping']
 
 
-def load_yaml_mapping(path: str | Path, error: type[Exception]) -> dict[str, Any]:
+def load_yaml_mapping(path: str | Path, error: type[Exception], what: str = '') -> dict[str, Any]:
     """Read a YAML file whose top level must be a mapping.
+
+    Every message is one line (PyYAML's own span several), because a node refusing to start
+    prints exactly this message as its single ``error:`` line.
 
     Args:
         path: file to read.
         error: exception class raised on any failure.
+        what: what the file is, named before its path in messages (e.g. ``'vehicle file'``
+            gives ``cannot read vehicle file x.yaml: ...``); empty: the path alone.
 
     Returns:
         The parsed top-level mapping.
     """
     p = Path(path)
+    label = f'{what} {p}' if what else str(p)
     try:
         text = p.read_text(encoding='utf-8')
     except OSError as exc:
-        raise error(f'cannot read {p}: {exc}') from exc
+        raise error(f'cannot read {label}: {exc}') from exc
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise error(f'{p} is not valid YAML: {exc}') from exc
+        reason = ' '.join(str(exc).split())
+        raise error(f'{label} is not valid YAML: {reason}') from exc
     if not isinstance(data, dict):
-        raise error(f'{p}: top level must be a mapping, got {type(data).__name__}')
+        raise error(f'{label}: top level must be a mapping, got {type(data).__name__}')
     return data
 
 

@@ -1,8 +1,14 @@
 """Vehicle parameter dataclasses and the validating loader of ``config/clio_rl_1_1.yaml``.
 
+This is the one parser of the vehicle file: the simulator uses :class:`VehicleParams` as
+is, and the estimators of vd_observer_node take their subset from it
+(``EstimatorVehicle.from_params``), so a key is read, range-checked and named in errors in
+one place.
+
 All values are SI (angles in rad, engine speeds in rad/s). The loader refuses a missing or
 out-of-range value with one :class:`~vd_sim_node.errors.ParameterError` that names the
-parameter by its dotted YAML path, e.g. ``chassis.mass must be > 0 kg, got -3``.
+parameter by its dotted YAML path, e.g. ``chassis.mass must be > 0 kg, got -3``;
+:func:`load_vehicle` puts the file in front: ``vehicle file x.yaml: chassis.mass must be ...``.
 """
 
 from __future__ import annotations
@@ -26,9 +32,13 @@ __all__ = [
     'TireParams',
     'VehicleParams',
     'WheelParams',
+    'default_vehicle_file',
     'load_vehicle',
     'parse_vehicle',
 ]
+
+# The shipped parameter file, in ``config/`` of the vd_sim_node package.
+_CLIO_FILE = 'clio_rl_1_1.yaml'
 
 
 @dataclass(frozen=True)
@@ -378,7 +388,43 @@ def load_vehicle(path: str | Path) -> VehicleParams:
         The validated parameters.
 
     Raises:
-        ParameterError: the file cannot be read, or a parameter is missing/invalid (the
-            message names it, e.g. ``chassis.mass must be > 0 kg, got -3``).
+        ParameterError: one line: the file cannot be read (``cannot read vehicle file
+            x.yaml: ...``, ``vehicle file x.yaml is not valid YAML: ...``), or a parameter
+            is missing/invalid (``vehicle file x.yaml: chassis.mass must be > 0 kg, got -3``).
     """
-    return parse_vehicle(load_yaml_mapping(path, ParameterError))
+    data = load_yaml_mapping(path, ParameterError, 'vehicle file')
+    try:
+        return parse_vehicle(data)
+    except ParameterError as exc:
+        # A node or tool prints this line alone: say which file holds the bad key.
+        raise ParameterError(f'vehicle file {Path(path)}: {exc}') from exc
+
+
+def default_vehicle_file() -> Path:
+    """The shipped Clio RL 1.1 parameter file.
+
+    The installed copy (``share/vd_sim_node/config``, found through the ament index) comes
+    first, so an installed node reads the file installed with it; without a ROS environment
+    (tests, tools run from the source tree) the copy in this package's source tree is used.
+
+    Returns:
+        Path of ``clio_rl_1_1.yaml``.
+
+    Raises:
+        ParameterError: neither copy exists.
+    """
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        installed = Path(get_package_share_directory('vd_sim_node')) / 'config' / _CLIO_FILE
+        if installed.is_file():
+            return installed
+    except (ImportError, LookupError, ValueError, OSError):
+        pass  # not installed / no ROS environment: use the source tree
+    # vd_sim_node/vehicle/params.py -> parents[2] is the package source root holding config/.
+    source = Path(__file__).resolve().parents[2] / 'config' / _CLIO_FILE
+    if source.is_file():
+        return source
+    raise ParameterError(
+        f'vehicle file {_CLIO_FILE} not found (vd_sim_node not installed, no {source})'
+    )
