@@ -1,0 +1,113 @@
+"""The import graph reads top-down: each folder of a package imports only the folders below it.
+
+Read from the source with `ast` (every import statement, also those inside functions), so a
+lazy import cannot hide an upward dependency.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / 'src'
+
+#: vd_observer_node's rooms and what each may import (besides itself and vd_sim_node).
+OBSERVER_LAYERS: dict[str, set[str]] = {
+    'errors': set(),
+    'bag': {'errors'},
+    'estimation': {'errors'},
+    'situation': {'errors', 'estimation'},
+    # the per-stamp chain picks its compiled twin, which implements the chain's interface
+    'chain': {'errors', 'estimation', 'situation', 'kernel'},
+    'kernel': {'errors', 'estimation', 'situation', 'chain'},
+    'tools': {'errors', 'bag', 'estimation', 'situation', 'chain', 'kernel'},
+    'testing': {'errors', 'bag', 'estimation', 'situation', 'chain', 'kernel', 'tools'},
+    # thin nodes: the core and the node plumbing, never the offline tools or test helpers
+    'nodes': {'errors', 'bag', 'estimation', 'situation', 'chain', 'kernel'},
+}
+#: vd_sim_node's rooms: the bond-graph core is a leaf, the vehicle model sits on it.
+SIM_LAYERS: dict[str, set[str]] = {
+    'errors': set(),
+    'topics': set(),
+    'params_file': set(),
+    'entry': set(),
+    'bondgraph': set(),
+    'vehicle': {'errors', 'bondgraph'},
+    'nodes': {'errors', 'topics', 'params_file', 'entry', 'bondgraph', 'vehicle'},
+}
+_NODE_PLUMBING = {'raw_io', 'node_params', 'entry_points', 'ros_common'}
+
+
+def _room(module: str, package: str) -> str | None:
+    parts = module.split('.')
+    if parts[-1] == '__init__':
+        parts = parts[:-1]
+    if parts[0] != package:
+        return None
+    if len(parts) == 1:
+        return 'package'
+    name = parts[1]
+    return 'nodes' if name.endswith('_node') or name in _NODE_PLUMBING else name
+
+
+def _imports(path: Path) -> Iterator[str]:
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            if '.' in node.module:
+                yield node.module
+            else:  # `from package import module`: the room is the module's
+                yield from (f'{node.module}.{alias.name}' for alias in node.names)
+        elif isinstance(node, ast.Import):
+            yield from (alias.name for alias in node.names)
+
+
+def _modules(package: str, src: Path = SRC) -> list[Path]:
+    return sorted((src / package / package).rglob('*.py'))
+
+
+def _violations(package: str, layers: dict[str, set[str]], src: Path = SRC) -> list[str]:
+    found = []
+    for path in _modules(package, src):
+        module = '.'.join(path.relative_to(src / package).with_suffix('').parts)
+        room = _room(module, package)
+        if room in (None, 'package'):
+            continue
+        assert room in layers, f'{module}: room {room!r} has no place in the layer table'
+        for imported in _imports(path):
+            target = _room(imported, package)
+            if target is None or target == room:
+                continue
+            if target not in layers[room]:
+                found.append(f'{module} imports {imported} ({room} -> {target})')
+    return found
+
+
+def test_vd_observer_node_imports_top_down() -> None:
+    assert _violations('vd_observer_node', OBSERVER_LAYERS) == []
+
+
+def test_vd_sim_node_imports_top_down() -> None:
+    assert _violations('vd_sim_node', SIM_LAYERS) == []
+
+
+@pytest.mark.parametrize('path', _modules('vd_sim_node'), ids=lambda p: p.name)
+def test_vd_sim_node_never_imports_vd_observer_node(path: Path) -> None:
+    upward = [m for m in _imports(path) if m.split('.')[0] == 'vd_observer_node']
+    assert upward == [], f'{path.name} imports {upward}: vd_observer_node is built on vd_sim_node'
+
+
+def test_the_layer_check_sees_a_violation(tmp_path: Path) -> None:
+    """The checker itself: a bag module importing the estimation room is reported."""
+    package = tmp_path / 'vd_observer_node' / 'vd_observer_node'
+    (package / 'bag').mkdir(parents=True)
+    (package / 'bag' / 'reader.py').write_text(
+        'def f():\n    from vd_observer_node.estimation.cascade import run_cascade\n'
+    )
+    found = _violations('vd_observer_node', OBSERVER_LAYERS, tmp_path)
+    assert found == [
+        'vd_observer_node.bag.reader imports vd_observer_node.estimation.cascade '
+        '(bag -> estimation)'
+    ]
