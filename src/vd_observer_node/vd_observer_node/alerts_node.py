@@ -181,9 +181,7 @@ class AlertsNode(Node):
         values = {
             'kernel': self.kernel,
             **self.counts,
-            'unmatched_dropped': self.aligner.dropped_count,
-            'stale': self.aligner.stale_count,
-            'time_jump_back': self.aligner.jump_back_count,
+            **self.aligner.counts(),
         }
         self.pub_diag.publish(
             node_status(self, 'vd: alerts', 'alerts_node', level, message, values)

@@ -169,8 +169,7 @@ class EstimatorNode(Node):
         values = {
             'kernel': self.kernel,
             **self.counts,
-            'unmatched_dropped': self.aligner.dropped_count,
-            'stale': self.aligner.stale_count,
+            **self.aligner.counts(),
             **report.counts,
         }
         level, message = report.level, report.message

@@ -272,9 +272,7 @@ class PipelineNode(Node):
         values = {
             'kernel': self.kernel,
             **self.counts,
-            'unmatched_dropped': self.aligner.dropped_count,
-            'stale': self.aligner.stale_count,
-            'time_jump_back': self.aligner.jump_back_count,
+            **self.aligner.counts(),
             **report.counts,
         }
         self.pub_diag.publish(

@@ -53,6 +53,15 @@ class StampAligner:
         self.stale_count = 0
         self.dropped_count = 0
 
+    def counts(self) -> dict[str, int]:
+        """The totals a node reports on /diagnostics: messages dropped unmatched, stale
+        (older than the last match) and restarts after a time jump back."""
+        return {
+            'unmatched_dropped': self.dropped_count,
+            'stale': self.stale_count,
+            'time_jump_back': self.jump_back_count,
+        }
+
     def push(self, topic: str, stamp_ns: int, message: Any) -> dict[str, Any] | None:
         """Add one message; return {topic: message} for its stamp if now complete, else None.
 
