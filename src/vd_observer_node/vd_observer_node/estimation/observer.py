@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
-from typing import Any, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -125,28 +125,37 @@ class SpeedState(NamedTuple):
     valid: bool
 
 
-def _differentiator(
-    config: ObserverConfig,
-    lipschitz: float,
-    n_channels: int,
-    kind: type[LevantDifferentiator],
-) -> LevantDifferentiator:
-    """The Levant differentiator of one signal kind, with the shared settings of `config`."""
-    return kind(
-        lipschitz,
-        n_channels=n_channels,
-        gains=config.gains,
-        discretization=config.discretization,
-        init=config.init,
-        max_gap=config.max_gap,
-        init_baseline=config.init_baseline,
-    )
-
-
 class _DifferentiatorObserver:
     """What both observers share: one differentiator and its fault bookkeeping."""
 
-    _diff: LevantDifferentiator
+    #: signals differentiated together (4 wheels, or the 1 body speed)
+    _channels: ClassVar[int]
+
+    @staticmethod
+    def _lipschitz(config: ObserverConfig) -> float:
+        """L of this signal kind [unit/s^3]."""
+        raise NotImplementedError
+
+    def __init__(
+        self,
+        config: ObserverConfig,
+        *,
+        differentiator: type[LevantDifferentiator] = LevantDifferentiator,
+    ) -> None:
+        """Create the observer from its settings.
+
+        ``differentiator``: the reference class, or a drop-in with its constructor and
+        ``update`` (the compiled `vd_observer_node.kernel.levant.CompiledDifferentiator`).
+        """
+        self._diff = differentiator(
+            self._lipschitz(config),
+            n_channels=self._channels,
+            gains=config.gains,
+            discretization=config.discretization,
+            init=config.init,
+            max_gap=config.max_gap,
+            init_baseline=config.init_baseline,
+        )
 
     @property
     def rejected_count(self) -> int:
@@ -162,19 +171,12 @@ class _DifferentiatorObserver:
 class WheelObserver(_DifferentiatorObserver):
     """Four-wheel Levant differentiator on the unwrapped wheel angles."""
 
-    def __init__(
-        self,
-        config: ObserverConfig,
-        *,
-        differentiator: type[LevantDifferentiator] = LevantDifferentiator,
-    ) -> None:
-        """Create the observer from its settings.
+    _channels = 4
+    last: WheelState | None = None
 
-        ``differentiator``: the reference class, or a drop-in with its constructor and
-        ``update`` (the compiled `vd_observer_node.kernel.levant.CompiledDifferentiator`).
-        """
-        self._diff = _differentiator(config, config.wheel_lipschitz, 4, differentiator)
-        self.last: WheelState | None = None
+    @staticmethod
+    def _lipschitz(config: ObserverConfig) -> float:
+        return config.wheel_lipschitz
 
     def update(self, t: float, angles: ArrayLike) -> WheelState:
         """Feed the wheel angles at stamp t.
@@ -197,19 +199,12 @@ class WheelObserver(_DifferentiatorObserver):
 class SpeedObserver(_DifferentiatorObserver):
     """Levant differentiator on the measured body speed."""
 
-    def __init__(
-        self,
-        config: ObserverConfig,
-        *,
-        differentiator: type[LevantDifferentiator] = LevantDifferentiator,
-    ) -> None:
-        """Create the observer from its settings.
+    _channels = 1
+    last: SpeedState | None = None
 
-        ``differentiator``: the reference class, or a drop-in with its constructor and
-        ``update`` (the compiled `vd_observer_node.kernel.levant.CompiledDifferentiator`).
-        """
-        self._diff = _differentiator(config, config.speed_lipschitz, 1, differentiator)
-        self.last: SpeedState | None = None
+    @staticmethod
+    def _lipschitz(config: ObserverConfig) -> float:
+        return config.speed_lipschitz
 
     def update(self, t: float, speed: float) -> SpeedState:
         """Feed the measured body speed [m/s] at stamp t [s]."""
