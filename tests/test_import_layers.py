@@ -20,13 +20,14 @@ OBSERVER_LAYERS: dict[str, set[str]] = {
     'bag': {'errors'},
     'estimation': {'errors'},
     'situation': {'errors', 'estimation'},
+    'inputs': {'errors', 'bag'},
     # the per-stamp chain picks its compiled twin, which implements the chain's interface
     'chain': {'errors', 'estimation', 'situation', 'kernel'},
     'kernel': {'errors', 'estimation', 'situation', 'chain'},
-    'tools': {'errors', 'bag', 'estimation', 'situation', 'chain', 'kernel'},
-    'testing': {'errors', 'bag', 'estimation', 'situation', 'chain', 'kernel', 'tools'},
+    'tools': {'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel'},
+    'testing': {'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel', 'tools'},
     # thin nodes: the core and the node plumbing, never the offline tools or test helpers
-    'nodes': {'errors', 'bag', 'estimation', 'situation', 'chain', 'kernel'},
+    'nodes': {'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel'},
 }
 #: vd_sim_node's rooms: the bond-graph core is a leaf, the vehicle model sits on it.
 SIM_LAYERS: dict[str, set[str]] = {

@@ -2,7 +2,8 @@
 
     vd bag info BAG [--recover]
     vd bag repair BAG [--no-backup]
-    vd replay IN_BAG OUT_BAG [--vehicle FILE] [--config FILE] [--no-progress] [--kernel K]
+    vd replay IN_BAG OUT_BAG [--vehicle FILE] [--config FILE] [--mapping FILE]
+              [--no-progress] [--kernel K]
 
 Errors (missing paths, corrupt bags, bad vehicle files) print one line on stderr and exit
 with status 2; no traceback.
@@ -75,9 +76,11 @@ def _repair(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    from vd_observer_node.inputs.mapping import load_input_mapping
     from vd_observer_node.tools.replay import ReplayConfig, load_replay_config, replay_bag
 
     config = load_replay_config(args.config) if args.config else ReplayConfig()
+    mapping = load_input_mapping(args.mapping) if args.mapping else None
     report = replay_bag(
         args.in_bag,
         args.out_bag,
@@ -90,6 +93,7 @@ def _replay(args: argparse.Namespace) -> int:
         situation_config=config.situation,
         progress=not args.no_progress,
         kernel=args.kernel,
+        mapping=mapping,
     )
     print(
         f'replayed {report.samples} samples ({report.sensor_messages} sensor messages, '
@@ -117,7 +121,9 @@ def _parser() -> argparse.ArgumentParser:
     repair.set_defaults(run=_repair)
     replay = commands.add_parser('replay', help='run the estimator cascade over a bag offline')
     replay.add_argument(
-        'in_bag', type=Path, help=f'input bag with the {SENSORS_NAMESPACE}* topics'
+        'in_bag',
+        type=Path,
+        help=f'input bag with the {SENSORS_NAMESPACE}* topics, or the topics of --mapping',
     )
     replay.add_argument('out_bag', type=Path, help='output bag folder to create')
     replay.add_argument('--vehicle', type=Path, help='vehicle YAML (default: the Clio file)')
@@ -125,6 +131,11 @@ def _parser() -> argparse.ArgumentParser:
         '--config',
         type=Path,
         help='YAML with observer / estimator / cascade settings (default: the defaults)',
+    )
+    replay.add_argument(
+        '--mapping',
+        type=Path,
+        help='input mapping YAML: your topics, types, joints and units (docs/bags.md)',
     )
     replay.add_argument('--no-progress', action='store_true', help='no progress bar')
     replay.add_argument(

@@ -49,14 +49,11 @@ from vd_sim_node.topics import (
     OBSERVER_BODY_VELOCITY,
     OBSERVER_WHEEL_STATES,
     SENSORS,
-    SENSORS_BODY_VELOCITY,
-    SENSORS_WHEEL_ANGLES,
-    SENSORS_WHEEL_TORQUES,
     TRUTH_NAMESPACE,
 )
 
 from vd_observer_node.bag.alerts_cdr import encode_alerts
-from vd_observer_node.bag.cdr_batch import decode_batch, encode_batch
+from vd_observer_node.bag.cdr_batch import encode_batch
 from vd_observer_node.bag.errors import BagExistsError, ReplayInputError
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
@@ -65,6 +62,8 @@ from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
+from vd_observer_node.inputs.decode import decode_input
+from vd_observer_node.inputs.mapping import InputMapping, default_mapping
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.situation.monitor import (
@@ -346,6 +345,7 @@ def replay_bag(
     friction_config: FrictionPotentialConfig | None = None,
     situation_config: SituationConfig | None = None,
     kernel: str = 'compiled',
+    mapping: InputMapping | None = None,
 ) -> ReplayReport:
     """Replay a bag's sensor topics through the cascade and write inputs, truth and estimates.
 
@@ -371,9 +371,13 @@ def replay_bag(
         situation_config: fast-observer settings; default SituationConfig().
         kernel: 'compiled' (the numba kernel, :mod:`vd_observer_node.kernel`) or 'python'
             (the reference implementation; equal results, ~30x the time).
+        mapping: which topics, types, joints, units and signs are the wheel angles, body
+            speed and wheel torques (:mod:`vd_observer_node.inputs.mapping`); default vd's
+            own ``/vd/sensors/*`` topics.
 
     Raises:
         ReplayInputError: a sensor topic is missing or has the wrong type.
+        MappingError: the messages do not fit the mapping (a joint or element absent).
         BagError: reading or writing failed (see .errors).
         VehicleParameterError: the vehicle file is unreadable or invalid.
     """
@@ -394,12 +398,17 @@ def replay_bag(
         raise BagExistsError(f'{target}: already exists (choose a new bag name)')
     reader = BagReader(in_bag)
     topics = reader.topics
-    for name, msgtype in SENSOR_TOPICS.items():
-        info = topics.get(name)
+    mapping = mapping or default_mapping()
+    for spec in mapping.specs:
+        info = topics.get(spec.topic)
+        origin = f' ({mapping.source}: {spec.name})' if mapping.source else ''
         if info is None or info.message_count == 0:
-            raise ReplayInputError(f'{in_bag}: no messages on sensor topic {name}')
-        if info.msgtype != msgtype:
-            raise ReplayInputError(f'{in_bag}: {name} has type {info.msgtype}, need {msgtype}')
+            raise ReplayInputError(f'{in_bag}: no messages on sensor topic {spec.topic}{origin}')
+        if info.msgtype != spec.msgtype:
+            raise ReplayInputError(
+                f'{in_bag}: {spec.topic} has type {info.msgtype}, need {spec.msgtype}{origin}'
+            )
+    inputs = [spec.topic for spec in mapping.specs]
     truth = [t for t in topics if t.startswith(TRUTH_PREFIX)]
     # One read of the file gives the estimator vehicle and the tyre alike (a millisecond).
     params = load_vehicle_params(vehicle_file)
@@ -423,7 +432,7 @@ def replay_bag(
             friction=friction_config,
             situation=situation_config,
         )
-    total_in = sum(topics[t].message_count for t in [*SENSOR_TOPICS, *truth])
+    total_in = sum(topics[t].message_count for t in [*inputs, *truth])
     bar = tqdm(
         total=2 * total_in,
         unit='msg',
@@ -434,26 +443,18 @@ def replay_bag(
     )
     with bar:
         arrays: dict[str, TopicArrays] = {}
-        for topic, arr in reader.topic_arrays([*SENSOR_TOPICS, *truth]).items():
+        for topic, arr in reader.topic_arrays([*inputs, *truth]).items():
             arrays[topic] = arr
             bar.update(len(arr.datas))
-        angles = decode_batch(
-            SENSOR_TOPICS[SENSORS_WHEEL_ANGLES], arrays[SENSORS_WHEEL_ANGLES].datas
-        )
-        speed = decode_batch(
-            SENSOR_TOPICS[SENSORS_BODY_VELOCITY], arrays[SENSORS_BODY_VELOCITY].datas
-        )
-        torque = decode_batch(
-            SENSOR_TOPICS[SENSORS_WHEEL_TORQUES], arrays[SENSORS_WHEEL_TORQUES].datas
-        )
+        angles, speed, torque = (decode_input(s, arrays[s.topic]) for s in mapping.specs)
         common, (ia, iv, it) = _align([angles.stamp_ns, speed.stamp_ns, torque.stamp_ns])
         sensor_count = len(angles.stamp_ns) + len(speed.stamp_ns) + len(torque.stamp_ns)
         bar.set_postfix_str(f'cascade on {len(common)} samples')
         cascade_start = time.perf_counter()
         t = common.astype(np.float64) * 1e-9
-        wheel_angle = angles.values['angle'][ia]
-        body_speed = speed.values['twist.linear.x'][iv]
-        wheel_torque = torque.values['torque'][it]
+        wheel_angle = angles.values[ia]
+        body_speed = speed.values[iv, 0]
+        wheel_torque = torque.values[it]
         result = cascade(
             t,
             wheel_angle,
@@ -524,11 +525,11 @@ def replay_bag(
                 worker.start()
             else:
                 run_monitor()
-        frames = angles.frame_id[ia]
+        frames = angles.frame_ids[ia]
         frame_id = frames[0].decode() if len(frames) else ''
-        log_ns = arrays[SENSORS_WHEEL_ANGLES].log_time_ns[ia]
+        log_ns = arrays[mapping.wheel_angles.topic].log_time_ns[ia]
         outputs: list[tuple[str, str, np.ndarray, list[bytes]]] = []
-        for topic in [*SENSOR_TOPICS, *truth]:
+        for topic in [*inputs, *truth]:
             arr = arrays[topic]
             outputs.append((topic, arr.msgtype, arr.log_time_ns, arr.datas))
         for topic, values in _estimates(result, wheel_angle).items():
@@ -548,7 +549,7 @@ def replay_bag(
         bar.set_postfix_str('writing')
         written = _write_merged(out_bag, reader, outputs, bar, total_in)
     wall = time.perf_counter() - started
-    sensor_log = np.concatenate([arrays[t].log_time_ns for t in SENSOR_TOPICS])
+    sensor_log = np.concatenate([arrays[t].log_time_ns for t in inputs])
     return ReplayReport(
         samples=len(common),
         sensor_messages=sensor_count,

@@ -1,0 +1,270 @@
+"""Input mapping: which topics of a user's data feed vd, with which types, fields and units.
+
+One mapping describes one car's data. It names, for each input of the cascade, the topic, its
+ROS type, where the four wheels are in the message (joint names or array indices), the unit
+and the sign of each wheel. Without a mapping, vd reads its own topics
+(:func:`default_mapping`: ``/vd/sensors/*`` with vd_msgs types).
+
+YAML form (every key of an input but ``topic`` and ``type`` is optional where the type does
+not need it)::
+
+    wheel_angles:
+      topic: /joint_states
+      type: sensor_msgs/msg/JointState
+      joints: [wheel_fl_joint, wheel_fr_joint, wheel_rl_joint, wheel_rr_joint]
+      unit: rad               # rad | deg | rev
+      sign: [1, -1, 1, -1]    # per wheel: +1 where the joint turns forward when rolling
+    body_speed:
+      topic: /odom
+      type: nav_msgs/msg/Odometry
+      unit: m/s               # m/s | km/h
+    wheel_torques:
+      topic: /wheel_torques
+      type: std_msgs/msg/Float64MultiArray
+      indices: [0, 1, 2, 3]   # element of each wheel, order FL, FR, RL, RR
+      unit: N m               # N m | kN m
+
+Supported types per input (:data:`SUPPORTED_TYPES`): wheel angles from
+``vd_msgs/msg/WheelAngles``, ``sensor_msgs/msg/JointState`` (position) or
+``std_msgs/msg/Float64MultiArray``; body speed from ``geometry_msgs/msg/TwistStamped``
+(``twist.linear.x``), ``nav_msgs/msg/Odometry`` (``twist.twist.linear.x``) or
+``std_msgs/msg/Float64MultiArray``; wheel torques from ``vd_msgs/msg/WheelTorques``,
+``sensor_msgs/msg/JointState`` (effort) or ``std_msgs/msg/Float64MultiArray``.
+Float64MultiArray has no header: its samples are stamped with their log time.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Final
+
+import yaml
+from vd_sim_node.topics import SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES, SENSORS_WHEEL_TORQUES
+
+from vd_observer_node.inputs.errors import MappingError
+
+__all__ = [
+    'INPUTS',
+    'SUPPORTED_TYPES',
+    'UNITS',
+    'InputMapping',
+    'InputSpec',
+    'default_mapping',
+    'load_input_mapping',
+    'mapping_from_dict',
+]
+
+#: The cascade's inputs, in the order of a mapping file.
+INPUTS: Final = ('wheel_angles', 'body_speed', 'wheel_torques')
+
+WHEEL_ANGLES_TYPE: Final = 'vd_msgs/msg/WheelAngles'
+WHEEL_TORQUES_TYPE: Final = 'vd_msgs/msg/WheelTorques'
+JOINT_STATE: Final = 'sensor_msgs/msg/JointState'
+FLOAT64_ARRAY: Final = 'std_msgs/msg/Float64MultiArray'
+TWIST_STAMPED: Final = 'geometry_msgs/msg/TwistStamped'
+ODOMETRY: Final = 'nav_msgs/msg/Odometry'
+
+SUPPORTED_TYPES: Final[dict[str, tuple[str, ...]]] = {
+    'wheel_angles': (WHEEL_ANGLES_TYPE, JOINT_STATE, FLOAT64_ARRAY),
+    'body_speed': (TWIST_STAMPED, ODOMETRY, FLOAT64_ARRAY),
+    'wheel_torques': (WHEEL_TORQUES_TYPE, JOINT_STATE, FLOAT64_ARRAY),
+}
+
+#: Factor to the SI unit of each input, by unit name.
+UNITS: Final[dict[str, dict[str, float]]] = {
+    'wheel_angles': {'rad': 1.0, 'deg': math.pi / 180.0, 'rev': 2.0 * math.pi},
+    'body_speed': {'m/s': 1.0, 'km/h': 1.0 / 3.6},
+    'wheel_torques': {'N m': 1.0, 'kN m': 1000.0},
+}
+_SI: Final = {'wheel_angles': 'rad', 'body_speed': 'm/s', 'wheel_torques': 'N m'}
+#: Inputs with one value per wheel (the others are one scalar).
+_PER_WHEEL: Final = frozenset({'wheel_angles', 'wheel_torques'})
+_KEYS: Final = frozenset({'topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign'})
+
+
+@dataclass(frozen=True)
+class InputSpec:
+    """Where one input of the cascade comes from.
+
+    Attributes:
+        name: the input, one of :data:`INPUTS`.
+        topic: ROS topic name.
+        msgtype: ROS type, 'pkg/msg/Type', one of ``SUPPORTED_TYPES[name]``.
+        joints: JointState only: the joint name of FL, FR, RL, RR (per-wheel inputs).
+        indices: Float64MultiArray only: the element of FL, FR, RL, RR, or of the scalar.
+        factor: multiplies the raw value to give SI units (unit factor times ``scale``).
+        sign: shape (4,) per-wheel sign (+1 or -1) for per-wheel inputs, (1,) for a scalar.
+    """
+
+    name: str
+    topic: str
+    msgtype: str
+    joints: tuple[str, ...] = ()
+    indices: tuple[int, ...] = ()
+    factor: float = 1.0
+    sign: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0)
+
+    @property
+    def width(self) -> int:
+        """Values per sample: 4 for the per-wheel inputs, 1 for the body speed."""
+        return 4 if self.name in _PER_WHEEL else 1
+
+
+@dataclass(frozen=True)
+class InputMapping:
+    """The three inputs of the cascade (see the module docstring for the YAML form).
+
+    Attributes:
+        wheel_angles: unwrapped wheel angles, FL, FR, RL, RR [rad after conversion].
+        body_speed: longitudinal body speed [m/s after conversion].
+        wheel_torques: drive minus brake torque per wheel [N m after conversion].
+        source: where the mapping was read from ('' for the default).
+    """
+
+    wheel_angles: InputSpec
+    body_speed: InputSpec
+    wheel_torques: InputSpec
+    source: str = ''
+
+    @property
+    def specs(self) -> tuple[InputSpec, InputSpec, InputSpec]:
+        """The inputs in :data:`INPUTS` order."""
+        return (self.wheel_angles, self.body_speed, self.wheel_torques)
+
+    @property
+    def is_default(self) -> bool:
+        """True when it reads vd's own sensor topics with vd's types, unchanged."""
+        return self.specs == default_mapping().specs
+
+
+def default_mapping() -> InputMapping:
+    """vd's own sensor topics (``/vd/sensors/*``) with vd_msgs types, SI units."""
+    return InputMapping(
+        wheel_angles=InputSpec('wheel_angles', SENSORS_WHEEL_ANGLES, WHEEL_ANGLES_TYPE),
+        body_speed=InputSpec('body_speed', SENSORS_BODY_VELOCITY, TWIST_STAMPED, sign=(1.0,)),
+        wheel_torques=InputSpec('wheel_torques', SENSORS_WHEEL_TORQUES, WHEEL_TORQUES_TYPE),
+    )
+
+
+def _number(where: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise MappingError(f'{where} must be a finite number, got {value!r}')
+    return float(value)
+
+
+def _spec(name: str, data: Any, where: str) -> InputSpec:
+    if not isinstance(data, Mapping):
+        raise MappingError(f'{where} must be a mapping with topic and type')
+    unknown = sorted(set(data) - _KEYS)
+    if unknown:
+        raise MappingError(
+            f'{where}.{unknown[0]}: unknown key (known: {", ".join(sorted(_KEYS))})'
+        )
+    for key in ('topic', 'type'):
+        if not isinstance(data.get(key), str) or not data[key]:
+            raise MappingError(f'{where}.{key} is missing (a string)')
+    topic, msgtype = str(data['topic']), str(data['type'])
+    if not topic.startswith('/'):
+        raise MappingError(f'{where}.topic must be an absolute name (/...), got {topic!r}')
+    if msgtype not in SUPPORTED_TYPES[name]:
+        allowed = ', '.join(SUPPORTED_TYPES[name])
+        raise MappingError(f'{where}.type {msgtype!r} is not supported (use one of {allowed})')
+    width = 4 if name in _PER_WHEEL else 1
+    joints: tuple[str, ...] = ()
+    indices: tuple[int, ...] = ()
+    if msgtype == JOINT_STATE:
+        raw = data.get('joints')
+        if (
+            not isinstance(raw, list)
+            or len(raw) != width
+            or not all(isinstance(j, str) and j for j in raw)
+            or len(set(raw)) != width
+        ):
+            raise MappingError(f'{where}.joints must list {width} distinct joint names')
+        joints = tuple(raw)
+    elif 'joints' in data:
+        raise MappingError(f'{where}.joints is for sensor_msgs/msg/JointState only')
+    if msgtype == FLOAT64_ARRAY:
+        raw = data.get('indices', list(range(width)))
+        if (
+            not isinstance(raw, list)
+            or len(raw) != width
+            or not all(isinstance(i, int) and not isinstance(i, bool) and i >= 0 for i in raw)
+        ):
+            raise MappingError(f'{where}.indices must list {width} element indices >= 0')
+        indices = tuple(raw)
+    elif 'indices' in data:
+        raise MappingError(f'{where}.indices is for std_msgs/msg/Float64MultiArray only')
+    unit = data.get('unit', _SI[name])
+    if unit not in UNITS[name]:
+        raise MappingError(
+            f'{where}.unit {unit!r} is unknown (use one of {", ".join(UNITS[name])})'
+        )
+    scale = _number(f'{where}.scale', data.get('scale', 1.0))
+    if scale == 0.0:
+        raise MappingError(f'{where}.scale must not be 0')
+    raw_sign = data.get('sign', [1] * width)
+    if not isinstance(raw_sign, list) or len(raw_sign) != width:
+        raise MappingError(f'{where}.sign must list {width} values of +1 or -1')
+    sign = tuple(_number(f'{where}.sign', s) for s in raw_sign)
+    if any(s not in (1.0, -1.0) for s in sign):
+        raise MappingError(f'{where}.sign must list {width} values of +1 or -1')
+    return InputSpec(
+        name=name,
+        topic=topic,
+        msgtype=msgtype,
+        joints=joints,
+        indices=indices,
+        factor=UNITS[name][unit] * scale,
+        sign=sign,
+    )
+
+
+def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
+    """Build a mapping from its YAML content; absent inputs keep vd's own topics.
+
+    Args:
+        data: a mapping of input name (:data:`INPUTS`) to its settings.
+        source: named in every error (the file).
+
+    Raises:
+        MappingError: one line naming the key and what is allowed.
+    """
+    if data is None:
+        data = {}
+    if not isinstance(data, Mapping):
+        raise MappingError(f'{source}: expected a mapping of {", ".join(INPUTS)}')
+    unknown = sorted(set(data) - set(INPUTS))
+    if unknown:
+        raise MappingError(f'{source}: {unknown[0]}: unknown input (use {", ".join(INPUTS)})')
+    default = default_mapping()
+    specs = {
+        name: _spec(name, data[name], f'{source}: {name}') if name in data else spec
+        for name, spec in zip(INPUTS, default.specs, strict=True)
+    }
+    topics = [s.topic for s in specs.values()]
+    if len(set(topics)) != len(topics):
+        raise MappingError(f'{source}: two inputs share one topic ({", ".join(topics)})')
+    return InputMapping(**specs, source=source)
+
+
+def load_input_mapping(path: str | os.PathLike[str]) -> InputMapping:
+    """Read a mapping file (YAML, see the module docstring).
+
+    Raises:
+        MappingError: unreadable file, malformed YAML or a refused key (one line).
+    """
+    try:
+        text = Path(path).read_text(encoding='utf-8')
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MappingError(f'cannot read input mapping {path}: {exc}') from exc
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        detail = ' '.join(str(exc).split())
+        raise MappingError(f'input mapping {path} is not valid YAML: {detail}') from exc
+    return mapping_from_dict(data, source=f'input mapping {path}')
