@@ -1,4 +1,5 @@
-"""ROS-free rosbag2 bag core: MCAP writing, reading, repair and offline replay.
+"""ROS-free rosbag2 bag core: MCAP writing, reading, repair and CDR coding (a leaf: the
+offline replay that uses it lives in `vd_observer_node.tools.replay`).
 
 Public API (see docs/bags.md):
 
