@@ -485,32 +485,23 @@ def replay_bag(
                     position=1,
                     leave=False,
                 ) as phase:
+                    runner: dict[str, Any] = {}
                     if compiled:
                         from vd_observer_node.kernel.chain import run_situation_compiled
 
-                        situation_values.update(
-                            situation_topics(
-                                wheel_angle,
-                                body_speed,
-                                wheel_torque,
-                                result,
-                                monitor,
-                                phase.update,
-                                runner=run_situation_compiled,
-                                block=20 * _SITUATION_BLOCK,
-                            )
+                        # larger blocks: a compiled call's cost is mostly its fixed Python overhead
+                        runner = {'runner': run_situation_compiled, 'block': 20 * _SITUATION_BLOCK}
+                    situation_values.update(
+                        situation_topics(
+                            wheel_angle,
+                            body_speed,
+                            wheel_torque,
+                            result,
+                            monitor,
+                            phase.update,
+                            **runner,
                         )
-                    else:
-                        situation_values.update(
-                            situation_topics(
-                                wheel_angle,
-                                body_speed,
-                                wheel_torque,
-                                result,
-                                monitor,
-                                phase.update,
-                            )
-                        )
+                    )
             except BaseException as exc:  # re-raised by the caller after the join
                 failure.append(exc)
             situation_time[0] = time.perf_counter() - situation_start
