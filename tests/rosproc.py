@@ -45,7 +45,7 @@ class RosProcess:
             f'(exit code {self.popen.poll()}); output:\n{out[-4000:]}'
         )
 
-    def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> int:
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 30.0) -> int:
         """Send `sig` to the process group, wait, escalate to SIGKILL; return the exit code."""
         if self.popen.poll() is None:
             with contextlib.suppress(ProcessLookupError):

@@ -38,7 +38,7 @@ def test_lock_alert_on_hard_braking_over_low_friction(
         ['recording to', 'observer ready', 'estimator ready', 'alerts ready'],
         strict=True,
     ):
-        proc.wait_for(text, timeout=30)
+        proc.wait_for(text, timeout=60)
     waiter = wait_for_last_stamp(
         procs,
         'waiter',

@@ -92,7 +92,7 @@ def run_live_graph(procs: RosProcessGroup, bag: Path) -> None:
     obs = procs.node('observer', 'vd_observer_node', 'observer_node')
     est = procs.node('estimator', 'vd_observer_node', 'estimator_node')
     for proc, text in ((rec, 'recording to'), (obs, 'observer ready'), (est, 'estimator ready')):
-        proc.wait_for(text, timeout=30)
+        proc.wait_for(text, timeout=60)
     waiter = wait_for_last_stamp(procs, 'waiter', LAST_STAMP_NS, ESTIMATES_DONE)
     # the simulator itself waits until its streams have subscribers and discovery settled
     sim = procs.node(
@@ -171,7 +171,7 @@ def test_live_graph_estimates_every_sample_and_matches_the_offline_cascade(
     obs = procs.node('observer2', 'vd_observer_node', 'observer_node', use_sim_time=True)
     est = procs.node('estimator2', 'vd_observer_node', 'estimator_node', use_sim_time=True)
     for proc, text in ((rec, 'recording to'), (obs, 'observer ready'), (est, 'estimator ready')):
-        proc.wait_for(text, timeout=30)
+        proc.wait_for(text, timeout=60)
     waiter = wait_for_last_stamp(procs, 'waiter2', LAST_STAMP_NS, ESTIMATES_DONE)
     # start_delay: time for the observers' publishers and the recorder to discover each other
     player = procs.node(

@@ -28,7 +28,7 @@ def test_every_message_type_arrives_intact_in_another_process(procs: RosProcessG
     sub = procs.python('sub', SCRIPT, 'sub')
     sub.wait_for('SUBSCRIBED')
     procs.python('pub', SCRIPT, 'pub')
-    out = sub.wait_for('ALL RECEIVED', timeout=30)
+    out = sub.wait_for('ALL RECEIVED', timeout=60)
     assert 'MISMATCH' not in out, out
     for name in TYPES:
         assert f'INTACT {name} ' in out

@@ -31,7 +31,7 @@ def count(bag: Path, topic: str, *, recover: bool = False) -> int:
 def test_signal_closes_a_complete_bag(procs: RosProcessGroup, tmp_path: Path, sig: int) -> None:
     bag = tmp_path / 'bag'
     rec = procs.node('recorder', 'vd_observer_node', 'recorder_node', output=str(bag))
-    rec.wait_for('recording to', timeout=30)
+    rec.wait_for('recording to', timeout=60)
     sim = procs.node(
         'sim',
         'vd_sim_node',
@@ -83,7 +83,7 @@ def test_sigkill_loses_at_most_the_open_chunk_and_repair_recovers_the_rest(
         output=str(bag),
         chunk_duration=0.5,
     )
-    rec.wait_for('recording to', timeout=30)
+    rec.wait_for('recording to', timeout=60)
     sim = procs.node(
         'sim',
         'vd_sim_node',
@@ -94,7 +94,7 @@ def test_sigkill_loses_at_most_the_open_chunk_and_repair_recovers_the_rest(
         start_delay=1.5,
         progress_period=0.5,
     )
-    sim.wait_for('progress t=0.0', timeout=30)
+    sim.wait_for('progress t=0.0', timeout=60)
     time.sleep(3.0)  # ~3 s of data at real time, then power cut for the recorder
     rec.stop(signal.SIGKILL)
     sim_t = _sim_time_now(sim.output())
