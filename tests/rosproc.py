@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterable
 from pathlib import Path
 
 __all__ = ['RosProcess', 'RosProcessGroup']
@@ -57,6 +58,18 @@ class RosProcess:
                 self.popen.wait(5)
         self._log.close()
         return self.popen.returncode
+
+
+def wait_recording(recorder: RosProcess, topics: Iterable[str], timeout: float = 60.0) -> None:
+    """Wait until the recorder is connected to a publisher of each topic.
+
+    The recorder logs 'recording TOPIC (TYPE)' when its subscription matches the topic's first
+    publisher. Messages published before that are not in the bag (volatile QoS), so a test
+    that compares a bag with everything a node published waits on this, after starting the
+    node and before the data flows.
+    """
+    for topic in topics:
+        recorder.wait_for(f'recording {topic} (', timeout=timeout)
 
 
 class RosProcessGroup:

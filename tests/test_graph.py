@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from rosproc import RosProcessGroup
+from rosproc import RosProcessGroup, wait_recording
 from vd_observer_node.bag import BagReader
 from vd_observer_node.tools.replay import replay_bag
 from vd_sim_node.topics import (
@@ -93,6 +93,7 @@ def run_live_graph(procs: RosProcessGroup, bag: Path) -> None:
     est = procs.node('estimator', 'vd_observer_node', 'estimator_node')
     for proc, text in ((rec, 'recording to'), (obs, 'observer ready'), (est, 'estimator ready')):
         proc.wait_for(text, timeout=60)
+    wait_recording(rec, ESTIMATE_TOPICS)  # the observer's and estimator's publishers
     waiter = wait_for_last_stamp(procs, 'waiter', LAST_STAMP_NS, ESTIMATES_DONE)
     # the simulator itself waits until its streams have subscribers and discovery settled
     sim = procs.node(
@@ -172,6 +173,7 @@ def test_live_graph_estimates_every_sample_and_matches_the_offline_cascade(
     est = procs.node('estimator2', 'vd_observer_node', 'estimator_node', use_sim_time=True)
     for proc, text in ((rec, 'recording to'), (obs, 'observer ready'), (est, 'estimator ready')):
         proc.wait_for(text, timeout=60)
+    wait_recording(rec, [ESTIMATES_SLOPE, ESTIMATES_TIRE_FORCES])
     waiter = wait_for_last_stamp(procs, 'waiter2', LAST_STAMP_NS, ESTIMATES_DONE)
     # start_delay: time for the observers' publishers and the recorder to discover each other
     player = procs.node(

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rosproc import RosProcessGroup
+from rosproc import RosProcessGroup, wait_recording
 from test_graph import (
     LAST_STAMP_NS,
     N_SAMPLES,
@@ -60,6 +60,7 @@ def test_pipeline_node_publishes_what_offline_replay_computes(
     pipe = procs.node('pipeline', 'vd_observer_node', 'pipeline_node', kernel=kernel)
     for proc, text in ((rec, 'recording to'), (pipe, 'pipeline ready')):
         proc.wait_for(text, timeout=60)
+    wait_recording(rec, [*OUTPUTS, ESTIMATES_ALERTS])  # the pipeline's publishers, connected
     waiter = wait_for_last_stamp(
         procs,
         'waiter',

@@ -22,6 +22,7 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from vd_sim_node.ros_common import (
     CLOCK_QOS,
@@ -135,9 +136,26 @@ class RecorderNode(Node):
             else (DIAGNOSTICS_QOS if topic == '/diagnostics' else STREAM_QOS)
         )
         self.subscriptions_by_topic[topic] = self.create_subscription(
-            kind, topic, self._make_callback(topic), qos, raw=True
+            kind,
+            topic,
+            self._make_callback(topic),
+            qos,
+            raw=True,
+            event_callbacks=SubscriptionEventCallbacks(matched=self._on_matched(topic, type_name)),
         )
-        self.get_logger().info(f'recording {topic} ({type_name})')
+
+    def _on_matched(self, topic: str, type_name: str) -> Any:
+        """Log 'recording TOPIC (TYPE)' once, when the first publisher is connected: from then
+        on what it publishes reaches the bag (a topic without a publisher logs nothing)."""
+        announced = False
+
+        def on_matched(info: Any) -> None:
+            nonlocal announced
+            if not announced and info.current_count > 0:
+                announced = True
+                self.get_logger().info(f'recording {topic} ({type_name})')
+
+        return on_matched
 
     def _make_callback(self, topic: str) -> Any:
         clock = self.get_clock()
