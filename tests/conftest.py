@@ -7,8 +7,10 @@ processes they start find them too.
 
 from __future__ import annotations
 
+import fcntl
 import os
 import sys
+import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -30,13 +32,37 @@ def ros_env(worker_domain_id: int) -> dict[str, str]:
     return env
 
 
-_domain_counter = iter(range(40, 100))
+#: Domain ids the tests use: ROS 2's portable range (1..101), one per test.
+_DOMAINS = range(1, 102)
+_next_domain = [0]
+_LOCKS = Path(tempfile.gettempdir()) / 'vd-test-ros-domains'
 
 
 @pytest.fixture
-def worker_domain_id() -> int:
-    """A fresh ROS domain id per test, so tests never hear each other's topics."""
-    return next(_domain_counter)
+def worker_domain_id() -> Iterator[int]:
+    """A ROS domain id that no other running test uses, on this machine: held by a lock file.
+
+    Fresh per test within a session (the search goes on where the last test's ended), so a
+    test never hears the topics of an earlier one; and locked for the test's duration, so two
+    test sessions at once (a developer's beside scripts/stress_suite.sh) never share a
+    domain: when they did, one graph test received the other's simulator.
+    """
+    _LOCKS.mkdir(exist_ok=True)
+    for _ in range(len(_DOMAINS)):
+        domain = _DOMAINS[_next_domain[0] % len(_DOMAINS)]
+        _next_domain[0] += 1
+        lock = (_LOCKS / f'{domain}.lock').open('w')
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            lock.close()
+            continue
+        try:
+            yield domain
+        finally:
+            lock.close()  # releases the lock
+        return
+    pytest.fail(f'every ROS domain id in {_DOMAINS} is in use by other test sessions')
 
 
 @pytest.fixture
