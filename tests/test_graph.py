@@ -103,6 +103,7 @@ def run_live_graph(procs: RosProcessGroup, bag: Path) -> None:
         scenario_file=str(SCENARIO),
         rate_hz=RATE_HZ,
         real_time_factor=1.0,
+        min_sensor_subscribers=2,  # the recorder and an estimation node on every sensor topic
     )
     assert wait_exit(sim, 60) == 0, sim.output()
     assert 'scenario finished' in sim.output()

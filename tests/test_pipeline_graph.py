@@ -78,6 +78,7 @@ def test_pipeline_node_publishes_what_offline_replay_computes(
         scenario_file=str(SCENARIO),
         rate_hz=RATE_HZ,
         real_time_factor=1.0,
+        min_sensor_subscribers=2,  # the recorder and the pipeline
     )
     assert wait_exit(sim, 60) == 0, sim.output()
     assert wait_exit(waiter, 180) == 0, waiter.output()  # the last stamp went through

@@ -274,9 +274,10 @@ def _header(stamp: Time) -> Any:
 class SubscriberGate:
     """Decides when a source node (simulator, player) may send its first message.
 
-    Open once every given publisher has `min_subscribers` subscribers and the counts have not
-    changed for `settle_s` (a topic whose first subscriber, say the recorder, matched may still
-    be waiting for its second, the observer), or once `deadline` (monotonic [s]) has passed.
+    Open once every given publisher has `min_subscribers` subscribers (one number for all, or
+    one per publisher) and the counts have not changed for `settle_s` (a topic whose first
+    subscriber, say the recorder, matched may still be waiting for its second, the observer),
+    or once `deadline` (monotonic [s]) has passed.
     """
 
     def __init__(
@@ -284,10 +285,16 @@ class SubscriberGate:
         publishers: Sequence[Any],
         deadline: float,
         settle_s: float = 1.0,
-        min_subscribers: int = 1,
+        min_subscribers: int | Sequence[int] = 1,
     ):
         self.publishers = list(publishers)
-        self.min_subscribers = min_subscribers
+        self.min_subscribers = (
+            [min_subscribers] * len(self.publishers)
+            if isinstance(min_subscribers, int)
+            else list(min_subscribers)
+        )
+        if len(self.min_subscribers) != len(self.publishers):
+            raise ValueError('min_subscribers: one number, or one per publisher')
         self.deadline = deadline
         self.settle_s = settle_s
         self._counts: tuple[int, ...] = ()
@@ -301,8 +308,8 @@ class SubscriberGate:
             self._counts, self._since = counts, now
         self.missing = [
             p.topic_name
-            for p, n in zip(self.publishers, counts, strict=True)
-            if n < self.min_subscribers
+            for p, n, least in zip(self.publishers, counts, self.min_subscribers, strict=True)
+            if n < least
         ]
         settled = not self.missing and now - self._since >= self.settle_s
         return settled or now >= self.deadline

@@ -127,6 +127,15 @@ PARAMS = [
         high=600.0,
     ),
     ParamSpec(
+        'min_sensor_subscribers',
+        1,
+        'subscribers every sensor topic must have before the first sample (within '
+        'wait_for_subscribers), e.g. 2 for a recorder and the estimation started with the '
+        'simulator; the truth topics need one',
+        low=1,
+        high=100,
+    ),
+    ParamSpec(
         'progress_period',
         10.0,
         'log progress every this much simulated time [s]',
@@ -215,6 +224,7 @@ class SimNode(Node):
         self.wall_start: float | None = None
         self.first_sample_at = time.monotonic() + v['start_delay']
         self.wait_for_subscribers = v['wait_for_subscribers']
+        self.min_sensor_subscribers = v['min_sensor_subscribers']
         self.gate: SubscriberGate | None = None
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.create_timer(_BATCH_PERIOD, self.publish_batch, clock=steady)
@@ -232,7 +242,11 @@ class SimNode(Node):
             return
         if self.wall_start is None:
             if self.gate is None:
-                self.gate = SubscriberGate(self.streams, now + self.wait_for_subscribers)
+                sensors = (self.p_angles, self.p_speed, self.p_torques)
+                least = [self.min_sensor_subscribers if p in sensors else 1 for p in self.streams]
+                self.gate = SubscriberGate(
+                    self.streams, now + self.wait_for_subscribers, 1.0, least
+                )
             if not self.gate.ready(now):
                 return
             if self.gate.missing:
