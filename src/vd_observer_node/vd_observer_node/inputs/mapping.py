@@ -43,7 +43,12 @@ from pathlib import Path
 from typing import Any, Final
 
 import yaml
-from vd_sim_node.topics import SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES, SENSORS_WHEEL_TORQUES
+from vd_sim_node.topics import (
+    SENSORS,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+)
 
 from vd_observer_node.inputs.errors import MappingError
 
@@ -61,11 +66,12 @@ __all__ = [
 #: The cascade's inputs, in the order of a mapping file.
 INPUTS: Final = ('wheel_angles', 'body_speed', 'wheel_torques')
 
-WHEEL_ANGLES_TYPE: Final = 'vd_msgs/msg/WheelAngles'
-WHEEL_TORQUES_TYPE: Final = 'vd_msgs/msg/WheelTorques'
+# vd's own sensor types, as the topic contract gives them
+WHEEL_ANGLES_TYPE: Final = SENSORS[SENSORS_WHEEL_ANGLES]
+WHEEL_TORQUES_TYPE: Final = SENSORS[SENSORS_WHEEL_TORQUES]
 JOINT_STATE: Final = 'sensor_msgs/msg/JointState'
 FLOAT64_ARRAY: Final = 'std_msgs/msg/Float64MultiArray'
-TWIST_STAMPED: Final = 'geometry_msgs/msg/TwistStamped'
+TWIST_STAMPED: Final = SENSORS[SENSORS_BODY_VELOCITY]
 ODOMETRY: Final = 'nav_msgs/msg/Odometry'
 
 SUPPORTED_TYPES: Final[dict[str, tuple[str, ...]]] = {
@@ -74,13 +80,12 @@ SUPPORTED_TYPES: Final[dict[str, tuple[str, ...]]] = {
     'wheel_torques': (WHEEL_TORQUES_TYPE, JOINT_STATE, FLOAT64_ARRAY),
 }
 
-#: Factor to the SI unit of each input, by unit name.
+#: Factor to the SI unit of each input, by unit name; the first is the SI unit (the default).
 UNITS: Final[dict[str, dict[str, float]]] = {
     'wheel_angles': {'rad': 1.0, 'deg': math.pi / 180.0, 'rev': 2.0 * math.pi},
     'body_speed': {'m/s': 1.0, 'km/h': 1.0 / 3.6},
     'wheel_torques': {'N m': 1.0, 'kN m': 1000.0},
 }
-_SI: Final = {'wheel_angles': 'rad', 'body_speed': 'm/s', 'wheel_torques': 'N m'}
 #: Inputs with one value per wheel (the others are one scalar).
 _PER_WHEEL: Final = frozenset({'wheel_angles', 'wheel_torques'})
 _KEYS: Final = frozenset({'topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign'})
@@ -199,7 +204,7 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         indices = tuple(raw)
     elif 'indices' in data:
         raise MappingError(f'{where}.indices is for std_msgs/msg/Float64MultiArray only')
-    unit = data.get('unit', _SI[name])
+    unit = data.get('unit', next(iter(UNITS[name])))
     if unit not in UNITS[name]:
         raise MappingError(
             f'{where}.unit {unit!r} is unknown (use one of {", ".join(UNITS[name])})'
