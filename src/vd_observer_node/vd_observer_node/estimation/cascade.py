@@ -108,7 +108,8 @@ def run_cascade(
 
     Args:
         t: shape (N,), [s] stamps (rejected samples keep the previous estimates).
-        wheel_angle: shape (N, 4), [rad] unwrapped wheel angles.
+        wheel_angle: shape (N, 4), [rad] unwrapped wheel angles, or wheel speeds [rad/s]
+            when ``observer_config.wheel_input`` is 'speed'.
         body_speed: shape (N,), [m/s] measured body speed.
         wheel_torque: shape (N, 4), [N m] drive minus brake torque.
         vehicle: estimator parameters.
