@@ -42,6 +42,8 @@ class CascadeResult:
         slope: shape (N,), [rad].
         slope_valid: shape (N,), bool.
         wheel_valid: shape (N, 4), bool, observer validity per wheel.
+        angle: shape (N, 4), [rad], the wheel observer's angle (filtered; with wheel speeds
+            as input, their integral from 0 at the observer's start).
         faults: total fault counts per kind, keys 'wheel.<kind>', 'speed.<kind>' (observers)
             and 'estimator.<kind>', as the nodes report them on /diagnostics.
     """
@@ -61,6 +63,7 @@ class CascadeResult:
     slope: FloatArray
     slope_valid: BoolArray
     wheel_valid: BoolArray
+    angle: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
     faults: dict[str, int] = field(default_factory=dict)
 
 
@@ -130,7 +133,10 @@ def run_cascade(
     observer = Observer(observer_config or ObserverConfig())
     estimator = Estimator(vehicle, estimator_config)
     wheel4 = np.zeros((n, 4))
-    out = {k: wheel4.copy() for k in ('omega', 'omega_dot', 'fx', 'fz', 'mu', 'slip', 'rolling')}
+    out = {
+        k: wheel4.copy()
+        for k in ('angle', 'omega', 'omega_dot', 'fx', 'fz', 'mu', 'slip', 'rolling')
+    }
     scalars = {k: np.zeros(n) for k in ('speed', 'accel', 'aero', 'slope')}
     mu_valid = np.zeros((n, 4), dtype=bool)
     wheel_valid = np.zeros((n, 4), dtype=bool)
@@ -142,6 +148,7 @@ def run_cascade(
         body = observer.speed.update(tk, float(speeds[k]))
         speed = float(speeds[k]) if use_measured else body.speed
         est = estimator.update(tk, wheel.omega, wheel.omega_dot, speed, body.accel, torques[k])
+        out['angle'][k] = wheel.angle
         out['omega'][k] = wheel.omega
         out['omega_dot'][k] = wheel.omega_dot
         wheel_valid[k] = wheel.valid
@@ -172,6 +179,7 @@ def run_cascade(
         slope=scalars['slope'],
         slope_valid=slope_valid,
         wheel_valid=wheel_valid,
+        angle=out['angle'],
         faults={
             f'{part}.{kind}': n
             for part, counter in (

@@ -40,7 +40,7 @@ _BATCH_FIELD = {
     TWIST_STAMPED: 'twist.linear.x',
 }
 #: the JointState array of each per-wheel input
-_JOINT_FIELD = {'wheel_angles': 'position', 'wheel_torques': 'effort'}
+_JOINT_FIELD = {'wheel_angles': 'position', 'wheel_speeds': 'velocity', 'wheel_torques': 'effort'}
 
 
 @dataclass(frozen=True)
@@ -123,18 +123,20 @@ def _odometry(msg: Any, _log: int) -> tuple[int, Sequence[float], bytes]:
     return _stamp(msg.header), [float(msg.twist.twist.linear.x)], msg.header.frame_id.encode()
 
 
-def decode_input(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
+def decode_input(spec: InputSpec, arrays: TopicArrays, radius: float | None = None) -> InputSeries:
     """Decode the messages of ``spec.topic`` to the input's SI values.
 
     Args:
         spec: the input's mapping.
         arrays: the topic's raw messages (`BagReader.topic_arrays`), of type ``spec.msgtype``.
+        radius: effective rolling radius [m], for wheel speeds given in m/s or km/h.
 
     Returns:
         The series in message order (not sorted; the replay aligns by stamp).
 
     Raises:
-        MappingError: a mapped joint or element is absent from the messages.
+        MappingError: a mapped joint or element is absent from the messages, or a wheel
+            speed in m/s or km/h comes without a radius.
         BagFormatError: a message cannot be decoded.
     """
     if spec.msgtype in _BATCH_FIELD:
@@ -149,7 +151,12 @@ def decode_input(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
         stamps, values, frames = _per_message(spec, arrays, _odometry)
     else:  # the mapping refuses every other type
         raise MappingError(f'{spec.name}: no decoder for {spec.msgtype}')
-    if spec.factor != 1.0 or any(s != 1.0 for s in spec.sign):
+    factor = spec.factor
+    if spec.per_radius:
+        if radius is None or not radius > 0.0:
+            raise MappingError(f'{spec.name}: a unit of m/s or km/h needs the rolling radius')
+        factor = factor / radius
+    if factor != 1.0 or any(s != 1.0 for s in spec.sign):
         # only then: the default mapping's values pass bit for bit
-        values = values * (spec.factor * np.asarray(spec.sign))
+        values = values * (factor * np.asarray(spec.sign))
     return InputSeries(stamps.astype(np.int64), values, frames)

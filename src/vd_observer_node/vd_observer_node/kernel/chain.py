@@ -194,6 +194,7 @@ def run_cascade_compiled(
         slope=est[:, E_SLOPE].copy(),
         slope_valid=est[:, E_SLOPE_VALID] != 0.0,
         wheel_valid=wheel_valid,
+        angle=wheel[:, 0, :].copy(),
         faults={
             f'{part}.{kind}': count
             for part, counter in (

@@ -64,6 +64,7 @@ from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.decode import decode_input
 from vd_observer_node.inputs.mapping import InputMapping, default_mapping
+from vd_observer_node.inputs.sync import align_stamps
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.situation.monitor import (
@@ -105,7 +106,11 @@ class ReplayReport:
         bag_duration_s: log-time span of the sensor data [s].
         wall_time_s: replay wall time [s]; cascade_time_s of it in the cascade.
         cascade_time_s: [s] wall time of the cascade.
-        unmatched: sensor messages whose stamp is missing on another sensor topic.
+        unmatched: sensor messages not used: with 'exact' alignment, those whose stamp is
+            missing on another sensor topic; with 'latest', the wheel messages dropped
+            (repeated stamps, ``stale`` ones) and the other inputs' messages never held.
+        stale: with 'latest' alignment, wheel stamps dropped because another input had no
+            sample yet or only one older than the mapping's ``max_age``.
         situation_time_s: [s] wall time of the situation monitor (alerts and friction
             potential; 0 when not run).
     """
@@ -118,6 +123,7 @@ class ReplayReport:
     cascade_time_s: float
     unmatched: int
     situation_time_s: float = 0.0
+    stale: int = 0
 
     @property
     def real_time_factor(self) -> float:
@@ -191,20 +197,6 @@ def load_replay_config(path: str | os.PathLike[str]) -> ReplayConfig:
         if sections['situation'] is not None
         else None,
     )
-
-
-def _align(stamps: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Stamps common to all topics (sorted, unique) and each topic's index of them."""
-    common = stamps[0]
-    for s in stamps[1:]:
-        common = np.intersect1d(common, s)
-    indexes = []
-    for s in stamps:
-        # Last message of each stamp wins, as a re-sent stamp replaces the buffered one live.
-        order = np.argsort(s, kind='stable')
-        last = order[np.searchsorted(s[order], common, side='right') - 1]
-        indexes.append(last)
-    return common, indexes
 
 
 def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
@@ -371,9 +363,11 @@ def replay_bag(
         situation_config: fast-observer settings; default SituationConfig().
         kernel: 'compiled' (the numba kernel, :mod:`vd_observer_node.kernel`) or 'python'
             (the reference implementation; equal results, ~30x the time).
-        mapping: which topics, types, joints, units and signs are the wheel angles, body
-            speed and wheel torques (:mod:`vd_observer_node.inputs.mapping`); default vd's
-            own ``/vd/sensors/*`` topics.
+        mapping: which topics, types, joints, units and signs are the wheel angles (or
+            speeds), body speed and wheel torques, and how their samples are aligned
+            (:mod:`vd_observer_node.inputs.mapping`); default vd's own ``/vd/sensors/*``
+            topics. With wheel speeds the observers run with ``wheel_input='speed'``
+            whatever ``observer_config`` says.
 
     Raises:
         ReplayInputError: a sensor topic is missing or has the wrong type.
@@ -408,7 +402,8 @@ def replay_bag(
             raise ReplayInputError(
                 f'{in_bag}: {spec.topic} has type {info.msgtype}, need {spec.msgtype}{origin}'
             )
-    inputs = [spec.topic for spec in mapping.specs]
+    inputs = list(mapping.topics)
+    observer_config = replace(observer_config or ObserverConfig(), wheel_input=mapping.wheel_input)
     truth = [t for t in topics if t.startswith(TRUTH_PREFIX)]
     # One read of the file gives the estimator vehicle and the tyre alike (a millisecond).
     params = load_vehicle_params(vehicle_file)
@@ -446,8 +441,12 @@ def replay_bag(
         for topic, arr in reader.topic_arrays([*inputs, *truth]).items():
             arrays[topic] = arr
             bar.update(len(arr.datas))
-        angles, speed, torque = (decode_input(s, arrays[s.topic]) for s in mapping.specs)
-        common, (ia, iv, it) = _align([angles.stamp_ns, speed.stamp_ns, torque.stamp_ns])
+        radius = estimator_vehicle.effective_radius
+        angles, speed, torque = (decode_input(s, arrays[s.topic], radius) for s in mapping.specs)
+        aligned = align_stamps(
+            [angles.stamp_ns, speed.stamp_ns, torque.stamp_ns], mapping.alignment, mapping.max_age
+        )
+        common, (ia, iv, it) = aligned.stamp_ns, aligned.indexes
         sensor_count = len(angles.stamp_ns) + len(speed.stamp_ns) + len(torque.stamp_ns)
         bar.set_postfix_str(f'cascade on {len(common)} samples')
         cascade_start = time.perf_counter()
@@ -518,12 +517,14 @@ def replay_bag(
                 run_monitor()
         frames = angles.frame_ids[ia]
         frame_id = frames[0].decode() if len(frames) else ''
-        log_ns = arrays[mapping.wheel_angles.topic].log_time_ns[ia]
+        log_ns = arrays[mapping.wheels.topic].log_time_ns[ia]
         outputs: list[tuple[str, str, np.ndarray, list[bytes]]] = []
         for topic in [*inputs, *truth]:
             arr = arrays[topic]
             outputs.append((topic, arr.msgtype, arr.log_time_ns, arr.datas))
-        for topic, values in _estimates(result, wheel_angle).items():
+        # the sensor's angles as the observer node publishes them; with speeds, the observer's
+        observed_angle = result.angle if mapping.wheel_input == 'speed' else wheel_angle
+        for topic, values in _estimates(result, observed_angle).items():
             datas = encode_batch(ESTIMATE_TOPICS[topic], common, frame_id, values)
             outputs.append((topic, ESTIMATE_TOPICS[topic], log_ns, datas))
         if worker is not None:
@@ -548,8 +549,9 @@ def replay_bag(
         bag_duration_s=float(sensor_log.max() - sensor_log.min()) * 1e-9,
         wall_time_s=wall,
         cascade_time_s=cascade_time,
-        unmatched=sensor_count - 3 * len(common),
+        unmatched=sensor_count - len(common) - sum(len(np.unique(i)) for i in (iv, it)),
         situation_time_s=situation_time[0],
+        stale=aligned.stale,
     )
 
 
