@@ -63,7 +63,8 @@ KERNEL: Final = ParamSpec(
 OBSERVER_PARAMS: Final = [
     *dataclass_param_specs(
         ObserverConfig,
-        skip=('gains',),
+        # what the wheel sensors are follows from the input mapping, not a parameter of its own
+        skip=('gains', 'wheel_input'),
         choices={'discretization': DISCRETIZATIONS, 'init': INIT_POLICIES},
     ),
     ParamSpec('l0', DEFAULT_GAINS.l0, 'Levant gain lambda0 [-]'),
