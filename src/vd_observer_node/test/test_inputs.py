@@ -20,7 +20,6 @@ from vd_observer_node.inputs.mapping import (
     load_input_mapping,
     mapping_from_dict,
 )
-from vd_observer_node.inputs.sync import align_stamps
 from vd_observer_node.testing.standard_bags import float64_array, joint_state, odometry
 from vd_observer_node.testing.synthetic_bags import synthetic_drive
 from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
@@ -310,28 +309,6 @@ def test_angles_and_torques_may_share_one_joint_state_topic() -> None:
         }
     )
     assert mapping.topics == ('/joint_states', SENSORS_BODY_VELOCITY)
-
-
-# --- alignment ------------------------------------------------------------------------------
-
-
-def test_exact_alignment_keeps_the_stamps_every_input_has() -> None:
-    got = align_stamps(
-        [np.array([1, 2, 3, 3, 5]), np.array([5, 3, 1]), np.array([1, 3, 4, 5])], 'exact', 1.0
-    )
-    assert got.stamp_ns.tolist() == [1, 3, 5]
-    assert [i.tolist() for i in got.indexes] == [[0, 3, 4], [2, 1, 0], [0, 1, 3]]
-
-
-def test_latest_alignment_holds_the_newest_sample_and_drops_stale_stamps() -> None:
-    wheel = np.array([10, 20, 30, 40, 50, 60]) * 1_000_000  # [ns] every 10 ms
-    speed = np.array([15, 35]) * 1_000_000  # 20 ms apart, then stops
-    torque = np.array([5, 25, 45, 55]) * 1_000_000
-    got = align_stamps([wheel, speed, torque], 'latest', 0.02)
-    # 10 ms: no speed yet; 60 ms: the speed of 35 ms is 25 ms old > 20 ms
-    assert (got.stamp_ns // 1_000_000).tolist() == [20, 30, 40, 50]
-    assert [i.tolist() for i in got.indexes] == [[1, 2, 3, 4], [0, 0, 1, 1], [0, 1, 1, 2]]
-    assert got.stale == 2
 
 
 # --- replay ---------------------------------------------------------------------------------

@@ -64,6 +64,7 @@ from vd_sim_node.topics import (
     SENSORS_WHEEL_TORQUES,
 )
 
+from vd_observer_node.estimation.alignment import ALIGNMENTS
 from vd_observer_node.inputs.errors import MappingError
 
 __all__ = [
@@ -80,8 +81,6 @@ __all__ = [
 
 #: The cascade's inputs, in the order of a mapping file (wheel angles OR wheel speeds).
 INPUTS: Final = ('wheel_angles', 'wheel_speeds', 'body_speed', 'wheel_torques')
-#: How the inputs' samples are matched (see the module docstring).
-ALIGNMENTS: Final = ('exact', 'latest')
 #: Top-level keys that are settings, not inputs.
 _SETTINGS: Final = ('alignment', 'max_age')
 

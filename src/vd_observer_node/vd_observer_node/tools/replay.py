@@ -58,13 +58,13 @@ from vd_observer_node.bag.errors import BagExistsError, ReplayInputError
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.errors import ConfigurationError
+from vd_observer_node.estimation.alignment import align_stamps
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.decode import decode_input
 from vd_observer_node.inputs.mapping import InputMapping, default_mapping
-from vd_observer_node.inputs.sync import align_stamps
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.situation.monitor import (
