@@ -28,7 +28,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -108,6 +108,8 @@ class ReplayReport:
         unmatched: sensor messages whose stamp is missing on another sensor topic.
         situation_time_s: [s] wall time of the situation monitor (alerts and friction
             potential; 0 when not run).
+        faults: the cascade's fault totals per kind (``CascadeResult.faults``: keys
+            'wheel.<kind>', 'speed.<kind>', 'estimator.<kind>', as on /diagnostics).
     """
 
     samples: int
@@ -118,6 +120,7 @@ class ReplayReport:
     cascade_time_s: float
     unmatched: int
     situation_time_s: float = 0.0
+    faults: dict[str, int] = field(default_factory=dict)
 
     @property
     def real_time_factor(self) -> float:
@@ -550,6 +553,7 @@ def replay_bag(
         cascade_time_s=cascade_time,
         unmatched=sensor_count - 3 * len(common),
         situation_time_s=situation_time[0],
+        faults=dict(result.faults),
     )
 
 
