@@ -1,10 +1,11 @@
 """Which bags a fleet run processes: folders, glob patterns and list files of paths.
 
-A folder that holds a ``metadata.yaml`` or a ``.mcap`` file is one bag; any other folder is
-searched (recursively, in sorted order) for such bag folders. A ``.mcap`` file is a bag of
-its own. A pattern with ``*``, ``?`` or ``[`` that names no existing path is expanded with
-:func:`glob.glob` (``**`` recursive). List files hold one path, folder or pattern per line
-(``#`` starts a comment; relative paths are relative to the list file).
+A folder that holds a ``metadata.yaml`` is one bag (rosbag2's layout, split files
+included); any other folder is searched (recursively, in sorted order) for bag folders and
+loose ``.mcap`` files, each of which is a bag of its own. A pattern with ``*``, ``?`` or
+``[`` that names no existing path is expanded with :func:`glob.glob` (``**`` recursive).
+List files hold one path, folder or pattern per line (``#`` starts a comment; relative
+paths are relative to the list file).
 
 A path that does not exist is kept: the run reports it as a failed bag ("no such bag")
 rather than losing it silently among hundreds.
@@ -25,12 +26,10 @@ _GLOB_CHARS = frozenset('*?[')
 
 
 def is_bag(path: Path) -> bool:
-    """True for a ``.mcap`` file or a folder with ``metadata.yaml`` or a ``.mcap`` file."""
+    """True for a ``.mcap`` file or a folder with a ``metadata.yaml``."""
     if path.is_file():
         return path.suffix == '.mcap'
-    if not path.is_dir():
-        return False
-    return (path / 'metadata.yaml').is_file() or any(path.glob('*.mcap'))
+    return (path / 'metadata.yaml').is_file()
 
 
 def _bags_under(folder: Path) -> list[Path]:
@@ -90,7 +89,7 @@ def find_bags(
         list_files: text files listing such entries, one a line.
 
     Returns:
-        Bag paths (absolute), duplicates removed (first occurrence kept).
+        Bag paths (absolute, normalised), duplicates removed (first occurrence kept).
 
     Raises:
         FleetInputError: a list file cannot be read, or nothing at all was named.
@@ -105,7 +104,7 @@ def find_bags(
     seen: set[Path] = set()
     for spec, base in named:
         for bag in _expand(spec, base):
-            key = bag.absolute()
+            key = Path(os.path.normpath(bag.absolute()))  # 'lists/../a' is 'a'
             if key not in seen:
                 seen.add(key)
                 out.append(key)

@@ -32,6 +32,7 @@ __all__ = [
     'RECORD_VERSION',
     'ROW_COLUMNS',
     'TARGET_COLUMNS',
+    'TEXT_COLUMNS',
     'FleetSettings',
     'bag_id',
     'bag_stat',
@@ -52,7 +53,8 @@ TARGET_COLUMNS: dict[str, str] = {
     'omega relative RMS [%]': 'omega_rel_rms_pct',
 }
 
-#: Columns of a row, in report order. Missing figures are None (empty in CSV).
+#: Columns of a row, in report order. Missing figures are None (empty in CSV); the text
+#: columns (bag, status, error, faults) are strings, '' when empty.
 ROW_COLUMNS: tuple[str, ...] = (
     'bag',
     'status',
@@ -76,6 +78,10 @@ ROW_COLUMNS: tuple[str, ...] = (
     'faults_total',
     'faults',
 )
+
+
+#: Columns holding text (never None).
+TEXT_COLUMNS = frozenset({'bag', 'status', 'error', 'faults'})
 
 
 @dataclass(frozen=True)
@@ -164,7 +170,7 @@ def _finite(value: float | None, digits: int = 9) -> float | None:
 
 def _empty_row(bag: str) -> dict[str, Any]:
     row: dict[str, Any] = {name: None for name in ROW_COLUMNS}
-    row.update(bag=bag, status='ok', error='')
+    row.update(bag=bag, status='ok', error='', faults='')
     return row
 
 
@@ -331,7 +337,7 @@ def process_bag(bag: str, settings: FleetSettings) -> dict[str, Any]:
             os.replace(evaluated, final)  # whole or not at all
     except Exception as exc:  # every failure of this bag is its row's error; the fleet goes on
         for name in ROW_COLUMNS[3:]:
-            row[name] = None
+            row[name] = '' if name in TEXT_COLUMNS else None
         row['status'] = 'failed'
         row['error'] = _one_line(exc)
     finally:

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from vd_observer_node.tools.fleet.errors import FleetInputError
-from vd_observer_node.tools.fleet.process import ROW_COLUMNS, TARGET_COLUMNS
+from vd_observer_node.tools.fleet.process import ROW_COLUMNS, TARGET_COLUMNS, TEXT_COLUMNS
 from vd_observer_node.tools.report.alerts import ALERT_KINDS
 
 __all__ = [
@@ -66,7 +66,6 @@ _FLOAT_COLUMNS = frozenset(
         'worst_target_ratio',
     }
 )
-_BOOL_COLUMNS = frozenset({'has_truth'})
 
 #: Columns where a larger value than the baseline's is a regression.
 LOWER_IS_BETTER: tuple[str, ...] = (
@@ -137,15 +136,15 @@ def fleet_csv(rows: Sequence[dict[str, Any]]) -> str:
 
 
 def _parse(name: str, text: str) -> Any:
+    if name in TEXT_COLUMNS or name not in REPORT_COLUMNS:
+        return text
     if text == '':
         return None
     if name in _INT_COLUMNS:
         return int(text)
     if name in _FLOAT_COLUMNS:
         return float(text)
-    if name in _BOOL_COLUMNS:
-        return text == 'true'
-    return text
+    return text == 'true'  # has_truth, the one flag
 
 
 def read_fleet_csv(path: str | os.PathLike[str]) -> list[dict[str, Any]]:
