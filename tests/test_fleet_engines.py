@@ -9,14 +9,21 @@ Python reference kernel so that no worker process spends its first bag compiling
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
-from vd_observer_node.testing.fleet_bags import TestFleet, write_test_fleet
+from vd_observer_node.testing.fleet_bags import (
+    DIE_MARKER,
+    TestFleet,
+    process_or_die,
+    write_test_fleet,
+)
 from vd_observer_node.tools.fleet import (
+    ENGINES,
     FleetSettings,
     find_bags,
     load_records,
@@ -134,6 +141,33 @@ def test_changed_bag_or_settings_are_processed_again(fleet: TestFleet, tmp_path:
     assert (retried.processed, retried.skipped) == (1, 1)
     other = FleetSettings(kernel='compiled', replay=False)  # another fingerprint
     assert run_fleet(bags, tmp_path, other, workers=1, progress=False).processed == 2
+
+
+@pytest.mark.parametrize('engine', ENGINES)
+def test_a_bag_that_kills_its_worker_is_a_failed_row(
+    engine: str, fleet: TestFleet, tmp_path: Path
+) -> None:
+    if engine == 'dask':
+        pytest.importorskip('distributed')
+    killer = tmp_path / 'killer'
+    shutil.copytree(fleet.good[0], killer)
+    (killer / DIE_MARKER).touch()  # process_or_die: SIGKILL, as the OOM killer would
+    bags = [str(b) for b in [*fleet.good[:3], killer, *fleet.good[3:5]]]
+    run = run_fleet(
+        bags,
+        tmp_path / 'out',
+        SETTINGS,
+        engine=engine,
+        workers=2,
+        progress=False,
+        function=process_or_die,
+    )
+    rows = {r['bag']: r['row'] for r in run.records}
+    assert run.lost == [] and sorted(rows) == sorted(bags)
+    assert rows[str(killer)]['status'] == 'failed'
+    assert rows[str(killer)]['error'].startswith('WorkerDied: ')
+    assert all(rows[b]['status'] == 'ok' for b in bags if b != str(killer))
+    assert run.failed == 1
 
 
 def _vd(*argv: str) -> subprocess.CompletedProcess[str]:

@@ -10,12 +10,48 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
-from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
+import numpy as np
+from vd_sim_node.topics import (
+    ALERTS,
+    ESTIMATES,
+    ESTIMATES_ALERTS,
+    OBSERVER,
+    SENSORS,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+    TRUTH,
+    TRUTH_BODY_ACCEL,
+    TRUTH_BODY_VELOCITY,
+    TRUTH_FRICTION,
+    TRUTH_FRICTION_POTENTIAL,
+    TRUTH_TIRE_FORCES,
+    TRUTH_WHEEL_STATES,
+)
 
-__all__ = ['TestFleet', 'corrupt_bag', 'truncate_bag', 'write_test_fleet']
+from vd_observer_node.bag.alerts_cdr import encode_alerts
+from vd_observer_node.bag.cdr_batch import encode_batch, flat_fields
+from vd_observer_node.bag.writer import BagWriter
+from vd_observer_node.testing.synthetic_bags import synthetic_drive, write_synthetic_drive_bag
+from vd_observer_node.tools.fleet.process import FleetSettings, process_bag
+
+#: A bag folder holding this file kills the worker process of :func:`process_or_die`.
+DIE_MARKER = 'KILL_THE_WORKER'
+
+__all__ = [
+    'DIE_MARKER',
+    'TestFleet',
+    'corrupt_bag',
+    'process_or_die',
+    'truncate_bag',
+    'write_recording_like_bag',
+    'write_test_fleet',
+]
 
 
 def _mcap(bag: Path) -> Path:
@@ -107,3 +143,95 @@ def _copy(source: Path | None, target: Path, duration_s: float, rate_hz: float) 
         write_synthetic_drive_bag(target, duration_s, rate_hz, seed=0)
     else:
         shutil.copytree(source, target)  # file names as metadata.yaml lists them
+
+
+def write_recording_like_bag(
+    path: str | os.PathLike[str],
+    duration_s: float,
+    rate_hz: float = 1000.0,
+    seed: int = 0,
+    *,
+    block_s: float = 10.0,
+) -> int:
+    """A bag laid out like a live recording of the demo: 20 topics at ``rate_hz``.
+
+    The three sensor topics and the truth of wheel states, body acceleration and speed carry
+    a synthetic drive, the true tyre forces, μ and friction potential plausible values; the
+    other truth topics and the live observer, estimate and alert topics (which the replay
+    does not read, but a recording holds) carry zeros. Written in
+    blocks of ``block_s`` seconds, so a long bag needs little memory to make.
+
+    Returns:
+        Messages written.
+    """
+    drive = synthetic_drive(duration_s, rate_hz, seed)
+    n = drive.stamp_ns.shape[0]
+    fz = np.tile([3300.0, 3300.0, 2400.0, 2400.0], (n, 1))  # [N] a small car's static loads
+    fx = drive.torque / 0.26
+    given: dict[str, dict[str, np.ndarray]] = {
+        SENSORS_WHEEL_ANGLES: {'angle': drive.angle},
+        SENSORS_BODY_VELOCITY: {'twist.linear.x': drive.speed},
+        SENSORS_WHEEL_TORQUES: {'torque': drive.torque},
+        TRUTH_WHEEL_STATES: {
+            'angle': drive.angle,
+            'omega': drive.omega,
+            'omega_dot': drive.omega_dot,
+        },
+        TRUTH_BODY_ACCEL: {'accel.linear.x': drive.accel},
+        TRUTH_BODY_VELOCITY: {'twist.linear.x': drive.speed},
+        TRUTH_TIRE_FORCES: {'fx': fx, 'fz': fz},
+        TRUTH_FRICTION: {'mu': fx / fz, 'valid': np.ones((n, 4), dtype=bool)},
+        TRUTH_FRICTION_POTENTIAL: {
+            'mu_max': np.ones((n, 2)),
+            'slip_peak': np.full((n, 2), 0.12),
+            'confidence': np.ones((n, 2)),
+        },
+    }
+    types = {**SENSORS, **TRUTH, **OBSERVER, **ESTIMATES, **ALERTS}
+    names = list(types)
+    block = max(1, round(block_s * rate_hz))
+    written = 0
+    with BagWriter(path) as writer:
+        for name in names:
+            writer.add_topic(name, types[name])
+        for start in range(0, n, block):
+            stop = min(start + block, n)
+            stamps = drive.stamp_ns[start:stop]
+            m = stop - start
+            per_topic: list[list[bytes]] = []
+            for name in names:
+                if name == ESTIMATES_ALERTS:
+                    zeros = np.zeros((m, 3, 4), dtype=np.int64)
+                    values = {
+                        'level': zeros.astype(np.uint8),
+                        'onset_ns': zeros,
+                        'detected_ns': zeros,
+                    }
+                    per_topic.append(encode_alerts(stamps, 'base_link', values))
+                    continue
+                fields = {}
+                for spec in flat_fields(types[name]):
+                    source = given.get(name, {}).get(spec.name)
+                    shape = (m, spec.count) if spec.count > 1 else (m,)
+                    fields[spec.name] = (
+                        source[start:stop]
+                        if source is not None
+                        else np.zeros(shape, dtype=spec.dtype)
+                    )
+                per_topic.append(encode_batch(types[name], stamps, 'base_link', fields))
+            # live order: every topic of one stamp, then the next stamp
+            which = np.tile(np.arange(len(names), dtype=np.int64), m)
+            datas = [per_topic[t][k] for k in range(m) for t in range(len(names))]
+            writer.write_interleaved(names, which, datas, np.repeat(stamps, len(names)))
+            written += len(datas)
+    return written
+
+
+def process_or_die(bag: str, settings: FleetSettings) -> dict[str, Any]:
+    """:func:`~vd_observer_node.tools.fleet.process.process_bag`, except that a bag folder
+    holding :data:`DIE_MARKER` kills the calling process with SIGKILL, as the kernel's
+    out-of-memory killer would. For the fleet engines' tests (``run_fleet(function=...)``).
+    """
+    if (Path(bag) / DIE_MARKER).exists():
+        os.kill(os.getpid(), signal.SIGKILL)
+    return process_bag(bag, settings)

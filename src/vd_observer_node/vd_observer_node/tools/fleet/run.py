@@ -37,6 +37,8 @@ from tqdm import tqdm
 from vd_observer_node.tools.fleet.errors import FleetEngineError, FleetInputError
 from vd_observer_node.tools.fleet.process import (
     RECORD_VERSION,
+    ROW_COLUMNS,
+    TEXT_COLUMNS,
     FleetSettings,
     bag_id,
     bag_stat,
@@ -44,7 +46,7 @@ from vd_observer_node.tools.fleet.process import (
     process_bag,
 )
 
-__all__ = ['ENGINES', 'FleetRun', 'load_records', 'run_fleet', 'write_atomic']
+__all__ = ['ENGINES', 'WORKER_DIED', 'FleetRun', 'load_records', 'run_fleet', 'write_atomic']
 
 ENGINES = ('local', 'dask')
 RESULTS_DIR = 'bags'
@@ -60,8 +62,8 @@ class FleetRun:
         processed: bags processed in this run.
         skipped: bags whose stored result was reused (resume).
         failed: bags whose row says 'failed' (this run's and reused ones).
-        lost: bags without a result because a worker died; not stored, so the next run
-            retries them.
+        lost: bags without a result because the cluster lost them (not a bag that kills
+            its worker: that one is a failed row); not stored, so the next run retries them.
         wall_time_s: [s] of this run.
         engine: 'local' or 'dask'.
         workers: worker processes used.
@@ -130,33 +132,87 @@ def _reusable(
     return not (retry_failed and record['row']['status'] != 'ok')
 
 
+#: The row error of a bag whose worker process died (twice: alone, the second time).
+WORKER_DIED = (
+    'WorkerDied: the worker process died while processing this bag (killed, or out of '
+    'memory: a replay holds the whole bag in memory, see docs/bags.md)'
+)
+
+BagFunction = Callable[[str, FleetSettings], dict[str, Any]]
+
+
+def _died(bag: str, settings: FleetSettings) -> dict[str, Any]:
+    """The record of a bag that killed its worker: a failed row, like any bad bag."""
+    row: dict[str, Any] = {name: '' if name in TEXT_COLUMNS else None for name in ROW_COLUMNS}
+    row.update(bag=bag, status='failed', error=WORKER_DIED)
+    return {
+        'version': RECORD_VERSION,
+        'fingerprint': settings.fingerprint(),
+        'bag': bag,
+        'id': bag_id(bag),
+        'stat': bag_stat(bag),
+        'row': row,
+        'mu_max_segments': [],
+        'timing': {'samples': 0},
+    }
+
+
 def _local_results(
-    bags: Sequence[str], settings: FleetSettings, workers: int
+    bags: Sequence[str], settings: FleetSettings, workers: int, function: BagFunction
 ) -> Iterator[tuple[str, dict[str, Any] | None]]:
+    """Results of the process pool, as they come.
+
+    At most ``workers`` bags are in flight, so when a worker dies (the pool breaks) the bags
+    it may have held are known: each runs again alone in a fresh pool, and one that kills
+    its worker alone too gets the :data:`WORKER_DIED` row. The others go on.
+    """
     context = multiprocessing.get_context('spawn')
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        pending: dict[Future[dict[str, Any]], str] = {
-            pool.submit(process_bag, bag, settings): bag for bag in bags
-        }
-        try:
-            while pending:
-                done, _ = wait(pending, return_when=FIRST_COMPLETED)
-                for future in done:
-                    bag = pending.pop(future)
-                    try:
-                        yield bag, future.result()
-                    except BrokenProcessPool:
-                        yield bag, None  # a worker died (killed, out of memory): retry later
-        finally:
-            for future in pending:
-                future.cancel()
+    queue = list(reversed(bags))  # pop() takes them in order
+    suspects: list[str] = []
+    while queue or suspects:
+        alone = bool(suspects)
+        limit = 1 if alone else workers
+        source = suspects if alone else queue
+        with ProcessPoolExecutor(max_workers=limit, mp_context=context) as pool:
+            pending: dict[Future[dict[str, Any]], str] = {}
+            broken = False
+            try:
+                while (source or pending) and not broken:
+                    while source and len(pending) < limit:
+                        bag = source.pop()
+                        pending[pool.submit(function, bag, settings)] = bag
+                    done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                    for future in done:
+                        bag = pending.pop(future)
+                        try:
+                            record = future.result()
+                        except BrokenProcessPool:
+                            broken = True
+                            if alone:
+                                yield bag, _died(bag, settings)
+                            else:
+                                suspects.append(bag)
+                            continue
+                        yield bag, record
+            finally:
+                for future in pending:
+                    future.cancel()
+            if broken:
+                # the bags in flight at the break: suspects (or, run alone, innocent: requeue)
+                for bag in pending.values():
+                    (queue if alone else suspects).append(bag)
 
 
 def _dask_results(
-    bags: Sequence[str], settings: FleetSettings, workers: int, scheduler: str | None
+    bags: Sequence[str],
+    settings: FleetSettings,
+    workers: int,
+    scheduler: str | None,
+    function: BagFunction,
 ) -> Iterator[tuple[str, dict[str, Any] | None]]:
     try:
         from distributed import Client, LocalCluster, as_completed
+        from distributed.scheduler import KilledWorker
     except ImportError as exc:
         raise FleetEngineError(
             "engine 'dask' needs Dask distributed: pip install 'vd_observer_node[fleet]' "
@@ -179,12 +235,14 @@ def _dask_results(
         raise FleetEngineError(f'cannot reach the Dask scheduler {scheduler}: {exc}') from exc
     try:
         # pure=False: a bag processed again (resume) must run again, not come from a cache
-        futures = {client.submit(process_bag, bag, settings, pure=False): bag for bag in bags}
+        futures = {client.submit(function, bag, settings, pure=False): bag for bag in bags}
         for future in as_completed(futures):
             bag = futures[future]
             try:
                 yield bag, future.result()
-            except Exception:  # KilledWorker, a lost worker: retry in the next run
+            except KilledWorker:  # Dask retried it on other workers; each one died
+                yield bag, _died(bag, settings)
+            except Exception:  # the cluster lost it otherwise: retried in the next run
                 yield bag, None
     finally:
         client.close()
@@ -203,6 +261,7 @@ def run_fleet(
     retry_failed: bool = False,
     progress: bool = True,
     on_record: Callable[[dict[str, Any]], None] | None = None,
+    function: BagFunction = process_bag,
 ) -> FleetRun:
     """Process every bag (resuming a previous run in ``out_dir``) and store one result each.
 
@@ -216,6 +275,8 @@ def run_fleet(
         retry_failed: process again the bags whose stored result is a failure.
         progress: a tqdm bar over bags on stderr (samples done in its postfix).
         on_record: called with each new record after it is stored (tests, tools).
+        function: the per-bag function (tests inject failures with it); it must be
+            importable by the workers and return :func:`~.process.process_bag`'s records.
 
     Returns:
         The run's :class:`FleetRun`.
@@ -259,9 +320,9 @@ def run_fleet(
     with bar:
         if todo:
             stream = (
-                _local_results(todo, cfg, count)
+                _local_results(todo, cfg, count, function)
                 if engine == 'local'
-                else _dask_results(todo, cfg, count, scheduler)
+                else _dask_results(todo, cfg, count, scheduler, function)
             )
             for bag, record in stream:
                 bar.update(1)
