@@ -8,8 +8,10 @@
    layout of a live demo recording) replayed and evaluated by ``vd fleet``'s engine with 1
    and 2 local worker processes (and a 2-worker Dask LocalCluster with ``--dask``): samples/s,
    bag-hours per hour, and the speed-up of 2 workers over 1 (the issue's goal: >= 1.7x on a
-   2-core machine). The load average is printed before and after: on a shared machine the
-   figures are not final.
+   2-core machine). Also the bags in flight on average (sum of the bags' wall times over the
+   run's) and, for the local pool, samples per CPU-second of the workers (start-up
+   included), which a busy machine disturbs less than wall time. The load average is printed
+   with every figure: on a shared machine the figures are not final.
 2. Memory per worker: the peak RSS of one process that runs the per-bag function on one bag,
    for bags of ``--memory-durations`` seconds, a straight-line fit over those of 30 s and more,
    and its extrapolation to a 2 h bag at ``--rate`` Hz (the issue's goal: <= 500 MiB). The
@@ -22,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -51,17 +54,29 @@ def _load() -> str:
     return ' '.join(f'{x:.2f}' for x in os.getloadavg())
 
 
+def _children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def _throughput(bags: list[str], root: Path, engine: str, workers: int) -> dict[str, float]:
     out = root / f'out-{engine}-{workers}'
+    cpu = _children_cpu()
     run = run_fleet(bags, out, FleetSettings(), engine=engine, workers=workers, progress=False)
+    # the pool's workers have exited: their CPU time is in RUSAGE_CHILDREN (Dask's workers
+    # are the nanny's children, not ours: no figure)
+    cpu = _children_cpu() - cpu
     failed = [r['row']['error'] for r in run.records if r['row']['status'] != 'ok']
     if failed:
         print(f'  failed bags: {failed}')
     wall = run.wall_time_s
+    busy = sum(r['timing'].get('wall_s', 0.0) for r in run.records)
     return {
         'wall_s': wall,
         'samples_per_s': run.samples_processed / wall,
         'bag_hours_per_hour': run.hours_processed * 3600.0 / wall,
+        'in_flight': busy / wall,
+        'samples_per_cpu_s': run.samples_processed / cpu if cpu > 0 and engine == 'local' else 0,
     }
 
 
@@ -140,11 +155,14 @@ def main() -> None:
             started = time.perf_counter()
             figures = _throughput(bags, root, engine, workers)
             results[f'{engine}-{workers}'] = figures
+            per_cpu = figures['samples_per_cpu_s']
             print(
                 f'  {engine:5s} {workers} worker(s): {figures["wall_s"]:6.1f} s, '
                 f'{figures["samples_per_s"]:9.0f} samples/s, '
-                f'{figures["bag_hours_per_hour"]:6.1f} bag-hours per hour '
-                f'(load {_load()}, {time.perf_counter() - started:.1f} s with start-up)'
+                f'{figures["bag_hours_per_hour"]:6.1f} bag-hours per hour; '
+                f'bags in flight {figures["in_flight"]:.2f} on average; '
+                + (f'{per_cpu:.0f} samples per worker CPU-second; ' if per_cpu else '')
+                + f'load {_load()} ({time.perf_counter() - started:.1f} s with start-up)'
             )
         if 'local-1' in results and 'local-2' in results:
             speedup = results['local-2']['samples_per_s'] / results['local-1']['samples_per_s']
