@@ -9,9 +9,12 @@ Python reference kernel so that no worker process spends its first bag compiling
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -168,6 +171,62 @@ def test_a_bag_that_kills_its_worker_is_a_failed_row(
     assert rows[str(killer)]['error'].startswith('WorkerDied: ')
     assert all(rows[b]['status'] == 'ok' for b in bags if b != str(killer))
     assert run.failed == 1
+
+
+def _wait_for_results(out: Path, count: int, process: subprocess.Popen[str]) -> None:
+    deadline = time.monotonic() + 120.0
+    while len(list((out / 'bags').glob('*.json'))) < count:
+        assert process.poll() is None, 'the run ended before it could be interrupted'
+        assert time.monotonic() < deadline, 'no result came'
+        time.sleep(0.05)
+
+
+@pytest.mark.parametrize('signal_number', [signal.SIGINT, signal.SIGKILL], ids=['int', 'kill'])
+def test_killed_command_resumes(
+    signal_number: int, fleet: TestFleet, local_run: Path, tmp_path: Path
+) -> None:
+    """Ctrl-C (exit 130), or the whole job killed: the next run does only the rest."""
+    out = tmp_path / 'out'
+    argv = [
+        sys.executable,
+        '-m',
+        'vd_observer_node.tools.cli',
+        'fleet',
+        str(fleet.folder),
+        '--out',
+        str(out),
+        '--workers',
+        '2',
+        '--kernel',
+        'python',
+        '--no-figures',
+    ]
+    first = subprocess.Popen(
+        argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )  # a process group: the job and its workers
+    try:
+        _wait_for_results(out, 2, first)
+        os.killpg(first.pid, signal_number)
+        first.communicate(timeout=60)
+    finally:
+        if first.poll() is None:
+            os.killpg(first.pid, signal.SIGKILL)
+            first.wait()
+    assert first.returncode == (130 if signal_number == signal.SIGINT else -signal.SIGKILL)
+    done = {p.name: p.read_bytes() for p in (out / 'bags').glob('*.json')}
+    assert 2 <= len(done) < GOOD + 2
+    if signal_number == signal.SIGINT:  # stopped cleanly: no temporary file left behind
+        assert not list((out / 'bags').glob('.*'))
+    second = _vd(*argv[3:])
+    assert second.returncode == 1, second.stderr  # the corrupt and the truncated bag
+    assert (
+        f'fleet: {GOOD + 2} bags, {GOOD + 2 - len(done)} processed now, {len(done)} done before'
+        in second.stdout
+    )
+    # the results of the first run were kept as they were: no bag processed twice
+    assert {name: (out / 'bags' / name).read_bytes() for name in done} == done
+    assert (out / 'fleet.csv').read_bytes() == (local_run / 'fleet.csv').read_bytes()
+    assert (out / 'fleet.md').read_bytes() == (local_run / 'fleet.md').read_bytes()
 
 
 def _vd(*argv: str) -> subprocess.CompletedProcess[str]:
