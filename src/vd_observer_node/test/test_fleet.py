@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 from vd_observer_node.bag.writer import BagWriter
+from vd_observer_node.testing.devbag import write_topic_arrays_bag
 from vd_observer_node.testing.fleet_bags import TestFleet, write_test_fleet
 from vd_observer_node.testing.synthetic_bags import synthetic_drive, write_synthetic_drive_bag
 from vd_observer_node.tools.cli import main
@@ -28,7 +29,12 @@ from vd_observer_node.tools.fleet import (
 from vd_observer_node.tools.fleet.process import bag_id
 from vd_observer_node.tools.fleet.report import fleet_csv, fleet_markdown, sort_worst_first
 from vd_observer_node.tools.replay import replay_bag
-from vd_sim_node.topics import SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES
+from vd_sim_node.topics import (
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+    TRUTH_TIRE_FORCES,
+)
 
 #: The Python reference kernel: no numba compilation in a test's first bag.
 PY = FleetSettings(kernel='python')
@@ -165,6 +171,26 @@ def test_missing_topic_and_wrong_type(tmp_path: Path) -> None:
         writer.write_batch(SENSORS_BODY_VELOCITY, datas, drive.stamp_ns)
     error = _failed(process_bag(str(wrong), PY))
     assert 'has type vd_msgs/msg/WheelAngles' in error
+
+
+def test_zero_true_force_is_a_row_without_that_figure(tmp_path: Path) -> None:
+    # true Fx zero throughout (a coasting drive, or a simulator that records no force):
+    # the report once divided by the largest true |Fx| and the bag failed
+    drive = synthetic_drive(DURATION, RATE)
+    bag = tmp_path / 'coasting'
+    write_topic_arrays_bag(
+        bag,
+        drive.stamp_ns,
+        {
+            SENSORS_WHEEL_ANGLES: {'angle': drive.angle},
+            SENSORS_BODY_VELOCITY: {'twist.linear.x': drive.speed},
+            SENSORS_WHEEL_TORQUES: {'torque': drive.torque},
+            TRUTH_TIRE_FORCES: {'fz': np.full((drive.speed.size, 4), 3000.0)},
+        },
+    )
+    row = process_bag(str(bag), PY)['row']
+    assert row['status'] == 'ok', row['error']
+    assert row['fx_rms_pct'] is None and row['fz_rms_pct'] is not None
 
 
 def test_no_replay_judges_the_recorded_estimates_alike(fleet: TestFleet, tmp_path: Path) -> None:
