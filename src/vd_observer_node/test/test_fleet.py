@@ -25,6 +25,7 @@ from vd_observer_node.tools.fleet import (
     find_bags,
     process_bag,
     read_fleet_csv,
+    write_fleet_report,
 )
 from vd_observer_node.tools.fleet.process import bag_id
 from vd_observer_node.tools.fleet.report import fleet_csv, fleet_markdown, sort_worst_first
@@ -375,3 +376,30 @@ def test_setting_errors_exit_2_in_one_line(
     assert main([a.replace('{tmp}', str(tmp_path)) for a in argv]) == 2
     err = capsys.readouterr().err
     assert err.count('\n') == 1 and err.startswith('vd: error: ') and message in err
+
+
+def test_report_files(tmp_path: Path) -> None:
+    records = [
+        {
+            'row': _row(
+                '/f/a',
+                omega_rel_rms_pct=0.02,
+                targets_met=1,
+                targets_failed=0,
+                duration_s=60.0,
+                alerts_traction=2,
+                alerts_lock=0,
+                alerts_low_friction=1,
+            )
+        },
+        {'row': _row('/f/b', status='failed', error='BagCorruptError: z')},
+    ]
+    report = write_fleet_report(records, tmp_path)
+    names = sorted(p.name for p in report.files)
+    assert names == ['fleet.csv', 'fleet.md', 'fleet.png']
+    assert (tmp_path / 'fleet.png').read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    assert [r['bag'] for r in report.rows] == ['/f/b', '/f/a'] and report.regressions is None
+    assert not list(tmp_path.glob('.*'))  # no temporary file left
+    again = write_fleet_report(records, tmp_path / '..' / tmp_path.name, baseline=tmp_path)
+    assert again.regressions == []
+    assert (tmp_path / 'regressions.csv').read_text() == 'bag,column,old,new\n'

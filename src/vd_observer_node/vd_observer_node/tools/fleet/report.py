@@ -369,39 +369,46 @@ def _write_figure(rows: Sequence[dict[str, Any]], path: Path) -> None:
     ax.set_yscale('log')
     ax.set_ylabel('figure / target limit')
     ax.set_title('Accuracy across bags (each dot a bag)')
-    ax.legend(loc='upper right')
+    ax.legend(loc='best')
     ax = axes[0, 1]
     worst = rows[:30]
     ratios = [r.get('worst_target_ratio') or 0.0 for r in worst]
-    colors = ['tab:red' if r['status'] != 'ok' else 'tab:blue' for r in worst]
-    ax.barh(range(len(worst)), ratios, color=colors)
+    reach = max([*ratios, 1.0])
+    for k, row in enumerate(worst):
+        if row['status'] != 'ok':  # no figure: a full-width red bar says "failed"
+            ax.barh(k, reach, color='tab:red', alpha=0.35)
+            ax.text(reach * 0.02, k, 'failed', va='center', fontsize=7, color='tab:red')
+        else:
+            ax.barh(k, ratios[k], color='tab:blue')
     ax.set_yticks(range(len(worst)), [Path(str(r['bag'])).name[:28] for r in worst], fontsize=7)
     ax.invert_yaxis()
     ax.axvline(1.0, color='tab:red', lw=1, ls='--')
-    ax.set_xlabel('worst figure / target limit (red bar: failed bag)')
+    ax.set_xlabel('worst accuracy figure / its target limit (> 1: a target failed)')
     ax.set_title(f'Worst bags first ({len(worst)} of {len(rows)})')
     ax = axes[1, 0]
     minutes = [r['duration_s'] / 60.0 for r in ok if r.get('duration_s') is not None]
     ax.hist(minutes, bins=min(30, max(len(minutes), 1)), color='tab:gray')
     ax.set_xlabel('bag duration [min]')
     ax.set_ylabel('bags')
-    ax.set_title('Durations')
+    ax.set_title('Durations (processed bags)')
     ax = axes[1, 1]
-    shown = ok[:30]
-    bottom = np.zeros(len(shown))
+    ranked = [(k + 1, r) for k, r in enumerate(rows) if r['status'] == 'ok'][:30]
+    bottom = np.zeros(len(ranked))
     for kind in ALERT_KINDS:
         per_hour = np.array(
             [
                 (r.get(f'alerts_{kind}') or 0) * 3600.0 / r['duration_s']
                 if r.get('duration_s')
                 else 0.0
-                for r in shown
+                for _, r in ranked
             ]
         )
-        ax.bar(range(len(shown)), per_hour, bottom=bottom, label=kind)
+        ax.bar(range(len(ranked)), per_hour, bottom=bottom, label=kind)
         bottom += per_hour
-    ax.set_xticks(range(len(shown)), [str(k + 1) for k in range(len(shown))], fontsize=7)
-    ax.set_xlabel('bag (rank in the table)')
+    if not bottom.any():
+        ax.text(0.5, 0.5, 'no alert activation', transform=ax.transAxes, ha='center')
+    ax.set_xticks(range(len(ranked)), [str(rank) for rank, _ in ranked], fontsize=7)
+    ax.set_xlabel('bag (its rank in the table)')
     ax.set_ylabel('alert activations per hour')
     ax.set_title('Alerts')
     ax.legend(loc='upper right')
