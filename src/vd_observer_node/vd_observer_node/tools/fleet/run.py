@@ -273,7 +273,8 @@ def run_fleet(
         workers: worker processes (default: ``os.cpu_count()``); with ``scheduler``, unused.
         scheduler: address of a running Dask scheduler (engine 'dask').
         retry_failed: process again the bags whose stored result is a failure.
-        progress: a tqdm bar over bags on stderr (samples done in its postfix).
+        progress: tqdm bars on stderr: bags (failures so far in its postfix), and samples
+            done with their rate.
         on_record: called with each new record after it is stored (tests, tools).
         function: the per-bag function (tests inject failures with it); it must be
             importable by the workers and return :func:`~.process.process_bag`'s records.
@@ -316,8 +317,16 @@ def run_fleet(
         disable=not progress,
         file=sys.stderr,
     )
-    samples = 0
-    with bar:
+    # the sample count of a bag is known only once it is done: a counter with its rate
+    samples_bar = tqdm(
+        unit='sample',
+        unit_scale=True,
+        desc='samples',
+        disable=not progress,
+        file=sys.stderr,
+        position=1,
+    )
+    with bar, samples_bar:
         if todo:
             stream = (
                 _local_results(todo, cfg, count, function)
@@ -332,9 +341,9 @@ def run_fleet(
                 write_atomic(results / f'{record["id"]}.json', dumps_record(record))
                 by_bag[bag] = record
                 run.processed += 1
-                samples += int(record['timing'].get('samples', 0))
+                samples_bar.update(int(record['timing'].get('samples', 0)))
                 failed = sum(1 for r in by_bag.values() if r['row']['status'] != 'ok')
-                bar.set_postfix_str(f'{samples} samples, {failed} failed', refresh=False)
+                bar.set_postfix_str(f'{failed} failed', refresh=False)
                 if on_record is not None:
                     on_record(record)
     run.records = [by_bag[b] for b in names if b in by_bag]
