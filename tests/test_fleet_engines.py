@@ -282,3 +282,28 @@ def test_command_exit_codes_and_baseline(
         f'- `{fleet.good[0]}`: bag present → absent from this run'
         in (tmp_path / 'one' / 'fleet.md').read_text()
     )
+
+
+def test_output_folder_among_the_bags(fleet: TestFleet, tmp_path: Path) -> None:
+    """`vd fleet . --out ./fleet --keep-bags` twice: the kept replays are not new input."""
+    bags = tmp_path / 'bags'
+    shutil.copytree(fleet.good[0], bags / 'd0')
+    argv = [
+        'fleet',
+        str(bags),
+        '--out',
+        str(bags / 'fleet'),
+        '--keep-bags',
+        '--workers',
+        '1',
+        '--kernel',
+        'python',
+        '--no-progress',
+        '--no-figures',
+    ]
+    first = _vd(*argv)
+    assert first.returncode == 0, first.stderr
+    assert len(list((bags / 'fleet' / 'replayed').iterdir())) == 1
+    second = _vd(*argv)
+    assert second.returncode == 0, second.stderr
+    assert 'fleet: 1 bags, 0 processed now, 1 done before' in second.stdout

@@ -340,6 +340,13 @@ def test_regressions_against_a_baseline() -> None:
     assert compare_baseline(old, old) == []
 
 
+def test_baseline_of_a_fleet_that_moved() -> None:
+    old = [_row('/mnt/a/drives/x/d1', mu_rms=0.01), _row('/mnt/a/drives/y/d1', mu_rms=0.01)]
+    new = [_row('/data/drives/x/d1', mu_rms=0.01), _row('/data/drives/y/d1', mu_rms=0.02)]
+    # no path in common: matched by their place below each fleet's folder
+    assert compare_baseline(new, old) == [Regression('/data/drives/y/d1', 'mu_rms', 0.01, 0.02)]
+
+
 # -- command line (setting errors; the run itself: tests/test_fleet_engines.py) ----------------
 
 

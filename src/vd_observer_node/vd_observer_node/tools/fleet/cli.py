@@ -14,6 +14,7 @@ stderr), a worker died, or (with --fail-on-regression) regressions against the b
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -101,7 +102,10 @@ def run_fleet_command(args: argparse.Namespace) -> int:
 
     if args.baseline is not None:
         read_fleet_csv(args.baseline)  # a bad baseline stops the run before hours of work
-    bags = find_bags(args.bags, args.lists)
+    out: Path = args.out
+    # the output folder may sit among the bags: its kept replays are no input
+    inside = Path(os.path.normpath(out.absolute()))
+    bags = [b for b in find_bags(args.bags, args.lists) if not b.is_relative_to(inside)]
     if not bags:
         raise FleetInputError('no bags found in ' + ', '.join(map(str, [*args.bags, *args.lists])))
     for name in ('vehicle', 'config', 'mapping'):
@@ -111,7 +115,6 @@ def run_fleet_command(args: argparse.Namespace) -> int:
     engine = args.engine or ('dask' if args.scheduler else 'local')
     if args.scheduler and engine != 'dask':
         raise FleetInputError('--scheduler needs --engine dask')
-    out: Path = args.out
     settings = FleetSettings(
         replay=not args.no_replay,
         vehicle_file=str(args.vehicle.absolute()) if args.vehicle else None,

@@ -195,7 +195,10 @@ def compare_baseline(
     rel_tol: float = 0.1,
     abs_tol: float = 1e-9,
 ) -> list[Regression]:
-    """What got worse from ``baseline`` to ``rows`` (bags matched by path).
+    """What got worse from ``baseline`` to ``rows``.
+
+    Bags are matched by path; when no path matches at all (the fleet was copied or mounted
+    elsewhere), by their path below the folder each report's bags share.
 
     A regression is: a bag that was ok and now fails or is missing from the run; a
     :data:`LOWER_IS_BETTER` figure above ``old * (1 + rel_tol) + abs_tol`` (or present
@@ -206,10 +209,15 @@ def compare_baseline(
         Regressions in the order of ``rows`` (then the missing bags).
     """
     old_by_bag = {str(r['bag']): r for r in baseline}
-    new_bags = {str(r['bag']) for r in rows}
+    key = {str(r['bag']): str(r['bag']) for r in rows}
+    if not set(key) & set(old_by_bag):
+        old_names, new_names = _names(baseline), _names(rows)
+        old_by_bag = {old_names[bag]: r for bag, r in old_by_bag.items()}
+        key = {bag: new_names[bag] for bag in key}
+    new_bags = set(key.values())
     out: list[Regression] = []
     for row in rows:
-        old = old_by_bag.get(str(row['bag']))
+        old = old_by_bag.get(key[str(row['bag'])])
         if old is None:
             continue
         if old.get('status') == 'ok' and row['status'] != 'ok':
