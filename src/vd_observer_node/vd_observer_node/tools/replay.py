@@ -28,7 +28,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -113,6 +113,8 @@ class ReplayReport:
             sample yet or only one older than the mapping's ``max_age``.
         situation_time_s: [s] wall time of the situation monitor (alerts and friction
             potential; 0 when not run).
+        faults: the cascade's fault totals per kind (``CascadeResult.faults``: keys
+            'wheel.<kind>', 'speed.<kind>', 'estimator.<kind>', as on /diagnostics).
     """
 
     samples: int
@@ -124,6 +126,7 @@ class ReplayReport:
     unmatched: int
     situation_time_s: float = 0.0
     stale: int = 0
+    faults: dict[str, int] = field(default_factory=dict)
 
     @property
     def real_time_factor(self) -> float:
@@ -552,6 +555,7 @@ def replay_bag(
         unmatched=sensor_count - len(common) - sum(len(np.unique(i)) for i in (iv, it)),
         situation_time_s=situation_time[0],
         stale=aligned.stale,
+        faults=dict(result.faults),
     )
 
 
