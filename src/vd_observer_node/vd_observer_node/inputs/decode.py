@@ -5,6 +5,11 @@ numpy (:func:`vd_observer_node.bag.cdr_batch.decode_batch`); the standard types 
 variable-length fields (JointState, Odometry, Float64MultiArray) are deserialized message by
 message with rosbags (about 10 µs of CPU each for JointState and Odometry, 4 µs for
 Float64MultiArray: 1.5 s per 150 s of a 1 kHz JointState topic).
+
+:class:`InputDecoder` is the live nodes' per-message form of the same decoding: the raw CDR
+bytes of one subscription -> stamp, frame_id and SI values, with the same per-message
+extractors (JointState, Odometry, Float64MultiArray) and the same factor and signs as a
+replay, so a mapping means one thing offline and live.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vd_observer_node.bag.cdr_batch import decode_batch
+from vd_observer_node.bag.cdr_message import MessageCodec
 from vd_observer_node.bag.reader import TopicArrays
 from vd_observer_node.bag.typestore import deserialize
 from vd_observer_node.inputs.errors import MappingError
@@ -30,7 +36,7 @@ from vd_observer_node.inputs.mapping import (
     InputSpec,
 )
 
-__all__ = ['InputSeries', 'decode_input']
+__all__ = ['InputDecoder', 'InputSeries', 'decode_input', 'has_header']
 
 _NS = 1_000_000_000
 #: the field of vd's batch-decodable types that holds the input
@@ -123,6 +129,81 @@ def _odometry(msg: Any, _log: int) -> tuple[int, Sequence[float], bytes]:
     return _stamp(msg.header), [float(msg.twist.twist.linear.x)], msg.header.frame_id.encode()
 
 
+def has_header(spec: InputSpec) -> bool:
+    """True when the input's messages carry a header stamp (all types but Float64MultiArray)."""
+    return spec.msgtype != FLOAT64_ARRAY
+
+
+def _extractor(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[float], bytes]]:
+    """The per-message extractor of a standard type with variable-length fields."""
+    if spec.msgtype == JOINT_STATE:
+        return _joint_state(spec)
+    if spec.msgtype == FLOAT64_ARRAY:
+        return _float64_array(spec)
+    if spec.msgtype == ODOMETRY:
+        return _odometry
+    raise MappingError(f'{spec.name}: no decoder for {spec.msgtype}')
+
+
+class InputDecoder:
+    """One mapped input, one message at a time: raw CDR bytes -> stamp, frame and SI values.
+
+    vd's fixed-layout types are unpacked with ``struct`` (:class:`MessageCodec`, a few µs);
+    the standard types are deserialized with rosbags and read by the extractors
+    :func:`decode_input` uses for a bag. A Float64MultiArray has no header: it takes the
+    ``receive_ns`` the caller gives (the live node's clock at reception).
+
+    Attributes:
+        spec: the input's mapping.
+    """
+
+    def __init__(self, spec: InputSpec) -> None:
+        """Prepare the decoder of ``spec.msgtype``.
+
+        Raises:
+            MappingError: the type has no decoder (the mapping refuses such types first).
+        """
+        self.spec = spec
+        self._codec: MessageCodec | None = None
+        self._extract: Callable[[Any, int], tuple[int, Sequence[float], bytes]] | None = None
+        if spec.msgtype in _BATCH_FIELD:
+            self._codec = MessageCodec(spec.msgtype)
+            self._field = self._codec.fields.index(_BATCH_FIELD[spec.msgtype])
+        else:
+            self._extract = _extractor(spec)
+        gain = spec.factor * np.asarray(spec.sign, dtype=np.float64)
+        # None: the default mapping's values pass unchanged (no multiplication at all)
+        self._gain: tuple[float, ...] | None = (
+            None
+            if spec.factor == 1.0 and all(s == 1.0 for s in spec.sign)
+            else tuple(gain.tolist())
+        )
+
+    def decode(self, data: bytes, receive_ns: int = 0) -> tuple[int, bytes, tuple[float, ...]]:
+        """Stamp [ns], header.frame_id and the ``spec.width`` SI values of one message.
+
+        Args:
+            data: the message's CDR bytes (a raw subscription's callback argument).
+            receive_ns: [ns] the stamp of a message without header (Float64MultiArray).
+
+        Raises:
+            BagFormatError: the bytes are not a message of ``spec.msgtype``.
+            MappingError: a mapped joint or element is absent from the message.
+        """
+        if self._codec is not None:
+            stamp, frame, fields = self._codec.decode(data)
+            raw = fields[self._field]
+            row: tuple[float, ...] = tuple(raw) if isinstance(raw, tuple) else (raw,)
+        else:
+            assert self._extract is not None  # set in __init__ when there is no codec
+            msg = deserialize(data, self.spec.msgtype)
+            stamp, values, frame = self._extract(msg, receive_ns)
+            row = tuple(values)
+        if self._gain is not None:
+            row = tuple(v * g for v, g in zip(row, self._gain, strict=True))
+        return stamp, frame, row
+
+
 def decode_input(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
     """Decode the messages of ``spec.topic`` to the input's SI values.
 
@@ -141,14 +222,8 @@ def decode_input(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
         fields = decode_batch(spec.msgtype, arrays.datas)
         raw = fields.values[_BATCH_FIELD[spec.msgtype]].reshape(len(arrays.datas), spec.width)
         stamps, values, frames = fields.stamp_ns, raw.astype(np.float64), fields.frame_id
-    elif spec.msgtype == JOINT_STATE:
-        stamps, values, frames = _per_message(spec, arrays, _joint_state(spec))
-    elif spec.msgtype == FLOAT64_ARRAY:
-        stamps, values, frames = _per_message(spec, arrays, _float64_array(spec))
-    elif spec.msgtype == ODOMETRY:
-        stamps, values, frames = _per_message(spec, arrays, _odometry)
-    else:  # the mapping refuses every other type
-        raise MappingError(f'{spec.name}: no decoder for {spec.msgtype}')
+    else:  # _extractor refuses a type without decoder (the mapping refuses it first)
+        stamps, values, frames = _per_message(spec, arrays, _extractor(spec))
     if spec.factor != 1.0 or any(s != 1.0 for s in spec.sign):
         # only then: the default mapping's values pass bit for bit
         values = values * (spec.factor * np.asarray(spec.sign))

@@ -54,6 +54,7 @@ from vd_observer_node.inputs.errors import MappingError
 
 __all__ = [
     'INPUTS',
+    'INPUT_KEYS',
     'SUPPORTED_TYPES',
     'UNITS',
     'InputMapping',
@@ -61,6 +62,7 @@ __all__ = [
     'default_mapping',
     'load_input_mapping',
     'mapping_from_dict',
+    'mapping_from_params',
 ]
 
 #: The cascade's inputs, in the order of a mapping file.
@@ -88,7 +90,9 @@ UNITS: Final[dict[str, dict[str, float]]] = {
 }
 #: Inputs with one value per wheel (the others are one scalar).
 _PER_WHEEL: Final = frozenset({'wheel_angles', 'wheel_torques'})
-_KEYS: Final = frozenset({'topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign'})
+#: The settings of one input, in the order of a mapping file.
+INPUT_KEYS: Final = ('topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign')
+_KEYS: Final = frozenset(INPUT_KEYS)
 
 
 @dataclass(frozen=True)
@@ -255,6 +259,37 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
     if len(set(topics)) != len(topics):
         raise MappingError(f'{source}: two inputs share one topic ({", ".join(topics)})')
     return InputMapping(**specs, source=source)
+
+
+def mapping_from_params(
+    values: Mapping[str, Any], prefix: str = 'inputs.', source: str = 'parameters'
+) -> InputMapping:
+    """Build a mapping from flat node parameters ``<prefix><input>.<key>`` (the params form).
+
+    The parameters are regrouped into the file's form and read by :func:`mapping_from_dict`,
+    so a ROS params file and a mapping file are checked by one parser. An input none of
+    whose parameters is set keeps vd's own topic.
+
+    Args:
+        values: parameter name -> value, None where a parameter is not set; names without
+            `prefix` are ignored. ROS gives arrays as lists or ``array.array``.
+        prefix: the parameters' common prefix.
+        source: named in every error.
+
+    Raises:
+        MappingError: one line naming the input and key.
+    """
+    data: dict[str, dict[str, Any]] = {}
+    for name, value in values.items():
+        if value is None or not name.startswith(prefix):
+            continue
+        parts = name[len(prefix) :].split('.')
+        if len(parts) != 2:
+            raise MappingError(f'{source}: {name}: expected {prefix}<input>.<key>')
+        if not isinstance(value, str | bytes | int | float | bool):
+            value = list(value)  # ROS arrays (array.array, tuples) in the YAML form
+        data.setdefault(parts[0], {})[parts[1]] = value
+    return mapping_from_dict(data, source=f'{source} {prefix}*')
 
 
 def load_input_mapping(path: str | os.PathLike[str]) -> InputMapping:
