@@ -280,6 +280,7 @@ def mapping_from_params(
         MappingError: one line naming the input and key.
     """
     data: dict[str, dict[str, Any]] = {}
+    source = f'{source} {prefix}*'
     for name, value in values.items():
         if value is None or not name.startswith(prefix):
             continue
@@ -289,7 +290,7 @@ def mapping_from_params(
         if not isinstance(value, str | bytes | int | float | bool):
             value = list(value)  # ROS arrays (array.array, tuples) in the YAML form
         data.setdefault(parts[0], {})[parts[1]] = value
-    return mapping_from_dict(data, source=f'{source} {prefix}*')
+    return mapping_from_dict(data, source=source)
 
 
 def load_input_mapping(path: str | os.PathLike[str]) -> InputMapping:
