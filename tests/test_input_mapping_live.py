@@ -13,11 +13,13 @@ import re
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from rosproc import RosProcess, RosProcessGroup
 from vd_sim_node.topics import ESTIMATES_SLOPE, ESTIMATES_TIRE_FORCES, OBSERVER_WHEEL_STATES
 
+NS = 1_000_000_000
 SCRIPTS = Path(__file__).resolve().parent / 'ros_scripts'
 #: the mapping of publish_std_inputs.py's topics, in the mapping file's form
 MAPPING = {
@@ -115,3 +117,132 @@ def test_pipeline_node_runs_on_standard_types_and_reports_a_stopped_topic(
     after = diags[stopped[-1] + 1 : end]
     assert after and all('stopped' not in d for d in after), '\n'.join(diags)
     assert diags[end - 1].split()[3] == '0', '\n'.join(diags)
+
+
+def _refused(proc: RosProcess, *words: str) -> None:
+    code = _wait_exit(proc, 120)  # several nodes start at once: generous on a busy machine
+    out = proc.output()
+    assert code == 2, out
+    assert 'Traceback' not in out, out
+    errors = [line for line in out.splitlines() if line.startswith('error:')]
+    assert len(errors) == 1, out
+    for word in words:
+        assert word in errors[0], (word, errors[0])
+
+
+def _standard_bag(path: Path, seconds: float, rate: float) -> Path:
+    """A bag of publish_std_inputs.py's topics (JointState, Odometry, Float64MultiArray)."""
+    import math
+
+    from vd_observer_node.bag import BagWriter
+    from vd_observer_node.bag.typestore import message_class, serialize
+
+    def header(stamp: int, frame: str) -> object:
+        t = message_class('builtin_interfaces/msg/Time')(sec=stamp // NS, nanosec=stamp % NS)
+        return message_class('std_msgs/msg/Header')(stamp=t, frame_id=frame)
+
+    vec = message_class('geometry_msgs/msg/Vector3')
+    twist = message_class('geometry_msgs/msg/Twist')
+    pose = message_class('geometry_msgs/msg/Pose')(
+        position=message_class('geometry_msgs/msg/Point')(x=0.0, y=0.0, z=0.0),
+        orientation=message_class('geometry_msgs/msg/Quaternion')(x=0.0, y=0.0, z=0.0, w=1.0),
+    )
+    cov = np.zeros(36)
+    joints = ['wheel_fl_joint', 'wheel_fr_joint', 'wheel_rl_joint', 'wheel_rr_joint']
+    with BagWriter(path) as writer:
+        writer.add_topic('/joint_states', 'sensor_msgs/msg/JointState')
+        writer.add_topic('/odom', 'nav_msgs/msg/Odometry')
+        writer.add_topic('/can/wheel_torques', 'std_msgs/msg/Float64MultiArray')
+        for k in range(round(seconds * rate)):
+            t = k / rate
+            stamp = NS + round(t * 1e9)
+            angle = (10.0 * t + 1.0 - math.cos(0.5 * t)) / 0.3
+            js = message_class('sensor_msgs/msg/JointState')(
+                header=header(stamp, 'base_link'),
+                name=joints,
+                position=np.array([angle, -angle, angle, -angle]),
+                velocity=np.zeros(0),
+                effort=np.zeros(0),
+            )
+            speed = (10.0 + 0.5 * math.sin(0.5 * t)) * 3.6
+            odom = message_class('nav_msgs/msg/Odometry')(
+                header=header(stamp, 'odom'),
+                child_frame_id='base_link',
+                pose=message_class('geometry_msgs/msg/PoseWithCovariance')(
+                    pose=pose, covariance=cov
+                ),
+                twist=message_class('geometry_msgs/msg/TwistWithCovariance')(
+                    twist=twist(
+                        linear=vec(x=speed, y=0.0, z=0.0), angular=vec(x=0.0, y=0.0, z=0.0)
+                    ),
+                    covariance=cov,
+                ),
+            )
+            layout = message_class('std_msgs/msg/MultiArrayLayout')(dim=[], data_offset=0)
+            torque = message_class('std_msgs/msg/Float64MultiArray')(
+                layout=layout, data=np.array([0.05, 0.05, 0.0, 0.0])
+            )
+            writer.write('/joint_states', serialize(js), stamp)
+            writer.write('/odom', serialize(odom), stamp)
+            writer.write('/can/wheel_torques', serialize(torque), stamp)
+    return path
+
+
+@pytest.mark.ros
+def test_bad_mappings_refuse_to_start_with_one_line_naming_the_key(
+    procs: RosProcessGroup, tmp_path: Path
+) -> None:
+    bag = _standard_bag(tmp_path / 'std', 0.1, 100.0)
+    mapping_file = tmp_path / 'car.yaml'
+    mapping_file.write_text(yaml.safe_dump(MAPPING), encoding='utf-8')
+    three = dict(MAPPING, wheel_angles=dict(MAPPING['wheel_angles'], joints=['a', 'b', 'c']))
+    odom = dict(MAPPING, body_speed={'topic': '/odom', 'type': 'nav_msgs/msg/Odom'})
+    unit = dict(MAPPING, wheel_torques=dict(MAPPING['wheel_torques'], unit='Nm'))
+    untyped = {'wheel_angles': {'topic': '/joint_states'}}
+    absent = dict(MAPPING, body_speed={'topic': '/gps/vel', 'type': 'nav_msgs/msg/Odometry'})
+    cases = [
+        ('pipeline_node', three, {}, ('wheel_angles.joints must list 4',)),
+        ('observer_node', {}, {'input_mapping': str(tmp_path / 'absent.yaml')}, ('absent.yaml',)),
+        ('estimator_node', odom, {}, ("body_speed.type 'nav_msgs/msg/Odom'",)),
+        ('alerts_node', unit, {}, ("wheel_torques.unit 'Nm'",)),
+        ('observer_node', untyped, {}, ('wheel_angles.type is missing',)),
+        ('pipeline_node', MAPPING, {'input_mapping': str(mapping_file)}, ('both set',)),
+        ('player_node', absent, {'bag': str(bag)}, ('body_speed.topic', '/gps/vel')),
+    ]
+    started = [
+        (_start(procs, f'case{i}', exe, params_file(tmp_path / f'{i}.yaml', m, **extra)), words)
+        for i, (exe, m, extra, words) in enumerate(cases)
+    ]
+    for proc, words in started:
+        _refused(proc, *words)
+
+
+@pytest.mark.ros
+def test_the_player_plays_a_users_bag_to_the_nodes_given_the_same_mapping(
+    procs: RosProcessGroup, tmp_path: Path
+) -> None:
+    bag = _standard_bag(tmp_path / 'std', 3.0, 100.0)
+    mapping_file = tmp_path / 'car.yaml'
+    mapping_file.write_text(yaml.safe_dump(MAPPING), encoding='utf-8')
+    params = params_file(tmp_path / 'p.yaml', {}, input_mapping=str(mapping_file))
+    observer = _start(procs, 'observer', 'observer_node', params)
+    estimator = _start(procs, 'estimator', 'estimator_node', params)
+    for proc, text in ((observer, 'observer ready'), (estimator, 'estimator ready')):
+        proc.wait_for(text, timeout=90)
+    collector = procs.python(
+        'collector', SCRIPTS / 'collect_outputs.py', '12', f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope'
+    )
+    collector.wait_for('SUBSCRIBED', timeout=60)
+    player_params = params_file(
+        tmp_path / 'player.yaml',
+        {},
+        input_mapping=str(mapping_file),
+        bag=str(bag),
+    )
+    player = _start(procs, 'player', 'player_node', player_params)
+    assert _wait_exit(player, 60) == 0, player.output()
+    assert _wait_exit(collector, 60) == 0
+    slopes = [line.split() for line in collector.output().splitlines() if line.startswith('MSG ')]
+    # the separate nodes: the estimator holds the headerless torque; most samples get through
+    assert len(slopes) > 0.5 * 300, collector.output()[-2000:]
+    assert {s[3] for s in slopes} == {'1'}

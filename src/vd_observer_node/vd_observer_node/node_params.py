@@ -36,6 +36,7 @@ from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import (
     INPUT_KEYS,
     INPUTS,
+    SUPPORTED_TYPES,
     UNITS,
     InputMapping,
     InputSpec,
@@ -88,7 +89,6 @@ INPUT_MAPPING: Final = ParamSpec(
 )
 _KEY_DOCS: Final = {
     'topic': 'topic (absolute name)',
-    'type': 'message type, e.g. sensor_msgs/msg/JointState',
     'joints': 'JointState joint names, order FL, FR, RL, RR',
     'indices': 'Float64MultiArray element indices',
     'unit': 'unit',
@@ -102,8 +102,9 @@ INPUT_PARAMS: Final = [
         ParamSpec(
             f'inputs.{name}.{key}',
             None,
-            f'{name}: {_KEY_DOCS.get(key, key)}'
+            f'{name}: {_KEY_DOCS.get(key, "message type" if key == "type" else key)}'
             + (f' ({" | ".join(UNITS[name])})' if key == 'unit' and name in UNITS else '')
+            + (f' ({" | ".join(SUPPORTED_TYPES[name])})' if key == 'type' else '')
             + ("; unset with every other inputs.* = vd's own topic" if key == 'topic' else ''),
         )
         for name in INPUTS
