@@ -262,3 +262,102 @@ def test_a_mapped_subscription_decodes_matches_holds_and_never_raises() -> None:
     assert watch.messages == {'/joint_states': 2, '/odom': 2, '/can/wheel_torques': 1}
     level, message, _ = watch.status(0)
     assert level == 2 and message.startswith("/joint_states: wheel_angles.joints: 'wheel_fl'")
+
+
+# --- gaps in the replay summary and vd report --mapping -----------------------------------
+
+
+def _user_bag_with_truth(
+    path: Path, seconds: float, rate: float, gap: tuple[float, float]
+) -> None:
+    """USER_MAPPING's topics and vd's wheel-state truth; the torque topic silent in `gap` [s]."""
+    from vd_observer_node.bag import BagWriter
+    from vd_observer_node.bag.cdr_batch import encode_batch
+    from vd_observer_node.testing.synthetic_bags import synthetic_drive
+    from vd_sim_node.topics import TRUTH_WHEEL_STATES
+
+    drive = synthetic_drive(seconds, rate)
+    t0 = int(drive.stamp_ns[0])
+    truth = encode_batch(
+        'vd_msgs/msg/WheelStates',
+        drive.stamp_ns,
+        'base_link',
+        {'angle': drive.angle, 'omega': drive.omega, 'omega_dot': drive.omega_dot},
+    )
+    with BagWriter(path) as writer:
+        writer.add_topic('/joint_states', 'sensor_msgs/msg/JointState')
+        writer.add_topic('/odom', 'nav_msgs/msg/Odometry')
+        writer.add_topic('/can/wheel_torques', 'std_msgs/msg/Float64MultiArray')
+        writer.add_topic(TRUTH_WHEEL_STATES, 'vd_msgs/msg/WheelStates')
+        sign = np.array([1.0, -1.0, 1.0, -1.0])
+        for k, stamp in enumerate(drive.stamp_ns.tolist()):
+            fl, fr, rl, rr = (drive.angle[k] * sign).tolist()
+            writer.write(
+                '/joint_states', serialize(_joint_state(stamp, [0.0, rr, fl, rl, fr])), stamp
+            )
+            writer.write('/odom', serialize(_odometry(stamp, float(drive.speed[k]))), stamp)
+            if not gap[0] <= (stamp - t0) * 1e-9 < gap[1]:
+                torque = drive.torque[k][::-1].tolist()  # indices [3, 2, 1, 0]
+                writer.write('/can/wheel_torques', serialize(_float_array(torque)), stamp)
+            writer.write(TRUTH_WHEEL_STATES, truth[k], stamp)
+
+
+def test_the_replay_summary_reports_a_topic_that_stopped_and_the_estimates_stay_finite(
+    tmp_path: Path,
+) -> None:
+    from vd_observer_node.bag import BagReader
+    from vd_observer_node.bag.cdr_batch import decode_batch
+    from vd_observer_node.tools.replay import replay_bag
+    from vd_sim_node.topics import ESTIMATES_SLOPE, ESTIMATES_TIRE_FORCES
+
+    bag = tmp_path / 'user'
+    _user_bag_with_truth(bag, 4.0, 100.0, gap=(1.0, 1.8))
+    report = replay_bag(
+        bag, tmp_path / 'out', progress=False, mapping=mapping_from_dict(USER_MAPPING)
+    )
+    by_name = {s.name: s for s in report.inputs}
+    torques = by_name['wheel_torques']
+    assert (torques.topic, torques.messages, torques.long_gaps) == ('/can/wheel_torques', 320, 1)
+    assert torques.longest_gap_s == pytest.approx(0.81, abs=1e-6)  # 1.0 s to 1.81 s
+    assert torques.text() == (
+        'wheel_torques (/can/wheel_torques): 320 messages, longest gap 0.810 s, 1 gaps > 0.5 s'
+    )
+    for name in ('wheel_angles', 'body_speed'):
+        assert by_name[name].messages == 400 and by_name[name].long_gaps == 0
+        assert by_name[name].longest_gap_s == pytest.approx(0.01, abs=1e-6)
+    assert report.samples == 320  # the stamps without torque are not estimated
+    out = BagReader(tmp_path / 'out')
+    for topic in (ESTIMATES_SLOPE, ESTIMATES_TIRE_FORCES):
+        arrays = out.topic_arrays([topic])[topic]
+        fields = decode_batch(arrays.msgtype, arrays.datas)
+        for values in fields.values.values():
+            assert np.isfinite(values.astype(np.float64)).all(), topic
+
+
+def test_vd_report_takes_a_mapping_replays_a_bag_without_estimates_and_summarises_inputs(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import json
+
+    import yaml
+    from vd_observer_node.tools.cli import main
+
+    bag = tmp_path / 'user'
+    _user_bag_with_truth(bag, 3.0, 100.0, gap=(1.0, 1.8))
+    mapping = tmp_path / 'car.yaml'
+    mapping.write_text(yaml.safe_dump(USER_MAPPING))
+    out = tmp_path / 'report'
+    args = ['report', str(bag), '--mapping', str(mapping), '--out', str(out), '--no-figures']
+    assert main([*args, '--no-progress']) == 0
+    text = capsys.readouterr().out
+    assert f'{bag} has no estimates: replayed it with {mapping} first' in text
+    line = 'input wheel_torques (/can/wheel_torques): 220 messages, longest gap 0.810 s, 1 gaps'
+    assert line in text
+    notes = json.loads((out / 'metrics.json').read_text())['notes']
+    assert any(n.startswith(line) for n in notes)
+    assert any(n.startswith('input wheel_angles (/joint_states): 300 messages') for n in notes)
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text(yaml.safe_dump({'body_speed': {'topic': '/odom'}}))
+    assert main([*args[:3], str(bad), *args[4:]]) == 2
+    err = capsys.readouterr().err
+    assert err.strip().splitlines()[-1].startswith('vd: error: ') and 'body_speed.type' in err

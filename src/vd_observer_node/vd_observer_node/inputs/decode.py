@@ -36,7 +36,14 @@ from vd_observer_node.inputs.mapping import (
     InputSpec,
 )
 
-__all__ = ['InputDecoder', 'InputSeries', 'decode_input', 'has_header']
+__all__ = [
+    'InputDecoder',
+    'InputSeries',
+    'InputStats',
+    'decode_input',
+    'has_header',
+    'input_stats',
+]
 
 _NS = 1_000_000_000
 #: the field of vd's batch-decodable types that holds the input
@@ -228,3 +235,46 @@ def decode_input(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
         # only then: the default mapping's values pass bit for bit
         values = values * (spec.factor * np.asarray(spec.sign))
     return InputSeries(stamps.astype(np.int64), values, frames)
+
+
+@dataclass(frozen=True)
+class InputStats:
+    """How regularly one input arrived over a recording (the replay and report summaries).
+
+    Attributes:
+        name: the input (:data:`~vd_observer_node.inputs.mapping.INPUTS`).
+        topic: its topic.
+        messages: messages on the topic.
+        longest_gap_s: [s] longest interval between consecutive stamps (0 with < 2 messages).
+        long_gaps: intervals longer than `max_gap_s`: there the observers restart.
+        max_gap_s: [s] the observers' ``max_gap`` the gaps were counted against.
+    """
+
+    name: str
+    topic: str
+    messages: int
+    longest_gap_s: float
+    long_gaps: int
+    max_gap_s: float
+
+    def text(self) -> str:
+        """One line, e.g. 'wheel_torques (/can/wheel_torques): 900 messages, longest gap
+        0.010 s, 0 gaps > 0.5 s'."""
+        return (
+            f'{self.name} ({self.topic}): {self.messages} messages, longest gap '
+            f'{self.longest_gap_s:.3f} s, {self.long_gaps} gaps > {self.max_gap_s:g} s'
+        )
+
+
+def input_stats(spec: InputSpec, series: InputSeries, max_gap_s: float) -> InputStats:
+    """Messages, longest gap and gaps longer than `max_gap_s` [s] of one decoded input."""
+    stamps = np.sort(series.stamp_ns)
+    gaps = np.diff(stamps)
+    return InputStats(
+        name=spec.name,
+        topic=spec.topic,
+        messages=len(stamps),
+        longest_gap_s=float(gaps.max()) * 1e-9 if gaps.size else 0.0,
+        long_gaps=int(np.count_nonzero(gaps > round(max_gap_s * 1e9))),
+        max_gap_s=max_gap_s,
+    )

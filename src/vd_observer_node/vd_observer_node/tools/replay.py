@@ -62,7 +62,7 @@ from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
-from vd_observer_node.inputs.decode import decode_input
+from vd_observer_node.inputs.decode import InputStats, decode_input, input_stats
 from vd_observer_node.inputs.mapping import InputMapping, default_mapping
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
@@ -108,6 +108,8 @@ class ReplayReport:
         unmatched: sensor messages whose stamp is missing on another sensor topic.
         situation_time_s: [s] wall time of the situation monitor (alerts and friction
             potential; 0 when not run).
+        inputs: per input, in mapping order: messages, longest gap between stamps and gaps
+            longer than the observers' ``max_gap`` (a topic that stopped arriving).
     """
 
     samples: int
@@ -118,6 +120,7 @@ class ReplayReport:
     cascade_time_s: float
     unmatched: int
     situation_time_s: float = 0.0
+    inputs: tuple[InputStats, ...] = ()
 
     @property
     def real_time_factor(self) -> float:
@@ -446,7 +449,12 @@ def replay_bag(
         for topic, arr in reader.topic_arrays([*inputs, *truth]).items():
             arrays[topic] = arr
             bar.update(len(arr.datas))
-        angles, speed, torque = (decode_input(s, arrays[s.topic]) for s in mapping.specs)
+        decoded = [decode_input(s, arrays[s.topic]) for s in mapping.specs]
+        max_gap_s = (observer_config or ObserverConfig()).max_gap
+        input_summary = tuple(
+            input_stats(s, d, max_gap_s) for s, d in zip(mapping.specs, decoded, strict=True)
+        )
+        angles, speed, torque = decoded
         common, (ia, iv, it) = _align([angles.stamp_ns, speed.stamp_ns, torque.stamp_ns])
         sensor_count = len(angles.stamp_ns) + len(speed.stamp_ns) + len(torque.stamp_ns)
         bar.set_postfix_str(f'cascade on {len(common)} samples')
@@ -550,6 +558,7 @@ def replay_bag(
         cascade_time_s=cascade_time,
         unmatched=sensor_count - 3 * len(common),
         situation_time_s=situation_time[0],
+        inputs=input_summary,
     )
 
 
