@@ -246,3 +246,52 @@ def test_the_player_plays_a_users_bag_to_the_nodes_given_the_same_mapping(
     # the separate nodes: the estimator holds the headerless torque; most samples get through
     assert len(slopes) > 0.5 * 300, collector.output()[-2000:]
     assert {s[3] for s in slopes} == {'1'}
+
+
+def test_every_mapping_setting_is_a_declared_parameter_of_the_nodes() -> None:
+    from vd_observer_node.inputs.mapping import INPUT_KEYS, INPUTS
+
+    from vd_observer_node import (
+        alerts_node,
+        estimator_node,
+        observer_node,
+        pipeline_node,
+        player_node,
+    )
+
+    wanted = {'input_mapping'} | {f'inputs.{i}.{k}' for i in INPUTS for k in INPUT_KEYS}
+    for node in (observer_node, estimator_node, alerts_node, pipeline_node, player_node):
+        names = {spec.name for spec in node.PARAMS}
+        assert wanted <= names, node.__name__
+        assert all(spec.default is None for spec in node.PARAMS if spec.name.startswith('inputs.'))
+
+
+def test_the_separate_nodes_hold_what_derives_from_a_headerless_input() -> None:
+    from vd_observer_node.alerts_node import held_inputs as alerts_held
+    from vd_observer_node.estimator_node import held_inputs as estimator_held
+    from vd_observer_node.inputs.mapping import default_mapping, mapping_from_dict
+
+    assert estimator_held(default_mapping()) == []
+    assert alerts_held(default_mapping()) == []
+    user = mapping_from_dict(MAPPING)  # torques on Float64MultiArray
+    assert estimator_held(user) == ['torques']
+    assert alerts_held(user) == ['torques']
+    array = {'topic': '/a', 'type': 'std_msgs/msg/Float64MultiArray'}
+    speed = mapping_from_dict(dict(MAPPING, body_speed=array))
+    assert estimator_held(speed) == ['accel', 'speed', 'torques']
+    assert alerts_held(speed) == ['speed', 'torques']
+    angles = mapping_from_dict({'wheel_angles': array})
+    assert estimator_held(angles) == ['accel', 'speed', 'torques']
+    assert alerts_held(angles) == ['angles', 'speed', 'torques']
+
+
+def test_a_mapping_file_and_mapping_parameters_together_are_refused(tmp_path: Path) -> None:
+    from vd_observer_node.inputs.errors import MappingError
+    from vd_observer_node.node_params import take_input_mapping
+
+    values = {'input_mapping': str(tmp_path / 'car.yaml'), 'inputs.body_speed.topic': '/odom'}
+    with pytest.raises(MappingError, match=r'inputs\.body_speed\.topic are both'):
+        take_input_mapping(dict(values))
+    values = {'input_mapping': '', 'inputs.body_speed.topic': None, 'kernel': 'python'}
+    mapping = take_input_mapping(values)
+    assert mapping.is_default and values == {'kernel': 'python'}  # the mapping's taken out
