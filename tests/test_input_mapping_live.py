@@ -295,3 +295,37 @@ def test_a_mapping_file_and_mapping_parameters_together_are_refused(tmp_path: Pa
     values = {'input_mapping': '', 'inputs.body_speed.topic': None, 'kernel': 'python'}
     mapping = take_input_mapping(values)
     assert mapping.is_default and values == {'kernel': 'python'}  # the mapping's taken out
+
+
+def test_messages_serialized_by_rclpy_decode_like_the_replays() -> None:
+    """What a raw subscription hands the nodes is rclpy's (Fast CDR's) serialization, which
+    may end a JointState with 8 bytes past its last field; it decodes to the same values."""
+    from nav_msgs.msg import Odometry
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    from vd_observer_node.inputs.decode import InputDecoder
+    from vd_observer_node.inputs.mapping import mapping_from_dict
+
+    mapping = mapping_from_dict(MAPPING)
+    names = ['steering', 'wheel_fl_joint', 'wheel_fr_joint', 'wheel_rl_joint', 'wheel_rr_joint']
+    for k in range(4):  # frame ids of several lengths: every tail of the message's alignment
+        js = JointState(name=names, position=[9.0, 1.0, 2.0, 3.0, 4.0])
+        js.header.frame_id = 'b' * k
+        js.header.stamp.sec = 3
+        decoded = InputDecoder(mapping.wheel_angles).decode(serialize_message(js), 0)
+        assert decoded == (3 * NS, b'b' * k, (1.0, -2.0, 3.0, -4.0))
+    odom = Odometry()
+    odom.header.stamp.nanosec = 5
+    odom.twist.twist.linear.x = 36.0
+    assert InputDecoder(mapping.body_speed).decode(serialize_message(odom), 0) == (
+        5,
+        b'',
+        (pytest.approx(10.0),),
+    )
+    array = Float64MultiArray(data=[1.0, 2.0, 3.0, 4.0, 5.0])
+    assert InputDecoder(mapping.wheel_torques).decode(serialize_message(array), 7) == (
+        7,
+        b'',
+        (1000.0, 2000.0, 3000.0, 4000.0),
+    )
