@@ -200,6 +200,8 @@ def test_bad_mappings_refuse_to_start_with_one_line_naming_the_key(
     unit = dict(MAPPING, wheel_torques=dict(MAPPING['wheel_torques'], unit='Nm'))
     untyped = {'wheel_angles': {'topic': '/joint_states'}}
     absent = dict(MAPPING, body_speed={'topic': '/gps/vel', 'type': 'nav_msgs/msg/Odometry'})
+    # not a declared parameter: ROS alone would ignore it and keep m/s
+    misspelt = dict(MAPPING, body_speed=dict(MAPPING['body_speed'], unti='km/h'))
     cases = [
         ('pipeline_node', three, {}, ('wheel_angles.joints must list 4',)),
         ('observer_node', {}, {'input_mapping': str(tmp_path / 'absent.yaml')}, ('absent.yaml',)),
@@ -208,6 +210,7 @@ def test_bad_mappings_refuse_to_start_with_one_line_naming_the_key(
         ('observer_node', untyped, {}, ('wheel_angles.type is missing',)),
         ('pipeline_node', MAPPING, {'input_mapping': str(mapping_file)}, ('both set',)),
         ('player_node', absent, {'bag': str(bag)}, ('body_speed.topic', '/gps/vel')),
+        ('estimator_node', misspelt, {}, ('body_speed.unti: unknown key',)),
     ]
     started = [
         (_start(procs, f'case{i}', exe, params_file(tmp_path / f'{i}.yaml', m, **extra)), words)

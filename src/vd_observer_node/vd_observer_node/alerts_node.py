@@ -57,6 +57,7 @@ from vd_observer_node.node_params import (
     KERNEL,
     input_message_class,
     take_input_mapping,
+    undeclared_inputs,
 )
 from vd_observer_node.raw_io import (
     Encoders,
@@ -107,7 +108,7 @@ class AlertsNode(Node):
     def __init__(self) -> None:
         super().__init__('alerts_node')
         values = declare_parameters(self, PARAMS)
-        mapping = take_input_mapping(values)
+        mapping = take_input_mapping(values, undeclared_inputs(self))
         sensors = {key: getattr(mapping, name) for key, name in _SENSORS.items()}
         classes = {key: input_message_class(spec) for key, spec in sensors.items()}
         self.kernel = values.pop('kernel')

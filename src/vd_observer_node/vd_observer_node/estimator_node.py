@@ -52,6 +52,7 @@ from vd_observer_node.node_params import (
     KERNEL,
     input_message_class,
     take_input_mapping,
+    undeclared_inputs,
 )
 from vd_observer_node.raw_io import (
     Encoders,
@@ -94,7 +95,7 @@ class EstimatorNode(Node):
     def __init__(self) -> None:
         super().__init__('estimator_node')
         values = declare_parameters(self, PARAMS)
-        mapping = take_input_mapping(values)
+        mapping = take_input_mapping(values, undeclared_inputs(self))
         self.kernel = values.pop('kernel')
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')

@@ -15,10 +15,11 @@ the :class:`~vd_observer_node.inputs.mapping.InputMapping` from either with the 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, Final
 
 from vd_sim_node.ros_common import ParamSpec, dataclass_param_specs, ros_message_class
-from vd_sim_node.topics import OBSERVER_BODY_VELOCITY, SENSORS_BODY_VELOCITY
+from vd_sim_node.topics import OBSERVER_BODY_VELOCITY, SENSORS_BODY_VELOCITY, SENSORS_NAMESPACE
 
 from vd_observer_node.chain import ESTIMATOR_SPEEDS, KERNELS
 from vd_observer_node.estimation.differentiator import (
@@ -59,6 +60,7 @@ __all__ = [
     'VEHICLE_FILE',
     'input_message_class',
     'take_input_mapping',
+    'undeclared_inputs',
 ]
 
 VEHICLE_FILE: Final = ParamSpec(
@@ -85,7 +87,7 @@ INPUT_MAPPING: Final = ParamSpec(
     'input_mapping',
     '',
     'input mapping YAML: the topics, types, joints, units and signs of the sensor inputs '
-    "(docs/bags.md; '' = vd's own /vd/sensors/* topics, or the inputs.* parameters)",
+    f"(docs/bags.md; '' = vd's own {SENSORS_NAMESPACE}* topics, or the inputs.* parameters)",
 )
 _KEY_DOCS: Final = {
     'topic': 'topic (absolute name)',
@@ -113,12 +115,26 @@ INPUT_PARAMS: Final = [
 ]
 
 
-def take_input_mapping(values: dict[str, Any]) -> InputMapping:
+def undeclared_inputs(node: Any) -> list[str]:
+    """The ``inputs.*`` parameters given to `node` (params file, ``-p``) but not declared.
+
+    ROS ignores a value given for an undeclared parameter, so a misspelt key
+    (``inputs.body_speed.unti``) would silently keep its default; the nodes pass these names
+    to :func:`take_input_mapping`, which refuses them naming the key.
+    """
+    # rclpy keeps the command line's and params files' values here (no public accessor)
+    overrides = getattr(node, '_parameter_overrides', {})
+    return [n for n in overrides if n.startswith('inputs.') and not node.has_parameter(n)]
+
+
+def take_input_mapping(values: dict[str, Any], undeclared: Sequence[str] = ()) -> InputMapping:
     """Remove the input-mapping parameters from `values` and build the mapping.
 
     Args:
         values: the declared parameters' values (:func:`declare_parameters`); ``input_mapping``
             and every ``inputs.*`` entry are popped.
+        undeclared: ``inputs.*`` names given but not declared (:func:`undeclared_inputs`):
+            refused as unknown inputs or keys.
 
     Raises:
         MappingError: unreadable file, a refused setting (one line naming the key), or both a
@@ -126,6 +142,7 @@ def take_input_mapping(values: dict[str, Any]) -> InputMapping:
     """
     path = values.pop(INPUT_MAPPING.name)
     params = {k: values.pop(k) for k in [k for k in values if k.startswith('inputs.')]}
+    params.update(dict.fromkeys(undeclared, ''))  # any value: the name alone is refused
     given = sorted(k for k, v in params.items() if v is not None)
     if path and given:
         raise MappingError(

@@ -52,6 +52,7 @@ from vd_observer_node.node_params import (
     OBSERVER_PARAMS,
     input_message_class,
     take_input_mapping,
+    undeclared_inputs,
 )
 from vd_observer_node.raw_io import Encoders, InputWatch, merge_status
 
@@ -69,7 +70,7 @@ class ObserverNode(Node):
     def __init__(self) -> None:
         super().__init__('observer_node')
         values = declare_parameters(self, PARAMS)
-        mapping = take_input_mapping(values)
+        mapping = take_input_mapping(values, undeclared_inputs(self))
         angles_spec, speed_spec = mapping.wheel_angles, mapping.body_speed
         classes = [input_message_class(spec) for spec in (angles_spec, speed_spec)]
         self.kernel = values.pop('kernel')

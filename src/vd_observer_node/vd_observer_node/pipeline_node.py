@@ -71,6 +71,7 @@ from vd_observer_node.node_params import (
     PIPELINE_PARAMS,
     input_message_class,
     take_input_mapping,
+    undeclared_inputs,
 )
 from vd_observer_node.raw_io import (
     Encoders,
@@ -151,7 +152,7 @@ class PipelineNode(Node):
     def __init__(self) -> None:
         super().__init__('pipeline_node')
         values = declare_parameters(self, PARAMS)
-        mapping = take_input_mapping(values)
+        mapping = take_input_mapping(values, undeclared_inputs(self))
         classes = [input_message_class(spec) for spec in mapping.specs]
         capacity = values.pop('align_capacity')
         settings, vehicle_file = _settings(values)

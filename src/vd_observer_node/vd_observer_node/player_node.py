@@ -41,7 +41,7 @@ from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.errors import ReplayInputError
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import InputMapping
-from vd_observer_node.node_params import INPUT_PARAMS, take_input_mapping
+from vd_observer_node.node_params import INPUT_PARAMS, take_input_mapping, undeclared_inputs
 
 __all__ = ['SENSOR_TOPICS', 'PlayerNode', 'main']
 
@@ -115,7 +115,7 @@ class PlayerNode(Node):
     def __init__(self) -> None:
         super().__init__('player_node')
         v = declare_parameters(self, PARAMS)
-        mapping = take_input_mapping(v)
+        mapping = take_input_mapping(v, undeclared_inputs(self))
         if not v['bag']:
             raise ReplayInputError("parameter 'bag' is required: -p bag:=PATH")
         reader = BagReader(v['bag'])
