@@ -117,10 +117,14 @@ def test_latest_aligner_waits_until_the_held_samples_are_final() -> None:
     assert aligner.push('speed', 5, 's5') == []
     assert aligner.push('torque', 8, 'q8') == []  # a later torque may still come
     assert aligner.push('torque', 12, 'q12') == []  # speed not known past 10 yet
-    assert aligner.push('speed', 15, 's15') == [{'wheel': 'w10', 'speed': 's5', 'torque': 'q8'}]
+    assert aligner.push('speed', 15, 's15') == [
+        (10, {'wheel': 'w10', 'speed': 's5', 'torque': 'q8'})
+    ]
     assert aligner.push('wheel', 20, 'w20') == []
     assert aligner.push('torque', 30, 'q30') == []  # the speed is known only up to 15
-    assert aligner.push('speed', 25, 's25') == [{'wheel': 'w20', 'speed': 's15', 'torque': 'q12'}]
+    assert aligner.push('speed', 25, 's25') == [
+        (20, {'wheel': 'w20', 'speed': 's15', 'torque': 'q12'})
+    ]
     assert aligner.push('wheel', 60, 'w60') == []
     assert aligner.push('speed', 61, 's61') == []
     # both final now, but the torque of 30 is 30 > 20 old: dropped, counted
@@ -151,7 +155,8 @@ def test_latest_aligner_gives_the_offline_sets(
     aligner = LatestAligner(topics, max_age_ns=max_age)
     live: list[tuple[int, ...]] = []
     for _, k, i in arrivals:
-        for matched in aligner.push(topics[k], int(stamps[k][i]), i):
+        for stamp, matched in aligner.push(topics[k], int(stamps[k][i]), i):
+            assert stamp == stamps[0][matched['wheel']]
             live.append(tuple(matched[t] for t in topics))
     offline = align_latest(stamps, max_age)
     expected = list(zip(*(i.tolist() for i in offline.indexes), strict=True))

@@ -194,8 +194,9 @@ class LatestAligner:
         self._history: dict[str, deque[tuple[int, Any]]] = {t: deque() for t in self._topics[1:]}
         self._last: dict[str, int | None] = dict.fromkeys(self._topics)
 
-    def push(self, topic: str, stamp_ns: int, message: Any) -> list[dict[str, Any]]:
-        """Add one message; return the sets it completes, oldest first ({topic: message}).
+    def push(self, topic: str, stamp_ns: int, message: Any) -> list[tuple[int, dict[str, Any]]]:
+        """Add one message; return the sets it completes, oldest first: (driving stamp [ns],
+        {topic: message}).
 
         Raises:
             ConfigurationError: unknown topic.
@@ -221,8 +222,8 @@ class LatestAligner:
             self._history[topic].append((stamp_ns, message))
         return self._release()
 
-    def _release(self) -> list[dict[str, Any]]:
-        out: list[dict[str, Any]] = []
+    def _release(self) -> list[tuple[int, dict[str, Any]]]:
+        out: list[tuple[int, dict[str, Any]]] = []
         while self._pending:
             t, message = self._pending[0]
             if not all((s := self._last[k]) is not None and s >= t for k in self._history):
@@ -238,7 +239,7 @@ class LatestAligner:
                     break
                 matched[k] = held[1]
             if len(matched) == len(self._topics):
-                out.append(matched)
+                out.append((t, matched))
             else:
                 self.dropped_count += 1
         return out

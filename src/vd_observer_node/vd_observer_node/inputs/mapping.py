@@ -70,6 +70,9 @@ from vd_observer_node.inputs.errors import MappingError
 __all__ = [
     'ALIGNMENTS',
     'INPUTS',
+    'INPUT_KEYS',
+    'PER_RADIUS_UNITS',
+    'SETTINGS',
     'SUPPORTED_TYPES',
     'UNITS',
     'InputMapping',
@@ -77,12 +80,13 @@ __all__ = [
     'default_mapping',
     'load_input_mapping',
     'mapping_from_dict',
+    'mapping_from_params',
 ]
 
 #: The cascade's inputs, in the order of a mapping file (wheel angles OR wheel speeds).
 INPUTS: Final = ('wheel_angles', 'wheel_speeds', 'body_speed', 'wheel_torques')
-#: Top-level keys that are settings, not inputs.
-_SETTINGS: Final = ('alignment', 'max_age')
+#: Top-level keys that are settings of the whole mapping, not inputs.
+SETTINGS: Final = ('alignment', 'max_age')
 
 # vd's own sensor types, as the topic contract gives them
 WHEEL_ANGLES_TYPE: Final = SENSORS[SENSORS_WHEEL_ANGLES]
@@ -116,7 +120,9 @@ UNITS: Final[dict[str, dict[str, float]]] = {
 PER_RADIUS_UNITS: Final = frozenset({'m/s', 'km/h'})
 #: Inputs with one value per wheel (the others are one scalar).
 _PER_WHEEL: Final = frozenset({'wheel_angles', 'wheel_speeds', 'wheel_torques'})
-_KEYS: Final = frozenset({'topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign'})
+#: The settings of one input, in the order of a mapping file.
+INPUT_KEYS: Final = ('topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign')
+_KEYS: Final = frozenset(INPUT_KEYS)
 
 
 @dataclass(frozen=True)
@@ -291,10 +297,10 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
         data = {}
     if not isinstance(data, Mapping):
         raise MappingError(f'{source}: expected a mapping of {", ".join(INPUTS)}')
-    unknown = sorted(set(data) - set(INPUTS) - set(_SETTINGS))
+    unknown = sorted(set(data) - set(INPUTS) - set(SETTINGS))
     if unknown:
         raise MappingError(
-            f'{source}: {unknown[0]}: unknown input (use {", ".join((*INPUTS, *_SETTINGS))})'
+            f'{source}: {unknown[0]}: unknown input (use {", ".join((*INPUTS, *SETTINGS))})'
         )
     if 'wheel_angles' in data and 'wheel_speeds' in data:
         raise MappingError(f'{source}: wheel_speeds: give wheel_angles or wheel_speeds, not both')
@@ -325,6 +331,41 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
     return InputMapping(
         wheels, body_speed, wheel_torques, source=source, alignment=alignment, max_age=max_age
     )
+
+
+def mapping_from_params(
+    values: Mapping[str, Any], prefix: str = 'inputs.', source: str = 'parameters'
+) -> InputMapping:
+    """Build a mapping from flat node parameters ``<prefix><input>.<key>`` (the params form).
+
+    The parameters are regrouped into the file's form and read by :func:`mapping_from_dict`,
+    so a ROS params file and a mapping file are checked by one parser. An input none of
+    whose parameters is set keeps vd's own topic.
+
+    Args:
+        values: parameter name -> value, None where a parameter is not set; names without
+            `prefix` are ignored. ROS gives arrays as lists or ``array.array``.
+        prefix: the parameters' common prefix.
+        source: named in every error.
+
+    Raises:
+        MappingError: one line naming the input and key.
+    """
+    data: dict[str, dict[str, Any]] = {}
+    source = f'{source} {prefix}*'
+    for name, value in values.items():
+        if value is None or not name.startswith(prefix):
+            continue
+        parts = name[len(prefix) :].split('.')
+        if not isinstance(value, str | bytes | int | float | bool):
+            value = list(value)  # ROS arrays (array.array, tuples) in the YAML form
+        if len(parts) == 1 and parts[0] in SETTINGS:
+            data[parts[0]] = value
+            continue
+        if len(parts) != 2:
+            raise MappingError(f'{source}: {name}: expected {prefix}<input>.<key>')
+        data.setdefault(parts[0], {})[parts[1]] = value
+    return mapping_from_dict(data, source=source)
 
 
 def load_input_mapping(path: str | os.PathLike[str]) -> InputMapping:

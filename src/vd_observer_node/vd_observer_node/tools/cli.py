@@ -106,6 +106,8 @@ def _replay(args: argparse.Namespace) -> int:
         f'{report.situation_us_per_sample:.0f} us per sample); wrote '
         f'{report.messages_written} messages to {args.out_bag}'
     )
+    for stats in report.inputs:
+        print(f'  input {stats.text()}')
     return EXIT_OK
 
 

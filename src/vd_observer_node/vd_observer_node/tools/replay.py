@@ -63,7 +63,7 @@ from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
-from vd_observer_node.inputs.decode import decode_input
+from vd_observer_node.inputs.decode import InputStats, decode_input, input_stats
 from vd_observer_node.inputs.mapping import InputMapping, default_mapping
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
@@ -115,6 +115,8 @@ class ReplayReport:
             potential; 0 when not run).
         faults: the cascade's fault totals per kind (``CascadeResult.faults``: keys
             'wheel.<kind>', 'speed.<kind>', 'estimator.<kind>', as on /diagnostics).
+        inputs: per input, in mapping order: messages, longest gap between stamps and gaps
+            longer than the observers' ``max_gap`` (a topic that stopped arriving).
     """
 
     samples: int
@@ -127,6 +129,7 @@ class ReplayReport:
     situation_time_s: float = 0.0
     stale: int = 0
     faults: dict[str, int] = field(default_factory=dict)
+    inputs: tuple[InputStats, ...] = ()
 
     @property
     def real_time_factor(self) -> float:
@@ -445,7 +448,12 @@ def replay_bag(
             arrays[topic] = arr
             bar.update(len(arr.datas))
         radius = estimator_vehicle.effective_radius
-        angles, speed, torque = (decode_input(s, arrays[s.topic], radius) for s in mapping.specs)
+        decoded = [decode_input(s, arrays[s.topic], radius) for s in mapping.specs]
+        max_gap_s = observer_config.max_gap
+        input_summary = tuple(
+            input_stats(s, d, max_gap_s) for s, d in zip(mapping.specs, decoded, strict=True)
+        )
+        angles, speed, torque = decoded
         aligned = align_stamps(
             [angles.stamp_ns, speed.stamp_ns, torque.stamp_ns], mapping.alignment, mapping.max_age
         )
@@ -556,6 +564,7 @@ def replay_bag(
         situation_time_s=situation_time[0],
         stale=aligned.stale,
         faults=dict(result.faults),
+        inputs=input_summary,
     )
 
 

@@ -519,6 +519,7 @@ def evaluate(
     if missing_truth:
         notes.append('truth topics missing: ' + ', '.join(missing_truth))
     notes.extend(f'{name} skipped: {why}' for name, why in series.skipped.items())
+    notes.extend(f'input {stats.text()}' for stats in series.inputs)
     data, alert_notes = alert_data(series)
     section = (
         None
