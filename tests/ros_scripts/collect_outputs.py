@@ -2,9 +2,10 @@
 
     python collect_outputs.py DURATION_S TOPIC=pkg.msg/Type [...]
 
-Each message of a TOPIC: 'MSG TOPIC STAMP_NS FINITE' (FINITE 1 when every float field is
-finite); each /diagnostics status: 'DIAG NAME LEVEL MESSAGE'. Prints 'SUBSCRIBED' once each
-TOPIC has a publisher and exits 0 after DURATION_S.
+Each message of a TOPIC: 'MSG TOPIC STAMP_NS FINITE FIRST' (FINITE 1 when every float field
+is finite; FIRST the repr of its first float field, e.g. a Slope's angle); each /diagnostics
+status: 'DIAG NAME LEVEL MESSAGE'. Prints 'SUBSCRIBED' once each TOPIC has a publisher and
+exits 0 after DURATION_S.
 """
 
 from __future__ import annotations
@@ -49,8 +50,10 @@ def main() -> int:
 
         def on_message(msg: Any, topic: str = topic) -> None:
             stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-            finite = int(all(math.isfinite(v) for v in _floats(msg)))
-            print(f'MSG {topic} {stamp} {finite}', flush=True)
+            floats = _floats(msg)
+            finite = int(all(math.isfinite(v) for v in floats))
+            first = repr(floats[0]) if floats else '-'
+            print(f'MSG {topic} {stamp} {finite} {first}', flush=True)
 
         subs.append(node.create_subscription(cls, topic, on_message, qos))
 

@@ -28,6 +28,7 @@ from vd_observer_node.bag.writer import BagWriter
 
 __all__ = [
     'JOINTS',
+    'JOINT_TORQUES',
     'STANDARD_MAPPING',
     'CarSensors',
     'abs_wheel_speeds',
@@ -64,6 +65,11 @@ STANDARD_MAPPING: Final[dict[str, Any]] = {
     },
     'alignment': 'latest',
 }
+#: :data:`STANDARD_MAPPING` for ``CarSensors(torques_in_joint_states=True)``.
+JOINT_TORQUES: Final[dict[str, Any]] = {
+    **STANDARD_MAPPING,
+    'wheel_torques': {**STANDARD_MAPPING['wheel_speeds'], 'unit': 'N m'},
+}
 
 
 @dataclass(frozen=True)
@@ -79,6 +85,9 @@ class CarSensors:
         torque_noise_std: white noise on each wheel torque [N m].
         phase_s: (wheel, odometry, torque) clock offsets [s], so no two topics share stamps.
         seed: noise generator seed.
+        torques_in_joint_states: carry the torques as the JointState's ``effort`` (at the
+            wheel stamps, mirrored like the speeds) instead of a CAN Float64MultiArray: every
+            input then has a header stamp (:data:`JOINT_TORQUES`).
     """
 
     wheel_rate_hz: float = 100.0
@@ -89,6 +98,7 @@ class CarSensors:
     torque_noise_std: float = 2.0
     phase_s: tuple[float, float, float] = (0.0, 0.003, 0.006)
     seed: int = 0
+    torques_in_joint_states: bool = False
 
 
 def header(stamp_ns: int, frame: str = 'base_link') -> Any:
@@ -190,22 +200,26 @@ def write_standard_bag(path: str | os.PathLike[str], sim: Any, sensors: CarSenso
     odom_t = _stamps(t, sensors.odom_rate_hz, sensors.phase_s[1])
     body = np.interp(odom_t, t, sim.speed_true)
     body = body + rng.normal(0.0, sensors.speed_noise_std, body.shape)
-    torque_t = _stamps(t, sensors.torque_rate_hz, sensors.phase_s[2])
+    in_joints = sensors.torques_in_joint_states
+    torque_t = wheel_t if in_joints else _stamps(t, sensors.torque_rate_hz, sensors.phase_s[2])
     torque = np.stack([np.interp(torque_t, t, sim.wheel_torque[:, i]) for i in range(4)], 1)
     torque = torque + rng.normal(0.0, sensors.torque_noise_std, torque.shape)
     rows: list[tuple[int, str, bytes]] = []
     for k, stamp in enumerate(np.round(wheel_t * _NS).astype(np.int64).tolist()):
-        published = [0.0 if i < 0 else float(speeds[k, i] * sign[i]) for i in _ORDER]
-        rows.append((stamp, '/joint_states', serialize(joint_state(stamp, [*_PUBLISHED], (),
-                                                                   published))))  # fmt: skip
+        velocity = [0.0 if i < 0 else float(speeds[k, i] * sign[i]) for i in _ORDER]
+        effort = [0.0 if i < 0 else float(torque[k, i] * sign[i]) for i in _ORDER]
+        msg = joint_state(stamp, [*_PUBLISHED], (), velocity, effort if in_joints else ())
+        rows.append((stamp, '/joint_states', serialize(msg)))
     for k, stamp in enumerate(np.round(odom_t * _NS).astype(np.int64).tolist()):
         rows.append((stamp, '/odom', serialize(odometry(stamp, float(body[k])))))
     for k, stamp in enumerate(np.round(torque_t * _NS).astype(np.int64).tolist()):
-        rows.append((stamp, '/can/wheel_torques', serialize(float64_array(torque[k]))))
+        if not in_joints:
+            rows.append((stamp, '/can/wheel_torques', serialize(float64_array(torque[k]))))
     rows.sort(key=lambda row: row[0])
     with BagWriter(path) as writer:
         writer.add_topic('/joint_states', 'sensor_msgs/msg/JointState')
         writer.add_topic('/odom', 'nav_msgs/msg/Odometry')
-        writer.add_topic('/can/wheel_torques', 'std_msgs/msg/Float64MultiArray')
+        if not in_joints:
+            writer.add_topic('/can/wheel_torques', 'std_msgs/msg/Float64MultiArray')
         for stamp, topic, data in rows:
             writer.write(topic, data, stamp)
