@@ -6,18 +6,20 @@ import dataclasses
 import math
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from vd_sim_node.errors import ParameterError
+from vd_sim_node.errors import ParameterError, ScenarioError, SimulationError
 from vd_sim_node.vehicle.model import Geometry, VehicleModel
 from vd_sim_node.vehicle.params import VehicleParams, load_vehicle
-from vd_sim_node.vehicle.scenario import parse_scenario
-from vd_sim_node.vehicle.simulation import SimResult, simulate
+from vd_sim_node.vehicle.scenario import VehicleVariant, parse_scenario
+from vd_sim_node.vehicle.simulation import SimResult, Simulator, simulate
 from vd_sim_node.vehicle.variants import (
     DEFAULT_LOAD_POSITION,
+    apply_variant,
     load_position_for_cg_shift,
     loaded,
     tyre_radius_scale,
@@ -208,3 +210,58 @@ def test_loaded_refuses_a_non_physical_car(kwargs: dict[str, float], match: str)
 
 def test_no_load_is_the_nominal_car() -> None:
     assert loaded(VP, 0.0) is VP
+
+
+# -- the scenario's true_vehicle section -------------------------------------------------
+
+_SHORT = {
+    'duration': 3.0,
+    'signals': {'throttle': [[0, 1.0], [2.0, 0.0]], 'slope_deg': [[0, 2.0]]},
+    'hold_brake': False,
+}
+
+
+def test_a_scenario_can_drive_a_loaded_car_with_a_lying_torque_signal() -> None:
+    truth = {'extra_mass_kg': 125.0, 'cg_shift_m': 0.05, 'tyre_radius_scale': 0.98}
+    scenario = parse_scenario({**_SHORT, 'true_vehicle': truth})
+    assert scenario.true_vehicle == VehicleVariant(125.0, 0.05, None, None, 0.98, 0.0)
+    by_hand = tyre_radius_scale(loaded(VP, 125.0, cg_shift_m=0.05), 0.98)
+    assert apply_variant(VP, scenario.true_vehicle) == by_hand
+    run = simulate(VP, scenario)
+    reference = simulate(by_hand, parse_scenario(_SHORT))
+    for name in ('speed_true', 'fx', 'fz', 'wheel_torque', 'engine_torque'):
+        np.testing.assert_array_equal(getattr(run, name), getattr(reference, name), name)
+
+    offset = parse_scenario({**_SHORT, 'true_vehicle': {'engine_torque_offset_nm': -10.0}})
+    lying = simulate(VP, offset)
+    honest = simulate(VP, parse_scenario(_SHORT))
+    np.testing.assert_array_equal(lying.speed_true, honest.speed_true)  # physics unchanged
+    expected = with_torque_offset(honest, VP, -10.0)
+    np.testing.assert_allclose(lying.wheel_torque, expected.wheel_torque, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(lying.engine_torque, expected.engine_torque, rtol=0, atol=1e-9)
+    assert np.any(lying.wheel_torque[:, 0] != honest.wheel_torque[:, 0])
+
+
+def test_a_compiled_model_is_refused_for_a_variant_that_changes_the_physics() -> None:
+    scenario = parse_scenario({**_SHORT, 'true_vehicle': {'extra_mass_kg': 100.0}})
+    with pytest.raises(SimulationError, match='true_vehicle'):
+        Simulator(VehicleModel(VP), scenario)
+    # A torque offset alone keeps the compiled model usable.
+    only_signal = parse_scenario({**_SHORT, 'true_vehicle': {'engine_torque_offset_nm': 5.0}})
+    assert not only_signal.true_vehicle.changes_physics
+    Simulator(VehicleModel(VP), only_signal)
+
+
+@pytest.mark.parametrize(
+    ('truth', 'match'),
+    [
+        ({'extra_mass_kg': 5000.0}, 'extra_mass_kg must be <= 2000'),
+        ({'tyre_radius_scale': 2.0}, 'tyre_radius_scale must be < 1.5'),
+        ({'extra_mass_kg': 10.0, 'cg_shift_m': 0.1, 'load_position_m': 1.0}, 'not both'),
+        ({'cg_shift_m': 0.1}, 'non-zero extra_mass_kg'),
+        ({'engine_torque_offset_nm': 'ten'}, 'engine_torque_offset_nm must be a number'),
+    ],
+)
+def test_a_bad_true_vehicle_section_is_refused_by_name(truth: dict[str, Any], match: str) -> None:
+    with pytest.raises(ScenarioError, match=match):
+        parse_scenario({**_SHORT, 'true_vehicle': truth})

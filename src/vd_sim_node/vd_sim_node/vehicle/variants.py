@@ -15,6 +15,11 @@ measure what a wrong parameter costs and what an adaptation recovers (issue 16).
   run (engine torque, and the driven wheels' torque through the gear ratio), not to the
   physics: the car drives as before, only the sensor lies.
 
+A scenario's ``true_vehicle`` section (:class:`~vd_sim_node.vehicle.scenario.VehicleVariant`)
+makes the :class:`~vd_sim_node.vehicle.simulation.Simulator` do both itself
+(:func:`apply_variant`, :func:`driven_wheel_torque_offset`), so the simulator node drives the
+true car from the scenario file while the estimators read the vehicle file.
+
 All functions are pure and return new frozen objects.
 """
 
@@ -22,15 +27,22 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import NDArray
 
 from vd_sim_node.errors import ParameterError
 from vd_sim_node.vehicle.params import VehicleParams
-from vd_sim_node.vehicle.simulation import SimResult
+from vd_sim_node.vehicle.scenario import VehicleVariant
+
+if TYPE_CHECKING:  # the simulator imports this module: no import cycle at run time
+    from vd_sim_node.vehicle.simulation import SimResult
 
 __all__ = [
     'DEFAULT_LOAD_POSITION',
+    'apply_variant',
+    'driven_wheel_torque_offset',
     'load_position_for_cg_shift',
     'loaded',
     'tyre_radius_scale',
@@ -198,6 +210,54 @@ def tyre_radius_scale(params: VehicleParams, scale: float) -> VehicleParams:
     return dataclasses.replace(params, wheel=wheel, name=name)
 
 
+def apply_variant(params: VehicleParams, variant: VehicleVariant) -> VehicleParams:
+    """The true vehicle of a scenario's ``true_vehicle`` section (its physical part).
+
+    Args:
+        params: the vehicle file's parameters.
+        variant: the scenario's variant.
+
+    Returns:
+        ``params`` itself if the variant changes no physics, else the loaded and/or
+        re-tyred vehicle (load first, then the tyre radius).
+
+    Raises:
+        ParameterError: the variant gives a non-physical car.
+    """
+    out = params
+    if variant.extra_mass_kg != 0.0:
+        out = loaded(
+            out,
+            variant.extra_mass_kg,
+            variant.cg_shift_m,
+            load_position_m=variant.load_position_m,
+            load_height_m=variant.load_height_m,
+        )
+    if variant.tyre_radius_scale != 1.0:
+        out = tyre_radius_scale(out, variant.tyre_radius_scale)
+    return out
+
+
+def driven_wheel_torque_offset(
+    params: VehicleParams, gear: NDArray[np.int64], engine_offset_nm: float
+) -> NDArray[np.float64]:
+    """Per-sample offset of each driven (front) wheel's torque signal, [N m].
+
+    Args:
+        params: the vehicle (gear ratios, final drive).
+        gear: engaged gear per sample, shape (M,), 0 during a shift.
+        engine_offset_nm: offset of the engine torque, [N m].
+
+    Returns:
+        shape (M,): ``engine_offset_nm * ratio(gear) * final_drive / 2`` (open differential),
+        0 where ``gear`` is 0.
+    """
+    gb = params.gearbox
+    overall = np.concatenate(([0.0], np.asarray(gb.ratios) * gb.final_drive))
+    out: NDArray[np.float64] = 0.5 * engine_offset_nm * overall[np.clip(gear, 0, len(gb.ratios))]
+    return out
+
+
 def with_torque_offset(
     result: SimResult, params: VehicleParams, engine_offset_nm: float
 ) -> SimResult:
@@ -222,10 +282,7 @@ def with_torque_offset(
     """
     if not math.isfinite(engine_offset_nm):
         raise ParameterError(f'engine torque offset must be finite, got {engine_offset_nm}')
-    gb = params.gearbox
-    overall = np.concatenate(([0.0], np.asarray(gb.ratios) * gb.final_drive))
-    gear = np.clip(result.gear, 0, len(gb.ratios))
-    per_wheel = 0.5 * engine_offset_nm * overall[gear]
+    per_wheel = driven_wheel_torque_offset(params, result.gear, engine_offset_nm)
     wheel_torque = np.array(result.wheel_torque, dtype=float, copy=True)
     wheel_torque[:, 0] += per_wheel
     wheel_torque[:, 1] += per_wheel
