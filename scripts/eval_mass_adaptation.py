@@ -14,6 +14,8 @@ applies to the force, as the estimator's slope does), and prints:
 * slope RMS: the cascade's own (adaptation off), the cascade's slope re-expressed with the
   adapted mass (``slope_with_mass``: what the estimator gives once the mass is wired in),
   and the mass/grade module's own slope,
+* R_eff from the free-rolling wheels (``estimation.rolling_radius``): error at the end and
+  after 60 s of free rolling; the mass and slope again with sum Fx rescaled by it,
 * mu RMS and Fz RMS: the cascade's (nominal mass) and recomputed with the adapted mass
   (the weight term of the quasi-static load formula scales with m; mu = Fx / Fz; the CG,
   which moves with the load, is not estimated); Fz also summed over the four wheels.
@@ -57,6 +59,7 @@ from vd_observer_node.estimation.mass_grade import (  # noqa: E402
     slope_with_mass,
 )
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
+from vd_observer_node.estimation.rolling_radius import run_rolling_radius  # noqa: E402
 from vd_observer_node.estimation.vehicle import EstimatorVehicle  # noqa: E402
 from vd_observer_node.kernel.chain import run_cascade_compiled  # noqa: E402
 from vd_sim_node.vehicle.params import VehicleParams, load_vehicle  # noqa: E402
@@ -206,6 +209,37 @@ def figures(
         out[f'slope_rms_deg_adapted{label}'] = math.degrees(rms(adapted[sel] - sim.slope[sel]))
         out[f'slope_rms_deg_module{label}'] = math.degrees(rms(track.slope[sel] - sim.slope[sel]))
 
+    # R_eff from the free-rolling wheels, then the mass again on sum Fx rescaled with it
+    # (Fx = (T - J omega_dot) / R: exactly proportional to 1/R).
+    r_true = true_vp.wheel.effective_radius
+    rr = run_rolling_radius(sim.t, est.omega, sim.wheel_torque, sim.body_speed, vehicle)
+    out['reff_final_err_pct'] = 100.0 * (rr.radius[-1] - r_true) / r_true
+    free_s = np.cumsum(rr.free_wheels > 0) * dt
+    k60 = int(np.searchsorted(free_s, 60.0))
+    out['reff_free_s'] = float(free_s[-1])
+    out['reff_err_60s_free_pct'] = (
+        100.0 * (rr.radius[k60] - r_true) / r_true if k60 < free_s.size else float('nan')
+    )
+    scale = vehicle.effective_radius / rr.radius_used
+    both = run_mass_grade(sim.t, est.fx.sum(axis=1) * scale, sim.body_speed, vehicle, cfg)
+    conv2 = np.flatnonzero(both.converged)
+    out['mass_final_err_pct_reff'] = 100.0 * (both.mass[-1] - m_true) / m_true
+    out['mass_worst_err_pct_reff'] = (
+        100.0 * float(np.max(np.abs(both.mass[conv2[0] :] - m_true))) / m_true
+        if conv2.size
+        else float('nan')
+    )
+    f_slope2 = lowpass(est.fx.sum(axis=1) * scale - aero_signed, dt, est_cfg.slope_filter_tau)
+    sine = np.sin(est.slope) + (f_slope2 / both.mass_used - f_slope / vehicle.mass) / (
+        vehicle.gravity
+    )
+    bound = math.sin(est_cfg.max_slope)
+    adapted2 = np.arcsin(np.clip(sine, -bound, bound))
+    adapted2 = np.where(held & (np.arange(held.size) > last), adapted2[last], adapted2)
+    after2 = moving & (sim.t >= sim.t[conv2[0]]) if conv2.size else np.zeros_like(moving)
+    out['slope_rms_deg_reff'] = math.degrees(rms(adapted2[mask] - sim.slope[mask]))
+    out['slope_rms_deg_reff_after'] = math.degrees(rms(adapted2[after2] - sim.slope[after2]))
+
     # Fz, mu with the adapted mass: the quasi-static loads of the estimator with m_used
     # (G = sum Fx - rolling, as load_transfer_source 'tire_forces').
     static_true = m_true * vehicle.gravity / 4.0  # mean static wheel load of the true car
@@ -304,6 +338,15 @@ def main() -> None:
                     f'{f["slope_rms_deg_module_moving"]:.3f}; moving after convergence '
                     f'{f["slope_rms_deg_off_after"]:.3f} / {f["slope_rms_deg_adapted_after"]:.3f}'
                     f' / {f["slope_rms_deg_module_after"]:.3f})'
+                )
+                print(
+                    f'   R_eff: final {f["reff_final_err_pct"]:+.3f} %, after 60 s of free '
+                    f'rolling {f["reff_err_60s_free_pct"]:+.3f} % ({f["reff_free_s"]:.0f} s '
+                    'free in all); with R_eff adapted: mass final '
+                    f'{f["mass_final_err_pct_reff"]:+.2f} %, worst after convergence '
+                    f'{f["mass_worst_err_pct_reff"]:.2f} %, slope RMS whole run '
+                    f'{f["slope_rms_deg_reff"]:.3f}, moving after convergence '
+                    f'{f["slope_rms_deg_reff_after"]:.3f} deg'
                 )
                 print(
                     f'   Fz RMS [% of static] off / adapted: {f["fz_rms_pct_off"]:.2f} / '
