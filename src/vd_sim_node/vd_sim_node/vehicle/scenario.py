@@ -19,6 +19,16 @@ A scenario file (``config/scenarios/*.yaml``)::
       encoder_counts_per_rev: 0  # 0 = ideal wheel angle, N > 0 = quantised encoder
       speed_noise_std: 0.0       # [m/s] Gaussian noise on the body speed, 0 = ideal
       torque_noise_std: 0.0      # [N m] Gaussian noise on the wheel torques, 0 = ideal
+    true_vehicle:                # optional: the car driven is not the vehicle file
+      extra_mass_kg: 0.0         # [kg] load added to the body (negative: removed)
+      cg_shift_m: 0.1            # [m] rearward CG shift it causes, or instead:
+      load_position_m: 1.6       # [m] load behind the front axle (default 1.6)
+      load_height_m: 0.55        # [m] load height (default the CG height)
+      tyre_radius_scale: 1.0     # [-] R_eff factor (worn tyre 0.97)
+      engine_torque_offset_nm: 0.0  # [N m] offset of the torque SIGNALS, not the physics
+
+The simulator drives the true vehicle (``vd_sim_node.vehicle.variants``) while the
+estimators keep reading the vehicle file.
 
 Each signal is right-continuous: the value given at ``t_start`` holds from ``t_start``
 (inclusive) to the next breakpoint. Missing signals default to throttle 0, brake 0, slope 0,
@@ -42,6 +52,7 @@ __all__ = [
     'PiecewiseConstant',
     'Scenario',
     'SensorSettings',
+    'VehicleVariant',
     'load_scenario',
     'parse_scenario',
 ]
@@ -107,6 +118,34 @@ class SensorSettings:
 
 
 @dataclass(frozen=True)
+class VehicleVariant:
+    """How the car driven differs from the vehicle file (see ``vd_sim_node.vehicle.variants``).
+
+    Attributes:
+        extra_mass_kg: point load added to the body, [kg]; negative removes mass.
+        cg_shift_m: rearward whole-vehicle CG shift the load causes, [m]; None: the load
+            sits at ``load_position_m``.
+        load_position_m: load position behind the front axle, [m]; None: the default 1.6 m.
+        load_height_m: load height above ground, [m]; None: the CG height.
+        tyre_radius_scale: factor on the effective rolling radius, [-].
+        engine_torque_offset_nm: offset of the engine torque signal, [N m], passed to the
+            driven wheels' torque signals through the engaged gear (the physics unchanged).
+    """
+
+    extra_mass_kg: float = 0.0
+    cg_shift_m: float | None = None
+    load_position_m: float | None = None
+    load_height_m: float | None = None
+    tyre_radius_scale: float = 1.0
+    engine_torque_offset_nm: float = 0.0
+
+    @property
+    def changes_physics(self) -> bool:
+        """True if the bond graph differs from the vehicle file's."""
+        return self.extra_mass_kg != 0.0 or self.tyre_radius_scale != 1.0
+
+
+@dataclass(frozen=True)
 class Scenario:
     """Inputs of one simulation run.
 
@@ -123,6 +162,7 @@ class Scenario:
         hold_brake: apply the hold brake automatically at standstill with throttle 0.
         sensors: sensor settings.
         description: free text.
+        true_vehicle: how the car driven differs from the vehicle file (default: not).
     """
 
     name: str
@@ -137,6 +177,7 @@ class Scenario:
     hold_brake: bool = True
     sensors: SensorSettings = field(default_factory=SensorSettings)
     description: str = ''
+    true_vehicle: VehicleVariant = field(default_factory=VehicleVariant)
 
     def breakpoints(self) -> tuple[float, ...]:
         """All input discontinuities inside (0, duration), sorted, [s]."""
@@ -209,6 +250,8 @@ def parse_scenario(data: object, default_name: str = 'scenario') -> Scenario:
         speed_noise_std=sens.number('speed_noise_std', 'm/s', ge=0.0, default=0.0),
         torque_noise_std=sens.number('torque_noise_std', 'N m', ge=0.0, default=0.0),
     )
+    truth = r.optional_section('true_vehicle')
+    true_vehicle = VehicleVariant() if truth is None else _variant(truth)
     return Scenario(
         name=r.string('name', default=default_name),
         duration=duration,
@@ -222,6 +265,29 @@ def parse_scenario(data: object, default_name: str = 'scenario') -> Scenario:
         hold_brake=r.boolean('hold_brake', default=True),
         sensors=sensors,
         description=r.string('description', default=''),
+        true_vehicle=true_vehicle,
+    )
+
+
+def _variant(r: MappingReader) -> VehicleVariant:
+    def optional(key: str, unit: str, **bounds: float) -> float | None:
+        return r.number(key, unit, **bounds) if r.has(key) else None
+
+    if r.has('cg_shift_m') and r.has('load_position_m'):
+        raise ScenarioError('true_vehicle: give cg_shift_m or load_position_m, not both')
+    extra = r.number('extra_mass_kg', 'kg', ge=-500.0, le=2000.0, default=0.0)
+    shift = optional('cg_shift_m', 'm', ge=-1.0, le=1.0)
+    if shift and extra == 0.0:
+        raise ScenarioError('true_vehicle.cg_shift_m needs a non-zero extra_mass_kg')
+    return VehicleVariant(
+        extra_mass_kg=extra,
+        cg_shift_m=shift,
+        load_position_m=optional('load_position_m', 'm', ge=-2.0, le=6.0),
+        load_height_m=optional('load_height_m', 'm', gt=0.0, le=3.0),
+        tyre_radius_scale=r.number('tyre_radius_scale', '', gt=0.5, lt=1.5, default=1.0),
+        engine_torque_offset_nm=r.number(
+            'engine_torque_offset_nm', 'N m', ge=-500.0, le=500.0, default=0.0
+        ),
     )
 
 

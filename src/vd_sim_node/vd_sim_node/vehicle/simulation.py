@@ -40,6 +40,7 @@ from vd_sim_node.vehicle.powertrain import (
 )
 from vd_sim_node.vehicle.scenario import Scenario
 from vd_sim_node.vehicle.sensors import SensorModel
+from vd_sim_node.vehicle.variants import apply_variant, driven_wheel_torque_offset
 
 __all__ = ['HOLD_BRAKE_PEDAL', 'SampleFrame', 'SimResult', 'Simulator', 'simulate']
 
@@ -188,8 +189,10 @@ class Simulator:
         """Prepare a run.
 
         Args:
-            vehicle: parameters (compiled here) or an already compiled model (reuse it to
-                avoid recompiling the bond graph for every run).
+            vehicle: parameters (compiled here, after the scenario's ``true_vehicle``
+                variant is applied) or an already compiled model (reuse it to avoid
+                recompiling the bond graph for every run; refused with a variant that
+                changes the physics).
             scenario: the scenario.
             rate_hz: sample rate, [Hz]; default the scenario's ``sensors.rate_hz``.
             seed: noise seed; default the scenario's ``sensors.seed``.
@@ -197,7 +200,18 @@ class Simulator:
             atol_scale: multiplies the per-state absolute tolerances (see docs).
             max_chunk: longest integration chunk without a logic check, [s].
         """
-        self.model = vehicle if isinstance(vehicle, VehicleModel) else VehicleModel(vehicle)
+        truth = scenario.true_vehicle
+        if isinstance(vehicle, VehicleModel):
+            if truth.changes_physics:
+                raise SimulationError(
+                    f'scenario {scenario.name} drives a variant of the vehicle '
+                    '(true_vehicle): pass the VehicleParams, not a compiled VehicleModel'
+                )
+            self.model = vehicle
+        else:
+            # The scenario's true car; the estimators keep reading the vehicle file.
+            self.model = VehicleModel(apply_variant(vehicle, truth))
+        self._torque_offset = truth.engine_torque_offset_nm
         self.scenario = scenario
         self.rate_hz = float(scenario.sensors.rate_hz if rate_hz is None else rate_hz)
         if not (self.rate_hz > 0.0 and math.isfinite(self.rate_hz)):
@@ -524,6 +538,13 @@ class Simulator:
         engine_torque = out[m.out['combustion']] - out[m.out['engine_drag']]
         gear = 0 if self._drv.clutch == ClutchMode.OPEN else self._drv.gear
         meas_angle, meas_speed, meas_torque = self._sensors.measure(angle, v, torque)
+        if self._torque_offset:
+            # A map-based torque signal that is off: the sensors lie, the physics does not.
+            gears = np.full(M, gear, dtype=np.int64)
+            meas_torque[:, :2] += driven_wheel_torque_offset(vp, gears, self._torque_offset)[
+                :, None
+            ]
+            engine_torque = engine_torque + self._torque_offset
         full = np.full
         potential = true_friction_potential(self._friction_table, fz, fx, full(M, u[3]))
         return {
