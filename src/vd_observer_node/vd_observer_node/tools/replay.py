@@ -53,7 +53,7 @@ from vd_sim_node.topics import (
 )
 
 from vd_observer_node.bag.alerts_cdr import encode_alerts
-from vd_observer_node.bag.cdr_batch import encode_batch
+from vd_observer_node.bag.cdr_batch import encode_batch, upgrade_batch
 from vd_observer_node.bag.errors import BagExistsError, ReplayInputError
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
@@ -210,6 +210,7 @@ def _align(stamps: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
 def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
     n = result.t.shape[0]
     zeros = np.zeros(n)
+    source = np.full(n, result.torque_source, dtype=np.uint8)
     return {
         OBSERVER_WHEEL_STATES: {
             'angle': angles,
@@ -232,14 +233,19 @@ def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str,
             'twist.angular.y': zeros,
             'twist.angular.z': zeros,
         },
-        ESTIMATES_TIRE_FORCES: {'fx': result.fx, 'fz': result.fz},
+        ESTIMATES_TIRE_FORCES: {'fx': result.fx, 'fz': result.fz, 'torque_source': source},
         ESTIMATES_FRICTION: {
             'mu': result.mu,
             'slip': result.slip,
             'valid': result.mu_valid,
+            'torque_source': source,
         },
         ESTIMATES_RESISTANCES: {'rolling': result.rolling, 'aero': result.aero},
-        ESTIMATES_SLOPE: {'angle': result.slope, 'valid': result.slope_valid},
+        ESTIMATES_SLOPE: {
+            'angle': result.slope,
+            'valid': result.slope_valid,
+            'torque_source': source,
+        },
     }
 
 
@@ -522,7 +528,10 @@ def replay_bag(
         outputs: list[tuple[str, str, np.ndarray, list[bytes]]] = []
         for topic in [*inputs, *truth]:
             arr = arrays[topic]
-            outputs.append((topic, arr.msgtype, arr.log_time_ns, arr.datas))
+            # a bag recorded before a vd_msgs field was added: copied in today's layout, so
+            # the output holds one definition per type
+            datas = upgrade_batch(arr.msgtype, arr.decoding_type, arr.datas)
+            outputs.append((topic, arr.msgtype, arr.log_time_ns, datas))
         for topic, values in _estimates(result, wheel_angle).items():
             datas = encode_batch(ESTIMATE_TOPICS[topic], common, frame_id, values)
             outputs.append((topic, ESTIMATE_TOPICS[topic], log_ns, datas))
