@@ -51,6 +51,7 @@ __all__ = [
     'Drivetrain',
     'clutch_engaged',
     'engine_wheel_torques',
+    'engine_wheel_torques_record',
     'gear_number',
     'torque_source_code',
 ]
@@ -283,3 +284,34 @@ def clutch_engaged(
     driven = drivetrain.driven
     carrier = float(np.sum(driven * omega)) / float(np.sum(driven))
     return abs(engine_speed - ratio * carrier) <= drivetrain.max_clutch_slip
+
+
+def engine_wheel_torques_record(
+    engine: ArrayLike, drivetrain: Drivetrain, wheel_omega_dot: ArrayLike
+) -> FloatArray:
+    """`engine_wheel_torques` over a record (what the engine path feeds the estimator).
+
+    Args:
+        engine: shape (N, 3): engine torque [N m], gear (float), engine speed (unused).
+        drivetrain: the vehicle's driveline.
+        wheel_omega_dot: shape (N, 4), [rad/s^2] the observer's wheel accelerations.
+
+    Returns:
+        shape (N, 4), [N m]; rows of nan where `engine_wheel_torques` gives nan.
+
+    Raises:
+        InputShapeError: inconsistent shapes.
+    """
+    record = np.asarray(engine, dtype=np.float64)
+    accel = np.asarray(wheel_omega_dot, dtype=np.float64)
+    n = record.shape[0] if record.ndim == 2 else -1
+    if record.shape != (n, 3) or accel.shape != (n, 4):
+        raise InputShapeError(
+            f'expected engine (N, 3) and wheel_omega_dot (N, 4), got {record.shape}, {accel.shape}'
+        )
+    out = np.empty((n, 4))
+    for k in range(n):
+        out[k] = engine_wheel_torques(
+            float(record[k, 0]), gear_number(float(record[k, 1])), drivetrain, accel[k]
+        )
+    return out

@@ -23,6 +23,23 @@ not need it)::
       type: std_msgs/msg/Float64MultiArray
       indices: [0, 1, 2, 3]   # element of each wheel, order FL, FR, RL, RR
       unit: N m               # N m | kN m
+    torque_source: measured   # measured | engine | none (see below)
+
+Where the wheel torques are not measured, ``torque_source: engine`` derives them from the
+engine torque and the gear (the ``engine_torque`` input; the drivetrain of the vehicle file,
+:mod:`vd_observer_node.estimation.drivetrain`) and ``torque_source: none`` runs without
+torque (Fx, mu and slope invalid); ``wheel_torques`` is then not read::
+
+    torque_source: engine
+    engine_torque:
+      topic: /can/engine
+      type: std_msgs/msg/Float64MultiArray
+      indices: [0, 1, 2]      # engine torque, gear, engine speed (optional 3rd)
+      unit: N m               # of the torque: N m | kN m
+      speed_unit: rpm         # of the engine speed: rad/s | rpm
+
+``engine_torque`` from ``vd_msgs/msg/WheelTorques`` reads its ``engine_torque``, ``gear`` and
+``engine_speed`` (the default: vd's own ``/vd/sensors/wheel_torques``).
 
 Supported types per input (:data:`SUPPORTED_TYPES`): wheel angles from
 ``vd_msgs/msg/WheelAngles``, ``sensor_msgs/msg/JointState`` (position) or
@@ -53,8 +70,11 @@ from vd_sim_node.topics import (
 from vd_observer_node.inputs.errors import MappingError
 
 __all__ = [
+    'ENGINE_INPUT',
     'INPUTS',
+    'SPEED_UNITS',
     'SUPPORTED_TYPES',
+    'TORQUE_SOURCE_KEY',
     'UNITS',
     'InputMapping',
     'InputSpec',
@@ -65,6 +85,12 @@ __all__ = [
 
 #: The cascade's inputs, in the order of a mapping file.
 INPUTS: Final = ('wheel_angles', 'body_speed', 'wheel_torques')
+#: Optional input of the engine path: engine torque, gear and (optionally) engine speed.
+ENGINE_INPUT: Final = 'engine_torque'
+#: Where the wheel torques come from (`drivetrain.TORQUE_SOURCES`): the top-level key.
+TORQUE_SOURCE_KEY: Final = 'torque_source'
+# estimation.drivetrain.TORQUE_SOURCES, spelled again: inputs sit below estimation (tested equal)
+_TORQUE_SOURCES: Final = ('measured', 'engine', 'none')
 
 # vd's own sensor types, as the topic contract gives them
 WHEEL_ANGLES_TYPE: Final = SENSORS[SENSORS_WHEEL_ANGLES]
@@ -78,6 +104,7 @@ SUPPORTED_TYPES: Final[dict[str, tuple[str, ...]]] = {
     'wheel_angles': (WHEEL_ANGLES_TYPE, JOINT_STATE, FLOAT64_ARRAY),
     'body_speed': (TWIST_STAMPED, ODOMETRY, FLOAT64_ARRAY),
     'wheel_torques': (WHEEL_TORQUES_TYPE, JOINT_STATE, FLOAT64_ARRAY),
+    ENGINE_INPUT: (WHEEL_TORQUES_TYPE, FLOAT64_ARRAY),
 }
 
 #: Factor to the SI unit of each input, by unit name; the first is the SI unit (the default).
@@ -85,10 +112,15 @@ UNITS: Final[dict[str, dict[str, float]]] = {
     'wheel_angles': {'rad': 1.0, 'deg': math.pi / 180.0, 'rev': 2.0 * math.pi},
     'body_speed': {'m/s': 1.0, 'km/h': 1.0 / 3.6},
     'wheel_torques': {'N m': 1.0, 'kN m': 1000.0},
+    ENGINE_INPUT: {'N m': 1.0, 'kN m': 1000.0},
 }
+#: Units of the engine speed (``speed_unit`` of ``engine_torque``) and their factor to rad/s.
+SPEED_UNITS: Final = {'rad/s': 1.0, 'rpm': math.pi / 30.0}
 #: Inputs with one value per wheel (the others are one scalar).
 _PER_WHEEL: Final = frozenset({'wheel_angles', 'wheel_torques'})
-_KEYS: Final = frozenset({'topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign'})
+_KEYS: Final = frozenset(
+    {'topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign', 'speed_unit'}
+)
 
 
 @dataclass(frozen=True)
@@ -103,6 +135,7 @@ class InputSpec:
         indices: Float64MultiArray only: the element of FL, FR, RL, RR, or of the scalar.
         factor: multiplies the raw value to give SI units (unit factor times ``scale``).
         sign: shape (4,) per-wheel sign (+1 or -1) for per-wheel inputs, (1,) for a scalar.
+        speed_factor: ``engine_torque`` only: multiplies the engine speed to give rad/s.
     """
 
     name: str
@@ -112,10 +145,14 @@ class InputSpec:
     indices: tuple[int, ...] = ()
     factor: float = 1.0
     sign: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0)
+    speed_factor: float = 1.0
 
     @property
     def width(self) -> int:
-        """Values per sample: 4 for the per-wheel inputs, 1 for the body speed."""
+        """Values per sample: 4 for the per-wheel inputs, 1 for the body speed, 3 for the
+        engine (torque, gear, engine speed)."""
+        if self.name == ENGINE_INPUT:
+            return 3
         return 4 if self.name in _PER_WHEEL else 1
 
 
@@ -128,12 +165,33 @@ class InputMapping:
         body_speed: longitudinal body speed [m/s after conversion].
         wheel_torques: drive minus brake torque per wheel [N m after conversion].
         source: where the mapping was read from ('' for the default).
+        engine_torque: engine torque [N m], gear and engine speed [rad/s], read with
+            ``torque_source`` engine only (default: vd's WheelTorques topic).
+        torque_source: 'measured' (``wheel_torques``), 'engine' (``engine_torque`` through
+            the drivetrain) or 'none' (no torque).
     """
 
     wheel_angles: InputSpec
     body_speed: InputSpec
     wheel_torques: InputSpec
     source: str = ''
+    engine_torque: InputSpec | None = None
+    torque_source: str = 'measured'
+
+    @property
+    def engine(self) -> InputSpec:
+        """The engine input (vd's own WheelTorques topic unless mapped)."""
+        return self.engine_torque or _default_engine()
+
+    @property
+    def used_specs(self) -> tuple[InputSpec, ...]:
+        """The inputs the torque source reads: wheel angles, body speed, and the wheel
+        torques (measured), the engine input (engine) or nothing more (none)."""
+        if self.torque_source == 'engine':
+            return (self.wheel_angles, self.body_speed, self.engine)
+        if self.torque_source == 'none':
+            return (self.wheel_angles, self.body_speed)
+        return self.specs
 
     @property
     def specs(self) -> tuple[InputSpec, InputSpec, InputSpec]:
@@ -143,7 +201,11 @@ class InputMapping:
     @property
     def is_default(self) -> bool:
         """True when it reads vd's own sensor topics with vd's types, unchanged."""
-        return self.specs == default_mapping().specs
+        return (
+            self.specs == default_mapping().specs
+            and self.torque_source == 'measured'
+            and self.engine_torque is None
+        )
 
 
 def default_mapping() -> InputMapping:
@@ -153,6 +215,10 @@ def default_mapping() -> InputMapping:
         body_speed=InputSpec('body_speed', SENSORS_BODY_VELOCITY, TWIST_STAMPED, sign=(1.0,)),
         wheel_torques=InputSpec('wheel_torques', SENSORS_WHEEL_TORQUES, WHEEL_TORQUES_TYPE),
     )
+
+
+def _default_engine() -> InputSpec:
+    return InputSpec(ENGINE_INPUT, SENSORS_WHEEL_TORQUES, WHEEL_TORQUES_TYPE, sign=(1.0,))
 
 
 def _number(where: str, value: Any) -> float:
@@ -179,6 +245,17 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         allowed = ', '.join(SUPPORTED_TYPES[name])
         raise MappingError(f'{where}.type {msgtype!r} is not supported (use one of {allowed})')
     width = 4 if name in _PER_WHEEL else 1
+    speed_factor = 1.0
+    if name == ENGINE_INPUT:
+        speed_unit = data.get('speed_unit', 'rad/s')
+        if speed_unit not in SPEED_UNITS:
+            raise MappingError(
+                f'{where}.speed_unit {speed_unit!r} is unknown (use one of '
+                f'{", ".join(SPEED_UNITS)})'
+            )
+        speed_factor = SPEED_UNITS[speed_unit]
+    elif 'speed_unit' in data:
+        raise MappingError(f'{where}.speed_unit is for {ENGINE_INPUT} only')
     joints: tuple[str, ...] = ()
     indices: tuple[int, ...] = ()
     if msgtype == JOINT_STATE:
@@ -195,12 +272,15 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         raise MappingError(f'{where}.joints is for sensor_msgs/msg/JointState only')
     if msgtype == FLOAT64_ARRAY:
         raw = data.get('indices', list(range(width)))
+        # the engine input: torque and gear, and the engine speed if the array has it
+        sizes = (2, 3) if name == ENGINE_INPUT else (width,)
         if (
             not isinstance(raw, list)
-            or len(raw) != width
+            or len(raw) not in sizes
             or not all(isinstance(i, int) and not isinstance(i, bool) and i >= 0 for i in raw)
         ):
-            raise MappingError(f'{where}.indices must list {width} element indices >= 0')
+            count = ' or '.join(str(k) for k in sizes)
+            raise MappingError(f'{where}.indices must list {count} element indices >= 0')
         indices = tuple(raw)
     elif 'indices' in data:
         raise MappingError(f'{where}.indices is for std_msgs/msg/Float64MultiArray only')
@@ -226,6 +306,7 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         indices=indices,
         factor=UNITS[name][unit] * scale,
         sign=sign,
+        speed_factor=speed_factor,
     )
 
 
@@ -243,18 +324,34 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
         data = {}
     if not isinstance(data, Mapping):
         raise MappingError(f'{source}: expected a mapping of {", ".join(INPUTS)}')
-    unknown = sorted(set(data) - set(INPUTS))
+    keys = (*INPUTS, ENGINE_INPUT, TORQUE_SOURCE_KEY)
+    unknown = sorted(set(data) - set(keys))
     if unknown:
-        raise MappingError(f'{source}: {unknown[0]}: unknown input (use {", ".join(INPUTS)})')
+        raise MappingError(f'{source}: {unknown[0]}: unknown input (use {", ".join(keys)})')
+    torque_source = data.get(TORQUE_SOURCE_KEY, 'measured')
+    if torque_source not in _TORQUE_SOURCES:
+        raise MappingError(
+            f'{source}: {TORQUE_SOURCE_KEY} {torque_source!r} is unknown (use one of '
+            f'{", ".join(_TORQUE_SOURCES)})'
+        )
     default = default_mapping()
     specs = {
         name: _spec(name, data[name], f'{source}: {name}') if name in data else spec
         for name, spec in zip(INPUTS, default.specs, strict=True)
     }
-    topics = [s.topic for s in specs.values()]
+    engine = (
+        _spec(ENGINE_INPUT, data[ENGINE_INPUT], f'{source}: {ENGINE_INPUT}')
+        if ENGINE_INPUT in data
+        else None
+    )
+    mapping = InputMapping(
+        **specs, source=source, engine_torque=engine, torque_source=torque_source
+    )
+    # only the inputs read must differ (the engine input may share vd's torque topic)
+    topics = [s.topic for s in mapping.used_specs]
     if len(set(topics)) != len(topics):
         raise MappingError(f'{source}: two inputs share one topic ({", ".join(topics)})')
-    return InputMapping(**specs, source=source)
+    return mapping
 
 
 def load_input_mapping(path: str | os.PathLike[str]) -> InputMapping:

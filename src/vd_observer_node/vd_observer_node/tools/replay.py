@@ -59,10 +59,16 @@ from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.estimation.drivetrain import (
+    TORQUE_SOURCES,
+    Drivetrain,
+    engine_wheel_torques_record,
+    torque_source_code,
+)
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
-from vd_observer_node.inputs.decode import decode_input
+from vd_observer_node.inputs.decode import InputSeries, decode_engine, decode_input
 from vd_observer_node.inputs.mapping import InputMapping, default_mapping
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
@@ -108,6 +114,9 @@ class ReplayReport:
         unmatched: sensor messages whose stamp is missing on another sensor topic.
         situation_time_s: [s] wall time of the situation monitor (alerts and friction
             potential; 0 when not run).
+        torque_source: the torque path: 'measured', 'engine' or 'none'.
+        torque_valid_fraction: share of the samples where the torque path held (1 when
+            measured, 0 with none, below 1 on the engine path while the clutch slipped).
     """
 
     samples: int
@@ -118,6 +127,8 @@ class ReplayReport:
     cascade_time_s: float
     unmatched: int
     situation_time_s: float = 0.0
+    torque_source: str = 'measured'
+    torque_valid_fraction: float = 1.0
 
     @property
     def real_time_factor(self) -> float:
@@ -352,6 +363,8 @@ def replay_bag(
     situation_config: SituationConfig | None = None,
     kernel: str = 'compiled',
     mapping: InputMapping | None = None,
+    torque_source: str | None = None,
+    drivetrain: Drivetrain | None = None,
 ) -> ReplayReport:
     """Replay a bag's sensor topics through the cascade and write inputs, truth and estimates.
 
@@ -380,6 +393,12 @@ def replay_bag(
         mapping: which topics, types, joints, units and signs are the wheel angles, body
             speed and wheel torques (:mod:`vd_observer_node.inputs.mapping`); default vd's
             own ``/vd/sensors/*`` topics.
+        torque_source: 'measured' (the wheel torques), 'engine' (wheel torques from the
+            engine torque and gear of the mapping's ``engine_torque`` input, by default
+            vd's WheelTorques topic, through `drivetrain`) or 'none' (no torque topic is
+            read; Fx, mu and slope invalid); None: the mapping's ``torque_source``.
+        drivetrain: the engine path's driveline; default that of ``vehicle_file``
+            (`Drivetrain.from_params`).
 
     Raises:
         ReplayInputError: a sensor topic is missing or has the wrong type.
@@ -405,7 +424,11 @@ def replay_bag(
     reader = BagReader(in_bag)
     topics = reader.topics
     mapping = mapping or default_mapping()
-    for spec in mapping.specs:
+    if torque_source is not None:
+        torque_source_code(torque_source)  # refuses an unknown name
+        mapping = replace(mapping, torque_source=torque_source)
+    source = mapping.torque_source
+    for spec in mapping.used_specs:
         info = topics.get(spec.topic)
         origin = f' ({mapping.source}: {spec.name})' if mapping.source else ''
         if info is None or info.message_count == 0:
@@ -414,11 +437,13 @@ def replay_bag(
             raise ReplayInputError(
                 f'{in_bag}: {spec.topic} has type {info.msgtype}, need {spec.msgtype}{origin}'
             )
-    inputs = [spec.topic for spec in mapping.specs]
+    inputs = [spec.topic for spec in mapping.used_specs]
     truth = [t for t in topics if t.startswith(TRUTH_PREFIX)]
     # One read of the file gives the estimator vehicle and the tyre alike (a millisecond).
     params = load_vehicle_params(vehicle_file)
     estimator_vehicle = vehicle or EstimatorVehicle.from_params(params)
+    if source == 'engine' and drivetrain is None:
+        drivetrain = Drivetrain.from_params(params)
     monitor = None
     if situation:
         tire = params.tire
@@ -452,15 +477,34 @@ def replay_bag(
         for topic, arr in reader.topic_arrays([*inputs, *truth]).items():
             arrays[topic] = arr
             bar.update(len(arr.datas))
-        angles, speed, torque = (decode_input(s, arrays[s.topic]) for s in mapping.specs)
-        common, (ia, iv, it) = _align([angles.stamp_ns, speed.stamp_ns, torque.stamp_ns])
-        sensor_count = len(angles.stamp_ns) + len(speed.stamp_ns) + len(torque.stamp_ns)
+        angles = decode_input(mapping.wheel_angles, arrays[mapping.wheel_angles.topic])
+        speed = decode_input(mapping.body_speed, arrays[mapping.body_speed.topic])
+        series: list[InputSeries] = [angles, speed]
+        if source == 'measured':
+            series.append(decode_input(mapping.wheel_torques, arrays[mapping.wheel_torques.topic]))
+        elif source == 'engine':
+            series.append(decode_engine(mapping.engine, arrays[mapping.engine.topic]))
+        common, index = _align([s.stamp_ns for s in series])
+        sensor_count = sum(len(s.stamp_ns) for s in series)
         bar.set_postfix_str(f'cascade on {len(common)} samples')
         cascade_start = time.perf_counter()
         t = common.astype(np.float64) * 1e-9
+        ia = index[0]
         wheel_angle = angles.values[ia]
-        body_speed = speed.values[iv, 0]
-        wheel_torque = torque.values[it]
+        body_speed = speed.values[index[1], 0]
+        wheel_torque = (
+            series[2].values[index[2]] if source == 'measured' else np.zeros((len(t), 4))
+        )
+        engine = series[2].values[index[2]] if source == 'engine' else None
+        extra = dict(cascade_kwargs or {})
+        clash = sorted({'torque_source', 'engine', 'drivetrain'} & set(extra))
+        if clash:
+            raise ConfigurationError(
+                f'cascade settings: {clash[0]} is set by the torque source, not the config'
+            )
+        torque_kwargs: dict[str, Any] = {}
+        if source != 'measured':  # the default call stays as it was (injected cascades)
+            torque_kwargs = {'torque_source': source, 'engine': engine, 'drivetrain': drivetrain}
         result = cascade(
             t,
             wheel_angle,
@@ -469,9 +513,15 @@ def replay_bag(
             estimator_vehicle,
             observer_config,
             estimator_config,
-            **dict(cascade_kwargs or {}),
+            **torque_kwargs,
+            **extra,
         )
         cascade_time = time.perf_counter() - cascade_start
+        if engine is not None and drivetrain is not None:
+            # the situation monitor gets the torques the engine path gave the estimator
+            # (0 where the path had none: a gear the box lacks)
+            derived = engine_wheel_torques_record(engine, drivetrain, result.omega_dot)
+            wheel_torque = np.where(np.isfinite(derived), derived, 0.0)
         situation_values: dict[str, dict[str, np.ndarray]] = {}
         situation_time = [0.0]
         failure: list[BaseException] = []
@@ -557,8 +607,10 @@ def replay_bag(
         bag_duration_s=float(sensor_log.max() - sensor_log.min()) * 1e-9,
         wall_time_s=wall,
         cascade_time_s=cascade_time,
-        unmatched=sensor_count - 3 * len(common),
+        unmatched=sensor_count - len(series) * len(common),
         situation_time_s=situation_time[0],
+        torque_source=TORQUE_SOURCES[result.torque_source],
+        torque_valid_fraction=float(np.mean(result.torque_valid)) if len(common) else 0.0,
     )
 
 
