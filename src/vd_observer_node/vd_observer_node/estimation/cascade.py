@@ -6,6 +6,7 @@ offline figures are those the nodes would produce on the same stamps.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -160,7 +161,8 @@ def run_cascade(
             filtered speed.
         torque_source: 'measured' (wheel_torque), 'engine' (wheel torques from `engine`
             with `drivetrain.engine_wheel_torques`, using the wheel observer's omega_dot for
-            the engine-inertia term; invalid where `drivetrain.clutch_engaged` is False) or
+            the engine-inertia term; invalid where `drivetrain.clutch_engaged` is False and
+            for `Drivetrain.clutch_settle_time` after it was, or after a gear change) or
             'none' (wheel_torque ignored; Fx 0, mu and slope invalid).
         engine: shape (N, 3): engine torque [N m], gear (0 neutral, -1 reverse), engine speed
             [rad/s] (nan if not measured); needed by the engine path only.
@@ -185,6 +187,8 @@ def run_cascade(
     wheel_valid = np.zeros((n, 4), dtype=bool)
     slope_valid = np.zeros(n, dtype=bool)
     torque_valid = np.full(n, source != torque_source_code('none'))
+    # engine path: when the clutch last slipped or the gear changed, and the last gear
+    last_unsettled, last_gear = -math.inf, None
     use_measured = estimator_speed == 'measured'
     for k in range(n):
         tk = float(stamps[k])
@@ -196,7 +200,11 @@ def run_cascade(
             engine_torque, gear, engine_speed = engine_record[k]
             gear_code = gear_number(float(gear))  # no gear at all: nan torques, a fault
             torque = engine_wheel_torques(engine_torque, gear_code, drivetrain, wheel.omega_dot)
-            torque_ok = clutch_engaged(engine_speed, gear_code, wheel.omega, drivetrain)
+            engaged = clutch_engaged(engine_speed, gear_code, wheel.omega, drivetrain)
+            if not engaged or gear_code != last_gear:
+                last_unsettled = tk
+            last_gear = gear_code
+            torque_ok = engaged and tk - last_unsettled >= drivetrain.clutch_settle_time
             torque_valid[k] = torque_ok
         est = estimator.update(
             tk, wheel.omega, wheel.omega_dot, speed, body.accel, torque, torque_ok

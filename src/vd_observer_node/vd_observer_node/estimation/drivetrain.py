@@ -110,6 +110,10 @@ class Drivetrain:
             where the engine speed differs from i * mean(omega of the driven wheels) by more
             than this; the simulator's closed clutch slips by ~0.5 rad/s, a launch by
             hundreds.
+        clutch_settle_time: [s] the engine path stays invalid this long after the clutch
+            last slipped or the gear changed: the clutch reaches the slip threshold while its
+            torque is still settling (the launch, the engagement after a shift), and the
+            wheel torque is then off by up to a few hundred N m for ~0.2 s.
     """
 
     ratios: tuple[float, ...]
@@ -119,6 +123,7 @@ class Drivetrain:
     driven_axle: str = 'front'
     engine_inertia: float = 0.0
     max_clutch_slip: float = 2.0
+    clutch_settle_time: float = 0.3
 
     def __post_init__(self) -> None:
         numbers = {
@@ -140,7 +145,7 @@ class Drivetrain:
                 f'Drivetrain.driven_axle must be one of {", ".join(DRIVEN_AXLES)}, '
                 f'got {self.driven_axle!r}'
             )
-        for name in ('engine_inertia', 'max_clutch_slip'):
+        for name in ('engine_inertia', 'max_clutch_slip', 'clutch_settle_time'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ConfigurationError(f'Drivetrain.{name} must be >= 0, got {value}')
@@ -190,7 +195,7 @@ class Drivetrain:
 
     def params_array(self) -> FloatArray:
         """The compiled twin's parameters:
-        [n, final, reverse, eta, J_e, max slip, driven (4), ratios (n)]."""
+        [n, final, reverse, eta, J_e, max slip, settle time, driven (4), ratios (n)]."""
         return np.array(
             [
                 float(len(self.ratios)),
@@ -199,6 +204,7 @@ class Drivetrain:
                 self.efficiency,
                 self.engine_inertia,
                 self.max_clutch_slip,
+                self.clutch_settle_time,
                 *self.driven.tolist(),
                 *self.ratios,
             ]

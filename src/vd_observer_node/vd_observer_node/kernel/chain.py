@@ -98,15 +98,16 @@ def _cascade_step(
     eprm: FloatArray, escal: FloatArray, held: FloatArray, fst: FloatArray, fpr: FloatArray,
     fme: FloatArray, sst: FloatArray, spr: FloatArray, sme: FloatArray, vst: FloatArray,
     vpr: FloatArray, vme: FloatArray, last: FloatArray, ecnt: NDArray[np.int64],
-    measured: bool, dprm: FloatArray, t: float, angle: FloatArray, speed: float,
-    torque: FloatArray, engine: FloatArray, wheel: FloatArray, wheel_valid: BoolArray,
-    body: FloatArray, body_valid: BoolArray, est: FloatArray,
+    measured: bool, dprm: FloatArray, escl: FloatArray, t: float, angle: FloatArray,
+    speed: float, torque: FloatArray, engine: FloatArray, wheel: FloatArray,
+    wheel_valid: BoolArray, body: FloatArray, body_valid: BoolArray, est: FloatArray,
 ) -> bool:  # fmt: skip
     """One stamp of `run_cascade`: wheel and speed observers, then the estimator.
 
     With the engine path (``dprm`` non-empty) the wheel torques come from ``engine``
     (engine torque, gear, engine speed) instead of ``torque``; returns whether the torque
-    source held (`CascadeResult.torque_valid`).
+    source held (`CascadeResult.torque_valid`). ``escl`` (2,) is the engine path's state:
+    the stamp the clutch last slipped or the gear changed (-inf before), the last gear (nan).
     """
     diff_update(wprm, wlip, wz, wfl, wact, wpt, wpf, wsc, wcnt, t, angle, wheel, wheel_valid)
     sample = np.empty(1)
@@ -117,9 +118,13 @@ def _cascade_step(
     torque_ok = True
     if dprm.shape[0] > 0:
         wheel_torque = np.empty(4)
-        torque_ok = engine_torques(
+        engaged = engine_torques(
             dprm, engine[0], engine[1], engine[2], wheel[1], wheel[2], wheel_torque
         )
+        if not engaged or engine[1] != escl[1]:
+            escl[0] = t
+        escl[1] = engine[1]
+        torque_ok = engaged and t - escl[0] >= dprm[6]
     estimator_update(
         eprm, escal, held, fst, fpr, fme, sst, spr, sme, vst, vpr, vme, last, ecnt, t,
         wheel[1], wheel[2], v_est, body[1, 0], wheel_torque, torque_ok, est,
@@ -143,11 +148,12 @@ def _cascade_block(
     """`_cascade_step` over N stamps; wheel (N, 3, 4), body (N, 3), est (N, EST_SIZE)."""
     body1 = np.empty((3, 1))
     body_valid = np.empty(1, dtype=np.bool_)
+    escl = np.array([-np.inf, np.nan])
     for k in range(t.shape[0]):
         torque_valid[k] = _cascade_step(
             wprm, wlip, wz, wfl, wact, wpt, wpf, wsc, wcnt, sprm, slip_, sz, sfl, sact, spt,
             spf, ssc, scnt, eprm, escal, held, fst, fpr, fme, sst, spr, sme, vst, vpr, vme,
-            last, ecnt, measured, dprm, t[k], angles[k], speeds[k], torques[k], engine[k],
+            last, ecnt, measured, dprm, escl, t[k], angles[k], speeds[k], torques[k], engine[k],
             wheel[k], wheel_valid[k], body1, body_valid, est[k],
         )  # fmt: skip
         body[k, 0] = body1[0, 0]
@@ -353,6 +359,7 @@ class CompiledChain:
         self._est = np.zeros(EST_SIZE)
         self._no_drivetrain = np.zeros(0)
         self._no_engine = np.zeros(3)
+        self._no_state = np.zeros(2)
 
     def update(
         self, t: float, wheel_angle: ArrayLike, speed: float, wheel_torque: ArrayLike
@@ -372,8 +379,9 @@ class CompiledChain:
         step: Any = _cascade_step  # its leading arguments come as one tuple
         wheel, body, est = self._wheel, self._body, self._est
         step(
-            *self._args, self._measured, self._no_drivetrain, float(t), angles, float(speed),
-            torques, self._no_engine, wheel, self._wheel_valid, body, self._body_valid, est,
+            *self._args, self._measured, self._no_drivetrain, self._no_state, float(t), angles,
+            float(speed), torques, self._no_engine, wheel, self._wheel_valid, body,
+            self._body_valid, est,
         )  # fmt: skip
         mu_valid = est[E_MU_VALID : E_MU_VALID + 4] != 0.0
         monitor = self.monitor

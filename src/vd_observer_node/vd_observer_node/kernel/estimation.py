@@ -180,7 +180,8 @@ def engine_torques(
     """`engine_wheel_torques` into ``out`` (4,); returns `clutch_engaged`.
 
     ``dprm`` is `Drivetrain.params_array`: [n, final, reverse, eta, J_e, max slip,
-    driven (4), ratios (n)]; the gear comes as a float and goes through `gear_number`.
+    settle time, driven (4), ratios (n)]; the gear comes as a float and goes through
+    `gear_number`. The settle time is the caller's (`kernel.chain._cascade_step`).
     """
     n_gears = int(dprm[0])
     ratio = math.nan
@@ -191,26 +192,26 @@ def engine_torques(
         elif gear == -1:
             ratio = -dprm[2] * dprm[1]
         elif 1 <= gear <= n_gears:
-            ratio = dprm[10 + gear - 1] * dprm[1]
+            ratio = dprm[11 + gear - 1] * dprm[1]
     if not math.isfinite(ratio):
         out[:] = math.nan
         return False
     if ratio == 0.0:
         out[:] = 0.0
         return True
-    n_driven = dprm[6] + dprm[7] + dprm[8] + dprm[9]
+    n_driven = dprm[7] + dprm[8] + dprm[9] + dprm[10]
     carrier_accel = 0.0
     carrier_speed = 0.0
     for i in range(4):
-        carrier_accel += dprm[6 + i] * omega_dot[i]
-        carrier_speed += dprm[6 + i] * omega[i]
+        carrier_accel += dprm[7 + i] * omega_dot[i]
+        carrier_speed += dprm[7 + i] * omega[i]
     if math.isfinite(engine_torque):
         clutch = engine_torque - dprm[4] * ratio * (carrier_accel / n_driven)
         total = ratio * clutch
         eta = dprm[3]
         total = total * eta if clutch >= 0.0 else total / eta
         for i in range(4):
-            out[i] = total * dprm[6 + i] / n_driven
+            out[i] = total * dprm[7 + i] / n_driven
     else:
         out[:] = math.nan
     if not math.isfinite(engine_speed):
