@@ -266,3 +266,22 @@ def test_engine_path_needs_its_inputs() -> None:
             run(*args, torque_source='engine', engine=np.zeros((3, 3)), drivetrain=DRIVETRAIN)
         with pytest.raises(ConfigurationError):
             run(*args, torque_source='wheel')
+
+
+def test_engine_path_while_braking() -> None:
+    """The engine path cannot see the brakes: its Fx is too high by the brake force. Braking
+    at 0.6 g leaves the force balance no plausible slope, which clears mu and slope; at
+    0.2 g (on the mu 0.3 patch) the balance reads a wrong uphill grade instead (documented
+    in docs/estimation.md, measured here)."""
+    sim = sim_run('braking_low_mu', 25.0)
+    eng = cascades(sim, 'engine', engine_record(sim))
+    moving = np.abs(sim.speed_true) > 0.5
+    braking = moving & (sim.brake_torque.max(axis=1) > 0.0)
+    assert float(np.mean((eng.fx - sim.fx)[braking])) > 500.0  # N per wheel
+    hard = moving & (((sim.t > 13.3) & (sim.t < 15.0)) | ((sim.t > 17.3) & (sim.t < 18.0)))
+    assert float(np.mean(sim.accel_true[hard])) < -5.5
+    assert not eng.mu_valid[hard].any() and not eng.slope_valid[hard].any()
+    light = moving & (sim.t > 15.3) & (sim.t < 17.0)
+    assert eng.slope_valid[light].any()
+    wrong = light & eng.slope_valid
+    assert float(np.min(eng.slope[wrong] - sim.slope[wrong])) > math.radians(5.0)

@@ -26,7 +26,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation import formulas as phys
-from vd_observer_node.estimation.drivetrain import TORQUE_MEASURED, TORQUE_NONE, TORQUE_SOURCES
+from vd_observer_node.estimation.drivetrain import (
+    TORQUE_ENGINE,
+    TORQUE_MEASURED,
+    TORQUE_NONE,
+    TORQUE_SOURCES,
+)
 from vd_observer_node.estimation.faults import ESTIMATOR_FAULTS, FaultCounter
 from vd_observer_node.estimation.filters import LowPass
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
@@ -359,6 +364,11 @@ class Estimator:
             sine = net_f / weight
             self.faults.count('arcsin_domain' if abs(sine) > 1.0 else 'slope_out_of_range')
         slope_valid = bool(in_range) and usable
+        if self.torque_source == TORQUE_ENGINE and usable and not in_range:
+            # The balance needs a force the engine path cannot know of (the brakes): the
+            # torques are wrong, so is mu.
+            mu_valid = np.zeros(4, dtype=bool)
+            mu = np.zeros(4)
         if slope_valid:
             # An invalid stamp keeps the last valid slope (it is published as invalid).
             self._slope = float(slope)

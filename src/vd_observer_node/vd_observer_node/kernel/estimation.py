@@ -28,7 +28,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.estimation.drivetrain import TORQUE_MEASURED, TORQUE_NONE, TORQUE_SOURCES
+from vd_observer_node.estimation.drivetrain import (
+    TORQUE_ENGINE,
+    TORQUE_MEASURED,
+    TORQUE_NONE,
+    TORQUE_SOURCES,
+)
 from vd_observer_node.estimation.estimator import (
     LOAD_TRANSFER_SOURCES,
     SLOPE_ACCEL_SOURCES,
@@ -401,6 +406,10 @@ def _estimate(
     if usable and not in_range:
         counts[_ARCSIN if abs(sine) > 1.0 else _SLOPE_RANGE] += 1
     slope_valid = in_range and usable
+    if int(prm[_TORQUE_SOURCE]) == TORQUE_ENGINE and usable and not in_range:
+        for i in range(4):  # a force the engine path cannot know of (the brakes)
+            est[E_MU_VALID + i] = 0.0
+            est[E_MU + i] = 0.0
     if slope_valid:
         scal[1] = math.asin(sine)
     est[E_T] = t
