@@ -28,6 +28,7 @@ from vd_sim_node.topics import (
     ESTIMATES_FRICTION,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
+    SENSORS_WHEEL_ANGLES,
     SENSORS_WHEEL_TORQUES,
 )
 from vd_sim_node.vehicle.params import default_vehicle_file, load_vehicle
@@ -104,7 +105,7 @@ def test_mapping_refusals_name_the_key() -> None:
     refused(
         {
             'torque_source': 'engine',
-            'engine_torque': {**engine, 'topic': '/vd/sensors/wheel_angles'},
+            'engine_torque': {**engine, 'topic': SENSORS_WHEEL_ANGLES},
         },
         r'two inputs share one topic',
     )
