@@ -7,7 +7,10 @@ Prints, per message [us] (median of repeated runs, CPU of this one process):
 2. encode: building a message from numpy arrays + rclpy's serialization, against
    `MessageCodec.encode`;
 3. publish: `Publisher.publish(msg)` against `Publisher.publish(bytes)` (one subscriber);
-4. receive: the executor's cost per delivered message (wait set, take, callback), typed and
+4. mapped inputs: `inputs.decode.InputDecoder.decode` of one message of each input type the
+   live nodes take through an input mapping (vd's WheelAngles through its struct codec,
+   JointState, Odometry and Float64MultiArray through rosbags and the replay's extractors);
+5. receive: the executor's cost per delivered message (wait set, take, callback), typed and
    raw subscriptions, SingleThreadedExecutor and the experimental EventsExecutor: K messages
    are published first, then the executor is timed until it has delivered all of them.
 
@@ -75,6 +78,44 @@ def codec_figures() -> None:
     typed = per_call_us(typed_encode)
     lean = per_call_us(raw_encode)
     print(f'encode WheelStates      rclpy {typed:6.2f} us   raw codec {lean:6.2f} us')
+
+
+def mapped_input_figures() -> None:
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    from vd_observer_node.inputs.decode import InputDecoder
+    from vd_observer_node.inputs.mapping import default_mapping, mapping_from_dict
+
+    joints = ['wheel_fl', 'wheel_fr', 'wheel_rl', 'wheel_rr']
+    user = mapping_from_dict(
+        {
+            'wheel_angles': {
+                'topic': '/joint_states',
+                'type': 'sensor_msgs/msg/JointState',
+                'joints': joints,
+                'sign': [1, -1, 1, -1],
+            },
+            'body_speed': {'topic': '/odom', 'type': 'nav_msgs/msg/Odometry'},
+            'wheel_torques': {'topic': '/t', 'type': 'std_msgs/msg/Float64MultiArray'},
+        }
+    )
+    angles = WheelAngles()
+    angles.angle = [1.0, 2.0, 3.0, 4.0]
+    states = JointState(name=['steering', *joints], position=[0.0, 1.0, 2.0, 3.0, 4.0])
+    odom = Odometry()
+    odom.twist.twist.linear.x = 10.0
+    array = Float64MultiArray(data=[1.0, 2.0, 3.0, 4.0])
+    for spec, msg in (
+        (default_mapping().wheel_angles, angles),
+        (user.wheel_angles, states),
+        (user.body_speed, odom),
+        (user.wheel_torques, array),
+    ):
+        decoder = InputDecoder(spec)
+        data = serialize_message(msg)
+        cost = per_call_us(lambda d=decoder, b=data: d.decode(b, 0), n=5000)
+        print(f'mapped input {spec.msgtype:<32} {cost:6.2f} us')
 
 
 def wait_for_one_subscriber(pub: object, count: int = 1, timeout: float = 10.0) -> None:
@@ -151,6 +192,7 @@ def receive_cost(raw: bool, make: Callable[[], object], n: int, data: bytes) -> 
 def main() -> None:
     print(f'load average {os.getloadavg()[0]:.2f} (figures taken above ~1.5 are not figures)')
     codec_figures()
+    mapped_input_figures()
     rclpy.init()
     try:
         publish_and_receive_figures()

@@ -39,6 +39,9 @@ def render(package: str, node: str) -> str:
         note = ' '.join(spec.description.split())
         if spec.choices or spec.low is not None or spec.high is not None:
             note += f' (allowed: {spec.allowed()})'
+        if spec.default is None:  # unset by default: shown commented out
+            lines += [f'    # {note}', f'    # {spec.name}:']
+            continue
         if isinstance(spec.default, str):
             value = repr(spec.default)
         else:

@@ -20,7 +20,7 @@ OBSERVER_LAYERS: dict[str, set[str]] = {
     'bag': {'errors'},
     'estimation': {'errors'},
     'situation': {'errors', 'estimation'},
-    'inputs': {'errors', 'bag'},
+    'inputs': {'errors', 'bag', 'estimation'},
     # the per-stamp chain picks its compiled twin, which implements the chain's interface
     'chain': {'errors', 'estimation', 'situation', 'kernel'},
     'kernel': {'errors', 'estimation', 'situation', 'chain'},

@@ -182,7 +182,11 @@ def test_sensor_faults_through_the_live_nodes(procs: RosProcessGroup, tmp_path: 
     warned = [d for d in got['diag'] if d['level'] == 1]
     assert any('time_jump_back' in d['message'] for d in warned), got['diag']
     assert any('gap' in d['message'] for d in warned), got['diag']
-    assert _last_diag(got['diag'], 'vd: observer')['level'] == 0  # the faults are over
+    # The faults are over; only the end of the feed may show, as inputs that stopped arriving.
+    last = _last_diag(got['diag'], 'vd: observer')
+    assert last['level'] == 0 or all(
+        'stopped: no message for' in part for part in last['message'].split('; ')
+    ), last
     # Recovery: after the loop the live estimates are exactly the offline cascade's on the
     # same messages, and the flags are set again.
     from vd_observer_node.estimation.cascade import run_cascade

@@ -17,6 +17,9 @@ setup(
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
     install_requires=['setuptools'],
+    # `vd fleet --engine dask` / `--scheduler`: the fleet replay on a Dask cluster (the local
+    # process pool needs nothing more). The dev set-up installs it (requirements/python.in).
+    extras_require={'fleet': ['distributed']},
     zip_safe=True,
     maintainer='vd maintainers',
     maintainer_email='maintainers@vd-project.org',

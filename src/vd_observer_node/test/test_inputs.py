@@ -11,7 +11,7 @@ import pytest
 from vd_observer_node.bag import BagReader, BagWriter
 from vd_observer_node.bag.errors import ReplayInputError
 from vd_observer_node.bag.reader import TopicArrays
-from vd_observer_node.bag.typestore import message_class, serialize
+from vd_observer_node.bag.typestore import serialize
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.inputs.decode import decode_input
 from vd_observer_node.inputs.errors import MappingError
@@ -20,11 +20,13 @@ from vd_observer_node.inputs.mapping import (
     load_input_mapping,
     mapping_from_dict,
 )
+from vd_observer_node.testing.standard_bags import float64_array, joint_state, odometry
 from vd_observer_node.testing.synthetic_bags import synthetic_drive
 from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
-from vd_sim_node.topics import SENSORS_WHEEL_ANGLES
+from vd_sim_node.topics import SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES
 
 NS = 1_000_000_000
+FLOAT64 = 'std_msgs/msg/Float64MultiArray'
 JOINTS = ['wheel_fl', 'wheel_fr', 'wheel_rl', 'wheel_rr']
 #: as a URDF robot publishes them: another order, and a joint vd does not use
 PUBLISHED_JOINTS = ['steering', 'wheel_rr', 'wheel_fl', 'wheel_rl', 'wheel_fr']
@@ -45,44 +47,13 @@ USER_MAPPING = {
 }
 
 
-def _header(stamp_ns: int, frame: str = 'base_link') -> Any:
-    time_cls = message_class('builtin_interfaces/msg/Time')
-    stamp = time_cls(sec=stamp_ns // NS, nanosec=stamp_ns % NS)
-    return message_class('std_msgs/msg/Header')(stamp=stamp, frame_id=frame)
-
-
-def _joint_state(stamp_ns: int, position: list[float], effort: list[float] | None = None) -> Any:
-    return message_class('sensor_msgs/msg/JointState')(
-        header=_header(stamp_ns),
-        name=list(PUBLISHED_JOINTS),
-        position=np.array(position, dtype=np.float64),
-        velocity=np.zeros(0),
-        effort=np.array(effort or [], dtype=np.float64),
-    )
-
-
-def _float_array(values: list[float]) -> Any:
-    layout = message_class('std_msgs/msg/MultiArrayLayout')(dim=[], data_offset=0)
-    return message_class('std_msgs/msg/Float64MultiArray')(
-        layout=layout, data=np.array(values, dtype=np.float64)
-    )
-
-
-def _odometry(stamp_ns: int, speed: float) -> Any:
-    vec = message_class('geometry_msgs/msg/Vector3')
-    twist = message_class('geometry_msgs/msg/Twist')(
-        linear=vec(x=speed, y=0.0, z=0.0), angular=vec(x=0.0, y=0.0, z=0.0)
-    )
-    point = message_class('geometry_msgs/msg/Point')(x=0.0, y=0.0, z=0.0)
-    quat = message_class('geometry_msgs/msg/Quaternion')(x=0.0, y=0.0, z=0.0, w=1.0)
-    pose = message_class('geometry_msgs/msg/Pose')(position=point, orientation=quat)
-    cov = np.zeros(36)
-    return message_class('nav_msgs/msg/Odometry')(
-        header=_header(stamp_ns, 'odom'),
-        child_frame_id='base_link',
-        pose=message_class('geometry_msgs/msg/PoseWithCovariance')(pose=pose, covariance=cov),
-        twist=message_class('geometry_msgs/msg/TwistWithCovariance')(twist=twist, covariance=cov),
-    )
+def _joint_state(
+    stamp_ns: int,
+    position: list[float],
+    effort: list[float] | None = None,
+    velocity: list[float] | None = None,
+) -> Any:
+    return joint_state(stamp_ns, PUBLISHED_JOINTS, position, velocity or (), effort or ())
 
 
 def _arrays(msgtype: str, msgs: list[Any], log_ns: list[int]) -> TopicArrays:
@@ -96,7 +67,7 @@ def test_the_default_mapping_reads_vds_own_topics() -> None:
     mapping = mapping_from_dict({})
     assert mapping.specs == default_mapping().specs
     assert mapping.is_default
-    assert mapping.wheel_angles.topic == SENSORS_WHEEL_ANGLES
+    assert mapping.wheels.topic == SENSORS_WHEEL_ANGLES
 
 
 def test_a_mapping_file_is_read_with_units_signs_and_joints(tmp_path: Path) -> None:
@@ -113,9 +84,9 @@ def test_a_mapping_file_is_read_with_units_signs_and_joints(tmp_path: Path) -> N
     )
     mapping = load_input_mapping(path)
     assert not mapping.is_default
-    assert mapping.wheel_angles.joints == tuple(JOINTS)
-    assert mapping.wheel_angles.factor == pytest.approx(math.pi / 180.0, rel=1e-15)
-    assert mapping.wheel_angles.sign == (1.0, -1.0, 1.0, -1.0)
+    assert mapping.wheels.joints == tuple(JOINTS)
+    assert mapping.wheels.factor == pytest.approx(math.pi / 180.0, rel=1e-15)
+    assert mapping.wheels.sign == (1.0, -1.0, 1.0, -1.0)
     assert mapping.body_speed.factor == pytest.approx(1 / 3.6, rel=1e-15)
     assert mapping.wheel_torques.indices == (0, 1, 2, 3)  # the default order
     assert mapping.wheel_torques.factor == 0.5
@@ -179,8 +150,26 @@ def test_a_mapping_file_is_read_with_units_signs_and_joints(tmp_path: Path) -> N
         ),
         (
             {'body_speed': {'topic': SENSORS_WHEEL_ANGLES, 'type': 'nav_msgs/msg/Odometry'}},
-            'two inputs share one topic',
+            f'body_speed.type: {SENSORS_WHEEL_ANGLES} is also mapped as vd_msgs/msg/WheelAngles',
         ),
+        (
+            {
+                'wheel_angles': USER_MAPPING['wheel_angles'],
+                'wheel_speeds': {'topic': '/w', 'type': 'std_msgs/msg/Float64MultiArray'},
+            },
+            'wheel_speeds: give wheel_angles or wheel_speeds, not both',
+        ),
+        (
+            {'wheel_speeds': {'topic': '/w', 'type': 'vd_msgs/msg/WheelAngles'}},
+            "wheel_speeds.type 'vd_msgs/msg/WheelAngles' is not supported",
+        ),
+        (
+            {'wheel_speeds': {'topic': '/w', 'type': FLOAT64, 'unit': 'mph'}},
+            "wheel_speeds.unit 'mph' is unknown (use one of rad/s, rpm, deg/s, m/s, km/h)",
+        ),
+        ({'alignment': 'nearest'}, "alignment 'nearest' is unknown (use one of exact, latest)"),
+        ({'max_age': -1}, 'max_age must be > 0 s'),
+        ({'max_age': 'long'}, 'max_age must be a finite number'),
         ([1, 2], 'expected a mapping'),
     ],
 )
@@ -224,9 +213,7 @@ def test_joint_state_positions_are_picked_by_name_converted_and_signed() -> None
         _joint_state(5 * NS + 10, [0.5, 40.0, 10.0, 30.0, -20.0]),
         _joint_state(5 * NS + 20, [0.5, 41.0, 11.0, 31.0, -21.0]),
     ]
-    series = decode_input(
-        mapping.wheel_angles, _arrays(mapping.wheel_angles.msgtype, msgs, [0, 0])
-    )
+    series = decode_input(mapping.wheels, _arrays(mapping.wheels.msgtype, msgs, [0, 0]))
     np.testing.assert_array_equal(series.stamp_ns, [5 * NS + 10, 5 * NS + 20])
     expected = np.radians([[10.0, 20.0, 30.0, -40.0], [11.0, 21.0, 31.0, -41.0]])
     np.testing.assert_allclose(series.values, expected, rtol=1e-15, atol=0)
@@ -253,7 +240,7 @@ def test_odometry_and_float64_arrays_decode_with_their_stamps() -> None:
     mapping = mapping_from_dict(USER_MAPPING)
     odom = decode_input(
         mapping.body_speed,
-        _arrays('nav_msgs/msg/Odometry', [_odometry(3 * NS, 12.5)], [3 * NS + 999]),
+        _arrays('nav_msgs/msg/Odometry', [odometry(3 * NS, 12.5)], [3 * NS + 999]),
     )
     np.testing.assert_array_equal(odom.stamp_ns, [3 * NS])  # the header stamp
     np.testing.assert_array_equal(odom.values, [[12.5]])
@@ -261,7 +248,7 @@ def test_odometry_and_float64_arrays_decode_with_their_stamps() -> None:
         mapping.wheel_torques,
         _arrays(
             'std_msgs/msg/Float64MultiArray',
-            [_float_array([4.0, 3.0, 2.0, 1.0, 99.0])],
+            [float64_array([4.0, 3.0, 2.0, 1.0, 99.0])],
             [7 * NS],
         ),
     )
@@ -272,7 +259,7 @@ def test_odometry_and_float64_arrays_decode_with_their_stamps() -> None:
 def test_data_that_does_not_fit_the_mapping_names_the_key() -> None:
     mapping = mapping_from_dict(USER_MAPPING)
     other = dict(USER_MAPPING['wheel_angles'], joints=['wheel_fl', 'wheel_fr', 'x', 'wheel_rr'])
-    spec = mapping_from_dict({'wheel_angles': other}).wheel_angles
+    spec = mapping_from_dict({'wheel_angles': other}).wheels
     msgs = [_joint_state(NS, [0.0] * 5)]
     with pytest.raises(MappingError, match=r"wheel_angles.joints: 'x' is not among the joints"):
         decode_input(spec, _arrays('sensor_msgs/msg/JointState', msgs, [0]))
@@ -281,9 +268,47 @@ def test_data_that_does_not_fit_the_mapping_names_the_key() -> None:
     ).wheel_torques
     with pytest.raises(MappingError, match='carry no effort'):
         decode_input(no_effort, _arrays('sensor_msgs/msg/JointState', msgs, [0]))
-    short = _arrays('std_msgs/msg/Float64MultiArray', [_float_array([1.0, 2.0])], [0])
+    short = _arrays('std_msgs/msg/Float64MultiArray', [float64_array([1.0, 2.0])], [0])
     with pytest.raises(MappingError, match=r'wheel_torques\.indices: element 3 is beyond the 2'):
         decode_input(mapping.wheel_torques, short)
+
+
+def test_wheel_speeds_from_joint_velocities_in_kmh_are_divided_by_the_radius() -> None:
+    mapping = mapping_from_dict(
+        {
+            'wheel_speeds': {
+                'topic': '/joint_states',
+                'type': 'sensor_msgs/msg/JointState',
+                'joints': JOINTS,
+                'unit': 'km/h',
+            }
+        }
+    )
+    assert mapping.wheel_input == 'speed' and mapping.wheels.per_radius
+    msgs = [_joint_state(NS, [0.0] * 5, velocity=[0.0, 36.0, 72.0, 18.0, 54.0])]
+    arrays = _arrays('sensor_msgs/msg/JointState', msgs, [0])
+    series = decode_input(mapping.wheels, arrays, radius=0.25)
+    # 72 km/h = 20 m/s on a 0.25 m radius = 80 rad/s (FL); order FL, FR, RL, RR
+    np.testing.assert_allclose(series.values, [[80.0, 60.0, 20.0, 40.0]], rtol=1e-15)
+    with pytest.raises(MappingError, match='needs the rolling radius'):
+        decode_input(mapping.wheels, arrays)
+    rpm = mapping_from_dict(
+        {'wheel_speeds': {'topic': '/w', 'type': FLOAT64, 'unit': 'rpm', 'indices': [0, 1, 2, 3]}}
+    ).wheels
+    assert not rpm.per_radius
+    got = decode_input(rpm, _arrays(FLOAT64, [float64_array([60.0, 30.0, 0.0, -60.0])], [7]))
+    np.testing.assert_allclose(got.values, [[2 * math.pi, math.pi, 0.0, -2 * math.pi]])
+    assert got.stamp_ns.tolist() == [7]
+
+
+def test_angles_and_torques_may_share_one_joint_state_topic() -> None:
+    mapping = mapping_from_dict(
+        {
+            'wheel_angles': USER_MAPPING['wheel_angles'],
+            'wheel_torques': dict(USER_MAPPING['wheel_angles'], sign=[1, 1, 1, 1]),
+        }
+    )
+    assert mapping.topics == ('/joint_states', SENSORS_BODY_VELOCITY)
 
 
 # --- replay ---------------------------------------------------------------------------------
@@ -301,9 +326,9 @@ def _standard_types_bag(path: Path, seconds: float, rate: float) -> None:
             fl, fr, rl, rr = (drive.angle[k] * sign).tolist()
             joints = _joint_state(stamp, [0.0, rr, fl, rl, fr])
             writer.write('/joint_states', serialize(joints), stamp)
-            writer.write('/odom', serialize(_odometry(stamp, float(drive.speed[k]))), stamp)
+            writer.write('/odom', serialize(odometry(stamp, float(drive.speed[k]))), stamp)
             torque = drive.torque[k][::-1].tolist()  # indices [3, 2, 1, 0]
-            writer.write('/can/wheel_torques', serialize(_float_array(torque)), stamp)
+            writer.write('/can/wheel_torques', serialize(float64_array(torque)), stamp)
 
 
 def test_replay_of_standard_types_equals_replay_of_vd_topics(tmp_path: Path) -> None:
@@ -348,7 +373,7 @@ def test_the_shipped_example_mapping_is_valid() -> None:
     example = Path(__file__).resolve().parents[1] / 'config' / 'input_mapping_example.yaml'
     mapping = load_input_mapping(example)
     assert [s.topic for s in mapping.specs] == ['/joint_states', '/odom', '/can/wheel_torques']
-    assert mapping.wheel_angles.sign == (1.0, -1.0, 1.0, -1.0)
+    assert mapping.wheels.sign == (1.0, -1.0, 1.0, -1.0)
 
 
 def test_vd_replay_takes_a_mapping_file(

@@ -221,6 +221,18 @@ def test_estimator_configurations(estimator: EstimatorConfig) -> None:
     check_record(scenario_record('braking_low_mu', 'encoder'), estimator=estimator)
 
 
+@pytest.mark.parametrize('sensors', ['ideal', 'encoder'])
+def test_wheel_speed_input_gives_the_same_estimates_and_alerts(sensors: str) -> None:
+    """The first-order wheel observer (``wheel_input='speed'``) in the cascade and the monitor."""
+    rec = scenario_record('braking_low_mu_hard', sensors)
+    # what an ABS sensor reports: the mean speed over the last sample period
+    speeds = np.vstack((np.zeros((1, 4)), np.diff(rec.angle, axis=0) / np.diff(rec.t)[:, None]))
+    speeds[0] = speeds[1]
+    observer = ObserverConfig(wheel_input='speed')
+    reference = check_record(dataclasses.replace(rec, angle=speeds), observer=observer)
+    assert np.all(np.isfinite(reference.omega_dot)) and reference.wheel_valid[50:].all()
+
+
 def test_monitor_variants() -> None:
     check_record(
         scenario_record('braking_low_mu_hard', 'ideal'),

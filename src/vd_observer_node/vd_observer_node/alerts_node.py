@@ -3,10 +3,13 @@
 Subscribes, matched by header stamp: ``/vd/sensors/wheel_angles`` (for its own fast wheel
 observer), ``/vd/sensors/body_velocity``, ``/vd/sensors/wheel_torques``,
 ``/vd/observer/wheel_states`` (the cascade's omega), ``/vd/estimates/friction`` (mu, validity)
-and ``/vd/estimates/tire_forces`` (Fz). Publishes with that stamp
+and ``/vd/estimates/tire_forces`` (Fz); the three sensor topics as the input mapping gives them
+(``input_mapping`` or ``inputs.*``, docs/bags.md; an input without header stamp joins each
+match with its latest value, see :func:`held_inputs`). Publishes with that stamp
 ``/vd/estimates/friction_potential`` (vd_msgs/FrictionPotential: mu_max per axle, confidence,
 road class) and ``/vd/estimates/alerts`` (vd_msgs/Alerts: traction, lock and low-friction
-alerts per wheel, with hysteresis and onset stamps). Health goes to ``/diagnostics``. All logic
+alerts per wheel, with hysteresis and onset stamps). Health goes to ``/diagnostics``, with a
+WARN naming a mapped input topic that stopped. All logic
 is in :mod:`vd_observer_node.situation.monitor` (see docs/alerts.md); offline replay runs the same.
 ``kernel`` selects its compiled twin (default) or the Python reference; messages travel as
 CDR bytes (:mod:`vd_observer_node.bag.cdr_message`).
@@ -15,11 +18,11 @@ CDR bytes (:mod:`vd_observer_node.bag.cdr_message`).
 from __future__ import annotations
 
 import math
+import time
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import TwistStamped
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from vd_sim_node.ros_common import (
     DIAGNOSTICS_QOS,
@@ -34,9 +37,6 @@ from vd_sim_node.topics import (
     ESTIMATES_FRICTION_POTENTIAL,
     ESTIMATES_TIRE_FORCES,
     OBSERVER_WHEEL_STATES,
-    SENSORS_BODY_VELOCITY,
-    SENSORS_WHEEL_ANGLES,
-    SENSORS_WHEEL_TORQUES,
 )
 from vd_sim_node.vehicle.params import default_vehicle_file
 
@@ -45,31 +45,59 @@ from vd_msgs.msg import (
     Friction,
     FrictionPotential,
     TireForces,
-    WheelAngles,
     WheelStates,
-    WheelTorques,
 )
-from vd_observer_node.estimation.alignment import StampAligner
+from vd_observer_node.estimation.faults import OK, WARN
+from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
-from vd_observer_node.node_params import ALERTS_PARAMS, KERNEL
-from vd_observer_node.raw_io import Encoders, aligned_input
+from vd_observer_node.inputs.decode import has_header
+from vd_observer_node.inputs.mapping import InputMapping
+from vd_observer_node.node_params import (
+    ALERTS_PARAMS,
+    INPUT_PARAMS,
+    KERNEL,
+    input_message_class,
+    take_input_mapping,
+    undeclared_inputs,
+)
+from vd_observer_node.raw_io import (
+    Encoders,
+    InputMatcher,
+    InputWatch,
+    LatestMatcher,
+    aligned_input,
+    mapped_input,
+    merge_status,
+)
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.situation.monitor import SituationConfig, SituationMonitor
 
 __all__ = ['PARAMS', 'AlertsNode', 'main']
 
-PARAMS = [KERNEL, *ALERTS_PARAMS]
+PARAMS = [KERNEL, *ALERTS_PARAMS, *INPUT_PARAMS]
 
 TOPICS = ('angles', 'speed', 'torques', 'states', 'friction', 'forces')
-_INPUTS = (
-    ('angles', WheelAngles, SENSORS_WHEEL_ANGLES, 'vd_msgs/msg/WheelAngles'),
-    ('speed', TwistStamped, SENSORS_BODY_VELOCITY, 'geometry_msgs/msg/TwistStamped'),
-    ('torques', WheelTorques, SENSORS_WHEEL_TORQUES, 'vd_msgs/msg/WheelTorques'),
+#: the node's name of each mapped sensor input
+_SENSORS = {'angles': 'wheels', 'speed': 'body_speed', 'torques': 'wheel_torques'}
+_DERIVED = (
     ('states', WheelStates, OBSERVER_WHEEL_STATES, 'vd_msgs/msg/WheelStates'),
     ('friction', Friction, ESTIMATES_FRICTION, 'vd_msgs/msg/Friction'),
     ('forces', TireForces, ESTIMATES_TIRE_FORCES, 'vd_msgs/msg/TireForces'),
 )
+
+
+def held_inputs(mapping: InputMapping) -> list[str]:
+    """The sensor inputs taken at their latest value instead of matched by stamp.
+
+    The cascade's outputs carry the wheel angles' stamps (or the observer's receive time when
+    the angles have no header, and then every sensor input is held); a sensor without header
+    is held.
+    """
+    specs = {key: getattr(mapping, name) for key, name in _SENSORS.items()}
+    if not has_header(specs['angles']):
+        return list(_SENSORS)
+    return [key for key, spec in specs.items() if not has_header(spec)]
 
 
 def _ns(t: float) -> int:
@@ -82,6 +110,9 @@ class AlertsNode(Node):
     def __init__(self) -> None:
         super().__init__('alerts_node')
         values = declare_parameters(self, PARAMS)
+        mapping = take_input_mapping(values, undeclared_inputs(self))
+        sensors = {key: getattr(mapping, name) for key, name in _SENSORS.items()}
+        classes = {key: input_message_class(spec) for key, spec in sensors.items()}
         self.kernel = values.pop('kernel')
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')
@@ -100,6 +131,8 @@ class AlertsNode(Node):
             TyreCurves.from_tire(params.tire),
             vehicle.static_wheel_loads[[0, 2]],
             vehicle.effective_radius,
+            # its fast wheel observer reads the wheel sensor: angles or ABS speeds
+            observer=ObserverConfig(wheel_input=mapping.wheel_input),
             situation=SituationConfig.from_mapping(
                 {k: v for k, v in values.items() if k in situation_keys}
             ),
@@ -110,35 +143,60 @@ class AlertsNode(Node):
                 {k: v for k, v in values.items() if k in friction_keys}
             ),
         )
-        self.aligner = StampAligner(
-            TOPICS,
-            capacity=capacity,
-            max_jump_back_ns=round(self.monitor.observer_config.max_gap * 1e9),
+        max_gap_ns = round(self.monitor.observer_config.max_gap * 1e9)
+        held = [] if mapping.alignment == 'latest' else held_inputs(mapping)
+        self.aligner: InputMatcher | LatestMatcher = (
+            # the wheel sensor drives, as in the replay
+            LatestMatcher(TOPICS, capacity, max_gap_ns, round(mapping.max_age * 1e9))
+            if mapping.alignment == 'latest'
+            else InputMatcher(
+                [t for t in TOPICS if t not in held],
+                held,
+                capacity=capacity,
+                max_jump_back_ns=max_gap_ns,
+                max_age_ns=max_gap_ns,
+            )
         )
+        self.watch = InputWatch([spec.topic for spec in sensors.values()], max_gap_ns)
         self.pub_alerts = self.create_publisher(Alerts, ESTIMATES_ALERTS, STREAM_QOS)
         self.pub_potential = self.create_publisher(
             FrictionPotential, ESTIMATES_FRICTION_POTENTIAL, STREAM_QOS
         )
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self.encoders = Encoders()
-        self.counts = {'estimates': 0, 'alerts_raised': 0, 'undecodable': 0}
-        for key, kind, topic, msgtype in _INPUTS:
+        self.counts = {'estimates': 0, 'alerts_raised': 0, 'undecodable': 0, 'unfit': 0}
+        clock = self.get_clock()
+        for key, spec in sensors.items():
+            callback = mapped_input(
+                spec,
+                self.aligner,
+                self.evaluate,
+                self.counts,
+                self.watch,
+                lambda: clock.now().nanoseconds,
+                key=key,
+                radius=vehicle.effective_radius,
+            )
+            self.create_subscription(classes[key], spec.topic, callback, STREAM_QOS, raw=True)
+        for key, kind, topic, msgtype in _DERIVED:
             callback = aligned_input(msgtype, key, self.aligner, self.evaluate, self.counts)
             self.create_subscription(kind, topic, callback, STREAM_QOS, raw=True)
         self._active: tuple[Any, ...] = ()
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
             f'alerts ready: {self.kernel} kernel, vehicle {vehicle.name!r} ({vehicle_file})'
+            + (f', inputs from {mapping.source}' if mapping.source else '')
         )
 
     def evaluate(self, stamp_ns: int, m: dict[str, Any]) -> None:
-        frame, (angles,) = m['angles']
+        frame = m['states'][0]  # the outputs' frame, as the cascade's outputs carry it
+        angles = m['angles'][1]  # mapped: SI values with the mapping's signs
         mu, _, valid = m['friction'][1]
         out = self.monitor.update(
             stamp_ns * 1e-9,
             np.array(angles, dtype=np.float64),
-            float(m['speed'][1][0]),  # twist.linear.x
-            np.array(m['torques'][1][0], dtype=np.float64),
+            float(m['speed'][1][0]),
+            np.array(m['torques'][1], dtype=np.float64),
             np.array(m['states'][1][1], dtype=np.float64),  # omega
             np.array(mu, dtype=np.float64),
             np.array(valid, dtype=np.bool_),
@@ -172,7 +230,7 @@ class AlertsNode(Node):
 
     def publish_diagnostics(self) -> None:
         active = self._active
-        level = DiagnosticStatus.WARN if active else DiagnosticStatus.OK
+        level = WARN if active else OK
         message = (
             ', '.join(f'{a.kind} wheel {a.wheel} level {a.level}' for a in active)
             if active
@@ -183,6 +241,10 @@ class AlertsNode(Node):
             **self.counts,
             **self.aligner.counts(),
         }
+        level, message, watch_values = merge_status(
+            level, message, self.watch, time.monotonic_ns()
+        )
+        values.update(watch_values)
         self.pub_diag.publish(
             node_status(self, 'vd: alerts', 'alerts_node', level, message, values)
         )

@@ -146,7 +146,8 @@ class PythonChain:
 
         Args:
             t: stamp [s].
-            wheel_angle: shape (4,), [rad] unwrapped, order FL, FR, RL, RR.
+            wheel_angle: shape (4,), [rad] unwrapped, order FL, FR, RL, RR (or speeds
+                [rad/s] with ``observer.wheel_input='speed'``).
             speed: measured body speed [m/s].
             wheel_torque: shape (4,), [N m] drive minus brake torque.
 

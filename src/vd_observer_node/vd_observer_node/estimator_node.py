@@ -1,17 +1,21 @@
 """ROS 2 node: tire forces, loads, friction, resistances and road slope from the observers.
 
 Subscribes ``/vd/observer/wheel_states``, ``/vd/observer/body_accel``,
-``/vd/observer/body_velocity`` and ``/vd/sensors/wheel_torques``, matches them by header
-stamp (:class:`vd_observer_node.estimation.alignment.StampAligner`) and publishes, with that stamp,
+``/vd/observer/body_velocity`` (or the measured body speed) and ``/vd/sensors/wheel_torques``
+(the sensor topics as the input mapping gives them: ``input_mapping`` or ``inputs.*``,
+docs/bags.md), matches them by header stamp (an input without header stamp, or derived from
+one, joins each match with its latest value: :func:`held_inputs`) and publishes, with that stamp,
 ``/vd/estimates/tire_forces`` (TireForces), ``/vd/estimates/friction`` (Friction),
 ``/vd/estimates/resistances`` (Resistances) and ``/vd/estimates/slope`` (Slope). Health and
-fault counters go to ``/diagnostics`` once per second. All math is in
+fault counters go to ``/diagnostics`` once per second, with a WARN naming a mapped input
+topic that stopped. All math is in
 :mod:`vd_observer_node.estimation.estimator`; ``kernel`` selects its compiled twin (default) or the
 Python reference. Messages travel as CDR bytes (:mod:`vd_observer_node.bag.cdr_message`).
 """
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
@@ -33,28 +37,38 @@ from vd_sim_node.topics import (
     OBSERVER_BODY_ACCEL,
     OBSERVER_BODY_VELOCITY,
     OBSERVER_WHEEL_STATES,
-    SENSORS_BODY_VELOCITY,
-    SENSORS_WHEEL_TORQUES,
 )
 from vd_sim_node.vehicle.params import default_vehicle_file
 
-from vd_msgs.msg import Friction, Resistances, Slope, TireForces, WheelStates, WheelTorques
-from vd_observer_node.estimation.alignment import StampAligner
+from vd_msgs.msg import Friction, Resistances, Slope, TireForces, WheelStates
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.faults import merge_reports, summarise
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
-from vd_observer_node.node_params import ESTIMATOR_PARAMS, KERNEL
-from vd_observer_node.raw_io import Encoders, aligned_input
+from vd_observer_node.inputs.decode import has_header
+from vd_observer_node.inputs.mapping import InputMapping
+from vd_observer_node.node_params import (
+    ESTIMATOR_PARAMS,
+    INPUT_PARAMS,
+    KERNEL,
+    input_message_class,
+    take_input_mapping,
+    undeclared_inputs,
+)
+from vd_observer_node.raw_io import (
+    Encoders,
+    InputMatcher,
+    InputWatch,
+    LatestMatcher,
+    aligned_input,
+    mapped_input,
+    merge_status,
+)
 
 __all__ = ['EstimatorNode', 'main']
 
-PARAMS = [KERNEL, *ESTIMATOR_PARAMS]
+PARAMS = [KERNEL, *ESTIMATOR_PARAMS, *INPUT_PARAMS]
 
 TOPICS = ('states', 'accel', 'speed', 'torques')
-SPEED_TOPICS = {
-    'measured': SENSORS_BODY_VELOCITY,
-    'observer': OBSERVER_BODY_VELOCITY,
-}
 _INPUT_TYPES = {
     'states': 'vd_msgs/msg/WheelStates',
     'accel': 'geometry_msgs/msg/AccelStamped',
@@ -63,16 +77,35 @@ _INPUT_TYPES = {
 }
 
 
+def held_inputs(mapping: InputMapping) -> list[str]:
+    """The estimator's inputs taken at their latest value instead of matched by stamp.
+
+    The wheel states carry the wheel angles' stamps and drive. The body acceleration and
+    speed carry the body speed's stamps and the torques their own: each is held when its
+    sensor has no header (stamped on receipt), and all are when the wheel angles have none.
+    """
+    if not has_header(mapping.wheels):
+        return ['accel', 'speed', 'torques']
+    held = [] if has_header(mapping.body_speed) else ['accel', 'speed']
+    return held + ([] if has_header(mapping.wheel_torques) else ['torques'])
+
+
 class EstimatorNode(Node):
     """Thin wrapper: stamp-matched raw messages -> Estimator.update -> four raw messages."""
 
     def __init__(self) -> None:
         super().__init__('estimator_node')
         values = declare_parameters(self, PARAMS)
+        mapping = take_input_mapping(values, undeclared_inputs(self))
         self.kernel = values.pop('kernel')
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')
-        speed_topic = SPEED_TOPICS[values.pop('speed_source')]
+        measured = values.pop('speed_source') == 'measured'
+        # the measured speed and the torques are the mapping's topics and types
+        sensors = {'torques': mapping.wheel_torques}
+        if measured:
+            sensors['speed'] = mapping.body_speed
+        classes = {key: input_message_class(spec) for key, spec in sensors.items()}
         self.vehicle = load_estimator_vehicle(vehicle_file)
         config = EstimatorConfig.from_mapping(values)
         if self.kernel == 'compiled':
@@ -82,11 +115,21 @@ class EstimatorNode(Node):
             self.estimator: Any = CompiledEstimator(self.vehicle, config)
         else:
             self.estimator = Estimator(self.vehicle, config)
-        self.aligner = StampAligner(
-            TOPICS,
-            capacity=capacity,
-            max_jump_back_ns=round(self.estimator.config.max_gap * 1e9),
+        max_gap_ns = round(self.estimator.config.max_gap * 1e9)
+        held = [] if mapping.alignment == 'latest' else held_inputs(mapping)
+        self.aligner: InputMatcher | LatestMatcher = (
+            # the wheel states (the wheel sensor's stamps) drive, as in the replay
+            LatestMatcher(TOPICS, capacity, max_gap_ns, round(mapping.max_age * 1e9))
+            if mapping.alignment == 'latest'
+            else InputMatcher(
+                [t for t in TOPICS if t not in held],
+                held,
+                capacity=capacity,
+                max_jump_back_ns=max_gap_ns,
+                max_age_ns=max_gap_ns,
+            )
         )
+        self.watch = InputWatch([spec.topic for spec in sensors.values()], max_gap_ns)
         self._align_reported: dict[str, int] = {}
         self.pub_forces = self.create_publisher(TireForces, ESTIMATES_TIRE_FORCES, STREAM_QOS)
         self.pub_friction = self.create_publisher(Friction, ESTIMATES_FRICTION, STREAM_QOS)
@@ -99,21 +142,35 @@ class EstimatorNode(Node):
             'mu_invalid_wheel_samples': 0,
             'slope_invalid': 0,
             'undecodable': 0,
+            'unfit': 0,
         }
-        for key, kind, topic in (
+        observed = [
             ('states', WheelStates, OBSERVER_WHEEL_STATES),
             ('accel', AccelStamped, OBSERVER_BODY_ACCEL),
-            ('speed', TwistStamped, speed_topic),
-            ('torques', WheelTorques, SENSORS_WHEEL_TORQUES),
-        ):
+        ]
+        if not measured:
+            observed.append(('speed', TwistStamped, OBSERVER_BODY_VELOCITY))
+        for key, kind, topic in observed:
             callback = aligned_input(
                 _INPUT_TYPES[key], key, self.aligner, self.estimate, self.counts
             )
             self.create_subscription(kind, topic, callback, STREAM_QOS, raw=True)
+        clock = self.get_clock()
+        for key, spec in sensors.items():
+            callback = mapped_input(
+                spec,
+                self.aligner,
+                self.estimate,
+                self.counts,
+                self.watch,
+                lambda: clock.now().nanoseconds,
+                key=key,
+            )
+            self.create_subscription(classes[key], spec.topic, callback, STREAM_QOS, raw=True)
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
             f'estimator ready: {self.kernel} kernel, vehicle {self.vehicle.name!r} '
-            f'({vehicle_file})'
+            f'({vehicle_file})' + (f', inputs from {mapping.source}' if mapping.source else '')
         )
 
     def estimate(self, stamp_ns: int, m: dict[str, Any]) -> None:
@@ -122,9 +179,9 @@ class EstimatorNode(Node):
             stamp_ns * 1e-9,
             np.array(omega, dtype=np.float64),
             np.array(omega_dot, dtype=np.float64),
-            float(m['speed'][1][0]),  # twist.linear.x
+            float(m['speed'][1][0]),  # twist.linear.x, or the mapped speed [m/s]
             float(m['accel'][1][0]),  # accel.linear.x
-            np.array(m['torques'][1][0], dtype=np.float64),
+            np.array(m['torques'][1], dtype=np.float64),  # mapped, SI [N m]
         )
         self.counts['estimates'] += 1
         self.counts['mu_invalid_wheel_samples'] += int(4 - np.count_nonzero(est.mu_valid))
@@ -157,8 +214,8 @@ class EstimatorNode(Node):
         # Stale (older) messages at the aligner are the out-of-order/duplicate stamps of the
         # inputs; its restarts are the looped bag seen before the estimator core sees it.
         align = {
-            'out_of_order': self.aligner.stale_count,
-            'time_jump_back': self.aligner.jump_back_count,
+            'out_of_order': self.aligner.aligner.stale_count,
+            'time_jump_back': self.aligner.aligner.jump_back_count,
         }
         report = merge_reports(
             {
@@ -173,7 +230,10 @@ class EstimatorNode(Node):
             **self.aligner.counts(),
             **report.counts,
         }
-        level, message = report.level, report.message
+        level, message, watch_values = merge_status(
+            report.level, report.message, self.watch, time.monotonic_ns()
+        )
+        values.update(watch_values)
         self.pub_diag.publish(
             node_status(self, 'vd: estimator', 'estimator_node', level, message, values)
         )

@@ -5,14 +5,21 @@ parameter's description and default cannot drift from the core. ``observer_node`
 ``estimator_node`` and ``alerts_node`` declare their own list; ``pipeline_node`` declares the
 union (one ``max_gap`` for observers and estimator, one ``vehicle_file`` and ``align_capacity``)
 plus ``kernel``.
+
+Every node that reads sensor topics also declares the input mapping (:data:`INPUT_PARAMS`):
+``input_mapping``, the path of a mapping file, or the same settings as nested parameters
+``inputs.<input>.<key>`` that a ROS params file can carry; :func:`take_input_mapping` builds
+the :class:`~vd_observer_node.inputs.mapping.InputMapping` from either with the one parser of
+:mod:`vd_observer_node.inputs.mapping`.
 """
 
 from __future__ import annotations
 
-from typing import Final
+from collections.abc import Sequence
+from typing import Any, Final
 
-from vd_sim_node.ros_common import ParamSpec, dataclass_param_specs
-from vd_sim_node.topics import OBSERVER_BODY_VELOCITY, SENSORS_BODY_VELOCITY
+from vd_sim_node.ros_common import ParamSpec, dataclass_param_specs, ros_message_class
+from vd_sim_node.topics import OBSERVER_BODY_VELOCITY, SENSORS_BODY_VELOCITY, SENSORS_NAMESPACE
 
 from vd_observer_node.chain import ESTIMATOR_SPEEDS, KERNELS
 from vd_observer_node.estimation.differentiator import (
@@ -26,6 +33,18 @@ from vd_observer_node.estimation.estimator import (
     EstimatorConfig,
 )
 from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.inputs.errors import MappingError
+from vd_observer_node.inputs.mapping import (
+    ALIGNMENTS,
+    INPUT_KEYS,
+    INPUTS,
+    SUPPORTED_TYPES,
+    UNITS,
+    InputMapping,
+    InputSpec,
+    load_input_mapping,
+    mapping_from_params,
+)
 from vd_observer_node.situation.alerts import ALERT_KINDS, AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig
 from vd_observer_node.situation.monitor import SituationConfig
@@ -34,10 +53,15 @@ __all__ = [
     'ALERTS_PARAMS',
     'ALIGN_CAPACITY',
     'ESTIMATOR_PARAMS',
+    'INPUT_MAPPING',
+    'INPUT_PARAMS',
     'KERNEL',
     'OBSERVER_PARAMS',
     'PIPELINE_PARAMS',
     'VEHICLE_FILE',
+    'input_message_class',
+    'take_input_mapping',
+    'undeclared_inputs',
 ]
 
 VEHICLE_FILE: Final = ParamSpec(
@@ -60,10 +84,103 @@ KERNEL: Final = ParamSpec(
     choices=KERNELS,
 )
 
+INPUT_MAPPING: Final = ParamSpec(
+    'input_mapping',
+    '',
+    'input mapping YAML: the topics, types, joints, units and signs of the sensor inputs '
+    f"(docs/bags.md; '' = vd's own {SENSORS_NAMESPACE}* topics, or the inputs.* parameters)",
+)
+_KEY_DOCS: Final = {
+    'topic': 'topic (absolute name)',
+    'joints': 'JointState joint names, order FL, FR, RL, RR',
+    'indices': 'Float64MultiArray element indices',
+    'unit': 'unit',
+    'scale': 'factor applied after the unit [-]',
+    'sign': 'per-value sign, +1 or -1',
+}
+#: ``inputs.<input>.<key>``: the mapping file's settings as parameters (unset by default).
+INPUT_PARAMS: Final = [
+    INPUT_MAPPING,
+    *(
+        ParamSpec(
+            f'inputs.{name}.{key}',
+            None,
+            f'{name}: {_KEY_DOCS.get(key, "message type" if key == "type" else key)}'
+            + (f' ({" | ".join(UNITS[name])})' if key == 'unit' and name in UNITS else '')
+            + (f' ({" | ".join(SUPPORTED_TYPES[name])})' if key == 'type' else '')
+            + ("; unset with every other inputs.* = vd's own topic" if key == 'topic' else ''),
+        )
+        for name in INPUTS
+        for key in INPUT_KEYS
+    ),
+    ParamSpec(
+        'inputs.alignment',
+        None,
+        f'how the inputs are matched ({" | ".join(ALIGNMENTS)}): exact header stamps, or each '
+        'wheel stamp with the newest not-later sample of the others (topics on their own clocks)',
+    ),
+    ParamSpec('inputs.max_age', None, "'latest' alignment: oldest held sample [s]"),
+]
+
+
+def undeclared_inputs(node: Any) -> list[str]:
+    """The ``inputs.*`` parameters given to `node` (params file, ``-p``) but not declared.
+
+    ROS ignores a value given for an undeclared parameter, so a misspelt key
+    (``inputs.body_speed.unti``) would silently keep its default; the nodes pass these names
+    to :func:`take_input_mapping`, which refuses them naming the key.
+    """
+    # rclpy keeps the command line's and params files' values here (no public accessor)
+    overrides = getattr(node, '_parameter_overrides', {})
+    return [n for n in overrides if n.startswith('inputs.') and not node.has_parameter(n)]
+
+
+def take_input_mapping(values: dict[str, Any], undeclared: Sequence[str] = ()) -> InputMapping:
+    """Remove the input-mapping parameters from `values` and build the mapping.
+
+    Args:
+        values: the declared parameters' values (:func:`declare_parameters`); ``input_mapping``
+            and every ``inputs.*`` entry are popped.
+        undeclared: ``inputs.*`` names given but not declared (:func:`undeclared_inputs`):
+            refused as unknown inputs or keys.
+
+    Raises:
+        MappingError: unreadable file, a refused setting (one line naming the key), or both a
+            file and ``inputs.*`` parameters given.
+    """
+    path = values.pop(INPUT_MAPPING.name)
+    params = {k: values.pop(k) for k in [k for k in values if k.startswith('inputs.')]}
+    params.update(dict.fromkeys(undeclared, ''))  # any value: the name alone is refused
+    given = sorted(k for k, v in params.items() if v is not None)
+    if path and given:
+        raise MappingError(
+            f'parameters input_mapping and {given[0]} are both set: give the mapping either '
+            'as a file or as inputs.* parameters'
+        )
+    if path:
+        return load_input_mapping(path)
+    return mapping_from_params(params)
+
+
+def input_message_class(spec: InputSpec) -> Any:
+    """The rclpy message class of a mapped input (what its subscription is created with).
+
+    Raises:
+        MappingError: the type's interface package is not installed (one line naming it).
+    """
+    try:
+        return ros_message_class(spec.msgtype)
+    except (ImportError, AttributeError) as exc:
+        raise MappingError(
+            f'{spec.name}.type: {spec.msgtype} is not installed here ({exc})'
+        ) from None
+
+
 OBSERVER_PARAMS: Final = [
     *dataclass_param_specs(
         ObserverConfig,
-        skip=('gains',),
+        # what the wheel sensors are follows from the input mapping, not a parameter of its own
+        skip=('gains', 'wheel_input'),
         choices={'discretization': DISCRETIZATIONS, 'init': INIT_POLICIES},
     ),
     ParamSpec('l0', DEFAULT_GAINS.l0, 'Levant gain lambda0 [-]'),

@@ -1,12 +1,15 @@
 """ROS 2 node: Levant sliding-mode differentiators on wheel angles and body speed.
 
 Subscribes ``/vd/sensors/wheel_angles`` (vd_msgs/WheelAngles) and
-``/vd/sensors/body_velocity`` (geometry_msgs/TwistStamped); publishes, stamped with the
+``/vd/sensors/body_velocity`` (geometry_msgs/TwistStamped), or the topics and types the input
+mapping gives (``input_mapping`` or ``inputs.*``, docs/bags.md; a Float64MultiArray is stamped
+with its receive time by the node clock); publishes, stamped with the
 measurement's own stamp, ``/vd/observer/wheel_states`` (vd_msgs/WheelStates),
 ``/vd/observer/body_accel`` (geometry_msgs/AccelStamped) and the differentiator's filtered
 speed ``/vd/observer/body_velocity`` (geometry_msgs/TwistStamped, which the estimator uses so
 that the live graph computes exactly what the offline cascade does). Health and fault
-counters go to ``/diagnostics`` once per second. All math is in
+counters go to ``/diagnostics`` once per second, with a WARN naming an input topic that
+stopped. All math is in
 :mod:`vd_observer_node.estimation.observer`; ``kernel`` selects its compiled differentiator
 (default) or the Python reference. Messages travel as CDR bytes: raw subscriptions decoded with
 ``struct`` and bytes published (:mod:`vd_observer_node.bag.cdr_message`), never Python message
@@ -16,6 +19,7 @@ objects.
 from __future__ import annotations
 
 import math
+import time
 from typing import Any
 
 import numpy as np
@@ -33,22 +37,30 @@ from vd_sim_node.topics import (
     OBSERVER_BODY_ACCEL,
     OBSERVER_BODY_VELOCITY,
     OBSERVER_WHEEL_STATES,
-    SENSORS_BODY_VELOCITY,
-    SENSORS_WHEEL_ANGLES,
 )
 
-from vd_msgs.msg import WheelAngles, WheelStates
-from vd_observer_node.bag.cdr_message import MessageCodec
+from vd_msgs.msg import WheelStates
 from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.faults import ERROR, merge_reports
 from vd_observer_node.estimation.observer import ObserverConfig, SpeedObserver, WheelObserver
-from vd_observer_node.node_params import KERNEL, OBSERVER_PARAMS
-from vd_observer_node.raw_io import Encoders
+from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
+from vd_observer_node.inputs.decode import InputDecoder, has_header
+from vd_observer_node.inputs.errors import MappingError
+from vd_observer_node.node_params import (
+    INPUT_PARAMS,
+    KERNEL,
+    OBSERVER_PARAMS,
+    VEHICLE_FILE,
+    input_message_class,
+    take_input_mapping,
+    undeclared_inputs,
+)
+from vd_observer_node.raw_io import Encoders, InputWatch, merge_status
 
 __all__ = ['ObserverNode', 'main']
 
-PARAMS = [KERNEL, *OBSERVER_PARAMS]
+PARAMS = [KERNEL, VEHICLE_FILE, *OBSERVER_PARAMS, *INPUT_PARAMS]
 
 _NS = 1e-9
 _ZEROS5 = (0.0, 0.0, 0.0, 0.0, 0.0)
@@ -60,8 +72,19 @@ class ObserverNode(Node):
     def __init__(self) -> None:
         super().__init__('observer_node')
         values = declare_parameters(self, PARAMS)
+        mapping = take_input_mapping(values, undeclared_inputs(self))
+        angles_spec, speed_spec = mapping.wheels, mapping.body_speed
+        classes = [input_message_class(spec) for spec in (angles_spec, speed_spec)]
         self.kernel = values.pop('kernel')
-        self.config = ObserverConfig.from_mapping(values)
+        vehicle_file = values.pop('vehicle_file') or None
+        # the vehicle file matters here only for wheel speeds given in m/s or km/h
+        radius = (
+            EstimatorVehicle.from_params(load_vehicle_params(vehicle_file)).effective_radius
+            if angles_spec.per_radius
+            else None
+        )
+        # angles or ABS wheel speeds: the mapping says which
+        self.config = ObserverConfig.from_mapping({**values, 'wheel_input': mapping.wheel_input})
         differentiator = LevantDifferentiator
         if self.kernel == 'compiled':
             # numba is imported only then; the kernel is built (or loaded from numba's disk
@@ -75,39 +98,56 @@ class ObserverNode(Node):
         self.pub_accel = self.create_publisher(AccelStamped, OBSERVER_BODY_ACCEL, STREAM_QOS)
         self.pub_speed = self.create_publisher(TwistStamped, OBSERVER_BODY_VELOCITY, STREAM_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
-        self._angles_in = MessageCodec('vd_msgs/msg/WheelAngles')
-        self._speed_in = MessageCodec('geometry_msgs/msg/TwistStamped')
+        # SI values with the mapping's signs, one message at a time (struct for vd's types)
+        self._angles_in = InputDecoder(angles_spec, radius)
+        self._speed_in = InputDecoder(speed_spec)
+        self._stamp_angles = not has_header(angles_spec)
+        self._stamp_speed = not has_header(speed_spec)
+        self.watch = InputWatch(
+            [angles_spec.topic, speed_spec.topic], round(self.config.max_gap * 1e9)
+        )
         self._codec = Encoders()
         # raw: the bytes are decoded with struct, never built into Python message objects
         self.create_subscription(
-            WheelAngles, SENSORS_WHEEL_ANGLES, self.on_wheel_angles, STREAM_QOS, raw=True
+            classes[0], angles_spec.topic, self.on_wheel_angles, STREAM_QOS, raw=True
         )
         self.create_subscription(
-            TwistStamped,
-            SENSORS_BODY_VELOCITY,
-            self.on_body_velocity,
-            STREAM_QOS,
-            raw=True,
+            classes[1], speed_spec.topic, self.on_body_velocity, STREAM_QOS, raw=True
         )
         self.counts = {
             'wheel_samples': 0,
             'speed_samples': 0,
             'withheld_non_finite': 0,
             'undecodable': 0,
+            'unfit': 0,
         }
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
             f'observer ready: {self.kernel} kernel, {self.config.discretization} '
             f'discretization, L_wheel={self.config.wheel_lipschitz:g}, '
             f'L_speed={self.config.speed_lipschitz:g}'
+            + (f', inputs from {mapping.source}' if mapping.source else '')
         )
 
-    def on_wheel_angles(self, data: bytes) -> None:
+    def _decode(
+        self, decoder: InputDecoder, data: bytes, stamp_now: bool
+    ) -> tuple[int, bytes, tuple[float, ...]] | None:
+        """One mapped input message, or None when dropped (counted, never raised)."""
+        self.watch.seen(decoder.spec.topic, time.monotonic_ns())
         try:
-            stamp_ns, frame, (angles,) = self._angles_in.decode(data)
+            return decoder.decode(data, self.get_clock().now().nanoseconds if stamp_now else 0)
         except BagFormatError:
             self.counts['undecodable'] += 1
+        except MappingError as exc:
+            self.counts['unfit'] += 1
+            self.watch.unfit(decoder.spec.topic, str(exc))
+        return None
+
+    def on_wheel_angles(self, data: bytes) -> None:
+        decoded = self._decode(self._angles_in, data, self._stamp_angles)
+        if decoded is None:
             return
+        stamp_ns, frame, angles = decoded
         state = self.wheels.update(stamp_ns * _NS, np.array(angles, dtype=np.float64))
         self.counts['wheel_samples'] += 1
         values = [*state.angle.tolist(), *state.omega.tolist(), *state.omega_dot.tolist()]
@@ -119,12 +159,11 @@ class ObserverNode(Node):
         )
 
     def on_body_velocity(self, data: bytes) -> None:
-        try:
-            stamp_ns, frame, values = self._speed_in.decode(data)
-        except BagFormatError:
-            self.counts['undecodable'] += 1
+        decoded = self._decode(self._speed_in, data, self._stamp_speed)
+        if decoded is None:
             return
-        state = self.speed.update(stamp_ns * _NS, float(values[0]))  # twist.linear.x
+        stamp_ns, frame, values = decoded
+        state = self.speed.update(stamp_ns * _NS, float(values[0]))
         self.counts['speed_samples'] += 1
         if not (math.isfinite(state.speed) and math.isfinite(state.accel)):
             self.counts['withheld_non_finite'] += 1
@@ -150,12 +189,16 @@ class ObserverNode(Node):
         if self.counts['withheld_non_finite']:
             level = max(level, ERROR)
             message += f'; {self.counts["withheld_non_finite"]} non-finite outputs withheld'
+        level, message, watch_values = merge_status(
+            level, message, self.watch, time.monotonic_ns()
+        )
         values: dict[str, Any] = {
             'kernel': self.kernel,
             **self.counts,
             'rejected_wheel_stamps': self.wheels.rejected_count,
             'rejected_speed_stamps': self.speed.rejected_count,
             **report.counts,
+            **watch_values,
         }
         self.pub_diag.publish(
             node_status(self, 'vd: observer', 'observer_node', level, message, values)

@@ -1,14 +1,18 @@
 """ROS 2 node: the whole estimation chain in one process, for the lowest latency.
 
 Observer, estimator and alerts nodes in one: subscribes the three sensor topics
-(``/vd/sensors/wheel_angles``, ``/vd/sensors/body_velocity``, ``/vd/sensors/wheel_torques``),
-matches them by header stamp, runs :mod:`vd_observer_node.chain` (observers -> estimator ->
+(``/vd/sensors/wheel_angles``, ``/vd/sensors/body_velocity``, ``/vd/sensors/wheel_torques``,
+or the topics and types of an input mapping: ``input_mapping`` or ``inputs.*``, see
+docs/bags.md), matches them by header stamp (an input without header, Float64MultiArray, is
+stamped with its receive time by the node clock and joins each match with its latest value),
+runs :mod:`vd_observer_node.chain` (observers -> estimator ->
 situation monitor; the compiled kernel by default) and publishes, with the sensors' stamp,
 every topic those three nodes publish: ``/vd/observer/{wheel_states, body_accel,
 body_velocity}``, ``/vd/estimates/{tire_forces, friction, resistances, slope,
 friction_potential, alerts}``, and ``/diagnostics`` once per second. Its parameters are the
 union of the three nodes' (one ``max_gap``, ``vehicle_file`` and ``align_capacity``) plus
-``kernel``.
+``kernel`` and the input mapping. A mapped topic that stops arriving is reported on
+``/diagnostics`` (WARN naming it and the time since its last message).
 
 What differs from the three nodes: the observers run on stamp-matched sensor sets only (as
 offline replay does, so the pipeline's output equals ``vd replay``'s on the same stamps), and
@@ -19,6 +23,8 @@ never as Python message objects.
 from __future__ import annotations
 
 import math
+import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -42,9 +48,6 @@ from vd_sim_node.topics import (
     OBSERVER_BODY_ACCEL,
     OBSERVER_BODY_VELOCITY,
     OBSERVER_WHEEL_STATES,
-    SENSORS_BODY_VELOCITY,
-    SENSORS_WHEEL_ANGLES,
-    SENSORS_WHEEL_TORQUES,
 )
 from vd_sim_node.vehicle.params import default_vehicle_file
 
@@ -55,33 +58,36 @@ from vd_msgs.msg import (
     Resistances,
     Slope,
     TireForces,
-    WheelAngles,
     WheelStates,
-    WheelTorques,
 )
 from vd_observer_node.bag.cdr_message import MessageCodec
 from vd_observer_node.chain import ChainOutput, ChainSettings, make_chain
-from vd_observer_node.estimation.alignment import StampAligner
 from vd_observer_node.estimation.differentiator import LevantGains
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import ERROR
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
-from vd_observer_node.node_params import PIPELINE_PARAMS
-from vd_observer_node.raw_io import Encoders, aligned_input
+from vd_observer_node.node_params import (
+    INPUT_PARAMS,
+    PIPELINE_PARAMS,
+    input_message_class,
+    take_input_mapping,
+    undeclared_inputs,
+)
+from vd_observer_node.raw_io import (
+    Encoders,
+    InputWatch,
+    input_matcher,
+    mapped_input,
+    merge_status,
+)
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.situation.monitor import SituationConfig
 
 __all__ = ['PARAMS', 'PipelineNode', 'main']
 
-PARAMS = PIPELINE_PARAMS
-
-_INPUTS = (
-    ('angles', WheelAngles, SENSORS_WHEEL_ANGLES, 'vd_msgs/msg/WheelAngles'),
-    ('speed', TwistStamped, SENSORS_BODY_VELOCITY, 'geometry_msgs/msg/TwistStamped'),
-    ('torques', WheelTorques, SENSORS_WHEEL_TORQUES, 'vd_msgs/msg/WheelTorques'),
-)
+PARAMS = [*PIPELINE_PARAMS, *INPUT_PARAMS]
 _OUTPUTS = (
     ('states', WheelStates, OBSERVER_WHEEL_STATES, 'vd_msgs/msg/WheelStates'),
     ('accel', AccelStamped, OBSERVER_BODY_ACCEL, 'geometry_msgs/msg/AccelStamped'),
@@ -146,16 +152,24 @@ class PipelineNode(Node):
     def __init__(self) -> None:
         super().__init__('pipeline_node')
         values = declare_parameters(self, PARAMS)
+        mapping = take_input_mapping(values, undeclared_inputs(self))
+        classes = [input_message_class(spec) for spec in mapping.specs]
         capacity = values.pop('align_capacity')
         settings, vehicle_file = _settings(values)
+        # what the wheel sensors are (angles or ABS speeds) follows from the mapping
+        settings = replace(
+            settings, observer=replace(settings.observer, wheel_input=mapping.wheel_input)
+        )
         self.kernel = settings.kernel
         # Builds (or loads from numba's disk cache) the compiled kernel now, before any sample.
         self.chain = make_chain(settings)
-        self.aligner = StampAligner(
-            tuple(key for key, *_ in _INPUTS),
-            capacity=capacity,
-            max_jump_back_ns=round(settings.estimator.max_gap * 1e9),
+        max_gap_ns = round(settings.estimator.max_gap * 1e9)
+        names = tuple(spec.name for spec in mapping.specs)
+        self._wheels = mapping.wheels.name  # 'wheel_angles' or 'wheel_speeds'
+        self.aligner = input_matcher(
+            mapping, names, capacity, max_jump_back_ns=max_gap_ns, max_age_ns=max_gap_ns
         )
+        self.watch = InputWatch([spec.topic for spec in mapping.specs], max_gap_ns)
         self.pubs = {
             key: self.create_publisher(cls, topic, STREAM_QOS) for key, cls, topic, _ in _OUTPUTS
         }
@@ -165,27 +179,38 @@ class PipelineNode(Node):
         self.counts = {
             'estimates': 0,
             'undecodable': 0,
+            'unfit': 0,
             'withheld_non_finite': 0,
             'alerts_raised': 0,
         }
-        for key, cls, topic, msgtype in _INPUTS:
-            callback = aligned_input(msgtype, key, self.aligner, self.process, self.counts)
-            self.create_subscription(cls, topic, callback, STREAM_QOS, raw=True)
+        clock = self.get_clock()
+        for spec, cls in zip(mapping.specs, classes, strict=True):
+            callback = mapped_input(
+                spec,
+                self.aligner,
+                self.process,
+                self.counts,
+                self.watch,
+                lambda: clock.now().nanoseconds,
+                radius=settings.vehicle.effective_radius,
+            )
+            self.create_subscription(cls, spec.topic, callback, STREAM_QOS, raw=True)
         self._active = 0
         self._last_alerts = ''
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
             f'pipeline ready: {self.kernel} kernel, vehicle {settings.vehicle.name!r} '
-            f'({vehicle_file})'
+            f'({vehicle_file})' + (f', inputs from {mapping.source}' if mapping.source else '')
         )
 
     def _codec(self, key: str, frame: bytes) -> MessageCodec:
         return self.encoders(self._types[key], frame)
 
     def process(self, stamp_ns: int, m: dict[str, Any]) -> None:
-        frame, (angles,) = m['angles']
-        speed = float(m['speed'][1][0])  # twist.linear.x
-        torques = m['torques'][1][0]
+        # SI values with the mapping's signs (raw_io.mapped_input)
+        frame, angles = m[self._wheels]  # angles [rad] or speeds [rad/s]
+        speed = float(m['body_speed'][1][0])
+        torques = m['wheel_torques'][1]
         out = self.chain.update(stamp_ns * 1e-9, angles, speed, torques)
         self.counts['estimates'] += 1
         if not self._finite(out):
@@ -274,11 +299,15 @@ class PipelineNode(Node):
         if self.counts['withheld_non_finite']:
             level = max(level, ERROR)
             message += f'; {self.counts["withheld_non_finite"]} non-finite outputs withheld'
+        level, message, watch_values = merge_status(
+            level, message, self.watch, time.monotonic_ns()
+        )
         values = {
             'kernel': self.kernel,
             **self.counts,
             **self.aligner.counts(),
             **report.counts,
+            **watch_values,
         }
         self.pub_diag.publish(
             node_status(self, 'vd: pipeline', 'pipeline_node', level, message, values)

@@ -6,6 +6,11 @@ by their log times divided by ``rate``, and ``/clock`` with the bag's log time, 
 then recompute the estimates, and the recorder can record them. With ``loop`` the bag starts
 over at its end (time jumps backwards; the observers re-initialise); otherwise the node exits
 with code 0 when everything has been played.
+
+With an input mapping (``input_mapping`` or ``inputs.*``, docs/bags.md) and ``topics`` left
+at its default, it plays the mapped input topics of a user's bag as they are (their own
+names and types), so that nodes given the same mapping consume them; a mapped topic absent
+from the bag or of another type is refused at start, naming the mapping key.
 """
 
 from __future__ import annotations
@@ -34,6 +39,9 @@ from vd_sim_node.topics import SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES, SENS
 
 from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.errors import ReplayInputError
+from vd_observer_node.inputs.errors import MappingError
+from vd_observer_node.inputs.mapping import InputMapping
+from vd_observer_node.node_params import INPUT_PARAMS, take_input_mapping, undeclared_inputs
 
 __all__ = ['SENSOR_TOPICS', 'PlayerNode', 'main']
 
@@ -45,7 +53,12 @@ SENSOR_TOPICS = [
 
 PARAMS = [
     ParamSpec('bag', '', 'bag folder or .mcap file to play (required)'),
-    ParamSpec('topics', SENSOR_TOPICS, "topics to play (['all'] = every topic of the bag)"),
+    ParamSpec(
+        'topics',
+        SENSOR_TOPICS,
+        "topics to play (['all'] = every topic of the bag; this default = the input "
+        "mapping's topics, vd's own sensor topics without a mapping)",
+    ),
     ParamSpec('rate', 1.0, 'playback speed factor (2.0 = twice as fast)', low=1e-3, high=1e4),
     ParamSpec('loop', False, 'start over at the end of the bag'),
     ParamSpec('clock', True, 'publish /clock with the bag log time'),
@@ -66,7 +79,32 @@ PARAMS = [
         low=1,
         high=1000,
     ),
+    *INPUT_PARAMS,
 ]
+
+
+def mapped_topics(mapping: InputMapping, available: dict[str, str]) -> list[str]:
+    """The mapped input topics, checked against the bag's topics (name -> type).
+
+    Raises:
+        MappingError: a mapped topic is absent from the bag or has another type (one line
+            naming the mapping key).
+    """
+    origin = f'{mapping.source}: ' if mapping.source else ''
+    for spec in mapping.specs:
+        msgtype = available.get(spec.topic)
+        if msgtype is None:
+            raise MappingError(
+                f'{origin}{spec.name}.topic: the bag has no topic {spec.topic} '
+                f'(it has {", ".join(sorted(available))})'
+            )
+        if msgtype != spec.msgtype:
+            raise MappingError(
+                f'{origin}{spec.name}.type: {spec.topic} is {msgtype} in the bag, '
+                f'not {spec.msgtype}'
+            )
+    return [spec.topic for spec in mapping.specs]
+
 
 _PERIOD = 0.002  # [s] publishing timer period
 
@@ -77,11 +115,15 @@ class PlayerNode(Node):
     def __init__(self) -> None:
         super().__init__('player_node')
         v = declare_parameters(self, PARAMS)
+        mapping = take_input_mapping(v, undeclared_inputs(self))
         if not v['bag']:
             raise ReplayInputError("parameter 'bag' is required: -p bag:=PATH")
         reader = BagReader(v['bag'])
         available = reader.topics
-        wanted = list(available) if v['topics'] == ['all'] else list(v['topics'])
+        if v['topics'] == SENSOR_TOPICS:  # the default: the mapped inputs, as recorded
+            wanted = mapped_topics(mapping, {t: i.msgtype for t, i in available.items()})
+        else:
+            wanted = list(available) if v['topics'] == ['all'] else list(v['topics'])
         missing = [t for t in wanted if t not in available]
         if missing:
             raise ReplayInputError(

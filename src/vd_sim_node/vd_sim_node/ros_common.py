@@ -114,7 +114,9 @@ class ParamSpec:
 
     Attributes:
         name: parameter name.
-        default: default value; its Python type fixes the parameter type.
+        default: default value; its Python type fixes the parameter type. None: unset by
+            default and of any type (the caller checks the value, e.g. a nested setting
+            that only a params file gives).
         description: shown by ``ros2 param describe``; give the unit in brackets.
         low: inclusive lower bound for numbers (None: unbounded).
         high: inclusive upper bound for numbers (None: unbounded).
@@ -131,6 +133,8 @@ class ParamSpec:
     read_only: bool = True
 
     def allowed(self) -> str:
+        if self.default is None:
+            return 'any value (unset by default)'
         if self.choices:
             return 'one of ' + ', '.join(repr(c) for c in self.choices)
         if self.low is not None or self.high is not None:
@@ -185,6 +189,7 @@ def _descriptor(spec: ParamSpec) -> ParameterDescriptor:
     desc = ParameterDescriptor(
         description=spec.description,
         read_only=spec.read_only,
+        dynamic_typing=spec.default is None,
         additional_constraints=('allowed: ' + spec.allowed()) if spec.choices else '',
     )
     if spec.low is not None and spec.high is not None and not isinstance(spec.default, bool):
@@ -215,6 +220,9 @@ def declare_parameters(node: Node, specs: Sequence[ParamSpec]) -> dict[str, Any]
                 f'parameter {spec.name!r} refused ({exc}); allowed: {spec.allowed()}'
             ) from None
         value = param.value
+        if spec.default is None:  # unset (None) or any type: the caller checks it
+            values[spec.name] = value
+            continue
         if isinstance(spec.default, float) and isinstance(value, int):
             value = float(value)
         if type(value) is not type(spec.default):

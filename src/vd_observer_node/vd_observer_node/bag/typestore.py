@@ -36,6 +36,8 @@ __all__ = [
 ]
 
 BASE_STORE = Stores.ROS2_JAZZY
+#: bytes after a message's last field that `deserialize` accepts (alignment padding)
+_MAX_TAIL = 8
 
 VD_MSG_TYPES = (
     'vd_msgs/msg/Friction',
@@ -179,10 +181,23 @@ def deserialize(data: bytes | memoryview, msgtype: str) -> Any:
         BagFormatError: the bytes do not decode as that type.
     """
     store = _require(msgtype)
+    raw = bytes(data)
     try:
-        return store.deserialize_cdr(bytes(data), msgtype)
+        if len(raw) < 4 or raw[:2] not in (b'\x00\x00', b'\x00\x01'):
+            raise ValueError('not a CDR encapsulation')
+        # What rosbags' deserialize_cdr does, with one difference: rclpy's Fast CDR may end
+        # a message with up to 8 bytes past its last field (after a JointState's empty
+        # effort array), where rosbags refuses more than 3.
+        msgdef = store.get_msgdef(msgtype)
+        decode = msgdef.deserialize_cdr_le if raw[1] else msgdef.deserialize_cdr_be
+        message, pos = decode(raw[4:], 0, msgdef.cls, store)
     except Exception as exc:  # rosbags raises struct/index/assertion errors on bad bytes
         raise BagFormatError(f'cannot decode a {msgtype} message: {exc}') from exc
+    if len(raw) - 4 - pos > _MAX_TAIL:
+        raise BagFormatError(
+            f'cannot decode a {msgtype} message: {len(raw) - 4 - pos} bytes after its fields'
+        )
+    return message
 
 
 @functools.cache

@@ -1,13 +1,40 @@
-"""Match messages of several topics by header stamp (for the estimator node)."""
+"""Put samples of several inputs together on the stamps the cascade runs on.
+
+Two policies, each live (message by message, in the nodes) and offline (whole arrays, in
+the replay), and the two give the same sets on the same data:
+
+* ``'exact'`` (`StampAligner`, `align_exact`): the stamps every input has; vd's own sensors
+  are stamped together.
+* ``'latest'`` (`LatestAligner`, `align_latest`): the first (driving) input's stamps, each
+  with the newest sample of every other input whose stamp is not later (sample and hold: a
+  car's topics run on their own clocks). A driving stamp is dropped while another input has
+  no sample yet or only one older than ``max_age``.
+"""
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, Final, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
 
 from vd_observer_node.errors import ConfigurationError
 
-__all__ = ['StampAligner']
+__all__ = [
+    'ALIGNMENTS',
+    'Alignment',
+    'LatestAligner',
+    'StampAligner',
+    'align_exact',
+    'align_latest',
+    'align_stamps',
+]
+
+IntArray = NDArray[np.int64]
+#: Alignment policies (module docstring).
+ALIGNMENTS: Final = ('exact', 'latest')
 
 
 class StampAligner:
@@ -102,3 +129,187 @@ class StampAligner:
             self.dropped_count += len(b)
             b.clear()
         self._last_emitted = None
+
+
+class LatestAligner:
+    """Live 'latest' alignment: each driving message with the newest not-later other samples.
+
+    A driving message waits until every other topic has delivered a message stamped at or
+    after it, so the held samples are final and the sets are those of `align_latest` on the
+    same data (each topic's stamps arriving in order). The wait is at most one period of the
+    slowest other topic. A message not newer than its topic's last one is stale (dropped and
+    counted); pending driving messages beyond ``capacity`` are dropped oldest first; a
+    driving stamp older than the last one by more than ``max_jump_back_ns`` restarts.
+    """
+
+    def __init__(
+        self,
+        topics: Sequence[str],
+        max_age_ns: int,
+        capacity: int = 1000,
+        max_jump_back_ns: int | None = None,
+    ) -> None:
+        """Create the aligner.
+
+        Args:
+            topics: the topics, the driving one first (at least two, unique).
+            max_age_ns: [ns] > 0, the oldest a held sample may be.
+            capacity: maximum pending driving messages, >= 1.
+            max_jump_back_ns: [ns] > 0, see the class docstring; None = never restart.
+
+        Raises:
+            ConfigurationError: bad topics or limits.
+        """
+        if len(topics) < 2 or len(set(topics)) != len(topics):
+            raise ConfigurationError(f'topics must be >= 2 and unique: {list(topics)}')
+        if max_age_ns <= 0 or capacity < 1:
+            raise ConfigurationError(
+                f'max_age_ns must be > 0 and capacity >= 1, got {max_age_ns}, {capacity}'
+            )
+        if max_jump_back_ns is not None and max_jump_back_ns <= 0:
+            raise ConfigurationError(f'max_jump_back_ns must be > 0, got {max_jump_back_ns}')
+        self._topics = tuple(topics)
+        self._max_age = max_age_ns
+        self._capacity = capacity
+        self._max_jump_back_ns = max_jump_back_ns
+        self.stale_count = 0
+        self.dropped_count = 0
+        self.jump_back_count = 0
+        self._restart(count=False)
+
+    def counts(self) -> dict[str, int]:
+        """Totals for /diagnostics: driving messages dropped (no fresh sample of another
+        input, or beyond capacity), stale messages, restarts after a time jump back."""
+        return {
+            'unmatched_dropped': self.dropped_count,
+            'stale': self.stale_count,
+            'time_jump_back': self.jump_back_count,
+        }
+
+    def _restart(self, count: bool = True) -> None:
+        if count:
+            self.jump_back_count += 1
+            self.dropped_count += len(self._pending)
+        self._pending: deque[tuple[int, Any]] = deque()
+        self._history: dict[str, deque[tuple[int, Any]]] = {t: deque() for t in self._topics[1:]}
+        self._last: dict[str, int | None] = dict.fromkeys(self._topics)
+
+    def push(self, topic: str, stamp_ns: int, message: Any) -> list[tuple[int, dict[str, Any]]]:
+        """Add one message; return the sets it completes, oldest first: (driving stamp [ns],
+        {topic: message}).
+
+        Raises:
+            ConfigurationError: unknown topic.
+        """
+        if topic not in self._last:
+            raise ConfigurationError(f'unknown topic {topic!r}; expected one of {self._topics}')
+        last = self._last[topic]
+        if last is not None and stamp_ns <= last:
+            jump = last - stamp_ns
+            if topic != self._topics[0] or (
+                self._max_jump_back_ns is None or jump <= self._max_jump_back_ns
+            ):
+                self.stale_count += 1
+                return []
+            self._restart()
+        self._last[topic] = stamp_ns
+        if topic == self._topics[0]:
+            self._pending.append((stamp_ns, message))
+            if len(self._pending) > self._capacity:
+                self._pending.popleft()
+                self.dropped_count += 1
+        else:
+            self._history[topic].append((stamp_ns, message))
+        return self._release()
+
+    def _release(self) -> list[tuple[int, dict[str, Any]]]:
+        out: list[tuple[int, dict[str, Any]]] = []
+        while self._pending:
+            t, message = self._pending[0]
+            if not all((s := self._last[k]) is not None and s >= t for k in self._history):
+                break
+            self._pending.popleft()
+            matched = {self._topics[0]: message}
+            for k, history in self._history.items():
+                # keep the newest sample <= t at the front: later driving stamps need it
+                while len(history) > 1 and history[1][0] <= t:
+                    history.popleft()
+                held = history[0] if history and history[0][0] <= t else None
+                if held is None or t - held[0] > self._max_age:
+                    break
+                matched[k] = held[1]
+            if len(matched) == len(self._topics):
+                out.append((t, matched))
+            else:
+                self.dropped_count += 1
+        return out
+
+
+class Alignment(NamedTuple):
+    """Where each input's sample of each cascade stamp is (offline alignment).
+
+    Attributes:
+        stamp_ns: shape (M,), int64 [ns], the cascade's stamps (sorted, unique).
+        indexes: per input, shape (M,), the index of its sample in its series.
+        stale: driving stamps dropped because another input was missing or too old.
+    """
+
+    stamp_ns: IntArray
+    indexes: list[IntArray]
+    stale: int
+
+
+def _last_of_each(stamps: IntArray, wanted: IntArray) -> IntArray:
+    """Index in ``stamps`` of the last sample with each stamp of ``wanted`` (all present)."""
+    order = np.argsort(stamps, kind='stable')
+    found: IntArray = order[np.searchsorted(stamps[order], wanted, side='right') - 1]
+    return found
+
+
+def align_exact(stamps: list[IntArray]) -> Alignment:
+    """Stamps common to every input (sorted, unique) and each input's index of them.
+
+    The last message of a repeated stamp wins, as a re-sent stamp replaces the buffered one
+    live.
+    """
+    common = stamps[0]
+    for s in stamps[1:]:
+        common = np.intersect1d(common, s)
+    return Alignment(common, [_last_of_each(s, common) for s in stamps], 0)
+
+
+def align_latest(stamps: list[IntArray], max_age_ns: int) -> Alignment:
+    """The first input's stamps, each with the newest not-later sample of every other input.
+
+    Args:
+        stamps: per input, shape (N_i,), int64 [ns]; the first input drives.
+        max_age_ns: a held sample older than this [ns] does not count.
+    """
+    drive = np.unique(stamps[0])
+    keep = np.ones(drive.shape[0], dtype=bool)
+    held: list[IntArray] = []
+    for s in stamps[1:]:
+        order = np.argsort(s, kind='stable')
+        sorted_s = s[order]
+        # position of the newest sample with stamp <= each drive stamp (-1: none yet)
+        pos = np.searchsorted(sorted_s, drive, side='right') - 1
+        ok = pos >= 0
+        age = np.where(ok, drive - sorted_s[np.maximum(pos, 0)], 0)
+        keep &= ok & (age <= max_age_ns)
+        held.append(order[np.maximum(pos, 0)])
+    first = _last_of_each(stamps[0], drive)
+    stale = int(np.count_nonzero(~keep))
+    return Alignment(drive[keep], [first[keep], *(h[keep] for h in held)], stale)
+
+
+def align_stamps(stamps: list[IntArray], alignment: str, max_age: float) -> Alignment:
+    """Dispatch by policy name (one of `ALIGNMENTS`); ``max_age`` in [s].
+
+    Raises:
+        ConfigurationError: unknown policy.
+    """
+    if alignment == 'exact':
+        return align_exact(stamps)
+    if alignment == 'latest':
+        return align_latest(stamps, round(max_age * 1e9))
+    raise ConfigurationError(f'alignment {alignment!r} is unknown (use one of {ALIGNMENTS})')

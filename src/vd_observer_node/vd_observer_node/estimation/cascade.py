@@ -55,6 +55,8 @@ class CascadeResult:
         torque_valid: shape (N,), bool, the torque source held at the stamp (False where
             the engine path's clutch slipped, and everywhere with no torque).
         torque_source: `drivetrain.TORQUE_MEASURED`, `TORQUE_ENGINE` or `TORQUE_NONE`.
+        angle: shape (N, 4), [rad], the wheel observer's angle (filtered; with wheel speeds
+            as input, their integral from 0 at the observer's start).
         faults: total fault counts per kind, keys 'wheel.<kind>', 'speed.<kind>' (observers)
             and 'estimator.<kind>', as the nodes report them on /diagnostics.
     """
@@ -74,7 +76,8 @@ class CascadeResult:
     slope: FloatArray
     slope_valid: BoolArray
     wheel_valid: BoolArray
-    torque_valid: BoolArray
+    torque_valid: BoolArray = field(default_factory=lambda: np.ones(0, dtype=bool))
+    angle: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
     torque_source: int = TORQUE_MEASURED
     faults: dict[str, int] = field(default_factory=dict)
 
@@ -150,7 +153,8 @@ def run_cascade(
 
     Args:
         t: shape (N,), [s] stamps (rejected samples keep the previous estimates).
-        wheel_angle: shape (N, 4), [rad] unwrapped wheel angles.
+        wheel_angle: shape (N, 4), [rad] unwrapped wheel angles, or wheel speeds [rad/s]
+            when ``observer_config.wheel_input`` is 'speed'.
         body_speed: shape (N,), [m/s] measured body speed.
         wheel_torque: shape (N, 4), [N m] drive minus brake torque.
         vehicle: estimator parameters.
@@ -181,7 +185,10 @@ def run_cascade(
     observer = Observer(observer_config or ObserverConfig())
     estimator = Estimator(vehicle, estimator_config, source)
     wheel4 = np.zeros((n, 4))
-    out = {k: wheel4.copy() for k in ('omega', 'omega_dot', 'fx', 'fz', 'mu', 'slip', 'rolling')}
+    out = {
+        k: wheel4.copy()
+        for k in ('angle', 'omega', 'omega_dot', 'fx', 'fz', 'mu', 'slip', 'rolling')
+    }
     scalars = {k: np.zeros(n) for k in ('speed', 'accel', 'aero', 'slope')}
     mu_valid = np.zeros((n, 4), dtype=bool)
     wheel_valid = np.zeros((n, 4), dtype=bool)
@@ -209,6 +216,7 @@ def run_cascade(
         est = estimator.update(
             tk, wheel.omega, wheel.omega_dot, speed, body.accel, torque, torque_ok
         )
+        out['angle'][k] = wheel.angle
         out['omega'][k] = wheel.omega
         out['omega_dot'][k] = wheel.omega_dot
         wheel_valid[k] = wheel.valid
@@ -241,6 +249,7 @@ def run_cascade(
         wheel_valid=wheel_valid,
         torque_valid=torque_valid,
         torque_source=source,
+        angle=out['angle'],
         faults={
             f'{part}.{kind}': n
             for part, counter in (

@@ -40,6 +40,19 @@ Two discretizations, both driven by the actual time step tau = t_{k+1} - t_k:
 `euler_step` and `implicit_step` are pure functions on a state of shape (3, n) (n
 channels, e.g. the four wheels); `LevantDifferentiator` wraps them with time keeping,
 initialisation and rejection of invalid samples.
+
+**Samples of the first derivative** (``input_derivative=1``, e.g. wheel speeds from ABS
+sensors instead of wheel angles): rows 1 and 2 of the same state run Levant's FIRST-order
+differentiator (the super-twisting differentiator) on the samples g = f', with the last two
+gains of the same sequence, (l1, l2) = (1.5, 1.1), and L bounding |g''| = |f'''| as before:
+
+    z1' = -l1 * L^(1/2) * |e|^(1/2) * sign(e) + z2,   z2' = -l2 * L * sign(e),   e = z1 - g
+
+and row 0 integrates z1 with the trapezoid rule (from 0 at the initialisation: an estimate of
+f up to its unknown initial value). The outputs keep their meaning (f, f', f''), so every
+consumer of the wheel observer works unchanged with either input. The implicit step
+(`first_order_implicit_step`, after Brogliato, Polyakov, Efimov 2020) reduces to a quadratic
+in |e|^(1/2); inside its band it is the backward difference of g, exact for a linear g.
 """
 
 from __future__ import annotations
@@ -58,12 +71,15 @@ __all__ = [
     'DEFAULT_GAINS',
     'DISCRETIZATIONS',
     'INIT_POLICIES',
+    'INPUT_DERIVATIVES',
     'DerivativeEstimate',
     'LevantDifferentiator',
     'LevantGains',
     'checked_settings',
     'euler_step',
     'euler_taylor_step',
+    'first_order_euler_step',
+    'first_order_implicit_step',
     'implicit_step',
     'step',
 ]
@@ -74,6 +90,8 @@ FloatArray = NDArray[np.float64]
 DISCRETIZATIONS: Final = ('euler', 'euler_taylor', 'implicit')
 #: Allowed initialisation policies, see `LevantDifferentiator`.
 INIT_POLICIES: Final = ('finite_difference', 'first_sample', 'zero')
+#: Which derivative of f the samples are: 0 = f itself, 1 = f' (see the module docstring).
+INPUT_DERIVATIVES: Final = (0, 1)
 
 _NEWTON_MAX_ITER: Final = 60
 _NEWTON_RTOL: Final = 1e-13
@@ -281,6 +299,82 @@ def euler_taylor_step(
     return z_next
 
 
+def first_order_euler_step(
+    z: FloatArray,
+    g: ArrayLike,
+    tau: float,
+    lipschitz: ArrayLike,
+    gains: LevantGains = DEFAULT_GAINS,
+    *,
+    taylor: bool = False,
+) -> FloatArray:
+    """One explicit step of the first-order differentiator on samples g of f'.
+
+    Args:
+        z: shape (3, n), state (f, f', f'') at t_k; rows 1, 2 are the differentiator's.
+        g: shape (n,) or scalar, sample of f' at the START of the step, t_k.
+        tau: step [s], > 0.
+        lipschitz: shape (n,) or scalar, L, bound on |g''| = |f'''| [unit / s^3], > 0.
+        gains: the last two (l1, l2) are the first-order gains.
+        taylor: add the Taylor term tau^2/2 * z2 to z1 (Livne & Levant 2014).
+
+    Returns:
+        shape (3, n), state at t_{k+1} (row 0: trapezoid integral of row 1).
+    """
+    lip = np.asarray(lipschitz, dtype=np.float64)
+    e = z[1] - np.asarray(g, dtype=np.float64)
+    v = z[2] - gains.l1 * np.sqrt(lip) * _signed_power(e, 0.5)
+    z1 = z[1] + tau * v
+    if taylor:
+        z1 = z1 + 0.5 * (tau * tau) * z[2]
+    z2 = z[2] - tau * (gains.l2 * lip * np.sign(e))
+    return np.stack((z[0] + 0.5 * tau * (z[1] + z1), z1, z2))
+
+
+def first_order_implicit_step(
+    z: FloatArray,
+    g_next: ArrayLike,
+    tau: float,
+    lipschitz: ArrayLike,
+    gains: LevantGains = DEFAULT_GAINS,
+) -> FloatArray:
+    """One implicit step of the first-order differentiator on samples g of f', solved exactly.
+
+    With a = l1, b = l2, the new error e = z1_{k+1} - g_{k+1} and s in Sign(e):
+
+        z2+ = z2 - tau*b*L*s,   z1+ = z1 + tau*z2+ - tau*a*L^(1/2)*|e|^(1/2) sign(e)
+
+    Writing w = z1 + tau*z2 - g_{k+1} and |e| = tau^2*L*y^2 this is e + tau^2*L*(a*y + b*s)
+    = w: if |w| <= b*tau^2*L then e = 0 and s = w/(b*tau^2*L) (z2+ is then the backward
+    difference of g when z1 = g_k), else y > 0 solves y^2 + a*y = |w|/(tau^2*L) - b.
+
+    Args:
+        z: shape (3, n), state at t_k; rows 1, 2 are the differentiator's.
+        g_next: shape (n,) or scalar, sample of f' at the END of the step, t_{k+1}.
+        tau: step [s], > 0.
+        lipschitz: shape (n,) or scalar, L [unit / s^3], > 0.
+        gains: the last two (l1, l2) are the first-order gains.
+
+    Returns:
+        shape (3, n), state at t_{k+1} (row 0: trapezoid integral of row 1).
+    """
+    a, b = gains.l1, gains.l2
+    lip = np.asarray(lipschitz, dtype=np.float64)
+    target = np.asarray(g_next, dtype=np.float64)
+    scale = (tau * tau) * lip
+    w = z[1] + tau * z[2] - target
+    s = np.sign(w)
+    excess = np.maximum(np.abs(w) / scale - b, 0.0)
+    # the root of y^2 + a*y = excess in the form without cancellation for small excess
+    y = 2.0 * excess / (a + np.sqrt(a * a + 4.0 * excess))
+    sign_value = np.where(excess > 0.0, s, w / (scale * b))
+    out = np.empty((3, *np.shape(w)))
+    out[2] = z[2] - tau * b * lip * sign_value
+    out[1] = target + s * scale * (y * y)
+    out[0] = z[0] + 0.5 * tau * (z[1] + out[1])
+    return out
+
+
 def step(
     discretization: str,
     z: FloatArray,
@@ -289,12 +383,20 @@ def step(
     tau: float,
     lipschitz: ArrayLike,
     gains: LevantGains = DEFAULT_GAINS,
+    input_derivative: int = 0,
 ) -> FloatArray:
     """Dispatch one step by discretization name (explicit uses f_start, implicit f_end).
+
+    ``input_derivative`` 1: the samples are of f' (the first-order steps).
 
     Raises:
         ConfigurationError: unknown discretization name.
     """
+    if input_derivative == 1 and discretization in DISCRETIZATIONS:
+        if discretization == 'implicit':
+            return first_order_implicit_step(z, f_end, tau, lipschitz, gains)
+        taylor = discretization == 'euler_taylor'
+        return first_order_euler_step(z, f_start, tau, lipschitz, gains, taylor=taylor)
     if discretization == 'euler':
         return euler_step(z, f_start, tau, lipschitz, gains)
     if discretization == 'euler_taylor':
@@ -336,6 +438,7 @@ def checked_settings(
     max_gap: float,
     init_baseline: float,
     max_jump_back: float | None,
+    input_derivative: int = 0,
 ) -> tuple[FloatArray, float]:
     """Check a differentiator's settings (see `LevantDifferentiator`).
 
@@ -353,6 +456,10 @@ def checked_settings(
         raise ConfigurationError(f'unknown init policy {init!r}; use one of {INIT_POLICIES}')
     if n_channels < 1:
         raise ConfigurationError(f'n_channels must be >= 1, got {n_channels}')
+    if input_derivative not in INPUT_DERIVATIVES:
+        raise ConfigurationError(
+            f'input_derivative must be one of {INPUT_DERIVATIVES}, got {input_derivative!r}'
+        )
     lip = np.broadcast_to(np.asarray(lipschitz, dtype=np.float64), (n_channels,)).copy()
     if not np.all(np.isfinite(lip) & (lip > 0.0)):
         raise ConfigurationError(f'Lipschitz bounds L must be finite and > 0: {lip}')
@@ -367,7 +474,10 @@ def checked_settings(
 
 
 class LevantDifferentiator:
-    """Stateful n-channel second-order Levant differentiator on irregular time stamps.
+    """Stateful n-channel Levant differentiator on irregular time stamps.
+
+    Second order on samples of f, or first order on samples of f' (``input_derivative=1``,
+    see the module docstring); the outputs are (f, f', f'') estimates either way.
 
     Invalid input never poisons the state (every case counted in `faults`, see
     `vd_observer_node.estimation.faults`):
@@ -404,6 +514,7 @@ class LevantDifferentiator:
         max_gap: float = math.inf,
         init_baseline: float = 0.0,
         max_jump_back: float | None = None,
+        input_derivative: int = 0,
     ) -> None:
         """Create the differentiator.
 
@@ -418,13 +529,23 @@ class LevantDifferentiator:
                 'finite_difference' initialisation.
             max_jump_back: a stamp older than the last accepted one by more than this [s]
                 resets the state instead of being rejected; None = `max_gap`.
+            input_derivative: one of `INPUT_DERIVATIVES`: 0 when the samples are f, 1 when
+                they are f' (L then bounds the second derivative of the samples).
 
         Raises:
             ConfigurationError: invalid L, name or gap.
         """
         lip, jump = checked_settings(
-            lipschitz, n_channels, discretization, init, max_gap, init_baseline, max_jump_back
+            lipschitz,
+            n_channels,
+            discretization,
+            init,
+            max_gap,
+            init_baseline,
+            max_jump_back,
+            input_derivative,
         )
+        self._row = int(input_derivative)
         self._init_baseline = float(init_baseline)
         self._lipschitz = lip
         self._n = n_channels
@@ -441,6 +562,11 @@ class LevantDifferentiator:
     def discretization(self) -> str:
         """Discretization name."""
         return self._discretization
+
+    @property
+    def input_derivative(self) -> int:
+        """Which derivative of f the samples are (0: f, 1: f')."""
+        return self._row
 
     @property
     def state(self) -> FloatArray:
@@ -525,9 +651,10 @@ class LevantDifferentiator:
         if self._all_active:
             return
         new = finite & ~self._active
+        row = self._row  # the row the samples estimate; rows below it start from 0
         if self._init == 'first_sample':
             self._z[:, new] = 0.0
-            self._z[0, new] = sample[new]
+            self._z[row, new] = sample[new]
             self._active |= new
             return
         pending = np.isfinite(self._pending_t)
@@ -535,16 +662,16 @@ class LevantDifferentiator:
         with np.errstate(invalid='ignore'):
             second = new & pending & (t - self._pending_t >= self._init_baseline)
         waiting = new & pending & ~second
-        self._z[0, waiting] = sample[waiting]
+        self._z[row, waiting] = sample[waiting]
         if np.any(second):
             dt = t - self._pending_t[second]
-            self._z[0, second] = sample[second]
-            self._z[1, second] = (sample[second] - self._pending_f[second]) / dt
-            self._z[2, second] = 0.0
+            self._z[:, second] = 0.0
+            self._z[row, second] = sample[second]
+            self._z[row + 1, second] = (sample[second] - self._pending_f[second]) / dt
             self._active |= second
         self._pending_t[first] = t
         self._pending_f[first] = sample[first]
-        self._z[0, first] = sample[first]
+        self._z[row, first] = sample[first]
 
     def _advance(self, t: float, sample: FloatArray, finite: NDArray[np.bool_]) -> None:
         assert self._t is not None
@@ -552,13 +679,20 @@ class LevantDifferentiator:
         z = self._z
         if self._discretization == 'implicit':
             use = finite
-            f_used = np.where(finite, sample, z[0])
+            f_used = np.where(finite, sample, z[self._row])
         else:
             # Explicit schemes correct with the sample at the start of the step.
             use = np.isfinite(self._f_last)
-            f_used = np.where(use, self._f_last, z[0])
+            f_used = np.where(use, self._f_last, z[self._row])
         corrected = step(
-            self._discretization, z, f_used, f_used, tau, self._lipschitz, self._gains
+            self._discretization,
+            z,
+            f_used,
+            f_used,
+            tau,
+            self._lipschitz,
+            self._gains,
+            self._row,
         )
         if self._all_active and bool(np.all(use)):
             self._z = corrected

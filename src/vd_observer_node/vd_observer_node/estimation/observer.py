@@ -1,7 +1,10 @@
 """Online observers: wheel speed and acceleration from wheel angles, body acceleration.
 
 Each observer is a `LevantDifferentiator` on the measured signal: the wheel angles theta_i
-give (theta, omega, omega_dot), the body speed v gives (v, v_dot, v_ddot). Outputs at a
+give (theta, omega, omega_dot), the body speed v gives (v, v_dot, v_ddot). Where only wheel
+speeds are measured (``ObserverConfig.wheel_input = 'speed'``: ABS sensors) the wheel observer
+is the first-order differentiator on omega_i and gives the same outputs, its angle being the
+integral of omega from 0 at the start (see `differentiator`). Outputs at a
 stamp are the estimates FOR that stamp (exactly so with the implicit discretization; the
 explicit ones use the sample of the stamp only from the next step on).
 """
@@ -10,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
-from typing import Any, ClassVar, NamedTuple
+from typing import Any, ClassVar, Final, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -26,6 +29,7 @@ from vd_observer_node.estimation.differentiator import (
 from vd_observer_node.estimation.faults import FaultCounter
 
 __all__ = [
+    'WHEEL_INPUTS',
     'Observer',
     'ObserverConfig',
     'ObserverOutput',
@@ -36,6 +40,9 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+
+#: What the wheel sensors measure: unwrapped angles [rad] or speeds [rad/s].
+WHEEL_INPUTS: Final = ('angle', 'speed')
 
 
 @dataclass(frozen=True)
@@ -54,6 +61,9 @@ class ObserverConfig:
             smaller step back or a repeated stamp is dropped. See docs/faults.md.
         init_baseline: time [s] between the two samples of the 'finite_difference'
             initialisation (longer = less noise in the initial derivative).
+        wheel_input: one of `WHEEL_INPUTS`: 'angle' runs the second-order differentiator on
+            the wheel angles, 'speed' the first-order one on the wheel speeds (same
+            wheel_lipschitz: it bounds |d^2 omega/dt^2| either way).
     """
 
     gains: LevantGains = field(default_factory=lambda: DEFAULT_GAINS)
@@ -63,8 +73,13 @@ class ObserverConfig:
     init: str = 'finite_difference'
     max_gap: float = 0.5
     init_baseline: float = 0.05
+    wheel_input: str = 'angle'
 
     def __post_init__(self) -> None:
+        if self.wheel_input not in WHEEL_INPUTS:
+            raise ConfigurationError(
+                f'unknown wheel_input {self.wheel_input!r}; use one of {WHEEL_INPUTS}'
+            )
         if self.discretization not in DISCRETIZATIONS:
             raise ConfigurationError(
                 f'unknown discretization {self.discretization!r}; use one of {DISCRETIZATIONS}'
@@ -136,6 +151,11 @@ class _DifferentiatorObserver:
         """L of this signal kind [unit/s^3]."""
         raise NotImplementedError
 
+    @staticmethod
+    def _input_derivative(config: ObserverConfig) -> int:
+        """Which derivative of the estimated signal the samples are (0: itself)."""
+        return 0
+
     def __init__(
         self,
         config: ObserverConfig,
@@ -155,6 +175,7 @@ class _DifferentiatorObserver:
             init=config.init,
             max_gap=config.max_gap,
             init_baseline=config.init_baseline,
+            input_derivative=self._input_derivative(config),
         )
 
     @property
@@ -169,7 +190,7 @@ class _DifferentiatorObserver:
 
 
 class WheelObserver(_DifferentiatorObserver):
-    """Four-wheel Levant differentiator on the unwrapped wheel angles."""
+    """Four-wheel Levant differentiator on the wheel angles (or speeds, `wheel_input`)."""
 
     _channels = 4
     last: WheelState | None = None
@@ -178,19 +199,24 @@ class WheelObserver(_DifferentiatorObserver):
     def _lipschitz(config: ObserverConfig) -> float:
         return config.wheel_lipschitz
 
+    @staticmethod
+    def _input_derivative(config: ObserverConfig) -> int:
+        return WHEEL_INPUTS.index(config.wheel_input)
+
     def update(self, t: float, angles: ArrayLike) -> WheelState:
-        """Feed the wheel angles at stamp t.
+        """Feed the wheel sensors at stamp t.
 
         Args:
             t: stamp [s].
-            angles: shape (4,), [rad], unwrapped, FL, FR, RL, RR.
+            angles: shape (4,), FL, FR, RL, RR: unwrapped angles [rad], or speeds [rad/s]
+                when the observer was configured with ``wheel_input='speed'``.
 
         Raises:
             InputShapeError: angles is not of shape (4,).
         """
         a = np.asarray(angles, dtype=np.float64)
         if a.shape != (4,):
-            raise InputShapeError(f'wheel angles must have shape (4,), got {a.shape}')
+            raise InputShapeError(f'wheel sensors must have shape (4,), got {a.shape}')
         est = self._diff.update(t, a)
         self.last = WheelState(est.value, est.first, est.second, est.valid)
         return self.last

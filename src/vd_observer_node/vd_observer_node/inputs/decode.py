@@ -5,6 +5,11 @@ numpy (:func:`vd_observer_node.bag.cdr_batch.decode_batch`); the standard types 
 variable-length fields (JointState, Odometry, Float64MultiArray) are deserialized message by
 message with rosbags (about 10 µs of CPU each for JointState and Odometry, 4 µs for
 Float64MultiArray: 1.5 s per 150 s of a 1 kHz JointState topic).
+
+:class:`InputDecoder` is the live nodes' per-message form of the same decoding: the raw CDR
+bytes of one subscription -> stamp, frame_id and SI values, with the same per-message
+extractors (JointState, Odometry, Float64MultiArray) and the same factor and signs as a
+replay, so a mapping means one thing offline and live.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vd_observer_node.bag.cdr_batch import decode_batch
+from vd_observer_node.bag.cdr_message import MessageCodec
 from vd_observer_node.bag.reader import TopicArrays
 from vd_observer_node.bag.typestore import deserialize
 from vd_observer_node.inputs.errors import MappingError
@@ -31,7 +37,15 @@ from vd_observer_node.inputs.mapping import (
     InputSpec,
 )
 
-__all__ = ['InputSeries', 'decode_engine', 'decode_input']
+__all__ = [
+    'InputDecoder',
+    'InputSeries',
+    'InputStats',
+    'decode_engine',
+    'decode_input',
+    'has_header',
+    'input_stats',
+]
 
 _NS = 1_000_000_000
 #: the field of vd's batch-decodable types that holds the input
@@ -41,7 +55,7 @@ _BATCH_FIELD = {
     TWIST_STAMPED: 'twist.linear.x',
 }
 #: the JointState array of each per-wheel input
-_JOINT_FIELD = {'wheel_angles': 'position', 'wheel_torques': 'effort'}
+_JOINT_FIELD = {'wheel_angles': 'position', 'wheel_speeds': 'velocity', 'wheel_torques': 'effort'}
 
 
 @dataclass(frozen=True)
@@ -124,35 +138,124 @@ def _odometry(msg: Any, _log: int) -> tuple[int, Sequence[float], bytes]:
     return _stamp(msg.header), [float(msg.twist.twist.linear.x)], msg.header.frame_id.encode()
 
 
-def decode_input(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
+def _factor(spec: InputSpec, radius: float | None) -> float:
+    """The input's factor to SI units, divided by the rolling radius for m/s or km/h speeds.
+
+    Raises:
+        MappingError: a wheel speed in m/s or km/h and no radius.
+    """
+    if not spec.per_radius:
+        return spec.factor
+    if radius is None or not radius > 0.0:
+        raise MappingError(f'{spec.name}: a unit of m/s or km/h needs the rolling radius')
+    return spec.factor / radius
+
+
+def has_header(spec: InputSpec) -> bool:
+    """True when the input's messages carry a header stamp (all types but Float64MultiArray)."""
+    return spec.msgtype != FLOAT64_ARRAY
+
+
+def _extractor(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[float], bytes]]:
+    """The per-message extractor of a standard type with variable-length fields."""
+    if spec.msgtype == JOINT_STATE:
+        return _joint_state(spec)
+    if spec.msgtype == FLOAT64_ARRAY:
+        return _float64_array(spec)
+    if spec.msgtype == ODOMETRY:
+        return _odometry
+    raise MappingError(f'{spec.name}: no decoder for {spec.msgtype}')
+
+
+class InputDecoder:
+    """One mapped input, one message at a time: raw CDR bytes -> stamp, frame and SI values.
+
+    vd's fixed-layout types are unpacked with ``struct`` (:class:`MessageCodec`, a few µs);
+    the standard types are deserialized with rosbags and read by the extractors
+    :func:`decode_input` uses for a bag. A Float64MultiArray has no header: it takes the
+    ``receive_ns`` the caller gives (the live node's clock at reception).
+
+    Attributes:
+        spec: the input's mapping.
+    """
+
+    def __init__(self, spec: InputSpec, radius: float | None = None) -> None:
+        """Prepare the decoder of ``spec.msgtype``.
+
+        Args:
+            spec: the input's mapping.
+            radius: effective rolling radius [m], for wheel speeds in m/s or km/h.
+
+        Raises:
+            MappingError: the type has no decoder (the mapping refuses such types first), or
+                a wheel speed in m/s or km/h comes without a radius.
+        """
+        self.spec = spec
+        self._codec: MessageCodec | None = None
+        self._extract: Callable[[Any, int], tuple[int, Sequence[float], bytes]] | None = None
+        if spec.msgtype in _BATCH_FIELD:
+            self._codec = MessageCodec(spec.msgtype)
+            self._field = self._codec.fields.index(_BATCH_FIELD[spec.msgtype])
+        else:
+            self._extract = _extractor(spec)
+        factor = _factor(spec, radius)
+        gain = factor * np.asarray(spec.sign, dtype=np.float64)
+        # None: the default mapping's values pass unchanged (no multiplication at all)
+        self._gain: tuple[float, ...] | None = (
+            None if factor == 1.0 and all(s == 1.0 for s in spec.sign) else tuple(gain.tolist())
+        )
+
+    def decode(self, data: bytes, receive_ns: int = 0) -> tuple[int, bytes, tuple[float, ...]]:
+        """Stamp [ns], header.frame_id and the ``spec.width`` SI values of one message.
+
+        Args:
+            data: the message's CDR bytes (a raw subscription's callback argument).
+            receive_ns: [ns] the stamp of a message without header (Float64MultiArray).
+
+        Raises:
+            BagFormatError: the bytes are not a message of ``spec.msgtype``.
+            MappingError: a mapped joint or element is absent from the message.
+        """
+        if self._codec is not None:
+            stamp, frame, fields = self._codec.decode(data)
+            raw = fields[self._field]
+            row: tuple[float, ...] = tuple(raw) if isinstance(raw, tuple) else (raw,)
+        else:
+            assert self._extract is not None  # set in __init__ when there is no codec
+            msg = deserialize(data, self.spec.msgtype)
+            stamp, values, frame = self._extract(msg, receive_ns)
+            row = tuple(values)
+        if self._gain is not None:
+            row = tuple(v * g for v, g in zip(row, self._gain, strict=True))
+        return stamp, frame, row
+
+
+def decode_input(spec: InputSpec, arrays: TopicArrays, radius: float | None = None) -> InputSeries:
     """Decode the messages of ``spec.topic`` to the input's SI values.
 
     Args:
         spec: the input's mapping.
         arrays: the topic's raw messages (`BagReader.topic_arrays`), of type ``spec.msgtype``.
+        radius: effective rolling radius [m], for wheel speeds given in m/s or km/h.
 
     Returns:
         The series in message order (not sorted; the replay aligns by stamp).
 
     Raises:
-        MappingError: a mapped joint or element is absent from the messages.
+        MappingError: a mapped joint or element is absent from the messages, or a wheel
+            speed in m/s or km/h comes without a radius.
         BagFormatError: a message cannot be decoded.
     """
     if spec.msgtype in _BATCH_FIELD:
         fields = decode_batch(spec.msgtype, arrays.datas)
         raw = fields.values[_BATCH_FIELD[spec.msgtype]].reshape(len(arrays.datas), spec.width)
         stamps, values, frames = fields.stamp_ns, raw.astype(np.float64), fields.frame_id
-    elif spec.msgtype == JOINT_STATE:
-        stamps, values, frames = _per_message(spec, arrays, _joint_state(spec))
-    elif spec.msgtype == FLOAT64_ARRAY:
-        stamps, values, frames = _per_message(spec, arrays, _float64_array(spec))
-    elif spec.msgtype == ODOMETRY:
-        stamps, values, frames = _per_message(spec, arrays, _odometry)
-    else:  # the mapping refuses every other type
-        raise MappingError(f'{spec.name}: no decoder for {spec.msgtype}')
-    if spec.factor != 1.0 or any(s != 1.0 for s in spec.sign):
+    else:  # _extractor refuses a type without decoder (the mapping refuses it first)
+        stamps, values, frames = _per_message(spec, arrays, _extractor(spec))
+    factor = _factor(spec, radius)
+    if factor != 1.0 or any(s != 1.0 for s in spec.sign):
         # only then: the default mapping's values pass bit for bit
-        values = values * (spec.factor * np.asarray(spec.sign))
+        values = values * (factor * np.asarray(spec.sign))
     return InputSeries(stamps.astype(np.int64), values, frames)
 
 
@@ -208,3 +311,46 @@ def _engine_array(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[f
         return log, row if len(row) == 3 else [*row, float('nan')], b''
 
     return extract
+
+
+@dataclass(frozen=True)
+class InputStats:
+    """How regularly one input arrived over a recording (the replay and report summaries).
+
+    Attributes:
+        name: the input (:data:`~vd_observer_node.inputs.mapping.INPUTS`).
+        topic: its topic.
+        messages: messages on the topic.
+        longest_gap_s: [s] longest interval between consecutive stamps (0 with < 2 messages).
+        long_gaps: intervals longer than `max_gap_s`: there the observers restart.
+        max_gap_s: [s] the observers' ``max_gap`` the gaps were counted against.
+    """
+
+    name: str
+    topic: str
+    messages: int
+    longest_gap_s: float
+    long_gaps: int
+    max_gap_s: float
+
+    def text(self) -> str:
+        """One line, e.g. 'wheel_torques (/can/wheel_torques): 900 messages, longest gap
+        0.010 s, 0 gaps > 0.5 s'."""
+        return (
+            f'{self.name} ({self.topic}): {self.messages} messages, longest gap '
+            f'{self.longest_gap_s:.3f} s, {self.long_gaps} gaps > {self.max_gap_s:g} s'
+        )
+
+
+def input_stats(spec: InputSpec, series: InputSeries, max_gap_s: float) -> InputStats:
+    """Messages, longest gap and gaps longer than `max_gap_s` [s] of one decoded input."""
+    stamps = np.sort(series.stamp_ns)
+    gaps = np.diff(stamps)
+    return InputStats(
+        name=spec.name,
+        topic=spec.topic,
+        messages=len(stamps),
+        longest_gap_s=float(gaps.max()) * 1e-9 if gaps.size else 0.0,
+        long_gaps=int(np.count_nonzero(gaps > round(max_gap_s * 1e9))),
+        max_gap_s=max_gap_s,
+    )

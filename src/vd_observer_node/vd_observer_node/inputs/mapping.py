@@ -2,8 +2,12 @@
 
 One mapping describes one car's data. It names, for each input of the cascade, the topic, its
 ROS type, where the four wheels are in the message (joint names or array indices), the unit
-and the sign of each wheel. Without a mapping, vd reads its own topics
-(:func:`default_mapping`: ``/vd/sensors/*`` with vd_msgs types).
+and the sign of each wheel, and how samples of different topics are put together. Without a
+mapping, vd reads its own topics (:func:`default_mapping`: ``/vd/sensors/*`` with vd_msgs
+types).
+
+The wheels come from ``wheel_angles`` or from ``wheel_speeds`` (ABS sensors; the observer then
+runs the first-order differentiator on them), never both.
 
 YAML form (every key of an input but ``topic`` and ``type`` is optional where the type does
 not need it)::
@@ -23,12 +27,19 @@ not need it)::
       type: std_msgs/msg/Float64MultiArray
       indices: [0, 1, 2, 3]   # element of each wheel, order FL, FR, RL, RR
       unit: N m               # N m | kN m
-    torque_source: measured   # measured | engine | none (see below)
+    alignment: latest         # exact (default) | latest
 
-Where the wheel torques are not measured, ``torque_source: engine`` derives them from the
-engine torque and the gear (the ``engine_torque`` input; the drivetrain of the vehicle file,
-:mod:`vd_observer_node.estimation.drivetrain`) and ``torque_source: none`` runs without
-torque (Fx, mu and slope invalid); ``wheel_torques`` is then not read::
+``alignment``: ``exact`` runs the cascade on the stamps that every input has (vd's own
+sensors, stamped together); ``latest`` runs it on the wheel sensor's stamps with the newest
+body speed and torque sample not later than each (sample and hold, as a live system sees
+them; a wheel stamp is dropped while an input is missing or older than ``max_age`` [s],
+default 0.5).
+
+``torque_source`` (replay only; the live nodes read measured torques): where the wheel
+torques are not measured, ``engine`` derives them from the engine torque and the gear (the
+``engine_torque`` input; the drivetrain of the vehicle file,
+:mod:`vd_observer_node.estimation.drivetrain`) and ``none`` runs without torque (Fx, mu and
+slope invalid); ``wheel_torques`` is then not read::
 
     torque_source: engine
     engine_torque:
@@ -41,9 +52,13 @@ torque (Fx, mu and slope invalid); ``wheel_torques`` is then not read::
 ``engine_torque`` from ``vd_msgs/msg/WheelTorques`` reads its ``engine_torque``, ``gear`` and
 ``engine_speed`` (the default: vd's own ``/vd/sensors/wheel_torques``).
 
+
 Supported types per input (:data:`SUPPORTED_TYPES`): wheel angles from
 ``vd_msgs/msg/WheelAngles``, ``sensor_msgs/msg/JointState`` (position) or
-``std_msgs/msg/Float64MultiArray``; body speed from ``geometry_msgs/msg/TwistStamped``
+``std_msgs/msg/Float64MultiArray``; wheel speeds from ``sensor_msgs/msg/JointState``
+(velocity) or ``std_msgs/msg/Float64MultiArray``, in rad/s, rpm, deg/s, or as the wheel's
+circumferential speed in m/s or km/h (divided by the vehicle's effective rolling radius);
+body speed from ``geometry_msgs/msg/TwistStamped``
 (``twist.linear.x``), ``nav_msgs/msg/Odometry`` (``twist.twist.linear.x``) or
 ``std_msgs/msg/Float64MultiArray``; wheel torques from ``vd_msgs/msg/WheelTorques``,
 ``sensor_msgs/msg/JointState`` (effort) or ``std_msgs/msg/Float64MultiArray``.
@@ -67,11 +82,17 @@ from vd_sim_node.topics import (
     SENSORS_WHEEL_TORQUES,
 )
 
+from vd_observer_node.estimation.alignment import ALIGNMENTS
+from vd_observer_node.estimation.drivetrain import TORQUE_SOURCES
 from vd_observer_node.inputs.errors import MappingError
 
 __all__ = [
+    'ALIGNMENTS',
     'ENGINE_INPUT',
     'INPUTS',
+    'INPUT_KEYS',
+    'PER_RADIUS_UNITS',
+    'SETTINGS',
     'SPEED_UNITS',
     'SUPPORTED_TYPES',
     'TORQUE_SOURCE_KEY',
@@ -81,16 +102,18 @@ __all__ = [
     'default_mapping',
     'load_input_mapping',
     'mapping_from_dict',
+    'mapping_from_params',
 ]
 
-#: The cascade's inputs, in the order of a mapping file.
-INPUTS: Final = ('wheel_angles', 'body_speed', 'wheel_torques')
+#: The cascade's inputs, in the order of a mapping file (wheel angles OR wheel speeds).
+INPUTS: Final = ('wheel_angles', 'wheel_speeds', 'body_speed', 'wheel_torques')
+#: Top-level keys that are settings of the whole mapping, not inputs.
+SETTINGS: Final = ('alignment', 'max_age')
 #: Optional input of the engine path: engine torque, gear and (optionally) engine speed.
 ENGINE_INPUT: Final = 'engine_torque'
-#: Where the wheel torques come from (`drivetrain.TORQUE_SOURCES`): the top-level key.
+#: Where the wheel torques come from (`drivetrain.TORQUE_SOURCES`): a top-level key of the
+#: file (offline replay; not a node parameter: the live nodes read measured torques).
 TORQUE_SOURCE_KEY: Final = 'torque_source'
-# estimation.drivetrain.TORQUE_SOURCES, spelled again: inputs sit below estimation (tested equal)
-_TORQUE_SOURCES: Final = ('measured', 'engine', 'none')
 
 # vd's own sensor types, as the topic contract gives them
 WHEEL_ANGLES_TYPE: Final = SENSORS[SENSORS_WHEEL_ANGLES]
@@ -102,6 +125,7 @@ ODOMETRY: Final = 'nav_msgs/msg/Odometry'
 
 SUPPORTED_TYPES: Final[dict[str, tuple[str, ...]]] = {
     'wheel_angles': (WHEEL_ANGLES_TYPE, JOINT_STATE, FLOAT64_ARRAY),
+    'wheel_speeds': (JOINT_STATE, FLOAT64_ARRAY),
     'body_speed': (TWIST_STAMPED, ODOMETRY, FLOAT64_ARRAY),
     'wheel_torques': (WHEEL_TORQUES_TYPE, JOINT_STATE, FLOAT64_ARRAY),
     ENGINE_INPUT: (WHEEL_TORQUES_TYPE, FLOAT64_ARRAY),
@@ -110,17 +134,26 @@ SUPPORTED_TYPES: Final[dict[str, tuple[str, ...]]] = {
 #: Factor to the SI unit of each input, by unit name; the first is the SI unit (the default).
 UNITS: Final[dict[str, dict[str, float]]] = {
     'wheel_angles': {'rad': 1.0, 'deg': math.pi / 180.0, 'rev': 2.0 * math.pi},
+    'wheel_speeds': {
+        'rad/s': 1.0,
+        'rpm': 2.0 * math.pi / 60.0,
+        'deg/s': math.pi / 180.0,
+        'm/s': 1.0,
+        'km/h': 1.0 / 3.6,
+    },
     'body_speed': {'m/s': 1.0, 'km/h': 1.0 / 3.6},
     'wheel_torques': {'N m': 1.0, 'kN m': 1000.0},
     ENGINE_INPUT: {'N m': 1.0, 'kN m': 1000.0},
 }
 #: Units of the engine speed (``speed_unit`` of ``engine_torque``) and their factor to rad/s.
 SPEED_UNITS: Final = {'rad/s': 1.0, 'rpm': math.pi / 30.0}
+#: Wheel-speed units of the circumferential speed: divided by the effective rolling radius.
+PER_RADIUS_UNITS: Final = frozenset({'m/s', 'km/h'})
 #: Inputs with one value per wheel (the others are one scalar).
-_PER_WHEEL: Final = frozenset({'wheel_angles', 'wheel_torques'})
-_KEYS: Final = frozenset(
-    {'topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign', 'speed_unit'}
-)
+_PER_WHEEL: Final = frozenset({'wheel_angles', 'wheel_speeds', 'wheel_torques'})
+#: The settings of one input, in the order of a mapping file.
+INPUT_KEYS: Final = ('topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign')
+_KEYS: Final = frozenset((*INPUT_KEYS, 'speed_unit'))  # speed_unit: engine_torque only
 
 
 @dataclass(frozen=True)
@@ -135,6 +168,8 @@ class InputSpec:
         indices: Float64MultiArray only: the element of FL, FR, RL, RR, or of the scalar.
         factor: multiplies the raw value to give SI units (unit factor times ``scale``).
         sign: shape (4,) per-wheel sign (+1 or -1) for per-wheel inputs, (1,) for a scalar.
+        per_radius: wheel speeds given as a circumferential speed: the value times ``factor``
+            is in m/s and is divided by the effective rolling radius [m] to give rad/s.
         speed_factor: ``engine_torque`` only: multiplies the engine speed to give rad/s.
     """
 
@@ -145,6 +180,7 @@ class InputSpec:
     indices: tuple[int, ...] = ()
     factor: float = 1.0
     sign: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0)
+    per_radius: bool = False
     speed_factor: float = 1.0
 
     @property
@@ -161,20 +197,25 @@ class InputMapping:
     """The three inputs of the cascade (see the module docstring for the YAML form).
 
     Attributes:
-        wheel_angles: unwrapped wheel angles, FL, FR, RL, RR [rad after conversion].
+        wheels: the wheel sensors, FL, FR, RL, RR: the ``wheel_angles`` input (unwrapped
+            angles, [rad] after conversion) or the ``wheel_speeds`` one ([rad/s]).
         body_speed: longitudinal body speed [m/s after conversion].
         wheel_torques: drive minus brake torque per wheel [N m after conversion].
         source: where the mapping was read from ('' for the default).
+        alignment: one of :data:`ALIGNMENTS`.
+        max_age: with 'latest' alignment, the oldest a held sample may be [s].
         engine_torque: engine torque [N m], gear and engine speed [rad/s], read with
             ``torque_source`` engine only (default: vd's WheelTorques topic).
         torque_source: 'measured' (``wheel_torques``), 'engine' (``engine_torque`` through
             the drivetrain) or 'none' (no torque).
     """
 
-    wheel_angles: InputSpec
+    wheels: InputSpec
     body_speed: InputSpec
     wheel_torques: InputSpec
     source: str = ''
+    alignment: str = 'exact'
+    max_age: float = 0.5
     engine_torque: InputSpec | None = None
     torque_source: str = 'measured'
 
@@ -188,21 +229,33 @@ class InputMapping:
         """The inputs the torque source reads: wheel angles, body speed, and the wheel
         torques (measured), the engine input (engine) or nothing more (none)."""
         if self.torque_source == 'engine':
-            return (self.wheel_angles, self.body_speed, self.engine)
+            return (self.wheels, self.body_speed, self.engine)
         if self.torque_source == 'none':
-            return (self.wheel_angles, self.body_speed)
+            return (self.wheels, self.body_speed)
         return self.specs
 
     @property
     def specs(self) -> tuple[InputSpec, InputSpec, InputSpec]:
-        """The inputs in :data:`INPUTS` order."""
-        return (self.wheel_angles, self.body_speed, self.wheel_torques)
+        """The inputs: wheels, body speed, wheel torques."""
+        return (self.wheels, self.body_speed, self.wheel_torques)
+
+    @property
+    def wheel_input(self) -> str:
+        """What the wheel sensors are, as `ObserverConfig.wheel_input`: 'angle' or 'speed'."""
+        return 'speed' if self.wheels.name == 'wheel_speeds' else 'angle'
+
+    @property
+    def topics(self) -> tuple[str, ...]:
+        """The distinct input topics, in input order (two inputs may share a JointState)."""
+        return tuple(dict.fromkeys(s.topic for s in self.specs))
 
     @property
     def is_default(self) -> bool:
         """True when it reads vd's own sensor topics with vd's types, unchanged."""
+        default = default_mapping()
         return (
-            self.specs == default_mapping().specs
+            self.specs == default.specs
+            and self.alignment == default.alignment
             and self.torque_source == 'measured'
             and self.engine_torque is None
         )
@@ -211,7 +264,7 @@ class InputMapping:
 def default_mapping() -> InputMapping:
     """vd's own sensor topics (``/vd/sensors/*``) with vd_msgs types, SI units."""
     return InputMapping(
-        wheel_angles=InputSpec('wheel_angles', SENSORS_WHEEL_ANGLES, WHEEL_ANGLES_TYPE),
+        wheels=InputSpec('wheel_angles', SENSORS_WHEEL_ANGLES, WHEEL_ANGLES_TYPE),
         body_speed=InputSpec('body_speed', SENSORS_BODY_VELOCITY, TWIST_STAMPED, sign=(1.0,)),
         wheel_torques=InputSpec('wheel_torques', SENSORS_WHEEL_TORQUES, WHEEL_TORQUES_TYPE),
     )
@@ -306,6 +359,7 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         indices=indices,
         factor=UNITS[name][unit] * scale,
         sign=sign,
+        per_radius=name == 'wheel_speeds' and unit in PER_RADIUS_UNITS,
         speed_factor=speed_factor,
     )
 
@@ -324,34 +378,97 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
         data = {}
     if not isinstance(data, Mapping):
         raise MappingError(f'{source}: expected a mapping of {", ".join(INPUTS)}')
-    keys = (*INPUTS, ENGINE_INPUT, TORQUE_SOURCE_KEY)
+    keys = (*INPUTS, *SETTINGS, ENGINE_INPUT, TORQUE_SOURCE_KEY)
     unknown = sorted(set(data) - set(keys))
     if unknown:
         raise MappingError(f'{source}: {unknown[0]}: unknown input (use {", ".join(keys)})')
     torque_source = data.get(TORQUE_SOURCE_KEY, 'measured')
-    if torque_source not in _TORQUE_SOURCES:
+    if torque_source not in TORQUE_SOURCES:
         raise MappingError(
             f'{source}: {TORQUE_SOURCE_KEY} {torque_source!r} is unknown (use one of '
-            f'{", ".join(_TORQUE_SOURCES)})'
+            f'{", ".join(TORQUE_SOURCES)})'
         )
+    if 'wheel_angles' in data and 'wheel_speeds' in data:
+        raise MappingError(f'{source}: wheel_speeds: give wheel_angles or wheel_speeds, not both')
     default = default_mapping()
-    specs = {
-        name: _spec(name, data[name], f'{source}: {name}') if name in data else spec
-        for name, spec in zip(INPUTS, default.specs, strict=True)
-    }
+    wheel_name = 'wheel_speeds' if 'wheel_speeds' in data else 'wheel_angles'
+    specs = [
+        _spec(name, data[name], f'{source}: {name}') if name in data else spec
+        for name, spec in zip(
+            (wheel_name, 'body_speed', 'wheel_torques'), default.specs, strict=True
+        )
+    ]
+    types: dict[str, str] = {}
+    for spec in specs:
+        if types.setdefault(spec.topic, spec.msgtype) != spec.msgtype:
+            raise MappingError(
+                f'{source}: {spec.name}.type: {spec.topic} is also mapped as '
+                f'{types[spec.topic]} (one topic has one type)'
+            )
+    alignment = data.get('alignment', default.alignment)
+    if alignment not in ALIGNMENTS:
+        raise MappingError(
+            f'{source}: alignment {alignment!r} is unknown (use one of {", ".join(ALIGNMENTS)})'
+        )
+    max_age = _number(f'{source}: max_age', data.get('max_age', default.max_age))
+    if max_age <= 0.0:
+        raise MappingError(f'{source}: max_age must be > 0 s, got {max_age}')
     engine = (
         _spec(ENGINE_INPUT, data[ENGINE_INPUT], f'{source}: {ENGINE_INPUT}')
         if ENGINE_INPUT in data
         else None
     )
-    mapping = InputMapping(
-        **specs, source=source, engine_torque=engine, torque_source=torque_source
+    if engine is not None and types.setdefault(engine.topic, engine.msgtype) != engine.msgtype:
+        raise MappingError(
+            f'{source}: {ENGINE_INPUT}.type: {engine.topic} is also mapped as '
+            f'{types[engine.topic]} (one topic has one type)'
+        )
+    wheels, body_speed, wheel_torques = specs
+    return InputMapping(
+        wheels,
+        body_speed,
+        wheel_torques,
+        source=source,
+        alignment=alignment,
+        max_age=max_age,
+        engine_torque=engine,
+        torque_source=torque_source,
     )
-    # only the inputs read must differ (the engine input may share vd's torque topic)
-    topics = [s.topic for s in mapping.used_specs]
-    if len(set(topics)) != len(topics):
-        raise MappingError(f'{source}: two inputs share one topic ({", ".join(topics)})')
-    return mapping
+
+
+def mapping_from_params(
+    values: Mapping[str, Any], prefix: str = 'inputs.', source: str = 'parameters'
+) -> InputMapping:
+    """Build a mapping from flat node parameters ``<prefix><input>.<key>`` (the params form).
+
+    The parameters are regrouped into the file's form and read by :func:`mapping_from_dict`,
+    so a ROS params file and a mapping file are checked by one parser. An input none of
+    whose parameters is set keeps vd's own topic.
+
+    Args:
+        values: parameter name -> value, None where a parameter is not set; names without
+            `prefix` are ignored. ROS gives arrays as lists or ``array.array``.
+        prefix: the parameters' common prefix.
+        source: named in every error.
+
+    Raises:
+        MappingError: one line naming the input and key.
+    """
+    data: dict[str, dict[str, Any]] = {}
+    source = f'{source} {prefix}*'
+    for name, value in values.items():
+        if value is None or not name.startswith(prefix):
+            continue
+        parts = name[len(prefix) :].split('.')
+        if not isinstance(value, str | bytes | int | float | bool):
+            value = list(value)  # ROS arrays (array.array, tuples) in the YAML form
+        if len(parts) == 1 and parts[0] in SETTINGS:
+            data[parts[0]] = value
+            continue
+        if len(parts) != 2:
+            raise MappingError(f'{source}: {name}: expected {prefix}<input>.<key>')
+        data.setdefault(parts[0], {})[parts[1]] = value
+    return mapping_from_dict(data, source=source)
 
 
 def load_input_mapping(path: str | os.PathLike[str]) -> InputMapping:

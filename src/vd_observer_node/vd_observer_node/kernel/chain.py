@@ -21,7 +21,12 @@ from vd_observer_node.estimation.cascade import CascadeResult, checked_engine, c
 from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_NONE, Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import FaultReport, merge_reports
-from vd_observer_node.estimation.observer import ObserverConfig, SpeedState, WheelState
+from vd_observer_node.estimation.observer import (
+    WHEEL_INPUTS,
+    ObserverConfig,
+    SpeedState,
+    WheelState,
+)
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.kernel._jit import jit
 from vd_observer_node.kernel.estimation import (
@@ -63,7 +68,7 @@ BoolArray = NDArray[np.bool_]
 def _observers(config: ObserverConfig) -> tuple[CompiledDifferentiator, CompiledDifferentiator]:
     """Wheel (4 channels) and speed (1 channel) differentiators of `observer.Observer`."""
 
-    def make(lipschitz: float, n: int) -> CompiledDifferentiator:
+    def make(lipschitz: float, n: int, input_derivative: int) -> CompiledDifferentiator:
         return CompiledDifferentiator(
             lipschitz,
             n_channels=n,
@@ -72,9 +77,11 @@ def _observers(config: ObserverConfig) -> tuple[CompiledDifferentiator, Compiled
             init=config.init,
             max_gap=config.max_gap,
             init_baseline=config.init_baseline,
+            input_derivative=input_derivative,
         )
 
-    return make(config.wheel_lipschitz, 4), make(config.speed_lipschitz, 1)
+    wheel_input = WHEEL_INPUTS.index(config.wheel_input)
+    return make(config.wheel_lipschitz, 4, wheel_input), make(config.speed_lipschitz, 1, 0)
 
 
 def _diff_args(d: CompiledDifferentiator) -> tuple[Any, ...]:
@@ -225,6 +232,7 @@ def run_cascade_compiled(
         wheel_valid=wheel_valid,
         torque_valid=torque_valid,
         torque_source=source,
+        angle=wheel[:, 0, :].copy(),
         faults={
             f'{part}.{kind}': count
             for part, counter in (

@@ -10,8 +10,8 @@ fast wheel observers.
 
 Array layouts (n channels):
 
-* ``prm`` float64 (11,): l0, l1, l2, k0, k1, k2, discretization code, init code, max_gap,
-  init_baseline, max_jump_back;
+* ``prm`` float64 (12,): l0, l1, l2, k0, k1, k2, discretization code, init code, max_gap,
+  init_baseline, max_jump_back, input_derivative (0: samples of f, 1: of f');
 * ``z`` (3, n) estimates of (f, f', f''); ``f_last``, ``pend_t``, ``pend_f`` (n,);
   ``active`` (n,) bool; ``scal`` (2,): stamp of the last accepted sample (nan before the first),
   1.0 when every channel is active;
@@ -85,6 +85,7 @@ def diff_params(
     max_gap: float,
     init_baseline: float,
     max_jump_back: float,
+    input_derivative: int = 0,
 ) -> FloatArray:
     """The ``prm`` array of one differentiator (see the module docstring)."""
     k0, k1, k2 = gains.nonrecursive()
@@ -101,6 +102,7 @@ def diff_params(
             max_gap,
             init_baseline,
             max_jump_back,
+            float(input_derivative),
         ]
     )
 
@@ -161,26 +163,30 @@ def _adopt(
         return
     first_sample = int(prm[7]) == _INIT_FIRST
     baseline = prm[9]
+    row = int(prm[11])  # the row the samples estimate; rows below it start from 0
     for i in range(z.shape[1]):
         if not finite[i] or active[i]:
             continue
         if first_sample:
-            z[0, i] = sample[i]
+            z[0, i] = 0.0
             z[1, i] = 0.0
             z[2, i] = 0.0
+            z[row, i] = sample[i]
             active[i] = True
             continue
         if math.isnan(pend_t[i]):
             pend_t[i] = t
             pend_f[i] = sample[i]
-            z[0, i] = sample[i]
+            z[row, i] = sample[i]
         elif t - pend_t[i] >= baseline:
-            z[0, i] = sample[i]
-            z[1, i] = (sample[i] - pend_f[i]) / (t - pend_t[i])
+            z[0, i] = 0.0
+            z[1, i] = 0.0
             z[2, i] = 0.0
+            z[row, i] = sample[i]
+            z[row + 1, i] = (sample[i] - pend_f[i]) / (t - pend_t[i])
             active[i] = True
         else:
-            z[0, i] = sample[i]
+            z[row, i] = sample[i]
 
 
 @jit
@@ -222,6 +228,39 @@ def _positive_cubic_root(a: float, b: float, c: FloatArray, y: FloatArray) -> No
 
 
 @jit
+def _corrected_first_order(
+    prm: FloatArray,
+    z: FloatArray,
+    g: FloatArray,
+    tau: float,
+    lip: FloatArray,
+    out: FloatArray,
+) -> None:
+    """`differentiator.first_order_implicit_step` / `first_order_euler_step` per channel."""
+    a, b = prm[1], prm[2]
+    code = int(prm[6])
+    for i in range(z.shape[1]):
+        if code == _IMPLICIT:
+            scale = (tau * tau) * lip[i]
+            w = z[1, i] + tau * z[2, i] - g[i]
+            s = _sign(w)
+            excess = max(abs(w) / scale - b, 0.0)
+            y = 2.0 * excess / (a + math.sqrt(a * a + 4.0 * excess))
+            sign_value = s if excess > 0.0 else w / (scale * b)
+            out[2, i] = z[2, i] - tau * b * lip[i] * sign_value
+            out[1, i] = g[i] + s * scale * (y * y)
+        else:
+            e = z[1, i] - g[i]
+            v = z[2, i] - a * math.sqrt(lip[i]) * (_sign(e) * math.sqrt(abs(e)))
+            z1 = z[1, i] + tau * v
+            if code == _EULER_TAYLOR:
+                z1 = z1 + 0.5 * (tau * tau) * z[2, i]
+            out[1, i] = z1
+            out[2, i] = z[2, i] - tau * (b * lip[i] * _sign(e))
+        out[0, i] = z[0, i] + 0.5 * tau * (z[1, i] + out[1, i])
+
+
+@jit
 def _corrected(
     prm: FloatArray,
     z: FloatArray,
@@ -233,6 +272,9 @@ def _corrected(
     """One step of the configured discretization for every channel (`differentiator.step`)."""
     n = z.shape[1]
     code = int(prm[6])
+    if int(prm[11]) == 1:
+        _corrected_first_order(prm, z, f, tau, lip, out)
+        return
     if code == _IMPLICIT:
         k0, k1, k2 = prm[3], prm[4], prm[5]
         excess = np.empty(n)
@@ -335,13 +377,14 @@ def diff_update(
     else:
         tau = t - scal[0]
         implicit = int(prm[6]) == _IMPLICIT
+        row = int(prm[11])
         use = np.empty(n, dtype=np.bool_)
         f_used = np.empty(n)
         all_use = True
         for i in range(n):
             use[i] = finite[i] if implicit else math.isfinite(f_last[i])
             source = sample[i] if implicit else f_last[i]
-            f_used[i] = source if use[i] else z[0, i]
+            f_used[i] = source if use[i] else z[row, i]
             all_use = all_use and use[i]
         corrected = np.empty((3, n))
         _corrected(prm, z, f_used, tau, lip, corrected)
@@ -418,6 +461,7 @@ class CompiledDifferentiator:
         max_gap: float = math.inf,
         init_baseline: float = 0.0,
         max_jump_back: float | None = None,
+        input_derivative: int = 0,
     ) -> None:
         """Create the differentiator; arguments as `LevantDifferentiator`.
 
@@ -425,12 +469,22 @@ class CompiledDifferentiator:
             ConfigurationError: invalid L, name or gap.
         """
         lip, jump = checked_settings(
-            lipschitz, n_channels, discretization, init, max_gap, init_baseline, max_jump_back
+            lipschitz,
+            n_channels,
+            discretization,
+            init,
+            max_gap,
+            init_baseline,
+            max_jump_back,
+            input_derivative,
         )
         self._n = n_channels
+        self._row = int(input_derivative)
         self._discretization = discretization
         self.lip = lip
-        self.prm = diff_params(gains, discretization, init, float(max_gap), init_baseline, jump)
+        self.prm = diff_params(
+            gains, discretization, init, float(max_gap), init_baseline, jump, input_derivative
+        )
         self.z = np.zeros((3, n_channels))
         self.f_last = np.full(n_channels, np.nan)
         self.active = np.zeros(n_channels, dtype=np.bool_)
@@ -457,6 +511,11 @@ class CompiledDifferentiator:
     def discretization(self) -> str:
         """Discretization name."""
         return self._discretization
+
+    @property
+    def input_derivative(self) -> int:
+        """Which derivative of f the samples are (0: f, 1: f')."""
+        return self._row
 
     @property
     def state(self) -> FloatArray:

@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import InputShapeError
-from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.estimation.observer import WHEEL_INPUTS, ObserverConfig
 from vd_observer_node.kernel._jit import jit
 from vd_observer_node.kernel.levant import CompiledDifferentiator, diff_reset, diff_update
 from vd_observer_node.situation.alerts import ALERT_KINDS, Alert, AlertConfig
@@ -479,6 +479,7 @@ class SituationArrays:
             init=fast_config.init,
             max_gap=fast_config.max_gap,
             init_baseline=fast_config.init_baseline,
+            input_derivative=WHEEL_INPUTS.index(fast_config.wheel_input),
         )
         self.prm_f = _friction_params(friction)
         self.tp, self.table = _tyre_params(curves)

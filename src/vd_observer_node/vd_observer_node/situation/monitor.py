@@ -168,7 +168,8 @@ class SituationMonitor:
 
         Args:
             t: stamp [s].
-            wheel_angle: shape (4,), [rad] unwrapped wheel angles (sensor).
+            wheel_angle: shape (4,), [rad] unwrapped wheel angles (sensor), or speeds [rad/s]
+                with ``wheel_input='speed'``.
             speed: [m/s] measured body speed.
             wheel_torque: shape (4,), [N m] drive minus brake torque (sensor).
             omega: shape (4,), [rad/s] the cascade observer's wheel speed.

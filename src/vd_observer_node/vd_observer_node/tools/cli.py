@@ -4,6 +4,8 @@
     vd bag repair BAG [--no-backup]
     vd replay IN_BAG OUT_BAG [--vehicle FILE] [--config FILE] [--mapping FILE]
               [--torque-source {measured,engine,none}] [--no-progress] [--kernel K]
+    vd report BAG [--out DIR] ...
+    vd fleet BAGS... --out DIR [--workers N] [--engine local|dask] [--baseline OLD] ...
 
 Errors (missing paths, corrupt bags, bad vehicle files) print one line on stderr and exit
 with status 2; no traceback.
@@ -19,6 +21,7 @@ from pathlib import Path
 from vd_sim_node.topics import SENSORS_NAMESPACE
 
 from vd_observer_node.errors import ObserverError
+from vd_observer_node.tools.fleet.cli import add_fleet_parser
 from vd_observer_node.tools.report.cli import add_report_parser
 
 __all__ = ['main']
@@ -110,6 +113,8 @@ def _replay(args: argparse.Namespace) -> int:
         f'{report.situation_us_per_sample:.0f} us per sample); wrote '
         f'{report.messages_written} messages to {args.out_bag}'
     )
+    for stats in report.inputs:
+        print(f'  input {stats.text()}')
     print(f'torque path: {path}')
     return EXIT_OK
 
@@ -161,6 +166,7 @@ def _parser() -> argparse.ArgumentParser:
     )
     replay.set_defaults(run=_replay)
     add_report_parser(commands)
+    add_fleet_parser(commands)
     return parser
 
 

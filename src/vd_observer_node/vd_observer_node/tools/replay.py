@@ -28,7 +28,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +58,7 @@ from vd_observer_node.bag.errors import BagExistsError, ReplayInputError
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.errors import ConfigurationError
+from vd_observer_node.estimation.alignment import align_stamps
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.drivetrain import (
     TORQUE_SOURCES,
@@ -68,8 +69,13 @@ from vd_observer_node.estimation.drivetrain import (
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
-from vd_observer_node.inputs.decode import InputSeries, decode_engine, decode_input
-from vd_observer_node.inputs.mapping import InputMapping, default_mapping
+from vd_observer_node.inputs.decode import (
+    InputStats,
+    decode_engine,
+    decode_input,
+    input_stats,
+)
+from vd_observer_node.inputs.mapping import ENGINE_INPUT, InputMapping, default_mapping
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.situation.monitor import (
@@ -111,9 +117,17 @@ class ReplayReport:
         bag_duration_s: log-time span of the sensor data [s].
         wall_time_s: replay wall time [s]; cascade_time_s of it in the cascade.
         cascade_time_s: [s] wall time of the cascade.
-        unmatched: sensor messages whose stamp is missing on another sensor topic.
+        unmatched: sensor messages not used: with 'exact' alignment, those whose stamp is
+            missing on another sensor topic; with 'latest', the wheel messages dropped
+            (repeated stamps, ``stale`` ones) and the other inputs' messages never held.
+        stale: with 'latest' alignment, wheel stamps dropped because another input had no
+            sample yet or only one older than the mapping's ``max_age``.
         situation_time_s: [s] wall time of the situation monitor (alerts and friction
             potential; 0 when not run).
+        faults: the cascade's fault totals per kind (``CascadeResult.faults``: keys
+            'wheel.<kind>', 'speed.<kind>', 'estimator.<kind>', as on /diagnostics).
+        inputs: per input, in mapping order: messages, longest gap between stamps and gaps
+            longer than the observers' ``max_gap`` (a topic that stopped arriving).
         torque_source: the torque path: 'measured', 'engine' or 'none'.
         torque_valid_fraction: share of the samples where the torque path held (1 when
             measured, 0 with none, below 1 on the engine path while the clutch slipped).
@@ -127,6 +141,9 @@ class ReplayReport:
     cascade_time_s: float
     unmatched: int
     situation_time_s: float = 0.0
+    stale: int = 0
+    faults: dict[str, int] = field(default_factory=dict)
+    inputs: tuple[InputStats, ...] = ()
     torque_source: str = 'measured'
     torque_valid_fraction: float = 1.0
 
@@ -202,20 +219,6 @@ def load_replay_config(path: str | os.PathLike[str]) -> ReplayConfig:
         if sections['situation'] is not None
         else None,
     )
-
-
-def _align(stamps: list[np.ndarray]) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Stamps common to all topics (sorted, unique) and each topic's index of them."""
-    common = stamps[0]
-    for s in stamps[1:]:
-        common = np.intersect1d(common, s)
-    indexes = []
-    for s in stamps:
-        # Last message of each stamp wins, as a re-sent stamp replaces the buffered one live.
-        order = np.argsort(s, kind='stable')
-        last = order[np.searchsorted(s[order], common, side='right') - 1]
-        indexes.append(last)
-    return common, indexes
 
 
 def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
@@ -390,9 +393,11 @@ def replay_bag(
         situation_config: fast-observer settings; default SituationConfig().
         kernel: 'compiled' (the numba kernel, :mod:`vd_observer_node.kernel`) or 'python'
             (the reference implementation; equal results, ~30x the time).
-        mapping: which topics, types, joints, units and signs are the wheel angles, body
-            speed and wheel torques (:mod:`vd_observer_node.inputs.mapping`); default vd's
-            own ``/vd/sensors/*`` topics.
+        mapping: which topics, types, joints, units and signs are the wheel angles (or
+            speeds), body speed and wheel torques, and how their samples are aligned
+            (:mod:`vd_observer_node.inputs.mapping`); default vd's own ``/vd/sensors/*``
+            topics. With wheel speeds the observers run with ``wheel_input='speed'``
+            whatever ``observer_config`` says.
         torque_source: 'measured' (the wheel torques), 'engine' (wheel torques from the
             engine torque and gear of the mapping's ``engine_torque`` input, by default
             vd's WheelTorques topic, through `drivetrain`) or 'none' (no torque topic is
@@ -437,7 +442,8 @@ def replay_bag(
             raise ReplayInputError(
                 f'{in_bag}: {spec.topic} has type {info.msgtype}, need {spec.msgtype}{origin}'
             )
-    inputs = [spec.topic for spec in mapping.used_specs]
+    inputs = list(dict.fromkeys(spec.topic for spec in mapping.used_specs))
+    observer_config = replace(observer_config or ObserverConfig(), wheel_input=mapping.wheel_input)
     truth = [t for t in topics if t.startswith(TRUTH_PREFIX)]
     # One read of the file gives the estimator vehicle and the tyre alike (a millisecond).
     params = load_vehicle_params(vehicle_file)
@@ -477,15 +483,22 @@ def replay_bag(
         for topic, arr in reader.topic_arrays([*inputs, *truth]).items():
             arrays[topic] = arr
             bar.update(len(arr.datas))
-        angles = decode_input(mapping.wheel_angles, arrays[mapping.wheel_angles.topic])
-        speed = decode_input(mapping.body_speed, arrays[mapping.body_speed.topic])
-        series: list[InputSeries] = [angles, speed]
-        if source == 'measured':
-            series.append(decode_input(mapping.wheel_torques, arrays[mapping.wheel_torques.topic]))
-        elif source == 'engine':
-            series.append(decode_engine(mapping.engine, arrays[mapping.engine.topic]))
-        common, index = _align([s.stamp_ns for s in series])
-        sensor_count = sum(len(s.stamp_ns) for s in series)
+        radius = estimator_vehicle.effective_radius
+        used = mapping.used_specs  # wheels, body speed, and the torque input of the path
+        decoded = [
+            decode_engine(s, arrays[s.topic])
+            if s.name == ENGINE_INPUT
+            else decode_input(s, arrays[s.topic], radius)
+            for s in used
+        ]
+        max_gap_s = observer_config.max_gap
+        input_summary = tuple(
+            input_stats(s, d, max_gap_s) for s, d in zip(used, decoded, strict=True)
+        )
+        angles, speed = decoded[0], decoded[1]
+        aligned = align_stamps([d.stamp_ns for d in decoded], mapping.alignment, mapping.max_age)
+        common, index = aligned.stamp_ns, aligned.indexes
+        sensor_count = sum(len(d.stamp_ns) for d in decoded)
         bar.set_postfix_str(f'cascade on {len(common)} samples')
         cascade_start = time.perf_counter()
         t = common.astype(np.float64) * 1e-9
@@ -493,9 +506,9 @@ def replay_bag(
         wheel_angle = angles.values[ia]
         body_speed = speed.values[index[1], 0]
         wheel_torque = (
-            series[2].values[index[2]] if source == 'measured' else np.zeros((len(t), 4))
+            decoded[2].values[index[2]] if source == 'measured' else np.zeros((len(t), 4))
         )
-        engine = series[2].values[index[2]] if source == 'engine' else None
+        engine = decoded[2].values[index[2]] if source == 'engine' else None
         extra = dict(cascade_kwargs or {})
         clash = sorted({'torque_source', 'engine', 'drivetrain'} & set(extra))
         if clash:
@@ -574,7 +587,7 @@ def replay_bag(
                 run_monitor()
         frames = angles.frame_ids[ia]
         frame_id = frames[0].decode() if len(frames) else ''
-        log_ns = arrays[mapping.wheel_angles.topic].log_time_ns[ia]
+        log_ns = arrays[mapping.wheels.topic].log_time_ns[ia]
         outputs: list[tuple[str, str, np.ndarray, list[bytes]]] = []
         for topic in [*inputs, *truth]:
             arr = arrays[topic]
@@ -582,7 +595,9 @@ def replay_bag(
             # the output holds one definition per type
             datas = upgrade_batch(arr.msgtype, arr.decoding_type, arr.datas)
             outputs.append((topic, arr.msgtype, arr.log_time_ns, datas))
-        for topic, values in _estimates(result, wheel_angle).items():
+        # the sensor's angles as the observer node publishes them; with speeds, the observer's
+        observed_angle = result.angle if mapping.wheel_input == 'speed' else wheel_angle
+        for topic, values in _estimates(result, observed_angle).items():
             datas = encode_batch(ESTIMATE_TOPICS[topic], common, frame_id, values)
             outputs.append((topic, ESTIMATE_TOPICS[topic], log_ns, datas))
         if worker is not None:
@@ -607,8 +622,11 @@ def replay_bag(
         bag_duration_s=float(sensor_log.max() - sensor_log.min()) * 1e-9,
         wall_time_s=wall,
         cascade_time_s=cascade_time,
-        unmatched=sensor_count - len(series) * len(common),
+        unmatched=sensor_count - len(common) - sum(len(np.unique(i)) for i in index[1:]),
         situation_time_s=situation_time[0],
+        stale=aligned.stale,
+        faults=dict(result.faults),
+        inputs=input_summary,
         torque_source=TORQUE_SOURCES[result.torque_source],
         torque_valid_fraction=float(np.mean(result.torque_valid)) if len(common) else 0.0,
     )

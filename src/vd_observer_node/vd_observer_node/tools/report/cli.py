@@ -1,15 +1,22 @@
-"""``vd report BAG [--out DIR]``: argparse wiring for the ``vd`` command (ROS-free).
+"""``vd report BAG [--out DIR] [--mapping FILE]``: argparse wiring of the ``vd`` command.
 
 The ``vd`` command adds the sub-command with :func:`add_report_parser`; the parsed
 arguments carry ``run=run_report``. Errors print one line on stderr and give exit status 2.
+
+With ``--mapping`` (a user's bag with its own topics and standard types, docs/bags.md) the
+report summarises each mapped input (messages, longest gap, gaps longer than ``max_gap``);
+a bag without estimates is first replayed with the mapping (``vd replay``, into a temporary
+folder) so that there is something to compare with the truth.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from vd_sim_node.topics import (
     ESTIMATES_NAMESPACE,
@@ -19,6 +26,9 @@ from vd_sim_node.topics import (
 )
 
 from vd_observer_node.errors import ObserverError
+
+if TYPE_CHECKING:
+    from vd_observer_node.tools.report.load import BagSeries
 
 __all__ = ['add_report_parser', 'default_out_dir', 'run_report']
 
@@ -57,6 +67,13 @@ def add_report_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentPa
         help='vehicle YAML: static wheel loads for the Fz percentage (default: '
         'median true Fz over the first second)',
     )
+    parser.add_argument(
+        '--mapping',
+        type=Path,
+        default=None,
+        help='input mapping YAML of a bag with your own topics and types (docs/bags.md): '
+        'its inputs are summarised, and a bag without estimates is replayed with it first',
+    )
     parser.add_argument('--no-figures', action='store_true', help='metrics only')
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
     parser.set_defaults(run=run_report)
@@ -74,6 +91,26 @@ def run_report(args: argparse.Namespace) -> int:
         return EXIT_ERROR
 
 
+def _load_mapped(bag: Path, mapping_file: Path, scratch: Path, progress: bool) -> BagSeries:
+    """The report's series of a user's bag: replayed with the mapping first if it has no
+    estimates (the replay copies the mapped inputs and the truth to its output)."""
+    from vd_observer_node.bag.reader import BagReader
+    from vd_observer_node.estimation.observer import ObserverConfig
+    from vd_observer_node.inputs.mapping import load_input_mapping
+    from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
+    from vd_observer_node.tools.report.load import load_bag_series
+
+    mapping = load_input_mapping(mapping_file)
+    source = bag
+    if not any(topic in ESTIMATE_TOPICS for topic in BagReader(bag).topics):
+        source = scratch / 'replayed'
+        replay_bag(bag, source, mapping=mapping, progress=progress)
+        print(f'{bag} has no estimates: replayed it with {mapping_file} first')
+    return load_bag_series(
+        source, progress=progress, mapping=mapping, max_gap_s=ObserverConfig().max_gap
+    )
+
+
 def _run(args: argparse.Namespace) -> int:
     from vd_observer_node.tools.report.evaluate import evaluate
     from vd_observer_node.tools.report.format import report_json, report_markdown, report_text
@@ -85,7 +122,14 @@ def _run(args: argparse.Namespace) -> int:
         from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 
         static = load_estimator_vehicle(args.vehicle).static_wheel_loads
-    series = load_bag_series(args.bag, progress=not getattr(args, 'no_progress', False))
+    progress = not getattr(args, 'no_progress', False)
+    mapping_file = getattr(args, 'mapping', None)
+    if mapping_file is None:
+        series = load_bag_series(args.bag, progress=progress)
+    else:
+        with tempfile.TemporaryDirectory(prefix='vd-report-') as scratch:
+            series = _load_mapped(args.bag, Path(mapping_file), Path(scratch), progress)
+        series.path = args.bag
     report, comparisons = evaluate(series, static_loads=static)
     out = args.out if args.out is not None else default_out_dir(args.bag)
     out.mkdir(parents=True, exist_ok=True)

@@ -418,7 +418,9 @@ def _extras(
     elif c.key == 'fx':
         peak = float(np.abs(c.truth[mask]).max()) if mask.any() else float('nan')
         extras['max_abs_truth'] = peak
-        extras['rms_pct_of_max_truth'] = 100.0 * error_stats(c.estimate, c.truth, mask).rms / peak
+        rms = error_stats(c.estimate, c.truth, mask).rms
+        # a drive that never pulls (true Fx zero in the window) has no percentage, not a crash
+        extras['rms_pct_of_max_truth'] = 100.0 * rms / peak if peak > 0 else float('nan')
     elif c.key == 'fz' and static_loads is not None:
         rel = relative_error_stats(c.estimate, c.truth, static_loads[None, :], mask)
         extras['rms_pct_of_static'] = 100.0 * rel.rms
@@ -520,6 +522,7 @@ def evaluate(
     if missing_truth:
         notes.append('truth topics missing: ' + ', '.join(missing_truth))
     notes.extend(f'{name} skipped: {why}' for name, why in series.skipped.items())
+    notes.extend(f'input {stats.text()}' for stats in series.inputs)
     data, alert_notes = alert_data(series)
     section = (
         None

@@ -19,6 +19,8 @@ from tqdm import tqdm
 from vd_observer_node.bag.alerts_cdr import ALERTS_TYPE, decode_alerts
 from vd_observer_node.bag.cdr_batch import BatchFields, decode_batch
 from vd_observer_node.bag.reader import BagReader
+from vd_observer_node.inputs.decode import InputStats, decode_input, input_stats
+from vd_observer_node.inputs.mapping import InputMapping
 from vd_observer_node.tools.report.topics import (
     ALERT_TOPICS,
     ESTIMATE_TOPICS,
@@ -54,6 +56,7 @@ class BagSeries:
         skipped: topic -> why it was not used (wrong type, no messages).
         read_time_s: wall time to read and decode [s].
         message_count: messages decoded.
+        inputs: with an input mapping, how regularly each mapped input arrived.
     """
 
     path: Path
@@ -61,6 +64,7 @@ class BagSeries:
     skipped: dict[str, str] = field(default_factory=dict)
     read_time_s: float = 0.0
     message_count: int = 0
+    inputs: list[InputStats] = field(default_factory=list)
 
 
 def _sorted(fields: BatchFields) -> TopicSeries:
@@ -71,15 +75,25 @@ def _sorted(fields: BatchFields) -> TopicSeries:
     return TopicSeries(stamp, dict(fields.values))
 
 
-def load_bag_series(path: str | os.PathLike[str], *, progress: bool = True) -> BagSeries:
+def load_bag_series(
+    path: str | os.PathLike[str],
+    *,
+    progress: bool = True,
+    mapping: InputMapping | None = None,
+    max_gap_s: float = 0.5,
+) -> BagSeries:
     """Read and decode the vd sensor, observer, estimate, alerts and truth topics of a bag.
 
     Args:
         path: bag folder or .mcap file.
         progress: allow a tqdm bar on stderr (shown only if reading takes over a second).
+        mapping: the user's input topics (:mod:`vd_observer_node.inputs.mapping`): each one
+            present is decoded for its summary (:attr:`BagSeries.inputs`).
+        max_gap_s: [s] the observers' ``max_gap`` the inputs' gaps are counted against.
 
     Raises:
         BagError: the bag cannot be read (see :mod:`vd_observer_node.bag.errors`).
+        MappingError: a mapped topic's messages do not fit the mapping.
     """
     started = time.perf_counter()
     reader = BagReader(path)
@@ -119,5 +133,22 @@ def load_bag_series(path: str | os.PathLike[str], *, progress: bool = True) -> B
             series.topics[name] = _sorted(fields)
             series.message_count += len(arr.datas)
             bar.update(len(arr.datas))
+    if mapping is not None:
+        mapped = [
+            spec
+            for spec in mapping.specs
+            if spec.topic in infos and infos[spec.topic].msgtype == spec.msgtype
+        ]
+        inputs = reader.topic_arrays([spec.topic for spec in mapped])
+        for spec in mapped:
+            decoded = decode_input(spec, inputs[spec.topic])
+            series.inputs.append(input_stats(spec, decoded, max_gap_s))
+        series.skipped.update(
+            {
+                spec.topic: f'mapped {spec.name} ({spec.msgtype}) absent'
+                for spec in mapping.specs
+                if spec not in mapped
+            }
+        )
     series.read_time_s = time.perf_counter() - started
     return series
