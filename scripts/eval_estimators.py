@@ -7,10 +7,16 @@ signals through `vd_observer_node.estimation.cascade.run_cascade` and prints the
 the issue's accuracy targets. Evaluation window: t >= 1 s, excluding +-0.5 s around slope steps
 and gear shifts (the scenario's events whose description mentions 'slope' or 'shift').
 
+Then the same run through each torque path (issue 15): measured wheel torques, the engine
+torque and gear through the drivetrain (`estimation.drivetrain`), and no torque: Fx, mu and
+slope RMS where each path says its estimates are valid, their coverage, and the figures
+while braking (the engine path cannot see the brakes).
+
 Usage:
     python scripts/eval_estimators.py [--scenario PATH] [--cases ideal,noisy]
         [--discretization implicit] [--wheel-lipschitz 300] [--speed-lipschitz 20]
         [--slope-tau 0.05] [--force-tau 0.0] [--load-transfer tire_forces]
+        [--torque-paths measured,engine,none]
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade  # noqa: E402
+from vd_observer_node.estimation.drivetrain import Drivetrain  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_estimator_vehicle  # noqa: E402
@@ -97,6 +104,42 @@ def figures(
     return out
 
 
+def torque_path_figures(
+    sim: Any, est: CascadeResult, vehicle: EstimatorVehicle, mask: np.ndarray
+) -> dict[str, float]:
+    """Error figures of one torque path where its own validity flags allow.
+
+    fx over the samples where the torque path held (torque_valid); mu where the wheel is
+    excited (|Fx_true| > 0.05 Fz_true) and the estimate valid; slope where valid and moving.
+    The braking figures take the samples with any brake torque (the hold brake at standstill
+    included).
+    """
+    out: dict[str, float] = {}
+    held = mask & est.torque_valid
+    out['torque_valid_pct'] = 100.0 * float(held.sum()) / max(int(mask.sum()), 1)
+    out['fx_rms_N'] = rms((est.fx - sim.fx)[held])
+    out['fz_rms_pct'] = 100.0 * rms(((est.fz - sim.fz) / vehicle.static_wheel_loads)[mask])
+    excited = mask[:, None] & (np.abs(sim.fx) > 0.05 * sim.fz)
+    valid_mu = excited & est.mu_valid
+    out['mu_rms'] = rms((est.mu - sim.mu)[valid_mu])
+    out['mu_valid_coverage_pct'] = 100.0 * float(valid_mu.sum()) / max(int(excited.sum()), 1)
+    moving = mask & (np.abs(sim.speed_true) > 0.5)
+    valid_slope = moving & est.slope_valid
+    out['slope_rms_deg'] = float(np.degrees(rms((est.slope - sim.slope)[valid_slope])))
+    out['slope_valid_pct'] = 100.0 * float(valid_slope.sum()) / max(int(moving.sum()), 1)
+    braking = mask & (sim.brake_torque.max(axis=1) > 0.0) & (np.abs(sim.speed_true) > 0.5)
+    out['braking_samples'] = float(braking.sum())
+    if braking.any():
+        out['braking_fx_bias_N'] = float(np.mean((est.fx - sim.fx)[braking]))
+        out['braking_mu_valid_pct'] = 100.0 * float(est.mu_valid[braking].mean())
+        out['braking_slope_valid_pct'] = 100.0 * float(est.slope_valid[braking].mean())
+        both = braking & est.slope_valid
+        out['braking_slope_bias_deg'] = float(
+            np.degrees(np.mean((est.slope - sim.slope)[both])) if both.any() else float('nan')
+        )
+    return out
+
+
 def _quasi_static_fz(sim: Any, vehicle: EstimatorVehicle) -> np.ndarray:
     """Textbook loads from the TRUE accel and slope: the best any quasi-static Fz can do."""
     from vd_observer_node.estimation.formulas import wheel_loads
@@ -118,6 +161,7 @@ def main() -> None:
     parser.add_argument('--slope-tau', type=float, default=None)
     parser.add_argument('--force-tau', type=float, default=None)
     parser.add_argument('--load-transfer', default=None)
+    parser.add_argument('--torque-paths', default='measured,engine,none')
     args = parser.parse_args()
 
     from vd_sim_node.vehicle.params import load_vehicle
@@ -126,6 +170,7 @@ def main() -> None:
 
     sim_vehicle = load_vehicle(args.vehicle)
     vehicle = load_estimator_vehicle(args.vehicle)
+    drivetrain = Drivetrain.from_params(sim_vehicle)
     scenario = load_scenario(args.scenario)
     for case in args.cases.split(','):
         counts, noise = CASES[case]
@@ -175,6 +220,31 @@ def main() -> None:
                 else (f'  target <= {target}: ' + ('MET' if value <= target else 'MISSED'))
             )
             print(f'   {key:26s} {value:12.5g}{verdict}')
+        engine = np.stack([sim.engine_torque, sim.gear.astype(float), sim.engine_speed], axis=1)
+        paths = [p for p in args.torque_paths.split(',') if p]
+        if paths:
+            print(f'   -- torque paths ({", ".join(paths)}), same run and settings:')
+        per_path = {}
+        for path in paths:
+            path_est = run_cascade(
+                sim.t,
+                sim.wheel_angle,
+                sim.body_speed,
+                sim.wheel_torque,
+                vehicle,
+                obs_cfg,
+                est_cfg,
+                torque_source=path,
+                engine=engine,
+                drivetrain=drivetrain,
+            )
+            per_path[path] = torque_path_figures(sim, path_est, vehicle, mask)
+        keys = list(next(iter(per_path.values()), {}))
+        if keys:
+            print('   ' + f'{"":26s}' + ''.join(f'{p:>12s}' for p in paths))
+        for key in keys:
+            row = ''.join(f'{per_path[p].get(key, float("nan")):12.5g}' for p in paths)
+            print(f'   {key:26s}{row}')
 
 
 #: Settings chosen with this script (see docs/estimation.md, "Tuning").

@@ -13,12 +13,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 from vd_observer_node.bag import BagReader
+from vd_observer_node.bag.cdr_batch import decode_batch
+from vd_observer_node.bag.typestore import message_definition
+from vd_observer_node.estimation.drivetrain import TORQUE_MEASURED
 from vd_observer_node.tools.replay import replay_bag
 from vd_sim_node.topics import (
+    ESTIMATES_FRICTION,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
     SENSORS_WHEEL_ANGLES,
     TRUTH_SLOPE,
+    TRUTH_TIRE_FORCES,
 )
 
 BAG = Path(__file__).resolve().parents[1] / 'bags' / 'paper_table1_100hz'
@@ -50,6 +55,23 @@ def test_offline_replay_reproduces_the_live_estimates(tmp_path: Path) -> None:
     offline_angles = np.array([offline[s][0] for s in common])
     np.testing.assert_allclose(live_angles, offline_angles, rtol=0, atol=1e-9)
     assert [live[s][1] for s in common] == [offline[s][1] for s in common]
+    # The bag predates the torque_source field: its estimates and truth decode with the
+    # definitions it embeds; the replay's output is in today's layout throughout (the truth
+    # upgraded, torque_source 0), and says the torques were measured.
+    old, new = BagReader(BAG), BagReader(out)
+    assert old.decoding_type(ESTIMATES_SLOPE) != 'vd_msgs/msg/Slope'
+    for topic in (TRUTH_TIRE_FORCES, ESTIMATES_TIRE_FORCES, ESTIMATES_FRICTION):
+        info = new.topics[topic]
+        assert info.definition == message_definition(info.msgtype)
+        arrays = new.topic_arrays([topic])[topic]
+        values = decode_batch(info.msgtype, arrays.datas).values
+        assert np.all(values['torque_source'] == TORQUE_MEASURED)
+    before = old.topic_arrays([TRUTH_TIRE_FORCES])[TRUTH_TIRE_FORCES]
+    after = new.topic_arrays([TRUTH_TIRE_FORCES])[TRUTH_TIRE_FORCES]
+    np.testing.assert_array_equal(
+        decode_batch(before.decoding_type, before.datas).values['fx'],
+        decode_batch(after.msgtype, after.datas).values['fx'],
+    )
 
 
 @pytest.mark.parametrize('topic', [TRUTH_SLOPE, ESTIMATES_TIRE_FORCES])

@@ -75,7 +75,12 @@ def test_batch_coding_matches_rosbags(msgtype: str, n: int, frames: list[str], s
 def test_decode_rejects_what_it_cannot_read() -> None:
     with pytest.raises(BagFormatError, match='shorter'):
         decode_batch('vd_msgs/msg/Slope', [b'\x00\x01\x00\x00'])
-    good = encode_batch('vd_msgs/msg/Slope', np.array([1]), 'f', {'angle': [0.5], 'valid': [1]})
+    good = encode_batch(
+        'vd_msgs/msg/Slope',
+        np.array([1]),
+        'f',
+        {'angle': [0.5], 'valid': [1], 'torque_source': [0]},
+    )
     with pytest.raises(BagFormatError, match='little-endian'):
         decode_batch('vd_msgs/msg/Slope', [b'\x00\x00' + good[0][2:]])
     with pytest.raises(BagFormatError, match='layout needs'):
@@ -84,10 +89,18 @@ def test_decode_rejects_what_it_cannot_read() -> None:
         flat_fields('diagnostic_msgs/msg/DiagnosticArray')
     with pytest.raises(BagUsageError, match='int32'):
         encode_batch(
-            'vd_msgs/msg/Slope', np.array([2**31 * 10**9]), 'f', {'angle': [0.0], 'valid': [1]}
+            'vd_msgs/msg/Slope',
+            np.array([2**31 * 10**9]),
+            'f',
+            {'angle': [0.0], 'valid': [1], 'torque_source': [0]},
         )
     with pytest.raises(BagUsageError, match='shape'):
-        encode_batch('vd_msgs/msg/Slope', np.array([1, 2]), 'f', {'angle': [0.0], 'valid': [1]})
+        encode_batch(
+            'vd_msgs/msg/Slope',
+            np.array([1, 2]),
+            'f',
+            {'angle': [0.0], 'valid': [1], 'torque_source': [0]},
+        )
 
 
 def test_write_interleaved_is_a_valid_indexed_mcap(tmp_path: Path) -> None:
@@ -100,7 +113,10 @@ def test_write_interleaved_is_a_valid_indexed_mcap(tmp_path: Path) -> None:
         'vd_msgs/msg/WheelAngles', stamps, 'x', {'angle': rng.normal(size=(n, 4))}
     )
     slopes = encode_batch(
-        'vd_msgs/msg/Slope', stamps, 'yy', {'angle': rng.normal(size=n), 'valid': np.ones(n)}
+        'vd_msgs/msg/Slope',
+        stamps,
+        'yy',
+        {'angle': rng.normal(size=n), 'valid': np.ones(n), 'torque_source': np.ones(n)},
     )
     datas = [angles[k] if which[k] == 0 else slopes[k] for k in range(n)]
     with BagWriter(tmp_path / 'v', chunk_size=8192) as writer:

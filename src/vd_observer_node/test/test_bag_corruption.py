@@ -33,7 +33,11 @@ def _write(path: Path) -> list[tuple[str, int, bytes]]:
         'vd_msgs/msg/Slope',
         stamps,
         'base_link',
-        {'angle': rng.normal(size=N), 'valid': rng.integers(0, 2, N).astype(bool)},
+        {
+            'angle': rng.normal(size=N),
+            'valid': rng.integers(0, 2, N).astype(bool),
+            'torque_source': rng.integers(0, 3, N),
+        },
     )
     sent = []
     with BagWriter(path, chunk_size=4096) as writer:

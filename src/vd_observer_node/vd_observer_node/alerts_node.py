@@ -191,7 +191,7 @@ class AlertsNode(Node):
     def evaluate(self, stamp_ns: int, m: dict[str, Any]) -> None:
         frame = m['states'][0]  # the outputs' frame, as the cascade's outputs carry it
         angles = m['angles'][1]  # mapped: SI values with the mapping's signs
-        mu, _, valid = m['friction'][1]
+        mu, _, valid = m['friction'][1][:3]  # mu, slip, valid (then torque_source)
         out = self.monitor.update(
             stamp_ns * 1e-9,
             np.array(angles, dtype=np.float64),

@@ -189,12 +189,13 @@ class EstimatorNode(Node):
         codec = self._codec
         self.pub_forces.publish(
             codec('vd_msgs/msg/TireForces', frame).encode(
-                stamp_ns, [*est.fx.tolist(), *est.fz.tolist()]
+                stamp_ns, [*est.fx.tolist(), *est.fz.tolist(), est.torque_source]
             )
         )
         self.pub_friction.publish(
             codec('vd_msgs/msg/Friction', frame).encode(
-                stamp_ns, [*est.mu.tolist(), *est.slip.tolist(), *est.mu_valid.tolist()]
+                stamp_ns,
+                [*est.mu.tolist(), *est.slip.tolist(), *est.mu_valid.tolist(), est.torque_source],
             )
         )
         self.pub_resist.publish(
@@ -204,7 +205,7 @@ class EstimatorNode(Node):
         )
         self.pub_slope.publish(
             codec('vd_msgs/msg/Slope', frame).encode(
-                stamp_ns, [float(est.slope), bool(est.slope_valid)]
+                stamp_ns, [float(est.slope), bool(est.slope_valid), est.torque_source]
             )
         )
 

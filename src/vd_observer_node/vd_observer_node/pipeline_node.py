@@ -242,17 +242,22 @@ class PipelineNode(Node):
             codec('velocity', frame).encode(stamp_ns, [s.speed, 0.0, 0.0, 0.0, 0.0, 0.0])
         )
         pubs['forces'].publish(
-            codec('forces', frame).encode(stamp_ns, [*e.fx.tolist(), *e.fz.tolist()])
+            codec('forces', frame).encode(
+                stamp_ns, [*e.fx.tolist(), *e.fz.tolist(), e.torque_source]
+            )
         )
         pubs['friction'].publish(
             codec('friction', frame).encode(
-                stamp_ns, [*e.mu.tolist(), *e.slip.tolist(), *e.mu_valid.tolist()]
+                stamp_ns,
+                [*e.mu.tolist(), *e.slip.tolist(), *e.mu_valid.tolist(), e.torque_source],
             )
         )
         pubs['resistances'].publish(
             codec('resistances', frame).encode(stamp_ns, [*e.rolling.tolist(), e.aero])
         )
-        pubs['slope'].publish(codec('slope', frame).encode(stamp_ns, [e.slope, e.slope_valid]))
+        pubs['slope'].publish(
+            codec('slope', frame).encode(stamp_ns, [e.slope, e.slope_valid, e.torque_source])
+        )
         pot = sit.potential
         pubs['potential'].publish(
             codec('potential', frame).encode(

@@ -22,7 +22,7 @@ import numpy as np
 from vd_observer_node.bag.errors import BagFormatError, BagUsageError, UnknownMessageTypeError
 from vd_observer_node.bag.typestore import vd_typestore
 
-__all__ = ['BatchFields', 'decode_batch', 'encode_batch', 'flat_fields']
+__all__ = ['BatchFields', 'decode_batch', 'encode_batch', 'flat_fields', 'upgrade_batch']
 
 _HEADER_TYPE = 'std_msgs/msg/Header'
 _PRIMITIVES = {
@@ -230,3 +230,38 @@ def encode_batch(
     buf = rows.tobytes()
     size = dtype.itemsize
     return [buf[i : i + size] for i in range(0, n * size, size)]
+
+
+def upgrade_batch(msgtype: str, decode_as: str, datas: list[bytes]) -> list[bytes]:
+    """Re-encode messages written with an older definition of ``msgtype`` in today's layout.
+
+    Fields the old definition lacks (e.g. ``torque_source``, added to TireForces, Friction
+    and Slope) are 0; stamps, frame ids and every other field are kept.
+
+    Args:
+        msgtype: the type's name, e.g. 'vd_msgs/msg/Slope' (today's fields).
+        decode_as: the alias of the old definition (`typestore.decoding_type`).
+        datas: CDR bytes in the old layout.
+
+    Raises:
+        BagFormatError: a message does not decode with the old layout.
+        UnknownMessageTypeError: either layout is not fixed.
+    """
+    if decode_as == msgtype or not datas:
+        return list(datas)
+    old = decode_batch(decode_as, datas)
+    n = len(datas)
+    values: dict[str, np.ndarray] = {}
+    for f in flat_fields(msgtype):
+        if f.name in old.values:
+            values[f.name] = old.values[f.name]
+        else:
+            values[f.name] = np.zeros((n, f.count) if f.count > 1 else n, dtype=f.dtype)
+    out: list[bytes] = [b''] * n
+    for frame in np.unique(old.frame_id).tolist():
+        members = np.flatnonzero(old.frame_id == frame)
+        part = {k: v[members] for k, v in values.items()}
+        encoded = encode_batch(msgtype, old.stamp_ns[members], frame.decode(), part)
+        for k, data in zip(members.tolist(), encoded, strict=True):
+            out[k] = data
+    return out

@@ -27,7 +27,7 @@ import zstandard
 from vd_observer_node.bag import mcap_format as fmt
 from vd_observer_node.bag.errors import BagCorruptError, BagFormatError, BagNotFoundError
 from vd_observer_node.bag.metadata import read_metadata_file_paths
-from vd_observer_node.bag.typestore import deserialize, register_definition
+from vd_observer_node.bag.typestore import decoding_type, deserialize, register_definition
 
 __all__ = [
     'BagReader',
@@ -65,11 +65,21 @@ class TopicInfo:
 
 @dataclass(frozen=True)
 class TopicArrays:
-    """All messages of one topic: log times [ns], shape (N,) int64, and CDR bytes (N)."""
+    """All messages of one topic: log times [ns], shape (N,) int64, and CDR bytes (N).
+
+    ``decode_as`` is the type to decode ``datas`` with (`typestore.decoding_type`):
+    ``msgtype`` unless the bag embeds an older definition of it ('' means ``msgtype``).
+    """
 
     msgtype: str
     log_time_ns: np.ndarray
     datas: list[bytes]
+    decode_as: str = ''
+
+    @property
+    def decoding_type(self) -> str:
+        """The type to decode ``datas`` with."""
+        return self.decode_as or self.msgtype
 
 
 def find_mcap_files(path: Path) -> list[Path]:
@@ -647,13 +657,22 @@ class BagReader:
 
         Types unknown to the vd typestore are registered from the bag's embedded definitions.
         """
-        registered: set[str] = set()
+        decode_as: dict[str, str] = {}
         selection = self.raw_messages(topics, start_ns=start_ns, stop_ns=stop_ns, ordered=ordered)
         for msg in selection:
-            if msg.msgtype not in registered:
+            name = decode_as.get(msg.topic)
+            if name is None:
                 self._register(msg.msgtype)
-                registered.add(msg.msgtype)
-            yield msg.topic, msg.msgtype, msg.log_time_ns, deserialize(msg.data, msg.msgtype)
+                name = decode_as[msg.topic] = self.decoding_type(msg.topic)
+            yield msg.topic, msg.msgtype, msg.log_time_ns, deserialize(msg.data, name)
+
+    def decoding_type(self, topic: str) -> str:
+        """The type to decode a topic's messages with (`typestore.decoding_type`): its type,
+        or an alias of the older definition the bag embeds for it."""
+        info = self.topics.get(topic)
+        if info is None:
+            return ''
+        return decoding_type(info.msgtype, info.definition)
 
     def _register(self, msgtype: str) -> None:
         info = next((t for t in self.topics.values() if t.msgtype == msgtype), None)
@@ -682,8 +701,14 @@ class BagReader:
                         members = np.flatnonzero(batch.channel == channel_id)
                         times[topic].append(batch.log[members])
                         datas[topic].extend([batch.datas[k] for k in members.tolist()])
+        infos = self.topics
         return {
-            t: TopicArrays(types[t], np.concatenate(times[t]).astype(np.int64), datas[t])
+            t: TopicArrays(
+                types[t],
+                np.concatenate(times[t]).astype(np.int64),
+                datas[t],
+                decoding_type(types[t], infos[t].definition if t in infos else ''),
+            )
             for t in times
         }
 

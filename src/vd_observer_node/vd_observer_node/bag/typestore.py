@@ -12,6 +12,7 @@ package (tests, uninstalled checkouts).
 from __future__ import annotations
 
 import functools
+import hashlib
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +24,7 @@ from vd_observer_node.bag.errors import BagFormatError, UnknownMessageTypeError
 __all__ = [
     'BASE_STORE',
     'VD_MSG_TYPES',
+    'decoding_type',
     'deserialize',
     'find_vd_msgs_dir',
     'message_class',
@@ -119,6 +121,45 @@ def register_definition(msgtype: str, definition: str) -> None:
     except Exception as exc:  # rosbags raises several parser exception types
         raise UnknownMessageTypeError(f'cannot parse definition of {msgtype!r}: {exc}') from exc
     store.register({k: v for k, v in types.items() if k not in store.fielddefs})
+
+
+@functools.cache
+def decoding_type(msgtype: str, definition: str) -> str:
+    """The type to decode a bag topic's messages with, given the definition the bag embeds.
+
+    A bag keeps the definition its messages were written with. When that differs from the
+    vd typestore's (a bag recorded before a field was added to a vd_msgs type, such as
+    ``torque_source`` in TireForces, Friction and Slope), the bag's definition is registered
+    under an alias, ``<package>_legacy_<digest>/msg/<Type>``, and the alias is returned:
+    decoding with it reads the old layout (the fields the old type lacks are absent).
+
+    Args:
+        msgtype: the bag's type name, e.g. 'vd_msgs/msg/Slope'.
+        definition: the bag's ``ros2msg`` definition of it ('' if none).
+
+    Returns:
+        ``msgtype`` itself when the fields agree, the definition is empty, or the type is
+        unknown to the typestore (then `register_definition` registers it as it is).
+
+    Raises:
+        UnknownMessageTypeError: the definition does not parse.
+    """
+    store = vd_typestore()
+    if not definition or msgtype not in store.fielddefs:
+        return msgtype
+    try:
+        types = get_types_from_msg(definition, msgtype)
+    except Exception as exc:  # rosbags raises several parser exception types
+        raise UnknownMessageTypeError(f'cannot parse definition of {msgtype!r}: {exc}') from exc
+    if msgtype not in types or types[msgtype][1] == store.fielddefs[msgtype][1]:
+        return msgtype
+    package, _, name = msgtype.split('/')
+    digest = hashlib.sha256(definition.encode()).hexdigest()[:12]
+    alias = f'{package}_legacy_{digest}/msg/{name}'
+    if alias not in store.fielddefs:
+        extra = {k: v for k, v in types.items() if k != msgtype and k not in store.fielddefs}
+        store.register({**extra, alias: types[msgtype]})
+    return alias
 
 
 def message_class(msgtype: str) -> Any:

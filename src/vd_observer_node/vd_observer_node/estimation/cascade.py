@@ -6,17 +6,27 @@ offline figures are those the nodes would produce on the same stamps.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimation.drivetrain import (
+    TORQUE_ENGINE,
+    TORQUE_MEASURED,
+    Drivetrain,
+    clutch_engaged,
+    engine_wheel_torques,
+    gear_number,
+    torque_source_code,
+)
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.observer import Observer, ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
-__all__ = ['CascadeResult', 'checked_record', 'run_cascade']
+__all__ = ['CascadeResult', 'checked_engine', 'checked_record', 'run_cascade']
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -42,6 +52,9 @@ class CascadeResult:
         slope: shape (N,), [rad].
         slope_valid: shape (N,), bool.
         wheel_valid: shape (N, 4), bool, observer validity per wheel.
+        torque_valid: shape (N,), bool, the torque source held at the stamp (False where
+            the engine path's clutch slipped, and everywhere with no torque).
+        torque_source: `drivetrain.TORQUE_MEASURED`, `TORQUE_ENGINE` or `TORQUE_NONE`.
         angle: shape (N, 4), [rad], the wheel observer's angle (filtered; with wheel speeds
             as input, their integral from 0 at the observer's start).
         faults: total fault counts per kind, keys 'wheel.<kind>', 'speed.<kind>' (observers)
@@ -63,7 +76,9 @@ class CascadeResult:
     slope: FloatArray
     slope_valid: BoolArray
     wheel_valid: BoolArray
+    torque_valid: BoolArray = field(default_factory=lambda: np.ones(0, dtype=bool))
     angle: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
+    torque_source: int = TORQUE_MEASURED
     faults: dict[str, int] = field(default_factory=dict)
 
 
@@ -97,6 +112,29 @@ def checked_record(
     return stamps, angles, speeds, torques
 
 
+def checked_engine(
+    n: int, torque_source: str, engine: ArrayLike | None, drivetrain: Drivetrain | None
+) -> tuple[int, FloatArray]:
+    """The torque source's code and the engine record (N, 3), checked.
+
+    Raises:
+        ConfigurationError: unknown source, or the engine path without engine or drivetrain.
+        InputShapeError: engine is not of shape (N, 3).
+    """
+    code = torque_source_code(torque_source)
+    if code != TORQUE_ENGINE:
+        return code, np.zeros((n, 3))
+    if engine is None or drivetrain is None:
+        raise ConfigurationError('torque_source engine needs the engine record and a drivetrain')
+    record = np.ascontiguousarray(engine, dtype=np.float64)
+    if record.shape != (n, 3):
+        raise InputShapeError(
+            f'engine must have shape ({n}, 3) (engine torque, gear, engine speed), '
+            f'got {record.shape}'
+        )
+    return code, record
+
+
 def run_cascade(
     t: ArrayLike,
     wheel_angle: ArrayLike,
@@ -106,6 +144,10 @@ def run_cascade(
     observer_config: ObserverConfig | None = None,
     estimator_config: EstimatorConfig | None = None,
     estimator_speed: str = 'measured',
+    *,
+    torque_source: str = 'measured',
+    engine: ArrayLike | None = None,
+    drivetrain: Drivetrain | None = None,
 ) -> CascadeResult:
     """Run observers and estimator over a record sampled at common stamps.
 
@@ -121,17 +163,27 @@ def run_cascade(
         estimator_speed: 'measured' feeds the estimator the measured body speed (its slope
             low-pass does the smoothing, no observer lag), 'observer' the observer's
             filtered speed.
+        torque_source: 'measured' (wheel_torque), 'engine' (wheel torques from `engine`
+            with `drivetrain.engine_wheel_torques`, using the wheel observer's omega_dot for
+            the engine-inertia term; invalid where `drivetrain.clutch_engaged` is False and
+            for `Drivetrain.clutch_settle_time` after it was, or after a gear change) or
+            'none' (wheel_torque ignored; Fx 0, mu and slope invalid).
+        engine: shape (N, 3): engine torque [N m], gear (0 neutral, -1 reverse), engine speed
+            [rad/s] (nan if not measured); needed by the engine path only.
+        drivetrain: the vehicle's driveline; needed by the engine path only.
 
     Raises:
         InputShapeError: inconsistent shapes.
-        ConfigurationError: unknown estimator_speed.
+        ConfigurationError: unknown estimator_speed or torque_source, or the engine path
+            without engine or drivetrain.
     """
     stamps, angles, speeds, torques = checked_record(
         t, wheel_angle, body_speed, wheel_torque, estimator_speed
     )
     n = stamps.shape[0]
+    source, engine_record = checked_engine(n, torque_source, engine, drivetrain)
     observer = Observer(observer_config or ObserverConfig())
-    estimator = Estimator(vehicle, estimator_config)
+    estimator = Estimator(vehicle, estimator_config, source)
     wheel4 = np.zeros((n, 4))
     out = {
         k: wheel4.copy()
@@ -141,13 +193,29 @@ def run_cascade(
     mu_valid = np.zeros((n, 4), dtype=bool)
     wheel_valid = np.zeros((n, 4), dtype=bool)
     slope_valid = np.zeros(n, dtype=bool)
+    torque_valid = np.full(n, source != torque_source_code('none'))
+    # engine path: when the clutch last slipped or the gear changed, and the last gear
+    last_unsettled, last_gear = -math.inf, None
     use_measured = estimator_speed == 'measured'
     for k in range(n):
         tk = float(stamps[k])
         wheel = observer.wheels.update(tk, angles[k])
         body = observer.speed.update(tk, float(speeds[k]))
         speed = float(speeds[k]) if use_measured else body.speed
-        est = estimator.update(tk, wheel.omega, wheel.omega_dot, speed, body.accel, torques[k])
+        torque, torque_ok = torques[k], True
+        if drivetrain is not None and source == TORQUE_ENGINE:
+            engine_torque, gear, engine_speed = engine_record[k]
+            gear_code = gear_number(float(gear))  # no gear at all: nan torques, a fault
+            torque = engine_wheel_torques(engine_torque, gear_code, drivetrain, wheel.omega_dot)
+            engaged = clutch_engaged(engine_speed, gear_code, wheel.omega, drivetrain)
+            if not engaged or gear_code != last_gear:
+                last_unsettled = tk
+            last_gear = gear_code
+            torque_ok = engaged and tk - last_unsettled >= drivetrain.clutch_settle_time
+            torque_valid[k] = torque_ok
+        est = estimator.update(
+            tk, wheel.omega, wheel.omega_dot, speed, body.accel, torque, torque_ok
+        )
         out['angle'][k] = wheel.angle
         out['omega'][k] = wheel.omega
         out['omega_dot'][k] = wheel.omega_dot
@@ -179,6 +247,8 @@ def run_cascade(
         slope=scalars['slope'],
         slope_valid=slope_valid,
         wheel_valid=wheel_valid,
+        torque_valid=torque_valid,
+        torque_source=source,
         angle=out['angle'],
         faults={
             f'{part}.{kind}': n

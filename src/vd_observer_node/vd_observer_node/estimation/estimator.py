@@ -3,7 +3,9 @@
 Per stamp, from the observer outputs (omega, omega_dot, speed, accel) and the measured wheel
 torques: Fx from the wheel spin balance, Fz from the whole-vehicle moment balance using the
 previous slope estimate, mu = Fx/Fz, slip, rolling and aero resistance, and the slope from
-the longitudinal force balance. See docs/estimation.md.
+the longitudinal force balance. See docs/estimation.md. The wheel torques are measured, or
+derived from the engine torque and gear (`drivetrain`), or absent: the estimator's
+`torque_source` says which, and every estimate carries it.
 
 All outputs are finite always: a non-finite input is replaced by its last finite value and
 the affected validity flags are cleared; a non-finite, repeated or slightly older stamp
@@ -24,6 +26,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation import formulas as phys
+from vd_observer_node.estimation.drivetrain import (
+    TORQUE_ENGINE,
+    TORQUE_MEASURED,
+    TORQUE_NONE,
+    TORQUE_SOURCES,
+)
 from vd_observer_node.estimation.faults import ESTIMATOR_FAULTS, FaultCounter
 from vd_observer_node.estimation.filters import LowPass
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
@@ -138,6 +146,9 @@ class Estimates:
         aero: [N] aero drag magnitude.
         slope: [rad] road slope, positive uphill (held while invalid).
         slope_valid: slope meaningful (moving, in range, finite inputs).
+        torque_source: where the wheel torques came from (`drivetrain.TORQUE_MEASURED`,
+            `TORQUE_ENGINE` or `TORQUE_NONE`; with none, fx is 0 and mu and slope are
+            invalid).
     """
 
     t: float
@@ -150,6 +161,7 @@ class Estimates:
     aero: float
     slope: float
     slope_valid: bool
+    torque_source: int = TORQUE_MEASURED
 
 
 def _as_wheels(name: str, value: ArrayLike) -> FloatArray:
@@ -169,15 +181,31 @@ def _all_finite(est: Estimates) -> bool:
 class Estimator:
     """Stateful per-stamp estimator (the estimator node calls `update` per aligned stamp)."""
 
-    def __init__(self, vehicle: EstimatorVehicle, config: EstimatorConfig | None = None) -> None:
+    def __init__(
+        self,
+        vehicle: EstimatorVehicle,
+        config: EstimatorConfig | None = None,
+        torque_source: int = TORQUE_MEASURED,
+    ) -> None:
         """Create the estimator.
 
         Args:
             vehicle: parameters from the shared vehicle file.
             config: settings; defaults if None.
+            torque_source: what the `torque` of `update` is: `drivetrain.TORQUE_MEASURED`
+                (measured wheel torques), `TORQUE_ENGINE` (from the engine torque and gear,
+                `drivetrain.engine_wheel_torques`) or `TORQUE_NONE` (no torque: the `torque`
+                argument is ignored, Fx is 0, mu and slope are invalid and Fz takes the
+                load transfer from the body acceleration).
+
+        Raises:
+            ConfigurationError: unknown torque_source.
         """
+        if torque_source not in range(len(TORQUE_SOURCES)):
+            raise ConfigurationError(f'unknown torque_source {torque_source!r}')
         self.vehicle = vehicle
         self.config = config or EstimatorConfig()
+        self.torque_source = int(torque_source)
         self._force_filter = LowPass(self.config.force_filter_tau, self.config.filter_order)
         self._slope_filter = LowPass(self.config.slope_filter_tau, self.config.filter_order)
         self._speed_filter = LowPass(self.config.slope_filter_tau, self.config.filter_order)
@@ -205,6 +233,7 @@ class Estimator:
         speed: float,
         accel: float,
         torque: ArrayLike,
+        torque_ok: bool = True,
     ) -> Estimates:
         """Estimate everything for stamp t.
 
@@ -215,6 +244,8 @@ class Estimator:
             speed: body speed [m/s] (measured, or the observer's).
             accel: body acceleration dv/dt [m/s^2] (observer).
             torque: shape (4,), [N m] drive minus brake torque per wheel.
+            torque_ok: False where the torque source cannot be trusted at this stamp (the
+                engine path while the clutch slips): mu and slope are then invalid.
 
         Raises:
             InputShapeError: a per-wheel input is not of shape (4,).
@@ -248,6 +279,9 @@ class Estimator:
             wheel_ok = ok[0:4] & ok[4:8] & ok[8:12] & ok[12]
             body_ok = bool(ok.all())
         self._held = packed
+        if not torque_ok:
+            wheel_ok = np.zeros(4, dtype=bool)
+            body_ok = False
         est = self._estimate(t, dt, packed, wheel_ok, body_ok)
         if not _all_finite(est):
             # Overflow from absurd (finite) input: drop the poisoned state, report nothing valid.
@@ -279,6 +313,7 @@ class Estimator:
     ) -> Estimates:
         veh, cfg = self.vehicle, self.config
         omega, omega_dot, torque = x[0:4], x[4:8], x[8:12]
+        no_torque = self.torque_source == TORQUE_NONE
         v = float(x[12])
         accel = float(x[13])
         # Same smooth sign as the simulator's rolling resistance; drag is exactly k*v*|v|.
@@ -289,11 +324,12 @@ class Estimator:
         cos_prev, sin_prev = math.cos(self._slope), math.sin(self._slope)
         weight = veh.mass * veh.gravity
 
-        fx_raw = phys.tire_longitudinal_force(torque, omega_dot, veh)
+        # Without torque Fx is unknown: published as 0 (torque_source none), not -J*omega_dot/R.
+        fx_raw = np.zeros(4) if no_torque else phys.tire_longitudinal_force(torque, omega_dot, veh)
         # Sum of the rolling resistances follows from sum(Fz) = m*g*cos(alpha) in both
         # load-transfer forms, so it does not depend on the transfer itself.
         rolling_sum = c_roll * weight * cos_prev
-        if cfg.load_transfer_source == 'tire_forces':
+        if cfg.load_transfer_source == 'tire_forces' and not no_torque:
             ground = float(np.sum(fx_raw)) - direction * rolling_sum
         else:
             ground = veh.mass * accel + weight * sin_prev + aero_signed
@@ -304,7 +340,7 @@ class Estimator:
         fz = np.maximum(phys.wheel_loads(ground_f, cos_prev, veh), 0.0)
         rolling = phys.rolling_resistance(v, fz, veh)
         mu, mu_valid = phys.utilised_friction(fx, fz, self._min_load, cfg.min_excitation_ratio)
-        mu_valid &= wheel_ok
+        mu_valid &= wheel_ok & (not no_torque)
         if bool(np.any(fz < self._min_load)):
             self.faults.count('wheel_lift')
         implausible = mu_valid & (np.abs(mu) > cfg.max_mu)
@@ -322,12 +358,17 @@ class Estimator:
         else:
             net_f = float(self._slope_filter.update(dt, forces - veh.mass * accel))
         slope, in_range = phys.slope_from_forces(net_f, veh, cfg.max_slope)
-        usable = body_ok and abs(v) >= cfg.min_speed
+        usable = body_ok and abs(v) >= cfg.min_speed and not no_torque
         if usable and not in_range:
             # |N| > m g has no arcsin at all; below that the slope is only implausible.
             sine = net_f / weight
             self.faults.count('arcsin_domain' if abs(sine) > 1.0 else 'slope_out_of_range')
         slope_valid = bool(in_range) and usable
+        if self.torque_source == TORQUE_ENGINE and usable and not in_range:
+            # The balance needs a force the engine path cannot know of (the brakes): the
+            # torques are wrong, so is mu.
+            mu_valid = np.zeros(4, dtype=bool)
+            mu = np.zeros(4)
         if slope_valid:
             # An invalid stamp keeps the last valid slope (it is published as invalid).
             self._slope = float(slope)
@@ -342,6 +383,7 @@ class Estimator:
             aero=aero,
             slope=self._slope,
             slope_valid=slope_valid,
+            torque_source=self.torque_source,
         )
         return self.last
 
@@ -358,4 +400,5 @@ class Estimator:
             aero=0.0,
             slope=0.0,
             slope_valid=False,
+            torque_source=self.torque_source,
         )

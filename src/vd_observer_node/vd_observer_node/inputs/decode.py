@@ -27,6 +27,7 @@ from vd_observer_node.bag.reader import TopicArrays
 from vd_observer_node.bag.typestore import deserialize
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import (
+    ENGINE_INPUT,
     FLOAT64_ARRAY,
     JOINT_STATE,
     ODOMETRY,
@@ -40,6 +41,7 @@ __all__ = [
     'InputDecoder',
     'InputSeries',
     'InputStats',
+    'decode_engine',
     'decode_input',
     'has_header',
     'input_stats',
@@ -255,6 +257,60 @@ def decode_input(spec: InputSpec, arrays: TopicArrays, radius: float | None = No
         # only then: the default mapping's values pass bit for bit
         values = values * (factor * np.asarray(spec.sign))
     return InputSeries(stamps.astype(np.int64), values, frames)
+
+
+def decode_engine(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
+    """Decode the engine input (``engine_torque`` of the mapping) to stamped SI values.
+
+    Args:
+        spec: the engine input's mapping.
+        arrays: the topic's raw messages, of type ``spec.msgtype``.
+
+    Returns:
+        values of shape (N, 3): engine torque [N m] (unit, scale and sign applied), gear
+        (as a float, 0 neutral, -1 reverse) and engine speed [rad/s] (nan when the mapping
+        has no element for it).
+
+    Raises:
+        MappingError: a mapped element is absent from the messages.
+        BagFormatError: a message cannot be decoded.
+    """
+    if spec.name != ENGINE_INPUT:
+        raise MappingError(f'{spec.name}: not the {ENGINE_INPUT} input')
+    n = len(arrays.datas)
+    if spec.msgtype == WHEEL_TORQUES_TYPE:
+        fields = decode_batch(spec.msgtype, arrays.datas)
+        values = np.stack(
+            [
+                fields.values['engine_torque'].astype(np.float64),
+                fields.values['gear'].astype(np.float64),
+                fields.values['engine_speed'].astype(np.float64),
+            ],
+            axis=1,
+        ).reshape(n, 3)
+        stamps, frames = fields.stamp_ns, fields.frame_id
+    elif spec.msgtype == FLOAT64_ARRAY:
+        stamps, values, frames = _per_message(spec, arrays, _engine_array(spec))
+    else:  # the mapping refuses every other type
+        raise MappingError(f'{spec.name}: no decoder for {spec.msgtype}')
+    values = values.copy()
+    values[:, 0] *= spec.factor * spec.sign[0]
+    values[:, 2] *= spec.speed_factor
+    return InputSeries(stamps.astype(np.int64), values, frames)
+
+
+def _engine_array(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[float], bytes]]:
+    def extract(msg: Any, log: int) -> tuple[int, Sequence[float], bytes]:
+        data = msg.data
+        if max(spec.indices) >= len(data):
+            raise MappingError(
+                f'{spec.name}.indices: element {max(spec.indices)} is beyond the '
+                f'{len(data)} values of the messages on {spec.topic}'
+            )
+        row = [float(data[i]) for i in spec.indices]
+        return log, row if len(row) == 3 else [*row, float('nan')], b''
+
+    return extract
 
 
 @dataclass(frozen=True)

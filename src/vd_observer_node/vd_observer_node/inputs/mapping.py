@@ -35,6 +35,24 @@ body speed and torque sample not later than each (sample and hold, as a live sys
 them; a wheel stamp is dropped while an input is missing or older than ``max_age`` [s],
 default 0.5).
 
+``torque_source`` (replay only; the live nodes read measured torques): where the wheel
+torques are not measured, ``engine`` derives them from the engine torque and the gear (the
+``engine_torque`` input; the drivetrain of the vehicle file,
+:mod:`vd_observer_node.estimation.drivetrain`) and ``none`` runs without torque (Fx, mu and
+slope invalid); ``wheel_torques`` is then not read::
+
+    torque_source: engine
+    engine_torque:
+      topic: /can/engine
+      type: std_msgs/msg/Float64MultiArray
+      indices: [0, 1, 2]      # engine torque, gear, engine speed (optional 3rd)
+      unit: N m               # of the torque: N m | kN m
+      speed_unit: rpm         # of the engine speed: rad/s | rpm
+
+``engine_torque`` from ``vd_msgs/msg/WheelTorques`` reads its ``engine_torque``, ``gear`` and
+``engine_speed`` (the default: vd's own ``/vd/sensors/wheel_torques``).
+
+
 Supported types per input (:data:`SUPPORTED_TYPES`): wheel angles from
 ``vd_msgs/msg/WheelAngles``, ``sensor_msgs/msg/JointState`` (position) or
 ``std_msgs/msg/Float64MultiArray``; wheel speeds from ``sensor_msgs/msg/JointState``
@@ -65,15 +83,19 @@ from vd_sim_node.topics import (
 )
 
 from vd_observer_node.estimation.alignment import ALIGNMENTS
+from vd_observer_node.estimation.drivetrain import TORQUE_SOURCES
 from vd_observer_node.inputs.errors import MappingError
 
 __all__ = [
     'ALIGNMENTS',
+    'ENGINE_INPUT',
     'INPUTS',
     'INPUT_KEYS',
     'PER_RADIUS_UNITS',
     'SETTINGS',
+    'SPEED_UNITS',
     'SUPPORTED_TYPES',
+    'TORQUE_SOURCE_KEY',
     'UNITS',
     'InputMapping',
     'InputSpec',
@@ -87,6 +109,11 @@ __all__ = [
 INPUTS: Final = ('wheel_angles', 'wheel_speeds', 'body_speed', 'wheel_torques')
 #: Top-level keys that are settings of the whole mapping, not inputs.
 SETTINGS: Final = ('alignment', 'max_age')
+#: Optional input of the engine path: engine torque, gear and (optionally) engine speed.
+ENGINE_INPUT: Final = 'engine_torque'
+#: Where the wheel torques come from (`drivetrain.TORQUE_SOURCES`): a top-level key of the
+#: file (offline replay; not a node parameter: the live nodes read measured torques).
+TORQUE_SOURCE_KEY: Final = 'torque_source'
 
 # vd's own sensor types, as the topic contract gives them
 WHEEL_ANGLES_TYPE: Final = SENSORS[SENSORS_WHEEL_ANGLES]
@@ -101,6 +128,7 @@ SUPPORTED_TYPES: Final[dict[str, tuple[str, ...]]] = {
     'wheel_speeds': (JOINT_STATE, FLOAT64_ARRAY),
     'body_speed': (TWIST_STAMPED, ODOMETRY, FLOAT64_ARRAY),
     'wheel_torques': (WHEEL_TORQUES_TYPE, JOINT_STATE, FLOAT64_ARRAY),
+    ENGINE_INPUT: (WHEEL_TORQUES_TYPE, FLOAT64_ARRAY),
 }
 
 #: Factor to the SI unit of each input, by unit name; the first is the SI unit (the default).
@@ -115,14 +143,17 @@ UNITS: Final[dict[str, dict[str, float]]] = {
     },
     'body_speed': {'m/s': 1.0, 'km/h': 1.0 / 3.6},
     'wheel_torques': {'N m': 1.0, 'kN m': 1000.0},
+    ENGINE_INPUT: {'N m': 1.0, 'kN m': 1000.0},
 }
+#: Units of the engine speed (``speed_unit`` of ``engine_torque``) and their factor to rad/s.
+SPEED_UNITS: Final = {'rad/s': 1.0, 'rpm': math.pi / 30.0}
 #: Wheel-speed units of the circumferential speed: divided by the effective rolling radius.
 PER_RADIUS_UNITS: Final = frozenset({'m/s', 'km/h'})
 #: Inputs with one value per wheel (the others are one scalar).
 _PER_WHEEL: Final = frozenset({'wheel_angles', 'wheel_speeds', 'wheel_torques'})
 #: The settings of one input, in the order of a mapping file.
 INPUT_KEYS: Final = ('topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign')
-_KEYS: Final = frozenset(INPUT_KEYS)
+_KEYS: Final = frozenset((*INPUT_KEYS, 'speed_unit'))  # speed_unit: engine_torque only
 
 
 @dataclass(frozen=True)
@@ -139,6 +170,7 @@ class InputSpec:
         sign: shape (4,) per-wheel sign (+1 or -1) for per-wheel inputs, (1,) for a scalar.
         per_radius: wheel speeds given as a circumferential speed: the value times ``factor``
             is in m/s and is divided by the effective rolling radius [m] to give rad/s.
+        speed_factor: ``engine_torque`` only: multiplies the engine speed to give rad/s.
     """
 
     name: str
@@ -149,10 +181,14 @@ class InputSpec:
     factor: float = 1.0
     sign: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0)
     per_radius: bool = False
+    speed_factor: float = 1.0
 
     @property
     def width(self) -> int:
-        """Values per sample: 4 for the per-wheel inputs, 1 for the body speed."""
+        """Values per sample: 4 for the per-wheel inputs, 1 for the body speed, 3 for the
+        engine (torque, gear, engine speed)."""
+        if self.name == ENGINE_INPUT:
+            return 3
         return 4 if self.name in _PER_WHEEL else 1
 
 
@@ -168,6 +204,10 @@ class InputMapping:
         source: where the mapping was read from ('' for the default).
         alignment: one of :data:`ALIGNMENTS`.
         max_age: with 'latest' alignment, the oldest a held sample may be [s].
+        engine_torque: engine torque [N m], gear and engine speed [rad/s], read with
+            ``torque_source`` engine only (default: vd's WheelTorques topic).
+        torque_source: 'measured' (``wheel_torques``), 'engine' (``engine_torque`` through
+            the drivetrain) or 'none' (no torque).
     """
 
     wheels: InputSpec
@@ -176,6 +216,23 @@ class InputMapping:
     source: str = ''
     alignment: str = 'exact'
     max_age: float = 0.5
+    engine_torque: InputSpec | None = None
+    torque_source: str = 'measured'
+
+    @property
+    def engine(self) -> InputSpec:
+        """The engine input (vd's own WheelTorques topic unless mapped)."""
+        return self.engine_torque or _default_engine()
+
+    @property
+    def used_specs(self) -> tuple[InputSpec, ...]:
+        """The inputs the torque source reads: wheel angles, body speed, and the wheel
+        torques (measured), the engine input (engine) or nothing more (none)."""
+        if self.torque_source == 'engine':
+            return (self.wheels, self.body_speed, self.engine)
+        if self.torque_source == 'none':
+            return (self.wheels, self.body_speed)
+        return self.specs
 
     @property
     def specs(self) -> tuple[InputSpec, InputSpec, InputSpec]:
@@ -196,7 +253,12 @@ class InputMapping:
     def is_default(self) -> bool:
         """True when it reads vd's own sensor topics with vd's types, unchanged."""
         default = default_mapping()
-        return self.specs == default.specs and self.alignment == default.alignment
+        return (
+            self.specs == default.specs
+            and self.alignment == default.alignment
+            and self.torque_source == 'measured'
+            and self.engine_torque is None
+        )
 
 
 def default_mapping() -> InputMapping:
@@ -206,6 +268,10 @@ def default_mapping() -> InputMapping:
         body_speed=InputSpec('body_speed', SENSORS_BODY_VELOCITY, TWIST_STAMPED, sign=(1.0,)),
         wheel_torques=InputSpec('wheel_torques', SENSORS_WHEEL_TORQUES, WHEEL_TORQUES_TYPE),
     )
+
+
+def _default_engine() -> InputSpec:
+    return InputSpec(ENGINE_INPUT, SENSORS_WHEEL_TORQUES, WHEEL_TORQUES_TYPE, sign=(1.0,))
 
 
 def _number(where: str, value: Any) -> float:
@@ -232,6 +298,17 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         allowed = ', '.join(SUPPORTED_TYPES[name])
         raise MappingError(f'{where}.type {msgtype!r} is not supported (use one of {allowed})')
     width = 4 if name in _PER_WHEEL else 1
+    speed_factor = 1.0
+    if name == ENGINE_INPUT:
+        speed_unit = data.get('speed_unit', 'rad/s')
+        if speed_unit not in SPEED_UNITS:
+            raise MappingError(
+                f'{where}.speed_unit {speed_unit!r} is unknown (use one of '
+                f'{", ".join(SPEED_UNITS)})'
+            )
+        speed_factor = SPEED_UNITS[speed_unit]
+    elif 'speed_unit' in data:
+        raise MappingError(f'{where}.speed_unit is for {ENGINE_INPUT} only')
     joints: tuple[str, ...] = ()
     indices: tuple[int, ...] = ()
     if msgtype == JOINT_STATE:
@@ -248,12 +325,15 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         raise MappingError(f'{where}.joints is for sensor_msgs/msg/JointState only')
     if msgtype == FLOAT64_ARRAY:
         raw = data.get('indices', list(range(width)))
+        # the engine input: torque and gear, and the engine speed if the array has it
+        sizes = (2, 3) if name == ENGINE_INPUT else (width,)
         if (
             not isinstance(raw, list)
-            or len(raw) != width
+            or len(raw) not in sizes
             or not all(isinstance(i, int) and not isinstance(i, bool) and i >= 0 for i in raw)
         ):
-            raise MappingError(f'{where}.indices must list {width} element indices >= 0')
+            count = ' or '.join(str(k) for k in sizes)
+            raise MappingError(f'{where}.indices must list {count} element indices >= 0')
         indices = tuple(raw)
     elif 'indices' in data:
         raise MappingError(f'{where}.indices is for std_msgs/msg/Float64MultiArray only')
@@ -280,6 +360,7 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         factor=UNITS[name][unit] * scale,
         sign=sign,
         per_radius=name == 'wheel_speeds' and unit in PER_RADIUS_UNITS,
+        speed_factor=speed_factor,
     )
 
 
@@ -297,10 +378,15 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
         data = {}
     if not isinstance(data, Mapping):
         raise MappingError(f'{source}: expected a mapping of {", ".join(INPUTS)}')
-    unknown = sorted(set(data) - set(INPUTS) - set(SETTINGS))
+    keys = (*INPUTS, *SETTINGS, ENGINE_INPUT, TORQUE_SOURCE_KEY)
+    unknown = sorted(set(data) - set(keys))
     if unknown:
+        raise MappingError(f'{source}: {unknown[0]}: unknown input (use {", ".join(keys)})')
+    torque_source = data.get(TORQUE_SOURCE_KEY, 'measured')
+    if torque_source not in TORQUE_SOURCES:
         raise MappingError(
-            f'{source}: {unknown[0]}: unknown input (use {", ".join((*INPUTS, *SETTINGS))})'
+            f'{source}: {TORQUE_SOURCE_KEY} {torque_source!r} is unknown (use one of '
+            f'{", ".join(TORQUE_SOURCES)})'
         )
     if 'wheel_angles' in data and 'wheel_speeds' in data:
         raise MappingError(f'{source}: wheel_speeds: give wheel_angles or wheel_speeds, not both')
@@ -327,9 +413,26 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
     max_age = _number(f'{source}: max_age', data.get('max_age', default.max_age))
     if max_age <= 0.0:
         raise MappingError(f'{source}: max_age must be > 0 s, got {max_age}')
+    engine = (
+        _spec(ENGINE_INPUT, data[ENGINE_INPUT], f'{source}: {ENGINE_INPUT}')
+        if ENGINE_INPUT in data
+        else None
+    )
+    if engine is not None and types.setdefault(engine.topic, engine.msgtype) != engine.msgtype:
+        raise MappingError(
+            f'{source}: {ENGINE_INPUT}.type: {engine.topic} is also mapped as '
+            f'{types[engine.topic]} (one topic has one type)'
+        )
     wheels, body_speed, wheel_torques = specs
     return InputMapping(
-        wheels, body_speed, wheel_torques, source=source, alignment=alignment, max_age=max_age
+        wheels,
+        body_speed,
+        wheel_torques,
+        source=source,
+        alignment=alignment,
+        max_age=max_age,
+        engine_torque=engine,
+        torque_source=torque_source,
     )
 
 

@@ -17,7 +17,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.chain import ChainOutput, ChainSettings
 from vd_observer_node.errors import InputShapeError
-from vd_observer_node.estimation.cascade import CascadeResult, checked_record
+from vd_observer_node.estimation.cascade import CascadeResult, checked_engine, checked_record
+from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_NONE, Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import FaultReport, merge_reports
 from vd_observer_node.estimation.observer import (
@@ -40,6 +41,7 @@ from vd_observer_node.kernel.estimation import (
     E_SLOPE_VALID,
     EST_SIZE,
     CompiledEstimator,
+    engine_torques,
     estimates_from_packed,
     estimator_update,
 )
@@ -103,20 +105,38 @@ def _cascade_step(
     eprm: FloatArray, escal: FloatArray, held: FloatArray, fst: FloatArray, fpr: FloatArray,
     fme: FloatArray, sst: FloatArray, spr: FloatArray, sme: FloatArray, vst: FloatArray,
     vpr: FloatArray, vme: FloatArray, last: FloatArray, ecnt: NDArray[np.int64],
-    measured: bool, t: float, angle: FloatArray, speed: float, torque: FloatArray,
-    wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray, body_valid: BoolArray,
-    est: FloatArray,
-) -> None:  # fmt: skip
-    """One stamp of `run_cascade`: wheel and speed observers, then the estimator."""
+    measured: bool, dprm: FloatArray, escl: FloatArray, t: float, angle: FloatArray,
+    speed: float, torque: FloatArray, engine: FloatArray, wheel: FloatArray,
+    wheel_valid: BoolArray, body: FloatArray, body_valid: BoolArray, est: FloatArray,
+) -> bool:  # fmt: skip
+    """One stamp of `run_cascade`: wheel and speed observers, then the estimator.
+
+    With the engine path (``dprm`` non-empty) the wheel torques come from ``engine``
+    (engine torque, gear, engine speed) instead of ``torque``; returns whether the torque
+    source held (`CascadeResult.torque_valid`). ``escl`` (2,) is the engine path's state:
+    the stamp the clutch last slipped or the gear changed (-inf before), the last gear (nan).
+    """
     diff_update(wprm, wlip, wz, wfl, wact, wpt, wpf, wsc, wcnt, t, angle, wheel, wheel_valid)
     sample = np.empty(1)
     sample[0] = speed
     diff_update(sprm, slip_, sz, sfl, sact, spt, spf, ssc, scnt, t, sample, body, body_valid)
     v_est = speed if measured else body[0, 0]
+    wheel_torque = torque
+    torque_ok = True
+    if dprm.shape[0] > 0:
+        wheel_torque = np.empty(4)
+        engaged = engine_torques(
+            dprm, engine[0], engine[1], engine[2], wheel[1], wheel[2], wheel_torque
+        )
+        if not engaged or engine[1] != escl[1]:
+            escl[0] = t
+        escl[1] = engine[1]
+        torque_ok = engaged and t - escl[0] >= dprm[6]
     estimator_update(
         eprm, escal, held, fst, fpr, fme, sst, spr, sme, vst, vpr, vme, last, ecnt, t,
-        wheel[1], wheel[2], v_est, body[1, 0], torque, est,
+        wheel[1], wheel[2], v_est, body[1, 0], wheel_torque, torque_ok, est,
     )  # fmt: skip
+    return torque_ok
 
 
 @jit
@@ -128,18 +148,20 @@ def _cascade_block(
     eprm: FloatArray, escal: FloatArray, held: FloatArray, fst: FloatArray, fpr: FloatArray,
     fme: FloatArray, sst: FloatArray, spr: FloatArray, sme: FloatArray, vst: FloatArray,
     vpr: FloatArray, vme: FloatArray, last: FloatArray, ecnt: NDArray[np.int64],
-    measured: bool, t: FloatArray, angles: FloatArray, speeds: FloatArray, torques: FloatArray,
-    wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray, est: FloatArray,
+    measured: bool, dprm: FloatArray, t: FloatArray, angles: FloatArray, speeds: FloatArray,
+    torques: FloatArray, engine: FloatArray, wheel: FloatArray, wheel_valid: BoolArray,
+    body: FloatArray, est: FloatArray, torque_valid: BoolArray,
 ) -> None:  # fmt: skip
     """`_cascade_step` over N stamps; wheel (N, 3, 4), body (N, 3), est (N, EST_SIZE)."""
     body1 = np.empty((3, 1))
     body_valid = np.empty(1, dtype=np.bool_)
+    escl = np.array([-np.inf, np.nan])
     for k in range(t.shape[0]):
-        _cascade_step(
+        torque_valid[k] = _cascade_step(
             wprm, wlip, wz, wfl, wact, wpt, wpf, wsc, wcnt, sprm, slip_, sz, sfl, sact, spt,
             spf, ssc, scnt, eprm, escal, held, fst, fpr, fme, sst, spr, sme, vst, vpr, vme,
-            last, ecnt, measured, t[k], angles[k], speeds[k], torques[k], wheel[k],
-            wheel_valid[k], body1, body_valid, est[k],
+            last, ecnt, measured, dprm, escl, t[k], angles[k], speeds[k], torques[k], engine[k],
+            wheel[k], wheel_valid[k], body1, body_valid, est[k],
         )  # fmt: skip
         body[k, 0] = body1[0, 0]
         body[k, 1] = body1[1, 0]
@@ -155,29 +177,43 @@ def run_cascade_compiled(
     observer_config: ObserverConfig | None = None,
     estimator_config: EstimatorConfig | None = None,
     estimator_speed: str = 'measured',
+    *,
+    torque_source: str = 'measured',
+    engine: ArrayLike | None = None,
+    drivetrain: Drivetrain | None = None,
 ) -> CascadeResult:
     """`cascade.run_cascade` (same arguments and result) in one compiled loop.
 
     Raises:
         InputShapeError: inconsistent shapes.
-        ConfigurationError: unknown estimator_speed.
+        ConfigurationError: unknown estimator_speed or torque_source, or the engine path
+            without engine or drivetrain.
     """
     stamps, angles, speeds, torques = checked_record(
         t, wheel_angle, body_speed, wheel_torque, estimator_speed
     )
     n = stamps.shape[0]
+    source, engine_record = checked_engine(n, torque_source, engine, drivetrain)
+    dprm = (
+        drivetrain.params_array()
+        if drivetrain is not None and source == TORQUE_ENGINE
+        else np.zeros(0)
+    )
     wheels, speed = _observers(observer_config or ObserverConfig())
-    estimator = CompiledEstimator(vehicle, estimator_config)
+    estimator = CompiledEstimator(vehicle, estimator_config, source)
     wheel = np.zeros((n, 3, 4))
     wheel_valid = np.zeros((n, 4), dtype=np.bool_)
     body = np.zeros((n, 3))
     est = np.zeros((n, EST_SIZE))
+    torque_valid = np.zeros(n, dtype=np.bool_)
     block: Any = _cascade_block  # its leading arguments come as tuples
     block(
         *_diff_args(wheels), *_diff_args(speed), *_estimator_args(estimator),
-        estimator_speed == 'measured', stamps, angles, speeds, torques, wheel, wheel_valid,
-        body, est,
+        estimator_speed == 'measured', dprm, stamps, angles, speeds, torques, engine_record,
+        wheel, wheel_valid, body, est, torque_valid,
     )  # fmt: skip
+    if source == TORQUE_NONE:
+        torque_valid[:] = False
     return CascadeResult(
         t=stamps.copy(),
         omega=wheel[:, 1, :].copy(),
@@ -194,6 +230,8 @@ def run_cascade_compiled(
         slope=est[:, E_SLOPE].copy(),
         slope_valid=est[:, E_SLOPE_VALID] != 0.0,
         wheel_valid=wheel_valid,
+        torque_valid=torque_valid,
+        torque_source=source,
         angle=wheel[:, 0, :].copy(),
         faults={
             f'{part}.{kind}': count
@@ -327,6 +365,9 @@ class CompiledChain:
         self._body = np.zeros((3, 1))
         self._body_valid = np.zeros(1, dtype=np.bool_)
         self._est = np.zeros(EST_SIZE)
+        self._no_drivetrain = np.zeros(0)
+        self._no_engine = np.zeros(3)
+        self._no_state = np.zeros(2)
 
     def update(
         self, t: float, wheel_angle: ArrayLike, speed: float, wheel_torque: ArrayLike
@@ -346,8 +387,9 @@ class CompiledChain:
         step: Any = _cascade_step  # its leading arguments come as one tuple
         wheel, body, est = self._wheel, self._body, self._est
         step(
-            *self._args, self._measured, float(t), angles, float(speed), torques, wheel,
-            self._wheel_valid, body, self._body_valid, est,
+            *self._args, self._measured, self._no_drivetrain, self._no_state, float(t), angles,
+            float(speed), torques, self._no_engine, wheel, self._wheel_valid, body,
+            self._body_valid, est,
         )  # fmt: skip
         mu_valid = est[E_MU_VALID : E_MU_VALID + 4] != 0.0
         monitor = self.monitor

@@ -9,6 +9,7 @@ equal outputs (1e-9) and equal fault counts.
 Array layouts:
 
 * ``prm`` float64 (`N_PARAMS`,): see `estimator_params`;
+* ``prm[27]`` is the torque source code (`drivetrain.TORQUE_*`);
 * ``scal`` (3,): stamp of the last sample (nan before the first), slope [rad], 1.0 once an
   estimate exists; ``held`` (14,): last finite inputs (omega, omega_dot, torque, v, accel);
 * three low-pass filters (force (order, 5), slope (order, 1), speed (order, 1)), each
@@ -26,7 +27,13 @@ from typing import Final
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node.errors import InputShapeError
+from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimation.drivetrain import (
+    TORQUE_ENGINE,
+    TORQUE_MEASURED,
+    TORQUE_NONE,
+    TORQUE_SOURCES,
+)
 from vd_observer_node.estimation.estimator import (
     LOAD_TRANSFER_SOURCES,
     SLOPE_ACCEL_SOURCES,
@@ -49,8 +56,10 @@ __all__ = [
     'E_SLOPE',
     'E_SLOPE_VALID',
     'E_T',
+    'E_TORQUE_SOURCE',
     'CompiledEstimator',
     'EstimatorState',
+    'engine_torques',
     'estimates_from_packed',
     'estimator_params',
     'estimator_reset',
@@ -71,14 +80,15 @@ E_AERO: Final = 21
 E_SLOPE: Final = 22
 E_SLOPE_VALID: Final = 23
 E_MU_VALID: Final = 24
-EST_SIZE: Final = 28
+E_TORQUE_SOURCE: Final = 28
+EST_SIZE: Final = 29
 
 # parameters
 _MASS, _GRAVITY, _RADIUS, _J_FRONT, _J_REAR, _DRAG, _C0, _C1, _REG = range(9)
 _H, _A, _B, _L, _LT_CODE, _FORCE_TAU, _SLOPE_TAU, _ACC_CODE, _ORDER = range(9, 18)
 _MIN_LOAD, _MIN_EXC, _MAX_SINE, _MIN_SPEED, _SLIP_EPS, _MAX_GAP, _MAX_MU = range(18, 25)
-_STATIC_FRONT, _STATIC_REAR = 25, 26
-N_PARAMS: Final = 27
+_STATIC_FRONT, _STATIC_REAR, _TORQUE_SOURCE = 25, 26, 27
+N_PARAMS: Final = 28
 
 # fault slots (ESTIMATOR_FAULTS order) and the rejection count
 _NON_FINITE_STAMP, _NON_FINITE_VALUE, _DUPLICATE, _OUT_OF_ORDER, _GAP, _JUMP_BACK = range(6)
@@ -99,7 +109,9 @@ assert ESTIMATOR_FAULTS == (
 _KMH_REFERENCE: Final = 160.0  # [km/h] speed scale of paper eq. 7 (estimators.py)
 
 
-def estimator_params(vehicle: EstimatorVehicle, config: EstimatorConfig) -> FloatArray:
+def estimator_params(
+    vehicle: EstimatorVehicle, config: EstimatorConfig, torque_source: int = TORQUE_MEASURED
+) -> FloatArray:
     """The ``prm`` array of the estimator kernel."""
     static = vehicle.static_wheel_loads
     prm = np.zeros(N_PARAMS)
@@ -130,6 +142,7 @@ def estimator_params(vehicle: EstimatorVehicle, config: EstimatorConfig) -> Floa
     prm[_MAX_MU] = config.max_mu
     prm[_STATIC_FRONT] = static[0]
     prm[_STATIC_REAR] = static[2]
+    prm[_TORQUE_SOURCE] = torque_source
     return prm
 
 
@@ -154,6 +167,61 @@ class EstimatorState:
         self.v_prev = np.zeros(1)
         self.v_meta = np.zeros(3)
         self.last = np.zeros(EST_SIZE)
+
+
+# -- drivetrain (drivetrain.engine_wheel_torques, clutch_engaged) ---------------------------
+
+
+@jit
+def engine_torques(
+    dprm: FloatArray,
+    engine_torque: float,
+    gear_value: float,
+    engine_speed: float,
+    omega: FloatArray,
+    omega_dot: FloatArray,
+    out: FloatArray,
+) -> bool:
+    """`engine_wheel_torques` into ``out`` (4,); returns `clutch_engaged`.
+
+    ``dprm`` is `Drivetrain.params_array`: [n, final, reverse, eta, J_e, max slip,
+    settle time, driven (4), ratios (n)]; the gear comes as a float and goes through
+    `gear_number`. The settle time is the caller's (`kernel.chain._cascade_step`).
+    """
+    n_gears = int(dprm[0])
+    ratio = math.nan
+    if math.isfinite(gear_value) and gear_value == round(gear_value) and abs(gear_value) < 2.0**31:
+        gear = int(gear_value)
+        if gear == 0:
+            ratio = 0.0
+        elif gear == -1:
+            ratio = -dprm[2] * dprm[1]
+        elif 1 <= gear <= n_gears:
+            ratio = dprm[11 + gear - 1] * dprm[1]
+    if not math.isfinite(ratio):
+        out[:] = math.nan
+        return False
+    if ratio == 0.0:
+        out[:] = 0.0
+        return True
+    n_driven = dprm[7] + dprm[8] + dprm[9] + dprm[10]
+    carrier_accel = 0.0
+    carrier_speed = 0.0
+    for i in range(4):
+        carrier_accel += dprm[7 + i] * omega_dot[i]
+        carrier_speed += dprm[7 + i] * omega[i]
+    if math.isfinite(engine_torque):
+        clutch = engine_torque - dprm[4] * ratio * (carrier_accel / n_driven)
+        total = ratio * clutch
+        eta = dprm[3]
+        total = total * eta if clutch >= 0.0 else total / eta
+        for i in range(4):
+            out[i] = total * dprm[7 + i] / n_driven
+    else:
+        out[:] = math.nan
+    if not math.isfinite(engine_speed):
+        return True
+    return bool(abs(engine_speed - ratio * (carrier_speed / n_driven)) <= dprm[5])
 
 
 # -- low-pass filter (filters.LowPass) -------------------------------------------------------
@@ -207,6 +275,7 @@ def _empty(prm: FloatArray, t: float, est: FloatArray) -> None:
     est[E_FZ + 1] = prm[_STATIC_FRONT]
     est[E_FZ + 2] = prm[_STATIC_REAR]
     est[E_FZ + 3] = prm[_STATIC_REAR]
+    est[E_TORQUE_SOURCE] = prm[_TORQUE_SOURCE]
 
 
 @jit
@@ -260,14 +329,16 @@ def _estimate(
     slope_prev = scal[1]
     cos_prev, sin_prev = math.cos(slope_prev), math.sin(slope_prev)
     weight = mass * gravity
+    no_torque = int(prm[_TORQUE_SOURCE]) == TORQUE_NONE
 
-    fx_raw = np.empty(4)
-    for i in range(4):
-        inertia = prm[_J_FRONT] if i < 2 else prm[_J_REAR]
-        fx_raw[i] = (x[8 + i] - inertia * x[4 + i]) / radius
+    fx_raw = np.zeros(4)
+    if not no_torque:
+        for i in range(4):
+            inertia = prm[_J_FRONT] if i < 2 else prm[_J_REAR]
+            fx_raw[i] = (x[8 + i] - inertia * x[4 + i]) / radius
     fx_sum = fx_raw[0] + fx_raw[1] + fx_raw[2] + fx_raw[3]
     rolling_sum = c_roll * weight * cos_prev
-    if int(prm[_LT_CODE]) == 0:
+    if int(prm[_LT_CODE]) == 0 and not no_torque:
         ground = fx_sum - direction * rolling_sum
     else:
         ground = mass * accel + weight * sin_prev + aero_signed
@@ -293,7 +364,7 @@ def _estimate(
         est[E_ROLL + i] = c_roll * fz
         valid = (fz >= min_load) and (abs(fx) >= prm[_MIN_EXC] * fz) and math.isfinite(fx)
         mu = fx / fz if valid else 0.0
-        valid = valid and wheel_ok[i]
+        valid = valid and wheel_ok[i] and not no_torque
         if fz < min_load:
             lift = True
         est[E_MU + i] = mu
@@ -331,16 +402,21 @@ def _estimate(
         net_f = net_out[0]
     sine = net_f / weight
     in_range = abs(sine) <= prm[_MAX_SINE]
-    usable = body_ok and abs(v) >= prm[_MIN_SPEED]
+    usable = body_ok and abs(v) >= prm[_MIN_SPEED] and not no_torque
     if usable and not in_range:
         counts[_ARCSIN if abs(sine) > 1.0 else _SLOPE_RANGE] += 1
     slope_valid = in_range and usable
+    if int(prm[_TORQUE_SOURCE]) == TORQUE_ENGINE and usable and not in_range:
+        for i in range(4):  # a force the engine path cannot know of (the brakes)
+            est[E_MU_VALID + i] = 0.0
+            est[E_MU + i] = 0.0
     if slope_valid:
         scal[1] = math.asin(sine)
     est[E_T] = t
     est[E_AERO] = aero
     est[E_SLOPE] = scal[1]
     est[E_SLOPE_VALID] = 1.0 if slope_valid else 0.0
+    est[E_TORQUE_SOURCE] = prm[_TORQUE_SOURCE]
 
 
 @jit
@@ -365,6 +441,7 @@ def estimator_update(
     speed: float,
     accel: float,
     torque: FloatArray,
+    torque_ok: bool,
     est: FloatArray,
 ) -> None:
     """Estimate everything for stamp t into ``est`` (`Estimator.update`)."""
@@ -421,6 +498,9 @@ def estimator_update(
             wheel_ok[i] = ok[i] and ok[4 + i] and ok[8 + i] and ok[12]
         body_ok = False
     held[:] = packed
+    if not torque_ok:
+        wheel_ok[:] = False
+        body_ok = False
     _estimate(
         prm, scal, f_stages, f_prev, f_meta, s_stages, s_prev, s_meta, v_stages, v_prev, v_meta,
         counts, t, dt, packed, wheel_ok, body_ok, est,
@@ -450,6 +530,7 @@ def estimates_from_packed(est: FloatArray) -> Estimates:
         aero=float(est[E_AERO]),
         slope=float(est[E_SLOPE]),
         slope_valid=bool(est[E_SLOPE_VALID] != 0.0),
+        torque_source=int(est[E_TORQUE_SOURCE]),
     )
 
 
@@ -463,11 +544,23 @@ def _wheels(name: str, value: ArrayLike) -> FloatArray:
 class CompiledEstimator:
     """Drop-in for `estimator.Estimator` running `estimator_update` (same API)."""
 
-    def __init__(self, vehicle: EstimatorVehicle, config: EstimatorConfig | None = None) -> None:
-        """Create the estimator (arguments as `Estimator`)."""
+    def __init__(
+        self,
+        vehicle: EstimatorVehicle,
+        config: EstimatorConfig | None = None,
+        torque_source: int = TORQUE_MEASURED,
+    ) -> None:
+        """Create the estimator (arguments as `Estimator`).
+
+        Raises:
+            ConfigurationError: unknown torque_source.
+        """
+        if torque_source not in range(len(TORQUE_SOURCES)):
+            raise ConfigurationError(f'unknown torque_source {torque_source!r}')
         self.vehicle = vehicle
         self.config = config or EstimatorConfig()
-        self.prm = estimator_params(vehicle, self.config)
+        self.torque_source = int(torque_source)
+        self.prm = estimator_params(vehicle, self.config, self.torque_source)
         self.s = EstimatorState(self.config.filter_order)
         self.counts = np.zeros(len(ESTIMATOR_FAULTS) + 1, dtype=np.int64)
         self._faults = FaultCounter(ESTIMATOR_FAULTS)
@@ -481,7 +574,7 @@ class CompiledEstimator:
             self.prm, scratch.scal, scratch.held, scratch.f_stages, scratch.f_prev,
             scratch.f_meta, scratch.s_stages, scratch.s_prev, scratch.s_meta, scratch.v_stages,
             scratch.v_prev, scratch.v_meta, scratch.last, self.counts.copy(), 0.0, zeros, zeros,
-            0.0, 0.0, zeros, self._est,
+            0.0, 0.0, zeros, True, self._est,
         )  # fmt: skip
 
     def reset(self) -> None:
@@ -520,6 +613,7 @@ class CompiledEstimator:
         speed: float,
         accel: float,
         torque: ArrayLike,
+        torque_ok: bool = True,
     ) -> Estimates:
         """Estimate everything for stamp t (`Estimator.update`).
 
@@ -531,6 +625,6 @@ class CompiledEstimator:
             self.prm, s.scal, s.held, s.f_stages, s.f_prev, s.f_meta, s.s_stages, s.s_prev,
             s.s_meta, s.v_stages, s.v_prev, s.v_meta, s.last, self.counts, float(t),
             _wheels('omega', omega), _wheels('omega_dot', omega_dot), float(speed), float(accel),
-            _wheels('torque', torque), self._est,
+            _wheels('torque', torque), bool(torque_ok), self._est,
         )  # fmt: skip
         return estimates_from_packed(self._est)

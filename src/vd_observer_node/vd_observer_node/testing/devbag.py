@@ -235,6 +235,7 @@ def cascade_topics(result: Any, wheel_angle: np.ndarray) -> dict[str, dict[str, 
         result: the cascade result (duck-typed).
         wheel_angle: shape (N, 4), [rad], measured angles echoed in ``wheel_states.angle``.
     """
+    source = np.full(result.t.shape[0], getattr(result, 'torque_source', 0), dtype=np.uint8)
     return {
         OBSERVER_WHEEL_STATES: {
             'angle': wheel_angle,
@@ -243,8 +244,17 @@ def cascade_topics(result: Any, wheel_angle: np.ndarray) -> dict[str, dict[str, 
         },
         OBSERVER_BODY_ACCEL: {'accel.linear.x': result.accel},
         OBSERVER_BODY_VELOCITY: {'twist.linear.x': result.speed},
-        ESTIMATES_TIRE_FORCES: {'fx': result.fx, 'fz': result.fz},
-        ESTIMATES_FRICTION: {'mu': result.mu, 'slip': result.slip, 'valid': result.mu_valid},
+        ESTIMATES_TIRE_FORCES: {'fx': result.fx, 'fz': result.fz, 'torque_source': source},
+        ESTIMATES_FRICTION: {
+            'mu': result.mu,
+            'slip': result.slip,
+            'valid': result.mu_valid,
+            'torque_source': source,
+        },
         ESTIMATES_RESISTANCES: {'rolling': result.rolling, 'aero': result.aero},
-        ESTIMATES_SLOPE: {'angle': result.slope, 'valid': result.slope_valid},
+        ESTIMATES_SLOPE: {
+            'angle': result.slope,
+            'valid': result.slope_valid,
+            'torque_source': source,
+        },
     }

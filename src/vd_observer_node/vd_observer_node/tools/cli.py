@@ -3,7 +3,7 @@
     vd bag info BAG [--recover]
     vd bag repair BAG [--no-backup]
     vd replay IN_BAG OUT_BAG [--vehicle FILE] [--config FILE] [--mapping FILE]
-              [--no-progress] [--kernel K]
+              [--torque-source {measured,engine,none}] [--no-progress] [--kernel K]
     vd report BAG [--out DIR] ...
     vd fleet BAGS... --out DIR [--workers N] [--engine local|dask] [--baseline OLD] ...
 
@@ -97,7 +97,14 @@ def _replay(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         kernel=args.kernel,
         mapping=mapping,
+        torque_source=args.torque_source,
     )
+    path = {
+        'measured': 'measured wheel torques',
+        'engine': f'engine torque and gear ({100 * report.torque_valid_fraction:.1f} % of '
+        'samples with the clutch closed)',
+        'none': 'none (Fx, mu and slope invalid)',
+    }[report.torque_source]
     print(
         f'replayed {report.samples} samples ({report.sensor_messages} sensor messages, '
         f'{report.unmatched} unmatched) of {report.bag_duration_s:.1f} s in '
@@ -108,6 +115,7 @@ def _replay(args: argparse.Namespace) -> int:
     )
     for stats in report.inputs:
         print(f'  input {stats.text()}')
+    print(f'torque path: {path}')
     return EXIT_OK
 
 
@@ -141,6 +149,13 @@ def _parser() -> argparse.ArgumentParser:
         '--mapping',
         type=Path,
         help='input mapping YAML: your topics, types, joints and units (docs/bags.md)',
+    )
+    replay.add_argument(
+        '--torque-source',
+        choices=('measured', 'engine', 'none'),
+        default=None,
+        help='wheel torques: measured, from the engine torque and gear (engine), or none; '
+        "default: the mapping's torque_source (measured)",
     )
     replay.add_argument('--no-progress', action='store_true', help='no progress bar')
     replay.add_argument(

@@ -53,18 +53,29 @@ from vd_sim_node.topics import (
 )
 
 from vd_observer_node.bag.alerts_cdr import encode_alerts
-from vd_observer_node.bag.cdr_batch import encode_batch
+from vd_observer_node.bag.cdr_batch import encode_batch, upgrade_batch
 from vd_observer_node.bag.errors import BagExistsError, ReplayInputError
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.alignment import align_stamps
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.estimation.drivetrain import (
+    TORQUE_SOURCES,
+    Drivetrain,
+    engine_wheel_torques_record,
+    torque_source_code,
+)
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
-from vd_observer_node.inputs.decode import InputStats, decode_input, input_stats
-from vd_observer_node.inputs.mapping import InputMapping, default_mapping
+from vd_observer_node.inputs.decode import (
+    InputStats,
+    decode_engine,
+    decode_input,
+    input_stats,
+)
+from vd_observer_node.inputs.mapping import ENGINE_INPUT, InputMapping, default_mapping
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.situation.monitor import (
@@ -117,6 +128,9 @@ class ReplayReport:
             'wheel.<kind>', 'speed.<kind>', 'estimator.<kind>', as on /diagnostics).
         inputs: per input, in mapping order: messages, longest gap between stamps and gaps
             longer than the observers' ``max_gap`` (a topic that stopped arriving).
+        torque_source: the torque path: 'measured', 'engine' or 'none'.
+        torque_valid_fraction: share of the samples where the torque path held (1 when
+            measured, 0 with none, below 1 on the engine path while the clutch slipped).
     """
 
     samples: int
@@ -130,6 +144,8 @@ class ReplayReport:
     stale: int = 0
     faults: dict[str, int] = field(default_factory=dict)
     inputs: tuple[InputStats, ...] = ()
+    torque_source: str = 'measured'
+    torque_valid_fraction: float = 1.0
 
     @property
     def real_time_factor(self) -> float:
@@ -208,6 +224,7 @@ def load_replay_config(path: str | os.PathLike[str]) -> ReplayConfig:
 def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
     n = result.t.shape[0]
     zeros = np.zeros(n)
+    source = np.full(n, result.torque_source, dtype=np.uint8)
     return {
         OBSERVER_WHEEL_STATES: {
             'angle': angles,
@@ -230,14 +247,19 @@ def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str,
             'twist.angular.y': zeros,
             'twist.angular.z': zeros,
         },
-        ESTIMATES_TIRE_FORCES: {'fx': result.fx, 'fz': result.fz},
+        ESTIMATES_TIRE_FORCES: {'fx': result.fx, 'fz': result.fz, 'torque_source': source},
         ESTIMATES_FRICTION: {
             'mu': result.mu,
             'slip': result.slip,
             'valid': result.mu_valid,
+            'torque_source': source,
         },
         ESTIMATES_RESISTANCES: {'rolling': result.rolling, 'aero': result.aero},
-        ESTIMATES_SLOPE: {'angle': result.slope, 'valid': result.slope_valid},
+        ESTIMATES_SLOPE: {
+            'angle': result.slope,
+            'valid': result.slope_valid,
+            'torque_source': source,
+        },
     }
 
 
@@ -344,6 +366,8 @@ def replay_bag(
     situation_config: SituationConfig | None = None,
     kernel: str = 'compiled',
     mapping: InputMapping | None = None,
+    torque_source: str | None = None,
+    drivetrain: Drivetrain | None = None,
 ) -> ReplayReport:
     """Replay a bag's sensor topics through the cascade and write inputs, truth and estimates.
 
@@ -374,6 +398,12 @@ def replay_bag(
             (:mod:`vd_observer_node.inputs.mapping`); default vd's own ``/vd/sensors/*``
             topics. With wheel speeds the observers run with ``wheel_input='speed'``
             whatever ``observer_config`` says.
+        torque_source: 'measured' (the wheel torques), 'engine' (wheel torques from the
+            engine torque and gear of the mapping's ``engine_torque`` input, by default
+            vd's WheelTorques topic, through `drivetrain`) or 'none' (no torque topic is
+            read; Fx, mu and slope invalid); None: the mapping's ``torque_source``.
+        drivetrain: the engine path's driveline; default that of ``vehicle_file``
+            (`Drivetrain.from_params`).
 
     Raises:
         ReplayInputError: a sensor topic is missing or has the wrong type.
@@ -399,7 +429,11 @@ def replay_bag(
     reader = BagReader(in_bag)
     topics = reader.topics
     mapping = mapping or default_mapping()
-    for spec in mapping.specs:
+    if torque_source is not None:
+        torque_source_code(torque_source)  # refuses an unknown name
+        mapping = replace(mapping, torque_source=torque_source)
+    source = mapping.torque_source
+    for spec in mapping.used_specs:
         info = topics.get(spec.topic)
         origin = f' ({mapping.source}: {spec.name})' if mapping.source else ''
         if info is None or info.message_count == 0:
@@ -408,12 +442,14 @@ def replay_bag(
             raise ReplayInputError(
                 f'{in_bag}: {spec.topic} has type {info.msgtype}, need {spec.msgtype}{origin}'
             )
-    inputs = list(mapping.topics)
+    inputs = list(dict.fromkeys(spec.topic for spec in mapping.used_specs))
     observer_config = replace(observer_config or ObserverConfig(), wheel_input=mapping.wheel_input)
     truth = [t for t in topics if t.startswith(TRUTH_PREFIX)]
     # One read of the file gives the estimator vehicle and the tyre alike (a millisecond).
     params = load_vehicle_params(vehicle_file)
     estimator_vehicle = vehicle or EstimatorVehicle.from_params(params)
+    if source == 'engine' and drivetrain is None:
+        drivetrain = Drivetrain.from_params(params)
     monitor = None
     if situation:
         tire = params.tire
@@ -448,23 +484,40 @@ def replay_bag(
             arrays[topic] = arr
             bar.update(len(arr.datas))
         radius = estimator_vehicle.effective_radius
-        decoded = [decode_input(s, arrays[s.topic], radius) for s in mapping.specs]
+        used = mapping.used_specs  # wheels, body speed, and the torque input of the path
+        decoded = [
+            decode_engine(s, arrays[s.topic])
+            if s.name == ENGINE_INPUT
+            else decode_input(s, arrays[s.topic], radius)
+            for s in used
+        ]
         max_gap_s = observer_config.max_gap
         input_summary = tuple(
-            input_stats(s, d, max_gap_s) for s, d in zip(mapping.specs, decoded, strict=True)
+            input_stats(s, d, max_gap_s) for s, d in zip(used, decoded, strict=True)
         )
-        angles, speed, torque = decoded
-        aligned = align_stamps(
-            [angles.stamp_ns, speed.stamp_ns, torque.stamp_ns], mapping.alignment, mapping.max_age
-        )
-        common, (ia, iv, it) = aligned.stamp_ns, aligned.indexes
-        sensor_count = len(angles.stamp_ns) + len(speed.stamp_ns) + len(torque.stamp_ns)
+        angles, speed = decoded[0], decoded[1]
+        aligned = align_stamps([d.stamp_ns for d in decoded], mapping.alignment, mapping.max_age)
+        common, index = aligned.stamp_ns, aligned.indexes
+        sensor_count = sum(len(d.stamp_ns) for d in decoded)
         bar.set_postfix_str(f'cascade on {len(common)} samples')
         cascade_start = time.perf_counter()
         t = common.astype(np.float64) * 1e-9
+        ia = index[0]
         wheel_angle = angles.values[ia]
-        body_speed = speed.values[iv, 0]
-        wheel_torque = torque.values[it]
+        body_speed = speed.values[index[1], 0]
+        wheel_torque = (
+            decoded[2].values[index[2]] if source == 'measured' else np.zeros((len(t), 4))
+        )
+        engine = decoded[2].values[index[2]] if source == 'engine' else None
+        extra = dict(cascade_kwargs or {})
+        clash = sorted({'torque_source', 'engine', 'drivetrain'} & set(extra))
+        if clash:
+            raise ConfigurationError(
+                f'cascade settings: {clash[0]} is set by the torque source, not the config'
+            )
+        torque_kwargs: dict[str, Any] = {}
+        if source != 'measured':  # the default call stays as it was (injected cascades)
+            torque_kwargs = {'torque_source': source, 'engine': engine, 'drivetrain': drivetrain}
         result = cascade(
             t,
             wheel_angle,
@@ -473,9 +526,15 @@ def replay_bag(
             estimator_vehicle,
             observer_config,
             estimator_config,
-            **dict(cascade_kwargs or {}),
+            **torque_kwargs,
+            **extra,
         )
         cascade_time = time.perf_counter() - cascade_start
+        if engine is not None and drivetrain is not None:
+            # the situation monitor gets the torques the engine path gave the estimator
+            # (0 where the path had none: a gear the box lacks)
+            derived = engine_wheel_torques_record(engine, drivetrain, result.omega_dot)
+            wheel_torque = np.where(np.isfinite(derived), derived, 0.0)
         situation_values: dict[str, dict[str, np.ndarray]] = {}
         situation_time = [0.0]
         failure: list[BaseException] = []
@@ -532,7 +591,10 @@ def replay_bag(
         outputs: list[tuple[str, str, np.ndarray, list[bytes]]] = []
         for topic in [*inputs, *truth]:
             arr = arrays[topic]
-            outputs.append((topic, arr.msgtype, arr.log_time_ns, arr.datas))
+            # a bag recorded before a vd_msgs field was added: copied in today's layout, so
+            # the output holds one definition per type
+            datas = upgrade_batch(arr.msgtype, arr.decoding_type, arr.datas)
+            outputs.append((topic, arr.msgtype, arr.log_time_ns, datas))
         # the sensor's angles as the observer node publishes them; with speeds, the observer's
         observed_angle = result.angle if mapping.wheel_input == 'speed' else wheel_angle
         for topic, values in _estimates(result, observed_angle).items():
@@ -560,11 +622,13 @@ def replay_bag(
         bag_duration_s=float(sensor_log.max() - sensor_log.min()) * 1e-9,
         wall_time_s=wall,
         cascade_time_s=cascade_time,
-        unmatched=sensor_count - len(common) - sum(len(np.unique(i)) for i in (iv, it)),
+        unmatched=sensor_count - len(common) - sum(len(np.unique(i)) for i in index[1:]),
         situation_time_s=situation_time[0],
         stale=aligned.stale,
         faults=dict(result.faults),
         inputs=input_summary,
+        torque_source=TORQUE_SOURCES[result.torque_source],
+        torque_valid_fraction=float(np.mean(result.torque_valid)) if len(common) else 0.0,
     )
 
 

@@ -515,6 +515,9 @@ def evaluate(
             f'no {OBSERVER_NAMESPACE}* or {ESTIMATES_NAMESPACE}* topic: nothing to compare '
             '(compute them offline with `vd replay IN OUT`)'
         )
+    path = torque_path(series)
+    if path:
+        notes.append(path)
     missing_truth = [t for t in TRUTH_TOPICS if t not in series.topics]
     if missing_truth:
         notes.append('truth topics missing: ' + ', '.join(missing_truth))
@@ -543,6 +546,29 @@ def evaluate(
         alerts=section,
     )
     return report, comparisons
+
+
+#: Names of vd_msgs' TORQUE_* codes (estimation.drivetrain.TORQUE_SOURCES).
+_TORQUE_PATHS = {
+    0: 'measured wheel torques',
+    1: 'engine torque and gear (drivetrain of the vehicle file)',
+    2: 'none (Fx is 0, mu and slope invalid)',
+}
+
+
+def torque_path(series: BagSeries) -> str:
+    """Which torque path the estimates came from, from their torque_source field ('' without
+    tyre-force estimates)."""
+    forces = series.topics.get(ESTIMATES_TIRE_FORCES)
+    if forces is None:
+        return ''
+    codes = forces.values.get('torque_source')
+    if codes is None:
+        return (
+            'torque path: not recorded (estimates from before the torque_source field: measured)'
+        )
+    names = [_TORQUE_PATHS.get(int(c), f'unknown code {int(c)}') for c in np.unique(codes)]
+    return 'torque path: ' + '; '.join(names)
 
 
 def _convergence(

@@ -128,7 +128,8 @@ def load_bag_series(
                 series.skipped[name] = 'no messages'
                 continue
             decode = decode_alerts if arr.msgtype == ALERTS_TYPE else None
-            fields = decode(arr.datas) if decode else decode_batch(arr.msgtype, arr.datas)
+            # decoding_type: the bag's own definition when it predates a vd_msgs field
+            fields = decode(arr.datas) if decode else decode_batch(arr.decoding_type, arr.datas)
             series.topics[name] = _sorted(fields)
             series.message_count += len(arr.datas)
             bar.update(len(arr.datas))

@@ -1,0 +1,323 @@
+"""Wheel torques from the engine torque and the engaged gear, for data without wheel torques.
+
+Most cars report the engine torque and the gear on their CAN bus, few the torque at each
+wheel. :func:`engine_wheel_torques` gives the drive torque per wheel from those two with the
+drivetrain of the vehicle file (gear ratios, final drive), as the simulator's driveline
+transmits it: the clutch torque times the overall ratio, split equally between the driven
+wheels by an open differential::
+
+    T_clutch = T_engine - J_engine * i * mean(omega_dot of the driven wheels)
+    T_wheel  = i * T_clutch * eta / n_driven   (power to the wheels; / eta when T_clutch < 0)
+
+with i = ratio[gear] * final_drive. The engine-inertia term is what the engine spends on
+accelerating its own flywheel: in first gear J_engine * i^2 is 28 kg m^2 at the wheels, 18
+times a front wheel's own inertia, so leaving it out over-states the traction torque by up
+to a third in a full-throttle launch. It needs the driven wheels' omega_dot (the observer
+gives it) and holds while the clutch is closed.
+
+What the engine path cannot know:
+
+* **brakes**: the brake torque never reaches the engine; while braking the path reports the
+  drive torque only (engine drag), so Fx is too high by the brake force (docs/estimation.md
+  measures it);
+* **a slipping clutch** (launch, the engagement after a shift): the clutch then transmits
+  less than T_engine - J_engine * i * omega_dot; gear 0 (the simulator reports 0 while the
+  clutch is open in a shift) gives 0 drive torque, which is right.
+
+Torque sources (the ``torque_source`` field of vd_msgs TireForces, Friction and Slope):
+:data:`TORQUE_MEASURED` (wheel torques measured), :data:`TORQUE_ENGINE` (this module),
+:data:`TORQUE_NONE` (no torque: Fx, mu and slope invalid).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Final
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from vd_sim_node.vehicle.params import VehicleParams
+
+from vd_observer_node.errors import ConfigurationError, InputShapeError
+
+__all__ = [
+    'DRIVEN_AXLES',
+    'NO_GEAR',
+    'TORQUE_ENGINE',
+    'TORQUE_MEASURED',
+    'TORQUE_NONE',
+    'TORQUE_SOURCES',
+    'Drivetrain',
+    'clutch_engaged',
+    'engine_wheel_torques',
+    'engine_wheel_torques_record',
+    'gear_number',
+    'torque_source_code',
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Codes of the torque source, equal to the vd_msgs constants TORQUE_MEASURED / _ENGINE / _NONE.
+TORQUE_MEASURED: Final = 0
+TORQUE_ENGINE: Final = 1
+TORQUE_NONE: Final = 2
+#: Names of the torque sources, indexed by code (CLI, mapping files, replay summary).
+TORQUE_SOURCES: Final = ('measured', 'engine', 'none')
+#: Which wheels the differential drives: front (FL, FR), rear (RL, RR) or all four.
+DRIVEN_AXLES: Final = ('front', 'rear', 'all')
+
+
+#: What `gear_number` gives for a value that is no gear at all (nan, 2.5): no box has it.
+NO_GEAR: Final = -(2**31)
+
+
+def gear_number(value: float) -> int:
+    """A gear read as a float (a Float64MultiArray element) as an int; `NO_GEAR` for a
+    non-finite or non-integral value."""
+    if not math.isfinite(value) or value != round(value) or abs(value) >= 2**31:
+        return NO_GEAR
+    return int(value)
+
+
+def torque_source_code(name: str) -> int:
+    """The code of a torque source name ('measured', 'engine', 'none').
+
+    Raises:
+        ConfigurationError: unknown name.
+    """
+    if name not in TORQUE_SOURCES:
+        raise ConfigurationError(
+            f'torque source must be one of {", ".join(TORQUE_SOURCES)}, got {name!r}'
+        )
+    return TORQUE_SOURCES.index(name)
+
+
+@dataclass(frozen=True)
+class Drivetrain:
+    """The driveline between engine and wheels.
+
+    Attributes:
+        ratios: gear ratios of gears 1..n [-] (gearbox input speed / output speed).
+        final_drive: final-drive ratio [-].
+        reverse_ratio: ratio of the reverse gear (gear -1) [-]; the vehicle file has none,
+            so :meth:`from_params` takes the first gear's (close on most manual boxes).
+        efficiency: eta in (0, 1], share of the clutch power that reaches the wheels.
+        driven_axle: one of :data:`DRIVEN_AXLES`.
+        engine_inertia: J_engine [kg m^2] (crankshaft, flywheel, clutch disc); 0 leaves the
+            engine-inertia term out.
+        max_clutch_slip: [rad/s] the clutch counts as slipping (the engine path invalid)
+            where the engine speed differs from i * mean(omega of the driven wheels) by more
+            than this; the simulator's closed clutch slips by ~0.5 rad/s, a launch by
+            hundreds.
+        clutch_settle_time: [s] the engine path stays invalid this long after the clutch
+            last slipped or the gear changed: the clutch reaches the slip threshold while its
+            torque is still settling (the launch, the engagement after a shift), and the
+            wheel torque is then off by up to a few hundred N m for ~0.2 s.
+    """
+
+    ratios: tuple[float, ...]
+    final_drive: float
+    reverse_ratio: float
+    efficiency: float = 1.0
+    driven_axle: str = 'front'
+    engine_inertia: float = 0.0
+    max_clutch_slip: float = 2.0
+    clutch_settle_time: float = 0.3
+
+    def __post_init__(self) -> None:
+        numbers = {
+            'final_drive': self.final_drive,
+            'reverse_ratio': self.reverse_ratio,
+            **{f'ratios[{k}]': r for k, r in enumerate(self.ratios)},
+        }
+        if not self.ratios:
+            raise ConfigurationError('Drivetrain.ratios must list at least one gear')
+        for name, value in numbers.items():
+            if not (math.isfinite(value) and value > 0.0):
+                raise ConfigurationError(f'Drivetrain.{name} must be > 0, got {value}')
+        if not (math.isfinite(self.efficiency) and 0.0 < self.efficiency <= 1.0):
+            raise ConfigurationError(
+                f'Drivetrain.efficiency must be in (0, 1], got {self.efficiency}'
+            )
+        if self.driven_axle not in DRIVEN_AXLES:
+            raise ConfigurationError(
+                f'Drivetrain.driven_axle must be one of {", ".join(DRIVEN_AXLES)}, '
+                f'got {self.driven_axle!r}'
+            )
+        for name in ('engine_inertia', 'max_clutch_slip', 'clutch_settle_time'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ConfigurationError(f'Drivetrain.{name} must be >= 0, got {value}')
+
+    @classmethod
+    def from_params(
+        cls, params: VehicleParams, *, efficiency: float = 1.0, driven_axle: str = 'front'
+    ) -> Drivetrain:
+        """The drivetrain of the vehicle file (``gearbox:`` and ``engine.inertia``).
+
+        The file has no efficiency, driven axle or reverse ratio: the simulator models a
+        lossless front-wheel drive with an open differential, hence the defaults; pass
+        other values for another car.
+
+        Args:
+            params: the parsed vehicle file.
+            efficiency: eta in (0, 1].
+            driven_axle: one of :data:`DRIVEN_AXLES`.
+        """
+        gearbox = params.gearbox
+        return cls(
+            ratios=tuple(gearbox.ratios),
+            final_drive=gearbox.final_drive,
+            reverse_ratio=gearbox.ratios[0],
+            efficiency=efficiency,
+            driven_axle=driven_axle,
+            engine_inertia=params.engine.inertia,
+        )
+
+    @property
+    def driven(self) -> FloatArray:
+        """shape (4,), [-]: 1 on the driven wheels (FL, FR, RL, RR), else 0."""
+        front = 1.0 if self.driven_axle in ('front', 'all') else 0.0
+        rear = 1.0 if self.driven_axle in ('rear', 'all') else 0.0
+        return np.array([front, front, rear, rear])
+
+    def overall_ratio(self, gear: int) -> float:
+        """i = gear ratio * final drive [-], signed (negative in reverse, 0 in neutral);
+        nan for a gear the box does not have."""
+        if gear == 0:
+            return 0.0
+        if gear == -1:
+            return -self.reverse_ratio * self.final_drive
+        if 1 <= gear <= len(self.ratios):
+            return self.ratios[gear - 1] * self.final_drive
+        return math.nan
+
+    def params_array(self) -> FloatArray:
+        """The compiled twin's parameters:
+        [n, final, reverse, eta, J_e, max slip, settle time, driven (4), ratios (n)]."""
+        return np.array(
+            [
+                float(len(self.ratios)),
+                self.final_drive,
+                self.reverse_ratio,
+                self.efficiency,
+                self.engine_inertia,
+                self.max_clutch_slip,
+                self.clutch_settle_time,
+                *self.driven.tolist(),
+                *self.ratios,
+            ]
+        )
+
+
+def engine_wheel_torques(
+    engine_torque: float,
+    gear: int,
+    drivetrain: Drivetrain,
+    wheel_omega_dot: ArrayLike | None = None,
+) -> FloatArray:
+    """Drive torque per wheel from the engine torque and the engaged gear.
+
+    Args:
+        engine_torque: net engine torque at the crankshaft [N m] (combustion minus drag, as
+            vd_msgs/WheelTorques.engine_torque carries it).
+        gear: engaged gear: 0 neutral (or clutch open), 1..n forward, -1 reverse.
+        drivetrain: the vehicle's driveline.
+        wheel_omega_dot: shape (4,), [rad/s^2] wheel accelerations (the observer's), for the
+            engine-inertia term; None leaves it out.
+
+    Returns:
+        shape (4,), [N m], order FL, FR, RL, RR, positive driving forward; 0 on undriven
+        wheels and in neutral. All nan for a non-finite engine torque in gear, or a gear the
+        box does not have: the estimator then counts a non-finite input and clears the validity
+        flags, as for any unusable sample.
+
+    Raises:
+        InputShapeError: wheel_omega_dot is not of shape (4,).
+    """
+    driven = drivetrain.driven
+    ratio = drivetrain.overall_ratio(int(gear))
+    if ratio == 0.0:
+        return np.zeros(4)  # neutral: nothing reaches the wheels, whatever the engine does
+    if not (math.isfinite(engine_torque) and math.isfinite(ratio)):
+        return np.full(4, math.nan)
+    clutch = float(engine_torque)
+    if wheel_omega_dot is not None:
+        accel = np.asarray(wheel_omega_dot, dtype=np.float64)
+        if accel.shape != (4,):
+            raise InputShapeError(f'wheel_omega_dot must have shape (4,), got {accel.shape}')
+        n_driven = float(np.sum(driven))
+        carrier = float(np.sum(driven * accel)) / n_driven
+        clutch -= drivetrain.engine_inertia * ratio * carrier
+    total = ratio * clutch
+    # The engine turns forward in every gear: a positive clutch torque sends power to the
+    # wheels (losses take eta of it), a negative one (engine braking) draws it from them.
+    eta = drivetrain.efficiency
+    total = total * eta if clutch >= 0.0 else total / eta
+    share: FloatArray = total * driven / float(np.sum(driven))
+    return share
+
+
+def clutch_engaged(
+    engine_speed: float, gear: int, wheel_omega: ArrayLike, drivetrain: Drivetrain
+) -> bool:
+    """Whether the engine path holds at this sample: the clutch is closed (not slipping).
+
+    Args:
+        engine_speed: [rad/s] crankshaft speed; nan when not measured (then only the gear
+            is checked).
+        gear: engaged gear (0 neutral, -1 reverse).
+        wheel_omega: shape (4,), [rad/s] wheel speeds (the observer's).
+        drivetrain: the vehicle's driveline.
+
+    Returns:
+        False for a gear the box does not have, and where the engine speed differs from
+        i * mean(omega of the driven wheels) by more than ``max_clutch_slip`` (a launch,
+        the engagement after a shift); True in neutral (0 drive torque is then right).
+
+    Raises:
+        InputShapeError: wheel_omega is not of shape (4,).
+    """
+    omega = np.asarray(wheel_omega, dtype=np.float64)
+    if omega.shape != (4,):
+        raise InputShapeError(f'wheel_omega must have shape (4,), got {omega.shape}')
+    ratio = drivetrain.overall_ratio(int(gear))
+    if not math.isfinite(ratio):
+        return False
+    if ratio == 0.0 or not math.isfinite(engine_speed):
+        return True
+    driven = drivetrain.driven
+    carrier = float(np.sum(driven * omega)) / float(np.sum(driven))
+    return abs(engine_speed - ratio * carrier) <= drivetrain.max_clutch_slip
+
+
+def engine_wheel_torques_record(
+    engine: ArrayLike, drivetrain: Drivetrain, wheel_omega_dot: ArrayLike
+) -> FloatArray:
+    """`engine_wheel_torques` over a record (what the engine path feeds the estimator).
+
+    Args:
+        engine: shape (N, 3): engine torque [N m], gear (float), engine speed (unused).
+        drivetrain: the vehicle's driveline.
+        wheel_omega_dot: shape (N, 4), [rad/s^2] the observer's wheel accelerations.
+
+    Returns:
+        shape (N, 4), [N m]; rows of nan where `engine_wheel_torques` gives nan.
+
+    Raises:
+        InputShapeError: inconsistent shapes.
+    """
+    record = np.asarray(engine, dtype=np.float64)
+    accel = np.asarray(wheel_omega_dot, dtype=np.float64)
+    n = record.shape[0] if record.ndim == 2 else -1
+    if record.shape != (n, 3) or accel.shape != (n, 4):
+        raise InputShapeError(
+            f'expected engine (N, 3) and wheel_omega_dot (N, 4), got {record.shape}, {accel.shape}'
+        )
+    out = np.empty((n, 4))
+    for k in range(n):
+        out[k] = engine_wheel_torques(
+            float(record[k, 0]), gear_number(float(record[k, 1])), drivetrain, accel[k]
+        )
+    return out
