@@ -362,3 +362,20 @@ def test_vd_report_takes_a_mapping_replays_a_bag_without_estimates_and_summarise
     assert main([*args[:3], str(bad), *args[4:]]) == 2
     err = capsys.readouterr().err
     assert err.strip().splitlines()[-1].startswith('vd: error: ') and 'body_speed.type' in err
+
+
+def test_estimating_nodes_refuse_a_torque_path_they_cannot_run(tmp_path: Path) -> None:
+    import yaml
+    from vd_observer_node.node_params import take_input_mapping
+
+    path = tmp_path / 'car.yaml'
+    path.write_text(yaml.safe_dump({'torque_source': 'engine'}), encoding='utf-8')
+
+    def values() -> dict[str, object]:
+        return {'input_mapping': str(path), 'kernel': 'compiled'}
+
+    # the observer and the player do not read torques: the file is theirs as it is
+    assert take_input_mapping(values()).torque_source == 'engine'
+    with pytest.raises(MappingError, match="torque_source 'engine' runs in vd replay") as info:
+        take_input_mapping(values(), estimates=True)
+    assert '\n' not in str(info.value) and str(path) in str(info.value)

@@ -110,7 +110,7 @@ class AlertsNode(Node):
     def __init__(self) -> None:
         super().__init__('alerts_node')
         values = declare_parameters(self, PARAMS)
-        mapping = take_input_mapping(values, undeclared_inputs(self))
+        mapping = take_input_mapping(values, undeclared_inputs(self), estimates=True)
         sensors = {key: getattr(mapping, name) for key, name in _SENSORS.items()}
         classes = {key: input_message_class(spec) for key, spec in sensors.items()}
         self.kernel = values.pop('kernel')

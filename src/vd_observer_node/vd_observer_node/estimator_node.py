@@ -96,7 +96,7 @@ class EstimatorNode(Node):
     def __init__(self) -> None:
         super().__init__('estimator_node')
         values = declare_parameters(self, PARAMS)
-        mapping = take_input_mapping(values, undeclared_inputs(self))
+        mapping = take_input_mapping(values, undeclared_inputs(self), estimates=True)
         self.kernel = values.pop('kernel')
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')

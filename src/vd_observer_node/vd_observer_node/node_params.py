@@ -135,7 +135,9 @@ def undeclared_inputs(node: Any) -> list[str]:
     return [n for n in overrides if n.startswith('inputs.') and not node.has_parameter(n)]
 
 
-def take_input_mapping(values: dict[str, Any], undeclared: Sequence[str] = ()) -> InputMapping:
+def take_input_mapping(
+    values: dict[str, Any], undeclared: Sequence[str] = (), *, estimates: bool = False
+) -> InputMapping:
     """Remove the input-mapping parameters from `values` and build the mapping.
 
     Args:
@@ -143,10 +145,14 @@ def take_input_mapping(values: dict[str, Any], undeclared: Sequence[str] = ()) -
             and every ``inputs.*`` entry are popped.
         undeclared: ``inputs.*`` names given but not declared (:func:`undeclared_inputs`):
             refused as unknown inputs or keys.
+        estimates: the node computes estimates from the wheel torques (estimator, alerts,
+            pipeline): a mapping whose ``torque_source`` is not 'measured' is refused, as the
+            live nodes read measured wheel torques only (the engine and no-torque paths run
+            in ``vd replay`` and ``vd report``).
 
     Raises:
-        MappingError: unreadable file, a refused setting (one line naming the key), or both a
-            file and ``inputs.*`` parameters given.
+        MappingError: unreadable file, a refused setting (one line naming the key), both a
+            file and ``inputs.*`` parameters given, or a torque source the node cannot run.
     """
     path = values.pop(INPUT_MAPPING.name)
     params = {k: values.pop(k) for k in [k for k in values if k.startswith('inputs.')]}
@@ -157,9 +163,14 @@ def take_input_mapping(values: dict[str, Any], undeclared: Sequence[str] = ()) -
             f'parameters input_mapping and {given[0]} are both set: give the mapping either '
             'as a file or as inputs.* parameters'
         )
-    if path:
-        return load_input_mapping(path)
-    return mapping_from_params(params)
+    mapping = load_input_mapping(path) if path else mapping_from_params(params)
+    if estimates and mapping.torque_source != 'measured':
+        raise MappingError(
+            f'{mapping.source}: torque_source {mapping.torque_source!r} runs in vd replay and '
+            'vd report only; the live nodes read measured wheel_torques (not yet the engine '
+            'or no-torque path)'
+        )
+    return mapping
 
 
 def input_message_class(spec: InputSpec) -> Any:

@@ -152,7 +152,7 @@ class PipelineNode(Node):
     def __init__(self) -> None:
         super().__init__('pipeline_node')
         values = declare_parameters(self, PARAMS)
-        mapping = take_input_mapping(values, undeclared_inputs(self))
+        mapping = take_input_mapping(values, undeclared_inputs(self), estimates=True)
         classes = [input_message_class(spec) for spec in mapping.specs]
         capacity = values.pop('align_capacity')
         settings, vehicle_file = _settings(values)
