@@ -364,7 +364,7 @@ def test_vd_report_takes_a_mapping_replays_a_bag_without_estimates_and_summarise
     assert err.strip().splitlines()[-1].startswith('vd: error: ') and 'body_speed.type' in err
 
 
-def test_estimating_nodes_refuse_a_torque_path_they_cannot_run(tmp_path: Path) -> None:
+def test_separate_estimating_nodes_refuse_a_torque_path_they_cannot_run(tmp_path: Path) -> None:
     import yaml
     from vd_observer_node.node_params import take_input_mapping
 
@@ -376,6 +376,10 @@ def test_estimating_nodes_refuse_a_torque_path_they_cannot_run(tmp_path: Path) -
 
     # the observer and the player do not read torques: the file is theirs as it is
     assert take_input_mapping(values()).torque_source == 'engine'
-    with pytest.raises(MappingError, match="torque_source 'engine' runs in vd replay") as info:
+    with pytest.raises(MappingError, match="torque_source 'engine' runs in pipeline_node") as info:
         take_input_mapping(values(), estimates=True)
     assert '\n' not in str(info.value) and str(path) in str(info.value)
+    # pipeline_node runs every torque path
+    assert take_input_mapping(values(), estimates=True, torque_paths=True).torque_source == (
+        'engine'
+    )
