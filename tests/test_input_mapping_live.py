@@ -397,18 +397,20 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
 
 
 @pytest.mark.ros
-def test_pipeline_node_on_the_engine_path_computes_what_the_replay_computes(
-    procs: RosProcessGroup, tmp_path: Path
+@pytest.mark.parametrize('source', ['engine', 'none'])
+def test_pipeline_node_on_the_engine_and_no_torque_paths_computes_what_the_replay_computes(
+    procs: RosProcessGroup, tmp_path: Path, source: str
 ) -> None:
     """A mapping with ``torque_source: engine`` (engine torque, gear and engine speed of vd's
     WheelTorques; its wheel torques unread): the live pipeline's slope estimates, their
     validity and torque_source (1, engine) equal the replay's, stamp for stamp, over a
-    launch (clutch slip) and an upshift."""
+    launch (clutch slip) and an upshift. With ``none`` and a bag without any torque topic:
+    the same, every slope invalid, torque_source 2."""
     import dataclasses
 
     from vd_observer_node.bag import BagReader
     from vd_observer_node.bag.cdr_batch import decode_batch
-    from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE
+    from vd_observer_node.estimation.drivetrain import TORQUE_SOURCES
     from vd_observer_node.inputs.mapping import mapping_from_dict
     from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
     from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
@@ -431,17 +433,18 @@ def test_pipeline_node_on_the_engine_path_computes_what_the_replay_computes(
     stamps = np.round(sim.t * 1e9).astype(np.int64) + NS
     topics = sim_topics(sim, truth=False)
     # the engine path must not read the measured wheel torques: they are garbage here
-    topics[next(t for t in topics if t.endswith('wheel_torques'))]['torque'] = np.full(
-        (len(stamps), 4), 1.0e5
-    )
+    torque_topic = next(t for t in topics if t.endswith('wheel_torques'))
+    topics[torque_topic]['torque'] = np.full((len(stamps), 4), 1.0e5)
+    if source == 'none':
+        del topics[torque_topic]  # no torque topic at all: the player and node need none
     write_topic_arrays_bag(bag, stamps, topics)
-    data = {'torque_source': 'engine'}
+    data = {'torque_source': source}
     mapping_file = tmp_path / 'car.yaml'
     mapping_file.write_text(yaml.safe_dump(data), encoding='utf-8')
     report = replay_bag(
         bag, tmp_path / 'replayed', progress=False, mapping=mapping_from_dict(data)
     )
-    assert report.torque_source == 'engine' and 0.0 < report.torque_valid_fraction < 1.0
+    assert report.torque_source == source
     datas = BagReader(tmp_path / 'replayed').topic_arrays([ESTIMATES_SLOPE])[ESTIMATES_SLOPE]
     offline = decode_batch(ESTIMATE_TOPICS[ESTIMATES_SLOPE], datas.datas)
     expected = {
@@ -454,12 +457,13 @@ def test_pipeline_node_on_the_engine_path_computes_what_the_replay_computes(
             strict=True,
         )
     }
-    assert {v[2] for v in expected.values()} == {TORQUE_ENGINE}
-    assert {v[1] for v in expected.values()} == {0, 1}  # the path holds and does not
+    assert {v[2] for v in expected.values()} == {TORQUE_SOURCES.index(source)}
+    # the engine path holds and does not (the launch, the upshift); none never holds
+    assert {v[1] for v in expected.values()} == ({0, 1} if source == 'engine' else {0})
 
     params = params_file(tmp_path / 'p.yaml', {}, input_mapping=str(mapping_file))
     pipeline = _start(procs, 'pipeline', 'pipeline_node', params)
-    pipeline.wait_for('torque source engine', timeout=90)
+    pipeline.wait_for(f'torque source {source}', timeout=90)
     collector = procs.python(
         'collector', SCRIPTS / 'collect_outputs.py', '25', f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope'
     )
