@@ -195,6 +195,22 @@ def test_headerless_inputs_are_held_and_the_wheel_angles_drive() -> None:
         wheel_angles={'topic': '/a', 'type': 'std_msgs/msg/Float64MultiArray'},
     )
     assert matched_inputs(mapping_from_dict(headerless), names) == ('wheel_angles',)
+    # the engine path's input in the torque slot: vd's WheelTorques matched by stamp, a
+    # Float64MultiArray from CAN held
+    engine_names = ('wheel_angles', 'body_speed', 'engine_torque')
+    own = mapping_from_dict({'torque_source': 'engine'})
+    assert matched_inputs(own, engine_names) == engine_names
+    can = mapping_from_dict(
+        {
+            'torque_source': 'engine',
+            'engine_torque': {
+                'topic': '/can/engine',
+                'type': 'std_msgs/msg/Float64MultiArray',
+                'indices': [0, 1],
+            },
+        }
+    )
+    assert matched_inputs(can, engine_names) == ('wheel_angles', 'body_speed')
 
 
 def test_a_held_input_joins_each_match_until_it_is_too_old() -> None:
