@@ -394,3 +394,92 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     assert set(live) <= set(expected)
     # the same sets in the same order through the same compiled chain: the same bits
     assert all(live[t] == expected[t] for t in live)
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('source', ['engine', 'none'])
+def test_pipeline_node_on_the_engine_and_no_torque_paths_computes_what_the_replay_computes(
+    procs: RosProcessGroup, tmp_path: Path, source: str
+) -> None:
+    """A mapping with ``torque_source: engine`` (engine torque, gear and engine speed of vd's
+    WheelTorques; its wheel torques unread): the live pipeline's slope estimates, their
+    validity and torque_source (1, engine) equal the replay's, stamp for stamp, over a
+    launch (clutch slip) and an upshift. With ``none`` and a bag without any torque topic:
+    the same, every slope invalid, torque_source 2."""
+    import dataclasses
+
+    from vd_observer_node.bag import BagReader
+    from vd_observer_node.bag.cdr_batch import decode_batch
+    from vd_observer_node.estimation.drivetrain import TORQUE_SOURCES
+    from vd_observer_node.inputs.mapping import mapping_from_dict
+    from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
+    from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
+    from vd_sim_node.vehicle.params import default_vehicle_file, load_vehicle
+    from vd_sim_node.vehicle.scenario import load_scenario
+    from vd_sim_node.vehicle.simulation import simulate
+
+    scenario = load_scenario(default_vehicle_file().parent / 'scenarios' / 'paper_table1.yaml')
+    # launch at 8 s, the upshift at 11.5 s
+    sim = simulate(
+        load_vehicle(default_vehicle_file()),
+        dataclasses.replace(
+            scenario,
+            duration=12.5,
+            sensors=dataclasses.replace(scenario.sensors, rate_hz=100.0),
+        ),
+    )
+    assert np.any(np.diff(sim.gear) > 0)
+    bag = tmp_path / 'car'
+    stamps = np.round(sim.t * 1e9).astype(np.int64) + NS
+    topics = sim_topics(sim, truth=False)
+    # the engine path must not read the measured wheel torques: they are garbage here
+    torque_topic = next(t for t in topics if t.endswith('wheel_torques'))
+    topics[torque_topic]['torque'] = np.full((len(stamps), 4), 1.0e5)
+    if source == 'none':
+        del topics[torque_topic]  # no torque topic at all: the player and node need none
+    write_topic_arrays_bag(bag, stamps, topics)
+    data = {'torque_source': source}
+    mapping_file = tmp_path / 'car.yaml'
+    mapping_file.write_text(yaml.safe_dump(data), encoding='utf-8')
+    report = replay_bag(
+        bag, tmp_path / 'replayed', progress=False, mapping=mapping_from_dict(data)
+    )
+    assert report.torque_source == source
+    datas = BagReader(tmp_path / 'replayed').topic_arrays([ESTIMATES_SLOPE])[ESTIMATES_SLOPE]
+    offline = decode_batch(ESTIMATE_TOPICS[ESTIMATES_SLOPE], datas.datas)
+    expected = {
+        stamp: (angle, int(valid), int(source))
+        for stamp, angle, valid, source in zip(
+            offline.stamp_ns.tolist(),
+            offline.values['angle'].tolist(),
+            offline.values['valid'].tolist(),
+            offline.values['torque_source'].tolist(),
+            strict=True,
+        )
+    }
+    assert {v[2] for v in expected.values()} == {TORQUE_SOURCES.index(source)}
+    # the engine path holds and does not (the launch, the upshift); none never holds
+    assert {v[1] for v in expected.values()} == ({0, 1} if source == 'engine' else {0})
+
+    params = params_file(tmp_path / 'p.yaml', {}, input_mapping=str(mapping_file))
+    pipeline = _start(procs, 'pipeline', 'pipeline_node', params)
+    pipeline.wait_for(f'torque source {source}', timeout=90)
+    collector = procs.python(
+        'collector', SCRIPTS / 'collect_outputs.py', '25', f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope'
+    )
+    collector.wait_for('SUBSCRIBED', timeout=60)
+    player_params = params_file(
+        tmp_path / 'player.yaml', {}, input_mapping=str(mapping_file), bag=str(bag)
+    )
+    player = _start(procs, 'player', 'player_node', player_params)
+    assert _wait_exit(player, 60) == 0, player.output()
+    assert _wait_exit(collector, 60) == 0
+    live = {
+        int(f[2]): (float(f[4]), int(f[5]), int(f[6]))
+        for f in (line.split() for line in collector.output().splitlines())
+        if f[0] == 'MSG'
+    }
+    assert len(live) > 0.9 * len(expected), (len(live), len(expected))
+    assert set(live) <= set(expected)
+    # the same sets in the same order through the same compiled chain: the same bits
+    assert all(live[t] == expected[t] for t in live)

@@ -2,8 +2,10 @@
 
     python collect_outputs.py DURATION_S TOPIC=pkg.msg/Type [...]
 
-Each message of a TOPIC: 'MSG TOPIC STAMP_NS FINITE FIRST' (FINITE 1 when every float field
-is finite; FIRST the repr of its first float field, e.g. a Slope's angle); each /diagnostics
+Each message of a TOPIC: 'MSG TOPIC STAMP_NS FINITE FIRST VALID SOURCE' (FINITE 1 when every
+float field is finite; FIRST the repr of its first float field, e.g. a Slope's angle; VALID
+its ``valid`` field where that is one bool (a Slope's), SOURCE its ``torque_source`` field,
+'-' where the message has none); each /diagnostics
 status: 'DIAG NAME LEVEL MESSAGE'. Prints 'SUBSCRIBED' once each TOPIC has a publisher and
 exits 0 after DURATION_S.
 """
@@ -53,7 +55,10 @@ def main() -> int:
             floats = _floats(msg)
             finite = int(all(math.isfinite(v) for v in floats))
             first = repr(floats[0]) if floats else '-'
-            print(f'MSG {topic} {stamp} {finite} {first}', flush=True)
+            valid = getattr(msg, 'valid', None)
+            flag = int(valid) if isinstance(valid, bool) else '-'
+            source = getattr(msg, 'torque_source', '-')
+            print(f'MSG {topic} {stamp} {finite} {first} {flag} {source}', flush=True)
 
         subs.append(node.create_subscription(cls, topic, on_message, qos))
 

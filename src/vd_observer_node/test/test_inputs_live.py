@@ -195,6 +195,22 @@ def test_headerless_inputs_are_held_and_the_wheel_angles_drive() -> None:
         wheel_angles={'topic': '/a', 'type': 'std_msgs/msg/Float64MultiArray'},
     )
     assert matched_inputs(mapping_from_dict(headerless), names) == ('wheel_angles',)
+    # the engine path's input in the torque slot: vd's WheelTorques matched by stamp, a
+    # Float64MultiArray from CAN held
+    engine_names = ('wheel_angles', 'body_speed', 'engine_torque')
+    own = mapping_from_dict({'torque_source': 'engine'})
+    assert matched_inputs(own, engine_names) == engine_names
+    can = mapping_from_dict(
+        {
+            'torque_source': 'engine',
+            'engine_torque': {
+                'topic': '/can/engine',
+                'type': 'std_msgs/msg/Float64MultiArray',
+                'indices': [0, 1],
+            },
+        }
+    )
+    assert matched_inputs(can, engine_names) == ('wheel_angles', 'body_speed')
 
 
 def test_a_held_input_joins_each_match_until_it_is_too_old() -> None:
@@ -364,7 +380,7 @@ def test_vd_report_takes_a_mapping_replays_a_bag_without_estimates_and_summarise
     assert err.strip().splitlines()[-1].startswith('vd: error: ') and 'body_speed.type' in err
 
 
-def test_estimating_nodes_refuse_a_torque_path_they_cannot_run(tmp_path: Path) -> None:
+def test_separate_estimating_nodes_refuse_a_torque_path_they_cannot_run(tmp_path: Path) -> None:
     import yaml
     from vd_observer_node.node_params import take_input_mapping
 
@@ -376,6 +392,10 @@ def test_estimating_nodes_refuse_a_torque_path_they_cannot_run(tmp_path: Path) -
 
     # the observer and the player do not read torques: the file is theirs as it is
     assert take_input_mapping(values()).torque_source == 'engine'
-    with pytest.raises(MappingError, match="torque_source 'engine' runs in vd replay") as info:
+    with pytest.raises(MappingError, match="torque_source 'engine' runs in pipeline_node") as info:
         take_input_mapping(values(), estimates=True)
     assert '\n' not in str(info.value) and str(path) in str(info.value)
+    # pipeline_node runs every torque path
+    assert take_input_mapping(values(), estimates=True, torque_paths=True).torque_source == (
+        'engine'
+    )

@@ -17,7 +17,7 @@ from vd_observer_node.bag.reader import TopicArrays
 from vd_observer_node.bag.typestore import message_class, serialize
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation import drivetrain
-from vd_observer_node.inputs.decode import decode_engine
+from vd_observer_node.inputs.decode import InputDecoder, decode_engine
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import default_mapping, mapping_from_dict
 from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
@@ -129,6 +129,31 @@ def test_engine_decoder_units_and_missing_elements() -> None:
     short = dataclasses.replace(spec, indices=(1, 0, 5))
     with pytest.raises(MappingError, match=r'engine_torque\.indices: element 5 is beyond'):
         decode_engine(short, arrays)
+
+
+def test_live_engine_decoder_gives_the_replays_values(tmp_path: Path) -> None:
+    """InputDecoder (pipeline_node, one message at a time) on the engine input: the values
+    decode_engine gives for a bag, bit for bit, from vd's WheelTorques and a
+    Float64MultiArray (kN m, rpm, another order; with and without the engine speed)."""
+    write_bag(tmp_path / 'in', engine_topic=True)
+    reader = BagReader(tmp_path / 'in_engine')
+    own = default_mapping().engine
+    mapped = mapping_from_dict(ENGINE_MAPPING).engine
+    no_speed = dataclasses.replace(mapped, indices=(1, 0))
+    inverted = dataclasses.replace(own, sign=(-1.0,), factor=1000.0)
+    for spec in (own, mapped, no_speed, inverted):
+        arrays = reader.topic_arrays([spec.topic])[spec.topic]
+        series = decode_engine(spec, arrays)
+        decoder = InputDecoder(spec)
+        live = [
+            decoder.decode(data, int(log))
+            for data, log in zip(arrays.datas, arrays.log_time_ns, strict=True)
+        ]
+        np.testing.assert_array_equal([s for s, _, _ in live], series.stamp_ns)
+        np.testing.assert_array_equal(np.array([v for _, _, v in live]), series.values)
+    assert np.ptp(series.values[:, 1]) > 0  # the gear changes in the record
+    with pytest.raises(MappingError, match='no decoder'):
+        InputDecoder(dataclasses.replace(own, msgtype='sensor_msgs/msg/JointState'))
 
 
 _SIM: list[SimResult] = []

@@ -21,11 +21,17 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from vd_observer_node.chain import ChainSettings, PythonChain
+from vd_observer_node.errors import InputShapeError
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.differentiator import (
     DISCRETIZATIONS,
     INIT_POLICIES,
     LevantDifferentiator,
+)
+from vd_observer_node.estimation.drivetrain import (
+    TORQUE_SOURCES,
+    Drivetrain,
+    engine_wheel_torques_record,
 )
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
@@ -271,6 +277,90 @@ def test_per_stamp_chain_equals_the_reference_chain_and_the_block_kernels() -> N
         assert_close(b.estimates.fx, block.fx[k], 'block fx')
         assert_close(b.situation.potential.mu_max, series.mu_max[k], 'block mu_max')
     assert python.fault_report().counts == compiled.fault_report().counts
+
+
+_ENGINE_SIM: list[Any] = []
+
+
+def engine_sim() -> Any:
+    """paper_table1's launch and first upshift (13 s at RATE_HZ, ideal sensors: an encoder's
+    quantized speed keeps the clutch check failing; cached)."""
+    if not _ENGINE_SIM:
+        scenario = load_scenario(CONFIG / 'scenarios' / 'paper_table1.yaml')
+        ideal = dataclasses.replace(
+            scenario.sensors,
+            rate_hz=RATE_HZ,
+            encoder_counts_per_rev=0,
+            speed_noise_std=0.0,
+            torque_noise_std=0.0,
+        )
+        short = dataclasses.replace(scenario, duration=13.0, sensors=ideal)
+        _ENGINE_SIM.append(simulate(load_vehicle(VEHICLE_FILE), short))
+    return _ENGINE_SIM[0]
+
+
+@pytest.mark.parametrize('source', ['engine', 'none'])
+def test_per_stamp_chain_on_the_engine_and_no_torque_paths(source: str) -> None:
+    """The live chain on the engine and no-torque paths: PythonChain is run_cascade stamp for
+    stamp (the same objects, the same bits), its monitor fed as the replay feeds it, and
+    CompiledChain equals PythonChain; the record has the launch (clutch slip), an upshift
+    and a gear the box lacks."""
+    sim = engine_sim()
+    engine = np.stack([sim.engine_torque, sim.gear.astype(float), sim.engine_speed], axis=1)
+    engine[2000, 1] = 2.5  # no gear at all: nan torques, a fault, the path invalid
+    engine[2150, 0] = math.nan
+    drivetrain = Drivetrain.from_params(load_vehicle(VEHICLE_FILE))
+    settings_ = ChainSettings(
+        vehicle=VEHICLE, curves=CURVES, torque_source=source, drivetrain=drivetrain
+    )
+    python = PythonChain(settings_)
+    compiled = CompiledChain(settings_)
+    n = len(sim.t)
+    # what the replay runs: no wheel torques read, the engine record on the engine path
+    reference = run_cascade(
+        sim.t, sim.wheel_angle, sim.body_speed, np.zeros((n, 4)), VEHICLE,
+        torque_source=source, engine=engine, drivetrain=drivetrain,
+    )  # fmt: skip
+    monitor_torque = np.zeros((n, 4))
+    if source == 'engine':
+        derived = engine_wheel_torques_record(engine, drivetrain, reference.omega_dot)
+        monitor_torque = np.where(np.isfinite(derived), derived, 0.0)
+        # the record holds what the path must handle: the launch's clutch slip, then valid
+        # torques, a faulty sample, an upshift (invalid from its first stamp)
+        valid = reference.torque_valid
+        shift = int(np.flatnonzero(np.diff(sim.gear))[0]) + 1
+        assert not valid[: n // 2].any() and valid[1990] and not valid[2000]
+        assert valid[shift - 1] and not valid[shift]
+        assert reference.faults['estimator.non_finite_value'] >= 2
+    series = run_situation(
+        monitors()[0], sim.wheel_angle, sim.body_speed, monitor_torque, reference
+    )
+    code = TORQUE_SOURCES.index(source)
+    for k in range(n):
+        # the measured wheel torques are given and must be ignored on both paths
+        args = (float(sim.t[k]), sim.wheel_angle[k], float(sim.body_speed[k]), sim.wheel_torque[k])
+        a, b = python.update(*args, engine[k]), compiled.update(*args, engine[k])
+        assert a.estimates.torque_source == b.estimates.torque_source == code
+        for name in ('fx', 'fz', 'mu', 'mu_valid', 'slip', 'rolling'):
+            np.testing.assert_array_equal(getattr(a.estimates, name), getattr(reference, name)[k])
+        assert (a.estimates.slope, a.estimates.slope_valid) == (
+            reference.slope[k],
+            reference.slope_valid[k],
+        )
+        np.testing.assert_array_equal(a.situation.potential.mu_max, series.mu_max[k])
+        assert [p.level for p in a.situation.alerts] == series.level[k].ravel().tolist()
+        for f in dataclasses.fields(a.estimates):
+            assert_close(getattr(b.estimates, f.name), getattr(a.estimates, f.name), f.name)
+        for f in dataclasses.fields(a.situation.potential):
+            x, y = getattr(a.situation.potential, f.name), getattr(b.situation.potential, f.name)
+            assert_close(y, x, f.name)
+        assert [p.level for p in b.situation.alerts] == [p.level for p in a.situation.alerts]
+    assert python.fault_report().counts == compiled.fault_report().counts
+    if source == 'engine':
+        for chain in (python, compiled):
+            for bad in (None, [1.0]):
+                with pytest.raises(InputShapeError, match='engine'):
+                    chain.update(20.0, np.zeros(4), 1.0, np.zeros(4), bad)
 
 
 def test_wrappers_match_the_reference_classes() -> None:

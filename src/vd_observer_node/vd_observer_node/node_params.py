@@ -136,7 +136,11 @@ def undeclared_inputs(node: Any) -> list[str]:
 
 
 def take_input_mapping(
-    values: dict[str, Any], undeclared: Sequence[str] = (), *, estimates: bool = False
+    values: dict[str, Any],
+    undeclared: Sequence[str] = (),
+    *,
+    estimates: bool = False,
+    torque_paths: bool = False,
 ) -> InputMapping:
     """Remove the input-mapping parameters from `values` and build the mapping.
 
@@ -146,9 +150,11 @@ def take_input_mapping(
         undeclared: ``inputs.*`` names given but not declared (:func:`undeclared_inputs`):
             refused as unknown inputs or keys.
         estimates: the node computes estimates from the wheel torques (estimator, alerts,
-            pipeline): a mapping whose ``torque_source`` is not 'measured' is refused, as the
-            live nodes read measured wheel torques only (the engine and no-torque paths run
-            in ``vd replay`` and ``vd report``).
+            pipeline): unless `torque_paths`, a mapping whose ``torque_source`` is not
+            'measured' is refused (estimator_node and alerts_node read measured wheel torques
+            only; the engine and no-torque paths run in pipeline_node, ``vd replay`` and
+            ``vd report``).
+        torque_paths: the node runs every torque source (pipeline_node).
 
     Raises:
         MappingError: unreadable file, a refused setting (one line naming the key), both a
@@ -164,11 +170,11 @@ def take_input_mapping(
             'as a file or as inputs.* parameters'
         )
     mapping = load_input_mapping(path) if path else mapping_from_params(params)
-    if estimates and mapping.torque_source != 'measured':
+    if estimates and not torque_paths and mapping.torque_source != 'measured':
         raise MappingError(
-            f'{mapping.source}: torque_source {mapping.torque_source!r} runs in vd replay and '
-            'vd report only; the live nodes read measured wheel_torques (not yet the engine '
-            'or no-torque path)'
+            f'{mapping.source}: torque_source {mapping.torque_source!r} runs in pipeline_node, '
+            'vd replay and vd report; this node reads measured wheel_torques only (run '
+            'pipeline_node instead)'
         )
     return mapping
 

@@ -14,6 +14,12 @@ union of the three nodes' (one ``max_gap``, ``vehicle_file`` and ``align_capacit
 ``kernel`` and the input mapping. A mapped topic that stops arriving is reported on
 ``/diagnostics`` (WARN naming it and the time since its last message).
 
+The mapping's ``torque_source`` (docs/bags.md) picks the torque path, as ``vd replay`` does:
+``measured`` reads the wheel torques; ``engine`` reads the ``engine_torque`` input (engine
+torque, gear, engine speed; vd's own WheelTorques topic unless mapped) instead and derives
+the wheel torques through the vehicle file's drivetrain; ``none`` reads no torque topic (Fx,
+mu and slope invalid). The estimates' ``torque_source`` field says which.
+
 What differs from the three nodes: the observers run on stamp-matched sensor sets only (as
 offline replay does, so the pipeline's output equals ``vd replay``'s on the same stamps), and
 messages travel as CDR bytes (raw subscriptions, :mod:`vd_observer_node.bag.cdr_message`),
@@ -63,10 +69,12 @@ from vd_msgs.msg import (
 from vd_observer_node.bag.cdr_message import MessageCodec
 from vd_observer_node.chain import ChainOutput, ChainSettings, make_chain
 from vd_observer_node.estimation.differentiator import LevantGains
+from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import ERROR
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
+from vd_observer_node.inputs.mapping import ENGINE_INPUT
 from vd_observer_node.node_params import (
     INPUT_PARAMS,
     PIPELINE_PARAMS,
@@ -108,8 +116,11 @@ _OBSERVER_KEYS = {f for f in ObserverConfig.__dataclass_fields__ if f != 'gains'
 _GAIN_KEYS = set(LevantGains.__dataclass_fields__)
 
 
-def _settings(values: dict[str, Any]) -> tuple[ChainSettings, str]:
-    """Chain settings from the declared parameters; also the vehicle file used."""
+def _settings(
+    values: dict[str, Any], torque_source: str = 'measured'
+) -> tuple[ChainSettings, str]:
+    """Chain settings from the declared parameters and the mapping's torque source (the
+    engine path takes the vehicle file's drivetrain); also the vehicle file used."""
     vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
     kernel = values.pop('kernel')
     speed_source = values.pop('speed_source')
@@ -138,6 +149,8 @@ def _settings(values: dict[str, Any]) -> tuple[ChainSettings, str]:
         ),
         estimator_speed=speed_source,
         kernel=kernel,
+        torque_source=torque_source,
+        drivetrain=Drivetrain.from_params(params) if torque_source == 'engine' else None,
     )
     return settings, vehicle_file
 
@@ -152,10 +165,13 @@ class PipelineNode(Node):
     def __init__(self) -> None:
         super().__init__('pipeline_node')
         values = declare_parameters(self, PARAMS)
-        mapping = take_input_mapping(values, undeclared_inputs(self), estimates=True)
-        classes = [input_message_class(spec) for spec in mapping.specs]
+        mapping = take_input_mapping(
+            values, undeclared_inputs(self), estimates=True, torque_paths=True
+        )
+        specs = mapping.used_specs  # wheels, body speed, and the torque path's input if any
+        classes = [input_message_class(spec) for spec in specs]
         capacity = values.pop('align_capacity')
-        settings, vehicle_file = _settings(values)
+        settings, vehicle_file = _settings(values, mapping.torque_source)
         # what the wheel sensors are (angles or ABS speeds) follows from the mapping
         settings = replace(
             settings, observer=replace(settings.observer, wheel_input=mapping.wheel_input)
@@ -164,12 +180,14 @@ class PipelineNode(Node):
         # Builds (or loads from numba's disk cache) the compiled kernel now, before any sample.
         self.chain = make_chain(settings)
         max_gap_ns = round(settings.estimator.max_gap * 1e9)
-        names = tuple(spec.name for spec in mapping.specs)
+        names = tuple(spec.name for spec in specs)
         self._wheels = mapping.wheels.name  # 'wheel_angles' or 'wheel_speeds'
+        self.torque_source = mapping.torque_source
+        self._no_torque = np.zeros(4)  # the chain reads no wheel torques off the measured path
         self.aligner = input_matcher(
             mapping, names, capacity, max_jump_back_ns=max_gap_ns, max_age_ns=max_gap_ns
         )
-        self.watch = InputWatch([spec.topic for spec in mapping.specs], max_gap_ns)
+        self.watch = InputWatch([spec.topic for spec in specs], max_gap_ns)
         self.pubs = {
             key: self.create_publisher(cls, topic, STREAM_QOS) for key, cls, topic, _ in _OUTPUTS
         }
@@ -184,7 +202,7 @@ class PipelineNode(Node):
             'alerts_raised': 0,
         }
         clock = self.get_clock()
-        for spec, cls in zip(mapping.specs, classes, strict=True):
+        for spec, cls in zip(specs, classes, strict=True):
             callback = mapped_input(
                 spec,
                 self.aligner,
@@ -200,7 +218,8 @@ class PipelineNode(Node):
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
             f'pipeline ready: {self.kernel} kernel, vehicle {settings.vehicle.name!r} '
-            f'({vehicle_file})' + (f', inputs from {mapping.source}' if mapping.source else '')
+            f'({vehicle_file}), torque source {self.torque_source}'
+            + (f', inputs from {mapping.source}' if mapping.source else '')
         )
 
     def _codec(self, key: str, frame: bytes) -> MessageCodec:
@@ -210,8 +229,10 @@ class PipelineNode(Node):
         # SI values with the mapping's signs (raw_io.mapped_input)
         frame, angles = m[self._wheels]  # angles [rad] or speeds [rad/s]
         speed = float(m['body_speed'][1][0])
-        torques = m['wheel_torques'][1]
-        out = self.chain.update(stamp_ns * 1e-9, angles, speed, torques)
+        source = self.torque_source
+        torques = m['wheel_torques'][1] if source == 'measured' else self._no_torque
+        engine = m[ENGINE_INPUT][1] if source == 'engine' else None
+        out = self.chain.update(stamp_ns * 1e-9, angles, speed, torques, engine)
         self.counts['estimates'] += 1
         if not self._finite(out):
             self.counts['withheld_non_finite'] += 1
@@ -304,6 +325,7 @@ class PipelineNode(Node):
         )
         values = {
             'kernel': self.kernel,
+            'torque_source': self.torque_source,
             **self.counts,
             **self.aligner.counts(),
             **report.counts,

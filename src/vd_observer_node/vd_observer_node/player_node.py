@@ -84,14 +84,16 @@ PARAMS = [
 
 
 def mapped_topics(mapping: InputMapping, available: dict[str, str]) -> list[str]:
-    """The mapped input topics, checked against the bag's topics (name -> type).
+    """The input topics the mapping's torque source reads (`InputMapping.used_specs`),
+    checked against the bag's topics (name -> type).
 
     Raises:
         MappingError: a mapped topic is absent from the bag or has another type (one line
             naming the mapping key).
     """
     origin = f'{mapping.source}: ' if mapping.source else ''
-    for spec in mapping.specs:
+    used = mapping.used_specs
+    for spec in used:
         msgtype = available.get(spec.topic)
         if msgtype is None:
             raise MappingError(
@@ -103,7 +105,7 @@ def mapped_topics(mapping: InputMapping, available: dict[str, str]) -> list[str]
                 f'{origin}{spec.name}.type: {spec.topic} is {msgtype} in the bag, '
                 f'not {spec.msgtype}'
             )
-    return [spec.topic for spec in mapping.specs]
+    return list(dict.fromkeys(spec.topic for spec in used))
 
 
 _PERIOD = 0.002  # [s] publishing timer period

@@ -6,7 +6,6 @@ offline figures are those the nodes would produce on the same stamps.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -17,9 +16,7 @@ from vd_observer_node.estimation.drivetrain import (
     TORQUE_ENGINE,
     TORQUE_MEASURED,
     Drivetrain,
-    clutch_engaged,
-    engine_wheel_torques,
-    gear_number,
+    EnginePath,
     torque_source_code,
 )
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
@@ -194,8 +191,9 @@ def run_cascade(
     wheel_valid = np.zeros((n, 4), dtype=bool)
     slope_valid = np.zeros(n, dtype=bool)
     torque_valid = np.full(n, source != torque_source_code('none'))
-    # engine path: when the clutch last slipped or the gear changed, and the last gear
-    last_unsettled, last_gear = -math.inf, None
+    engine_path = (
+        EnginePath(drivetrain) if drivetrain is not None and source == TORQUE_ENGINE else None
+    )
     use_measured = estimator_speed == 'measured'
     for k in range(n):
         tk = float(stamps[k])
@@ -203,15 +201,10 @@ def run_cascade(
         body = observer.speed.update(tk, float(speeds[k]))
         speed = float(speeds[k]) if use_measured else body.speed
         torque, torque_ok = torques[k], True
-        if drivetrain is not None and source == TORQUE_ENGINE:
-            engine_torque, gear, engine_speed = engine_record[k]
-            gear_code = gear_number(float(gear))  # no gear at all: nan torques, a fault
-            torque = engine_wheel_torques(engine_torque, gear_code, drivetrain, wheel.omega_dot)
-            engaged = clutch_engaged(engine_speed, gear_code, wheel.omega, drivetrain)
-            if not engaged or gear_code != last_gear:
-                last_unsettled = tk
-            last_gear = gear_code
-            torque_ok = engaged and tk - last_unsettled >= drivetrain.clutch_settle_time
+        if engine_path is not None:
+            torque, torque_ok = engine_path.update(
+                tk, engine_record[k], wheel.omega, wheel.omega_dot
+            )
             torque_valid[k] = torque_ok
         est = estimator.update(
             tk, wheel.omega, wheel.omega_dot, speed, body.accel, torque, torque_ok

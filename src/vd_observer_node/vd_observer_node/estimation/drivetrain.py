@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Final
+from typing import Final, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -49,7 +49,10 @@ __all__ = [
     'TORQUE_NONE',
     'TORQUE_SOURCES',
     'Drivetrain',
+    'EnginePath',
+    'EngineState',
     'clutch_engaged',
+    'engine_path_step',
     'engine_wheel_torques',
     'engine_wheel_torques_record',
     'gear_number',
@@ -290,6 +293,89 @@ def clutch_engaged(
     driven = drivetrain.driven
     carrier = float(np.sum(driven * omega)) / float(np.sum(driven))
     return abs(engine_speed - ratio * carrier) <= drivetrain.max_clutch_slip
+
+
+class EngineState(NamedTuple):
+    """The engine path's memory between samples.
+
+    Attributes:
+        last_unsettled: [s] stamp at which the clutch last slipped or the gear changed
+            (-inf before any).
+        last_gear: the previous sample's gear (`gear_number`), None before the first.
+    """
+
+    last_unsettled: float = -math.inf
+    last_gear: int | None = None
+
+
+def engine_path_step(
+    drivetrain: Drivetrain,
+    state: EngineState,
+    t: float,
+    engine: ArrayLike,
+    wheel_omega: ArrayLike,
+    wheel_omega_dot: ArrayLike,
+) -> tuple[FloatArray, bool, EngineState]:
+    """One sample of the engine path (pure): wheel torques, whether they hold, next state.
+
+    The torques hold where the clutch is closed (`clutch_engaged`) and has been for
+    ``drivetrain.clutch_settle_time`` since it last slipped or the gear changed.
+
+    Args:
+        drivetrain: the vehicle's driveline.
+        state: the state after the previous sample (`EngineState()` at the start).
+        t: stamp [s].
+        engine: shape (3,): engine torque [N m], gear (a float; 0 neutral, -1 reverse),
+            engine speed [rad/s] (nan if not measured).
+        wheel_omega: shape (4,), [rad/s] the observer's wheel speeds.
+        wheel_omega_dot: shape (4,), [rad/s^2] the observer's wheel accelerations.
+
+    Returns:
+        (wheel torques (4,) [N m] as `engine_wheel_torques` gives them, torque valid, the
+        next state).
+
+    Raises:
+        InputShapeError: an array of the wrong shape.
+    """
+    row = np.asarray(engine, dtype=np.float64)
+    if row.shape != (3,):
+        raise InputShapeError(f'engine must have shape (3,), got {row.shape}')
+    engine_torque, gear, engine_speed = (float(v) for v in row)
+    gear_code = gear_number(gear)  # no gear at all: nan torques, a fault
+    torque = engine_wheel_torques(engine_torque, gear_code, drivetrain, wheel_omega_dot)
+    engaged = clutch_engaged(engine_speed, gear_code, wheel_omega, drivetrain)
+    last_unsettled = state.last_unsettled
+    if not engaged or gear_code != state.last_gear:
+        last_unsettled = t
+    valid = engaged and t - last_unsettled >= drivetrain.clutch_settle_time
+    return torque, valid, EngineState(last_unsettled, gear_code)
+
+
+class EnginePath:
+    """`engine_path_step` with its state kept: what the cascade and the live chain run.
+
+    Attributes:
+        drivetrain: the vehicle's driveline.
+        state: the state after the last sample.
+    """
+
+    def __init__(self, drivetrain: Drivetrain) -> None:
+        """Start with no sample seen."""
+        self.drivetrain = drivetrain
+        self.state = EngineState()
+
+    def update(
+        self, t: float, engine: ArrayLike, wheel_omega: ArrayLike, wheel_omega_dot: ArrayLike
+    ) -> tuple[FloatArray, bool]:
+        """Wheel torques (4,) [N m] and whether they hold at stamp t [s] (`engine_path_step`).
+
+        Raises:
+            InputShapeError: an array of the wrong shape.
+        """
+        torque, valid, self.state = engine_path_step(
+            self.drivetrain, self.state, t, engine, wheel_omega, wheel_omega_dot
+        )
+        return torque, valid
 
 
 def engine_wheel_torques_record(

@@ -54,6 +54,8 @@ _BATCH_FIELD = {
     WHEEL_TORQUES_TYPE: 'torque',
     TWIST_STAMPED: 'twist.linear.x',
 }
+#: the WheelTorques fields of the engine input, in its order (torque, gear, engine speed)
+_ENGINE_FIELDS = ('engine_torque', 'gear', 'engine_speed')
 #: the JointState array of each per-wheel input
 _JOINT_FIELD = {'wheel_angles': 'position', 'wheel_speeds': 'velocity', 'wheel_torques': 'effort'}
 
@@ -167,13 +169,22 @@ def _extractor(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[floa
     raise MappingError(f'{spec.name}: no decoder for {spec.msgtype}')
 
 
+def _engine_gain(spec: InputSpec) -> tuple[float, float, float]:
+    """The engine input's factors to SI: the torque's unit, scale and sign, 1 for the gear,
+    the engine speed's unit."""
+    return (spec.factor * spec.sign[0], 1.0, spec.speed_factor)
+
+
 class InputDecoder:
     """One mapped input, one message at a time: raw CDR bytes -> stamp, frame and SI values.
 
     vd's fixed-layout types are unpacked with ``struct`` (:class:`MessageCodec`, a few µs);
     the standard types are deserialized with rosbags and read by the extractors
     :func:`decode_input` uses for a bag. A Float64MultiArray has no header: it takes the
-    ``receive_ns`` the caller gives (the live node's clock at reception).
+    ``receive_ns`` the caller gives (the live node's clock at reception). The engine input
+    (``engine_torque``) gives what :func:`decode_engine` gives for a bag: engine torque
+    [N m], gear, engine speed [rad/s] (nan when not mapped), with the same extractor and
+    factors.
 
     Attributes:
         spec: the input's mapping.
@@ -193,6 +204,17 @@ class InputDecoder:
         self.spec = spec
         self._codec: MessageCodec | None = None
         self._extract: Callable[[Any, int], tuple[int, Sequence[float], bytes]] | None = None
+        self._engine: tuple[int, ...] = ()  # the engine fields' places in the codec's
+        if spec.name == ENGINE_INPUT:
+            if spec.msgtype == WHEEL_TORQUES_TYPE:
+                self._codec = MessageCodec(spec.msgtype)
+                self._engine = tuple(self._codec.fields.index(f) for f in _ENGINE_FIELDS)
+            elif spec.msgtype == FLOAT64_ARRAY:
+                self._extract = _engine_array(spec)
+            else:  # the mapping refuses every other type
+                raise MappingError(f'{spec.name}: no decoder for {spec.msgtype}')
+            self._gain: tuple[float, ...] | None = _engine_gain(spec)
+            return
         if spec.msgtype in _BATCH_FIELD:
             self._codec = MessageCodec(spec.msgtype)
             self._field = self._codec.fields.index(_BATCH_FIELD[spec.msgtype])
@@ -201,7 +223,7 @@ class InputDecoder:
         factor = _factor(spec, radius)
         gain = factor * np.asarray(spec.sign, dtype=np.float64)
         # None: the default mapping's values pass unchanged (no multiplication at all)
-        self._gain: tuple[float, ...] | None = (
+        self._gain = (
             None if factor == 1.0 and all(s == 1.0 for s in spec.sign) else tuple(gain.tolist())
         )
 
@@ -218,8 +240,12 @@ class InputDecoder:
         """
         if self._codec is not None:
             stamp, frame, fields = self._codec.decode(data)
-            raw = fields[self._field]
-            row: tuple[float, ...] = tuple(raw) if isinstance(raw, tuple) else (raw,)
+            row: tuple[float, ...]
+            if self._engine:
+                row = tuple(float(fields[i]) for i in self._engine)
+            else:
+                raw = fields[self._field]
+                row = tuple(raw) if isinstance(raw, tuple) else (raw,)
         else:
             assert self._extract is not None  # set in __init__ when there is no codec
             msg = deserialize(data, self.spec.msgtype)
@@ -281,21 +307,14 @@ def decode_engine(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
     if spec.msgtype == WHEEL_TORQUES_TYPE:
         fields = decode_batch(spec.msgtype, arrays.datas)
         values = np.stack(
-            [
-                fields.values['engine_torque'].astype(np.float64),
-                fields.values['gear'].astype(np.float64),
-                fields.values['engine_speed'].astype(np.float64),
-            ],
-            axis=1,
+            [fields.values[f].astype(np.float64) for f in _ENGINE_FIELDS], axis=1
         ).reshape(n, 3)
         stamps, frames = fields.stamp_ns, fields.frame_id
     elif spec.msgtype == FLOAT64_ARRAY:
         stamps, values, frames = _per_message(spec, arrays, _engine_array(spec))
     else:  # the mapping refuses every other type
         raise MappingError(f'{spec.name}: no decoder for {spec.msgtype}')
-    values = values.copy()
-    values[:, 0] *= spec.factor * spec.sign[0]
-    values[:, 2] *= spec.speed_factor
+    values = values * np.asarray(_engine_gain(spec))  # InputDecoder's factors, live
     return InputSeries(stamps.astype(np.int64), values, frames)
 
 

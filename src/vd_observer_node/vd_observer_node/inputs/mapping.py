@@ -35,7 +35,8 @@ body speed and torque sample not later than each (sample and hold, as a live sys
 them; a wheel stamp is dropped while an input is missing or older than ``max_age`` [s],
 default 0.5).
 
-``torque_source`` (replay only; the live nodes read measured torques): where the wheel
+``torque_source`` (``vd replay``, ``vd report`` and ``pipeline_node``; the other live nodes
+read measured torques; a mapping file's key, not a node parameter): where the wheel
 torques are not measured, ``engine`` derives them from the engine torque and the gear (the
 ``engine_torque`` input; the drivetrain of the vehicle file,
 :mod:`vd_observer_node.estimation.drivetrain`) and ``none`` runs without torque (Fx, mu and
@@ -112,7 +113,7 @@ SETTINGS: Final = ('alignment', 'max_age')
 #: Optional input of the engine path: engine torque, gear and (optionally) engine speed.
 ENGINE_INPUT: Final = 'engine_torque'
 #: Where the wheel torques come from (`drivetrain.TORQUE_SOURCES`): a top-level key of the
-#: file (offline replay; not a node parameter: the live nodes read measured torques).
+#: file (replay, report and pipeline_node; not a node parameter of its own).
 TORQUE_SOURCE_KEY: Final = 'torque_source'
 
 # vd's own sensor types, as the topic contract gives them

@@ -15,10 +15,16 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node.chain import ChainOutput, ChainSettings
+from vd_observer_node.chain import ChainOutput, ChainSettings, engine_row
 from vd_observer_node.errors import InputShapeError
 from vd_observer_node.estimation.cascade import CascadeResult, checked_engine, checked_record
-from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_NONE, Drivetrain
+from vd_observer_node.estimation.drivetrain import (
+    TORQUE_ENGINE,
+    TORQUE_NONE,
+    Drivetrain,
+    engine_wheel_torques,
+    gear_number,
+)
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import FaultReport, merge_reports
 from vd_observer_node.estimation.observer import (
@@ -344,7 +350,10 @@ class CompiledChain:
         self.settings = settings
         vehicle = settings.vehicle
         self.wheels, self.speed = _observers(settings.observer)
-        self.estimator = CompiledEstimator(vehicle, settings.estimator)
+        source = settings.source
+        self.estimator = CompiledEstimator(vehicle, settings.estimator, source)
+        self._drivetrain = settings.drivetrain if source == TORQUE_ENGINE else None
+        self._none = source == TORQUE_NONE
         self.monitor = CompiledSituationMonitor(
             settings.curves,
             vehicle.static_wheel_loads[[0, 2]],
@@ -365,17 +374,26 @@ class CompiledChain:
         self._body = np.zeros((3, 1))
         self._body_valid = np.zeros(1, dtype=np.bool_)
         self._est = np.zeros(EST_SIZE)
-        self._no_drivetrain = np.zeros(0)
+        # the engine path's parameters and state, as run_cascade_compiled gives them
+        self._dprm = (
+            self._drivetrain.params_array() if self._drivetrain is not None else np.zeros(0)
+        )
+        self._escl = np.array([-np.inf, np.nan])
         self._no_engine = np.zeros(3)
-        self._no_state = np.zeros(2)
 
     def update(
-        self, t: float, wheel_angle: ArrayLike, speed: float, wheel_torque: ArrayLike
+        self,
+        t: float,
+        wheel_angle: ArrayLike,
+        speed: float,
+        wheel_torque: ArrayLike,
+        engine: ArrayLike | None = None,
     ) -> ChainOutput:
         """Advance to stamp t (`chain.PythonChain.update`).
 
         Raises:
-            InputShapeError: an array input has the wrong shape.
+            InputShapeError: an array input has the wrong shape, or no engine on the engine
+                path.
         """
         angles = np.ascontiguousarray(wheel_angle, dtype=np.float64)
         torques = np.ascontiguousarray(wheel_torque, dtype=np.float64)
@@ -384,13 +402,22 @@ class CompiledChain:
                 f'wheel_angle and wheel_torque must have shape (4,), got {angles.shape}, '
                 f'{torques.shape}'
             )
+        row = engine_row(engine) if self._drivetrain is not None else self._no_engine
+        if self._none:
+            torques = np.zeros(4)  # the replay's: no torque topic, zeros everywhere
         step: Any = _cascade_step  # its leading arguments come as one tuple
         wheel, body, est = self._wheel, self._body, self._est
         step(
-            *self._args, self._measured, self._no_drivetrain, self._no_state, float(t), angles,
-            float(speed), torques, self._no_engine, wheel, self._wheel_valid, body,
-            self._body_valid, est,
+            *self._args, self._measured, self._dprm, self._escl, float(t), angles,
+            float(speed), torques, row, wheel, self._wheel_valid, body, self._body_valid, est,
         )  # fmt: skip
+        if self._drivetrain is not None:
+            # the monitor gets the torques the engine path gave the estimator, from the
+            # reference function as the replay computes them (0 where it had none)
+            derived = engine_wheel_torques(
+                float(row[0]), gear_number(float(row[1])), self._drivetrain, wheel[2]
+            )
+            torques = np.where(np.isfinite(derived), derived, 0.0)
         mu_valid = est[E_MU_VALID : E_MU_VALID + 4] != 0.0
         monitor = self.monitor
         monitor.update_arrays(
