@@ -233,14 +233,18 @@ def test_the_player_plays_a_users_bag_to_the_nodes_given_the_same_mapping(
     for proc, text in ((observer, 'observer ready'), (estimator, 'estimator ready')):
         proc.wait_for(text, timeout=90)
     collector = procs.python(
-        'collector', SCRIPTS / 'collect_outputs.py', '12', f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope'
+        'collector', SCRIPTS / 'collect_outputs.py', '18', f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope'
     )
     collector.wait_for('SUBSCRIBED', timeout=60)
+    # The player waits for subscribers to its own topics only; the estimator's subscriptions
+    # to the observer's outputs are discovered meanwhile. Two runs under load got 0 slopes
+    # with the default 0.5 s (cause not pinned down): give that discovery 3 s.
     player_params = params_file(
         tmp_path / 'player.yaml',
         {},
         input_mapping=str(mapping_file),
         bag=str(bag),
+        start_delay=3.0,
     )
     player = _start(procs, 'player', 'player_node', player_params)
     assert _wait_exit(player, 60) == 0, player.output()
