@@ -375,3 +375,15 @@ def test_any_garbage_gives_finite_outputs_and_counted_faults(
     }
     if np.isnan(t).any():
         assert result.faults['estimator.non_finite_stamp'] >= 1
+
+
+def test_classify_stamp_is_the_stamp_rule_of_the_online_estimators() -> None:
+    from vd_observer_node.estimation.faults import classify_stamp
+
+    assert classify_stamp(None, 1.0, 0.5) == (None, 0.0)
+    assert classify_stamp(1.0, 1.25, 0.5) == (None, 0.25)
+    assert classify_stamp(1.0, float('nan'), 0.5) == ('non_finite_stamp', None)
+    assert classify_stamp(1.0, 1.0, 0.5) == ('duplicate_stamp', None)
+    assert classify_stamp(1.0, 0.75, 0.5) == ('out_of_order', None)
+    assert classify_stamp(1.0, 0.25, 0.5) == ('time_jump_back', 0.0)
+    assert classify_stamp(1.0, 1.75, 0.5) == ('gap', 0.0)

@@ -62,10 +62,9 @@ from vd_observer_node.node_params import (
 )
 from vd_observer_node.raw_io import (
     Encoders,
-    InputMatcher,
     InputWatch,
-    LatestMatcher,
     aligned_input,
+    input_matcher,
     mapped_input,
     merge_status,
 )
@@ -144,18 +143,9 @@ class AlertsNode(Node):
             ),
         )
         max_gap_ns = round(self.monitor.observer_config.max_gap * 1e9)
-        held = [] if mapping.alignment == 'latest' else held_inputs(mapping)
-        self.aligner: InputMatcher | LatestMatcher = (
-            # the wheel sensor drives, as in the replay
-            LatestMatcher(TOPICS, capacity, max_gap_ns, round(mapping.max_age * 1e9))
-            if mapping.alignment == 'latest'
-            else InputMatcher(
-                [t for t in TOPICS if t not in held],
-                held,
-                capacity=capacity,
-                max_jump_back_ns=max_gap_ns,
-                max_age_ns=max_gap_ns,
-            )
+        # TOPICS: the wheel sensor's stamps first; they drive, as in the replay
+        self.aligner = input_matcher(
+            mapping, TOPICS, capacity, max_gap_ns, max_gap_ns, held=held_inputs(mapping)
         )
         self.watch = InputWatch([spec.topic for spec in sensors.values()], max_gap_ns)
         self.pub_alerts = self.create_publisher(Alerts, ESTIMATES_ALERTS, STREAM_QOS)

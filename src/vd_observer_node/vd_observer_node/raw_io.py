@@ -217,18 +217,22 @@ def input_matcher(
     capacity: int,
     max_jump_back_ns: int | None,
     max_age_ns: int,
+    held: Sequence[str] | None = None,
 ) -> InputMatcher | LatestMatcher:
     """The matcher of the mapping's alignment for the inputs ``names`` (the wheels first).
 
-    'exact': stamp-matched inputs with the headerless ones held (`matched_inputs`);
-    'latest': `LatestMatcher` with the mapping's ``max_age``.
+    'exact': stamp-matched inputs with the others held: ``held``, by default the headerless
+    ones (`matched_inputs`; a node whose inputs are not the mapping's names gives its own);
+    'latest': `LatestMatcher` with the mapping's ``max_age`` (nothing held).
     """
     if mapping.alignment == 'latest':
         return LatestMatcher(names, capacity, max_jump_back_ns, round(mapping.max_age * 1e9))
-    matched = matched_inputs(mapping, names)
+    if held is None:
+        matched = matched_inputs(mapping, names)
+        held = [n for n in names if n not in matched]
     return InputMatcher(
-        matched,
-        [n for n in names if n not in matched],
+        [n for n in names if n not in held],
+        held,
         capacity=capacity,
         max_jump_back_ns=max_jump_back_ns,
         max_age_ns=max_age_ns,

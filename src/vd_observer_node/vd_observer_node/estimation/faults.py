@@ -8,6 +8,7 @@ See docs/faults.md for what each kind means and what the core does about it.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Final
@@ -20,9 +21,12 @@ __all__ = [
     'FAULT_LEVELS',
     'OBSERVER_FAULTS',
     'OK',
+    'RESTART_FAULTS',
+    'STAMP_FAULTS',
     'WARN',
     'FaultCounter',
     'FaultReport',
+    'classify_stamp',
     'merge_reports',
     'summarise',
 ]
@@ -49,16 +53,20 @@ FAULT_LEVELS: Final[Mapping[str, int]] = {
     'non_finite_output': ERROR,
 }
 
-#: Kinds an observer (differentiator) can count.
-OBSERVER_FAULTS: Final = (
+#: Input kinds every online estimator counts: the stamp rules of `classify_stamp` and a
+#: non-finite value.
+STAMP_FAULTS: Final = (
     'non_finite_stamp',
     'non_finite_value',
     'duplicate_stamp',
     'out_of_order',
     'gap',
     'time_jump_back',
-    'non_finite_output',
 )
+#: The stamp faults after which an estimator starts again from the new sample.
+RESTART_FAULTS: Final = frozenset({'gap', 'time_jump_back'})
+#: Kinds an observer (differentiator) can count.
+OBSERVER_FAULTS: Final = (*STAMP_FAULTS, 'non_finite_output')
 #: Kinds the estimator can count.
 ESTIMATOR_FAULTS: Final = (*OBSERVER_FAULTS, 'wheel_lift', 'mu_out_of_range',
                            'slope_out_of_range', 'arcsin_domain')  # fmt: skip
@@ -142,3 +150,37 @@ def merge_reports(reports: Mapping[str, FaultReport]) -> FaultReport:
     active = tuple(f'{part}.{k}' for part, r in reports.items() for k in r.active)
     counts = {f'{part}.{k}': v for part, r in reports.items() for k, v in r.counts.items()}
     return FaultReport(level=level, active=active, counts=counts)
+
+
+def classify_stamp(
+    last: float | None, t: float, max_gap: float
+) -> tuple[str | None, float | None]:
+    """The stamp rules of the online estimators, as a pure step.
+
+    A non-finite stamp, a repeated one or one slightly older than the last (by at most
+    ``max_gap``) is rejected; one older by more (a looped bag) or newer by more than
+    ``max_gap`` restarts from this sample (`RESTART_FAULTS`).
+
+    Args:
+        last: stamp [s] of the last accepted sample, None before the first.
+        t: this sample's stamp [s].
+        max_gap: [s] > 0.
+
+    Returns:
+        (the fault kind to count or None, dt [s]): dt None rejects the sample, 0.0 starts
+        (again) at t, > 0 steps on.
+    """
+    if not math.isfinite(t):
+        return 'non_finite_stamp', None
+    if last is None:
+        return None, 0.0
+    dt = t - last
+    if dt == 0.0:
+        return 'duplicate_stamp', None
+    if dt < 0.0:
+        if -dt <= max_gap:
+            return 'out_of_order', None
+        return 'time_jump_back', 0.0
+    if dt > max_gap:
+        return 'gap', 0.0
+    return None, dt

@@ -66,6 +66,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimation.faults import RESTART_FAULTS, STAMP_FAULTS, classify_stamp
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
 __all__ = [
@@ -84,15 +85,7 @@ FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
 #: Fault kinds :class:`MassGradeEstimator` counts (all handled: the output stays finite).
-MASS_GRADE_FAULTS = (
-    'non_finite_stamp',
-    'non_finite_value',
-    'duplicate_stamp',
-    'out_of_order',
-    'gap',
-    'time_jump_back',
-    'mass_clamped',
-)
+MASS_GRADE_FAULTS = (*STAMP_FAULTS, 'mass_clamped')
 
 _KMH_REFERENCE = 160.0  # [km/h] speed scale of paper eq. 7 (as estimation.formulas)
 
@@ -384,31 +377,14 @@ class MassGradeEstimator:
         )
 
     def _accept_stamp(self, t: float) -> float | None:
-        """dt [s] of a usable stamp; None to hold the last estimate (counted)."""
-        if not math.isfinite(t):
-            self.faults['non_finite_stamp'] += 1
-            return None
-        if self._t is None:
-            self._t = t
-            return 0.0
-        dt = t - self._t
-        if dt == 0.0:
-            self.faults['duplicate_stamp'] += 1
-            return None
-        if dt < 0.0:
-            if -dt <= self.config.max_gap:
-                self.faults['out_of_order'] += 1
-                return None
-            self.faults['time_jump_back'] += 1
+        """dt [s] of a usable stamp (0.0: (re)start); None to hold the last estimate."""
+        kind, dt = classify_stamp(self._t, t, self.config.max_gap)
+        if kind is not None:
+            self.faults[kind] += 1
+        if kind in RESTART_FAULTS:
             self.reset()
+        if dt is not None:
             self._t = t
-            return 0.0
-        if dt > self.config.max_gap:
-            self.faults['gap'] += 1
-            self.reset()
-            self._t = t
-            return 0.0
-        self._t = t
         return dt
 
     # -- the step ---------------------------------------------------------------------
