@@ -47,9 +47,12 @@ import numpy as np
 from scipy.signal import lfilter
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / 'scripts'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 
+# the evaluation window and RMS of the estimator evaluation, so the figures compare
+from eval_estimators import evaluation_mask, rms  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.estimation.formulas import wheel_loads  # noqa: E402
 from vd_observer_node.estimation.mass_grade import (  # noqa: E402
@@ -97,20 +100,6 @@ SENSORS: dict[str, tuple[int, float, dict[str, Any], dict[str, Any]]] = {
 SLOPE_GOAL_DEG = {'+125kg': 0.25, '+400kg': 0.3}
 MASS_GOAL_PCT = 2.0
 CONVERGE_GOAL_S = 15.0
-
-
-def evaluation_mask(t: np.ndarray, events: tuple[tuple[float, str], ...]) -> np.ndarray:
-    """shape (N,), bool: t >= 1 s and not within 0.5 s of a slope step or gear shift."""
-    mask = t >= 1.0
-    for stamp, text in events:
-        if 'slope' in text or 'shift' in text:
-            mask &= np.abs(t - stamp) > 0.5
-    return mask
-
-
-def rms(x: np.ndarray) -> float:
-    """Root mean square of all elements (nan if empty)."""
-    return float(np.sqrt(np.mean(np.square(x)))) if x.size else float('nan')
 
 
 def lowpass(x: np.ndarray, dt: float, tau: float, order: int = 2) -> np.ndarray:
