@@ -29,9 +29,11 @@ from vd_observer_node.estimation.differentiator import (
 )
 from vd_observer_node.estimation.estimator import (
     LOAD_TRANSFER_SOURCES,
+    MASS_PREFIX,
     SLOPE_ACCEL_SOURCES,
     EstimatorConfig,
 )
+from vd_observer_node.estimation.mass_grade import MassGradeConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import (
@@ -205,13 +207,21 @@ OBSERVER_PARAMS: Final = [
     ParamSpec('l2', DEFAULT_GAINS.l2, 'Levant gain lambda2 [-], > 1'),
 ]
 
-_ESTIMATOR_CORE: Final = dataclass_param_specs(
-    EstimatorConfig,
-    choices={
-        'load_transfer_source': LOAD_TRANSFER_SOURCES,
-        'slope_accel_source': SLOPE_ACCEL_SOURCES,
-    },
-)
+_ESTIMATOR_CORE: Final = [
+    *dataclass_param_specs(
+        EstimatorConfig,
+        skip=('mass',),
+        choices={
+            'load_transfer_source': LOAD_TRANSFER_SOURCES,
+            'slope_accel_source': SLOPE_ACCEL_SOURCES,
+        },
+    ),
+    # the online mass estimator's settings, as EstimatorConfig.from_mapping takes them
+    *(
+        ParamSpec(f'{MASS_PREFIX}{p.name}', p.default, f'online mass: {p.description}')
+        for p in dataclass_param_specs(MassGradeConfig)
+    ),
+]
 
 ESTIMATOR_PARAMS: Final = [
     VEHICLE_FILE,

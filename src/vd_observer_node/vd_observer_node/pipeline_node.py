@@ -124,7 +124,7 @@ def _settings(
     vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
     kernel = values.pop('kernel')
     speed_source = values.pop('speed_source')
-    estimator_keys = set(EstimatorConfig.__dataclass_fields__)
+    estimator_keys = set(EstimatorConfig.setting_keys())
     situation_keys = set(SituationConfig.__dataclass_fields__)
     friction_keys = set(FrictionPotentialConfig.__dataclass_fields__)
     observer = ObserverConfig.from_mapping(

@@ -56,6 +56,12 @@ class CascadeResult:
             as input, their integral from 0 at the observer's start).
         faults: total fault counts per kind, keys 'wheel.<kind>', 'speed.<kind>' (observers)
             and 'estimator.<kind>', as the nodes report them on /diagnostics.
+        mass: shape (N,), [kg] online mass estimate (`Estimates.mass`; the file's mass
+            without adaptation).
+        mass_std: shape (N,), [kg] its standard deviation.
+        mass_converged: shape (N,), bool, the estimate is trusted and used.
+        mass_used: shape (N,), [kg] the mass the stamp's Fz, mu, rolling and slope used.
+        mass_excited: shape (N,), bool, the stamp updated the mass.
     """
 
     t: FloatArray
@@ -77,6 +83,11 @@ class CascadeResult:
     angle: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
     torque_source: int = TORQUE_MEASURED
     faults: dict[str, int] = field(default_factory=dict)
+    mass: FloatArray = field(default_factory=lambda: np.zeros(0))
+    mass_std: FloatArray = field(default_factory=lambda: np.zeros(0))
+    mass_converged: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    mass_used: FloatArray = field(default_factory=lambda: np.zeros(0))
+    mass_excited: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 def checked_record(
@@ -186,7 +197,11 @@ def run_cascade(
         k: wheel4.copy()
         for k in ('angle', 'omega', 'omega_dot', 'fx', 'fz', 'mu', 'slip', 'rolling')
     }
-    scalars = {k: np.zeros(n) for k in ('speed', 'accel', 'aero', 'slope')}
+    scalars = {
+        k: np.zeros(n)
+        for k in ('speed', 'accel', 'aero', 'slope', 'mass', 'mass_std', 'mass_used')
+    }
+    flags = {k: np.zeros(n, dtype=bool) for k in ('mass_converged', 'mass_excited')}
     mu_valid = np.zeros((n, 4), dtype=bool)
     wheel_valid = np.zeros((n, 4), dtype=bool)
     slope_valid = np.zeros(n, dtype=bool)
@@ -224,6 +239,11 @@ def run_cascade(
         scalars['aero'][k] = est.aero
         scalars['slope'][k] = est.slope
         slope_valid[k] = est.slope_valid
+        scalars['mass'][k] = est.mass
+        scalars['mass_std'][k] = est.mass_std
+        scalars['mass_used'][k] = est.mass_used
+        flags['mass_converged'][k] = est.mass_converged
+        flags['mass_excited'][k] = est.mass_excited
     return CascadeResult(
         t=stamps.copy(),
         omega=out['omega'],
@@ -252,4 +272,9 @@ def run_cascade(
             )
             for kind, n in counter.counts.items()
         },
+        mass=scalars['mass'],
+        mass_std=scalars['mass_std'],
+        mass_converged=flags['mass_converged'],
+        mass_used=scalars['mass_used'],
+        mass_excited=flags['mass_excited'],
     )

@@ -7,6 +7,16 @@ the longitudinal force balance. See docs/estimation.md. The wheel torques are me
 derived from the engine torque and gear (`drivetrain`), or absent: the estimator's
 `torque_source` says which, and every estimate carries it.
 
+Online mass (`EstimatorConfig.mass_adaptation`, issue 16): per stamp, before the rest, a
+`mass_grade.MassGradeEstimator` takes this stamp's sum of the tyre forces (from the wheel
+torque balance, which never uses the mass) and the estimator's body speed. Its `mass_used`
+(the estimate once converged, the file's mass before) is the mass of the load transfer (Fz),
+hence mu and the rolling resistance, and of the slope balance. It runs on measured torques
+only (the engine path cannot see the brakes, so a braking would teach it a wrong mass); a
+stamp whose inputs were not all finite, or whose torque cannot be trusted, does not update it.
+A mass that hits its clamp is counted as 'mass_clamped'. It restarts with the estimator (gap,
+time jump, overflow).
+
 All outputs are finite always: a non-finite input is replaced by its last finite value and
 the affected validity flags are cleared; a non-finite, repeated or slightly older stamp
 returns the previous estimates unchanged (counted in `rejected_count`); a stamp older by more
@@ -18,7 +28,7 @@ per kind in `Estimator.faults` (see docs/faults.md).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import Any, Final
 
 import numpy as np
@@ -34,10 +44,12 @@ from vd_observer_node.estimation.drivetrain import (
 )
 from vd_observer_node.estimation.faults import ESTIMATOR_FAULTS, FaultCounter
 from vd_observer_node.estimation.filters import LowPass
+from vd_observer_node.estimation.mass_grade import MassGradeConfig, MassGradeEstimator
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
 __all__ = [
     'LOAD_TRANSFER_SOURCES',
+    'MASS_PREFIX',
     'SLOPE_ACCEL_SOURCES',
     'Estimates',
     'Estimator',
@@ -50,6 +62,8 @@ FloatArray = NDArray[np.float64]
 LOAD_TRANSFER_SOURCES: Final = ('tire_forces', 'acceleration')
 #: Where m*v_dot in the slope balance comes from, see `EstimatorConfig.slope_accel_source`.
 SLOPE_ACCEL_SOURCES: Final = ('speed', 'observer')
+#: Prefix of the online mass settings in a flat mapping (`EstimatorConfig.from_mapping`).
+MASS_PREFIX: Final = 'mass.'
 
 
 @dataclass(frozen=True)
@@ -79,6 +93,10 @@ class EstimatorConfig:
             one by more than this (a looped bag), resets the estimator; must be > 0.
         max_mu: |mu| above this [-] is implausible for a tyre on a road: mu is flagged
             invalid (and counted as 'mu_out_of_range'); must be > 0.
+        mass_adaptation: estimate the mass online (measured torques only) and use it, once
+            converged, for Fz, mu, rolling resistance and the slope; False: the file's mass.
+        mass: settings of the online mass estimator (flat keys ``mass.<name>`` in
+            `from_mapping` and as node parameters).
     """
 
     load_transfer_source: str = 'tire_forces'
@@ -93,6 +111,8 @@ class EstimatorConfig:
     slip_eps: float = 0.1
     max_gap: float = 0.5
     max_mu: float = 2.0
+    mass_adaptation: bool = False
+    mass: MassGradeConfig = field(default_factory=MassGradeConfig)
 
     def __post_init__(self) -> None:
         if self.load_transfer_source not in LOAD_TRANSFER_SOURCES:
@@ -118,17 +138,27 @@ class EstimatorConfig:
             raise ConfigurationError(f'max_slope must be in (0, pi/2), got {self.max_slope}')
 
     @classmethod
+    def setting_keys(cls) -> frozenset[str]:
+        """The flat keys `from_mapping` takes: the field names, ``mass.<name>`` for `mass`."""
+        nested = {f'{MASS_PREFIX}{f.name}' for f in fields(MassGradeConfig)}
+        return frozenset({f.name for f in fields(cls)} - {'mass'} | nested)
+
+    @classmethod
     def from_mapping(cls, data: dict[str, Any]) -> EstimatorConfig:
-        """Build from a flat mapping (e.g. ROS parameters).
+        """Build from a flat mapping (e.g. ROS parameters; `setting_keys`).
 
         Raises:
             ConfigurationError: unknown key or invalid value.
         """
-        known = {f.name for f in fields(cls)}
-        unknown = set(data) - known
+        data = dict(data)
+        if isinstance(data.get('mass'), dict):  # a YAML section ``mass: {...}``
+            data.update({f'{MASS_PREFIX}{k}': v for k, v in data.pop('mass').items()})
+        unknown = set(data) - cls.setting_keys()
         if unknown:
             raise ConfigurationError(f'unknown estimator settings: {sorted(unknown)}')
-        return cls(**data)
+        flat = {k: v for k, v in data.items() if not k.startswith(MASS_PREFIX)}
+        nested = {k[len(MASS_PREFIX) :]: v for k, v in data.items() if k.startswith(MASS_PREFIX)}
+        return cls(**flat, mass=MassGradeConfig.from_mapping(nested))
 
 
 @dataclass(frozen=True)
@@ -149,6 +179,11 @@ class Estimates:
         torque_source: where the wheel torques came from (`drivetrain.TORQUE_MEASURED`,
             `TORQUE_ENGINE` or `TORQUE_NONE`; with none, fx is 0 and mu and slope are
             invalid).
+        mass: [kg] online mass estimate (the file's mass without adaptation).
+        mass_std: [kg] its standard deviation (0 without adaptation).
+        mass_converged: the estimate is trusted and used (latched until a restart).
+        mass_used: [kg] the mass Fz, mu, rolling resistance and slope used at this stamp.
+        mass_excited: this stamp updated the mass estimate.
     """
 
     t: float
@@ -162,6 +197,11 @@ class Estimates:
     slope: float
     slope_valid: bool
     torque_source: int = TORQUE_MEASURED
+    mass: float = 0.0
+    mass_std: float = 0.0
+    mass_converged: bool = False
+    mass_used: float = 0.0
+    mass_excited: bool = False
 
 
 def _as_wheels(name: str, value: ArrayLike) -> FloatArray:
@@ -212,6 +252,12 @@ class Estimator:
         self._min_load = self.config.min_load_ratio * float(np.min(vehicle.static_wheel_loads))
         self.rejected_count = 0
         self.faults = FaultCounter(ESTIMATOR_FAULTS)
+        # The online mass (None: the file's); on measured torques only (module docstring).
+        self.mass_estimator = (
+            MassGradeEstimator(vehicle, self.config.mass)
+            if self.config.mass_adaptation and self.torque_source == TORQUE_MEASURED
+            else None
+        )
         self.reset()
 
     def reset(self) -> None:
@@ -223,6 +269,8 @@ class Estimator:
         self._force_filter.reset()
         self._slope_filter.reset()
         self._speed_filter.reset()
+        if self.mass_estimator is not None:
+            self.mass_estimator.reset()
         self.last: Estimates | None = None
 
     def update(
@@ -316,28 +364,30 @@ class Estimator:
         no_torque = self.torque_source == TORQUE_NONE
         v = float(x[12])
         accel = float(x[13])
+        # Without the torque the balance has no force: Fx is 0 (not -J*omega_dot/R).
+        fx_raw = np.zeros(4) if no_torque else phys.tire_longitudinal_force(torque, omega_dot, veh)
+        mass = self._mass_step(t, float(np.sum(fx_raw)), v, bool(wheel_ok.all()) and body_ok)
+        m_used = mass[3]
         # Same smooth sign as the simulator's rolling resistance; drag is exactly k*v*|v|.
         direction = float(phys.motion_direction(v, veh.rolling_regularisation_speed))
         aero = float(phys.aero_drag(v, veh))
         aero_signed = math.copysign(aero, v)
         c_roll = float(phys.rolling_coefficient(v, veh))
         cos_prev, sin_prev = math.cos(self._slope), math.sin(self._slope)
-        weight = veh.mass * veh.gravity
+        weight = m_used * veh.gravity
 
-        # Without torque Fx is unknown: published as 0 (torque_source none), not -J*omega_dot/R.
-        fx_raw = np.zeros(4) if no_torque else phys.tire_longitudinal_force(torque, omega_dot, veh)
         # Sum of the rolling resistances follows from sum(Fz) = m*g*cos(alpha) in both
         # load-transfer forms, so it does not depend on the transfer itself.
         rolling_sum = c_roll * weight * cos_prev
         if cfg.load_transfer_source == 'tire_forces' and not no_torque:
             ground = float(np.sum(fx_raw)) - direction * rolling_sum
         else:
-            ground = veh.mass * accel + weight * sin_prev + aero_signed
+            ground = m_used * accel + weight * sin_prev + aero_signed
         filtered = self._force_filter.update(dt, np.append(fx_raw, ground))
         fx, ground_f = filtered[:4], float(filtered[4])
 
         # A load transfer beyond the axle's load means the wheel has lifted off: Fz = 0.
-        fz = np.maximum(phys.wheel_loads(ground_f, cos_prev, veh), 0.0)
+        fz = np.maximum(phys.wheel_loads(ground_f, cos_prev, veh, m_used), 0.0)
         rolling = phys.rolling_resistance(v, fz, veh)
         mu, mu_valid = phys.utilised_friction(fx, fz, self._min_load, cfg.min_excitation_ratio)
         mu_valid &= wheel_ok & (not no_torque)
@@ -354,10 +404,10 @@ class Estimator:
         if cfg.slope_accel_source == 'speed' and cfg.slope_filter_tau > 0.0:
             self._speed_filter.update(dt, v)
             accel_f = float(self._speed_filter.derivative())
-            net_f = float(self._slope_filter.update(dt, forces)) - veh.mass * accel_f
+            net_f = float(self._slope_filter.update(dt, forces)) - m_used * accel_f
         else:
-            net_f = float(self._slope_filter.update(dt, forces - veh.mass * accel))
-        slope, in_range = phys.slope_from_forces(net_f, veh, cfg.max_slope)
+            net_f = float(self._slope_filter.update(dt, forces - m_used * accel))
+        slope, in_range = phys.slope_from_forces(net_f, veh, cfg.max_slope, m_used)
         usable = body_ok and abs(v) >= cfg.min_speed and not no_torque
         if usable and not in_range:
             # |N| > m g has no arcsin at all; below that the slope is only implausible.
@@ -384,11 +434,46 @@ class Estimator:
             slope=self._slope,
             slope_valid=slope_valid,
             torque_source=self.torque_source,
+            mass=mass[0],
+            mass_std=mass[1],
+            mass_converged=bool(mass[2]),
+            mass_used=m_used,
+            mass_excited=bool(mass[4]),
         )
         return self.last
 
+    def _mass_step(self, t: float, sum_fx: float, v: float, ok: bool) -> tuple[float, ...]:
+        """Advance the online mass: (mass, mass_std, converged, mass_used, excited).
+
+        Args:
+            t: stamp [s] (accepted by the estimator).
+            sum_fx: sum of the four tyre forces [N] from the wheel torque balance.
+            v: the estimator's body speed [m/s].
+            ok: every input of the stamp was finite and the torque trusted; else the mass
+                estimator holds (it is given a non-finite force, which it skips).
+        """
+        est = self.mass_estimator
+        if est is None:
+            return self._fixed_mass()
+        clamped = est.faults['mass_clamped']
+        out = est.update(t, sum_fx if ok else math.nan, v)
+        if est.faults['mass_clamped'] != clamped:
+            self.faults.count('mass_clamped')
+        # a held stamp (skipped here) did not update the mass, whatever the last one did
+        excited = float(out.excited and ok)
+        return out.mass, out.mass_std, float(out.converged), out.mass_used, excited
+
+    def _fixed_mass(self) -> tuple[float, ...]:
+        """The mass fields where nothing was estimated: the file's or the mass estimator's."""
+        m0 = self.vehicle.mass
+        if self.mass_estimator is None:
+            return m0, 0.0, 0.0, m0, 0.0
+        out = self.mass_estimator.current()
+        return out.mass, out.mass_std, float(out.converged), out.mass_used, 0.0
+
     def _empty(self, t: float) -> Estimates:
         zeros = np.zeros(4)
+        mass = self._fixed_mass()
         return Estimates(
             t=t if math.isfinite(t) else 0.0,
             fx=zeros,
@@ -401,4 +486,8 @@ class Estimator:
             slope=0.0,
             slope_valid=False,
             torque_source=self.torque_source,
+            mass=mass[0],
+            mass_std=mass[1],
+            mass_converged=False,
+            mass_used=mass[3],
         )

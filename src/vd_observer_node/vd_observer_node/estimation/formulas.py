@@ -107,7 +107,10 @@ def rolling_resistance(speed: ArrayLike, fz: ArrayLike, vehicle: EstimatorVehicl
 
 
 def wheel_loads(
-    ground_force: ArrayLike, cos_slope: ArrayLike, vehicle: EstimatorVehicle
+    ground_force: ArrayLike,
+    cos_slope: ArrayLike,
+    vehicle: EstimatorVehicle,
+    mass: float | None = None,
 ) -> FloatArray:
     """Quasi-static wheel loads with longitudinal load transfer (whole-vehicle moment balance).
 
@@ -119,12 +122,14 @@ def wheel_loads(
     Args:
         ground_force: shape (...), G [N].
         cos_slope: shape (...), cos(alpha) [-].
+        mass: m [kg] if not the vehicle's (the online estimate); the CG stays the file's.
 
     Returns:
         shape (..., 4), [N], order FL, FR, RL, RR.
     """
     g_force = np.asarray(ground_force, dtype=np.float64)
-    weight_normal = vehicle.mass * vehicle.gravity * np.asarray(cos_slope, dtype=np.float64)
+    m = vehicle.mass if mass is None else mass
+    weight_normal = m * vehicle.gravity * np.asarray(cos_slope, dtype=np.float64)
     transfer = g_force * vehicle.cg_height
     front = 0.5 * (weight_normal * vehicle.cg_to_rear_axle - transfer) / vehicle.wheelbase
     rear = 0.5 * (weight_normal * vehicle.cg_to_front_axle + transfer) / vehicle.wheelbase
@@ -177,7 +182,10 @@ def slip_ratio(
 
 
 def slope_from_forces(
-    net_force: ArrayLike, vehicle: EstimatorVehicle, max_slope: float
+    net_force: ArrayLike,
+    vehicle: EstimatorVehicle,
+    max_slope: float,
+    mass: float | None = None,
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
     """alpha = arcsin(N / (m*g)), N = sum(Fx) - sum(F_r_signed) - F_aero_signed - m*v_dot.
 
@@ -186,12 +194,13 @@ def slope_from_forces(
     Args:
         net_force: shape (...), N [N].
         max_slope: |alpha| bound [rad]; beyond it the estimate is clamped and invalid.
+        mass: m [kg] if not the vehicle's (the online estimate).
 
     Returns:
         (alpha [rad], valid): shape (...) each.
     """
     n = np.asarray(net_force, dtype=np.float64)
-    sine = n / (vehicle.mass * vehicle.gravity)
+    sine = n / ((vehicle.mass if mass is None else mass) * vehicle.gravity)
     bound = math.sin(max_slope)
     valid = np.isfinite(sine) & (np.abs(sine) <= bound)
     clipped = np.clip(np.nan_to_num(sine, nan=0.0), -bound, bound)

@@ -1,7 +1,8 @@
 """Online vehicle mass and road grade: recursive least squares with separate memories.
 
-Standalone for now (issue 16, deliverable 1): fed with the cascade's outputs, not yet wired
-into the estimator, the kernel or the live nodes.
+Run per stamp inside `estimator.Estimator` (``EstimatorConfig.mass_adaptation``), whose
+Fz, mu, rolling resistance and slope then use ``mass_used``; also usable alone
+(:func:`run_mass_grade`).
 
 Model (after Vahidi, Stefanopoulou, Peng, "Recursive least squares with forgetting for
 online estimation of vehicle mass and road grade", Vehicle System Dynamics 43(1), 2005).
@@ -386,6 +387,10 @@ class MassGradeEstimator:
         if dt is not None:
             self._t = t
         return dt
+
+    def current(self) -> MassGradeEstimate:
+        """The last estimate (the nominal mass and prior deviation before any stamp)."""
+        return self._last or self._estimate(False, False)
 
     # -- the step ---------------------------------------------------------------------
 

@@ -92,7 +92,8 @@ N_PARAMS: Final = 28
 
 # fault slots (ESTIMATOR_FAULTS order) and the rejection count
 _NON_FINITE_STAMP, _NON_FINITE_VALUE, _DUPLICATE, _OUT_OF_ORDER, _GAP, _JUMP_BACK = range(6)
-_NON_FINITE_OUTPUT, _WHEEL_LIFT, _MU_RANGE, _SLOPE_RANGE, _ARCSIN, _REJECTED = range(6, 12)
+_NON_FINITE_OUTPUT, _WHEEL_LIFT, _MU_RANGE, _SLOPE_RANGE, _ARCSIN = range(6, 11)
+_MASS_CLAMPED, _REJECTED = 11, 12
 assert ESTIMATOR_FAULTS == (
     'non_finite_stamp',
     'non_finite_value',
@@ -105,6 +106,7 @@ assert ESTIMATOR_FAULTS == (
     'mu_out_of_range',
     'slope_out_of_range',
     'arcsin_domain',
+    'mass_clamped',
 )
 _KMH_REFERENCE: Final = 160.0  # [km/h] speed scale of paper eq. 7 (estimators.py)
 
