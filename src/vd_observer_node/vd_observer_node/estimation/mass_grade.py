@@ -348,7 +348,7 @@ class MassGradeEstimator:
         c, m0 = self.config, self.vehicle.mass
         self.theta: FloatArray = np.array([1.0 / m0])
         sigma_inv_m = c.initial_mass_std_ratio / m0  # d(1/m) = dm / m^2
-        self.cov: FloatArray = np.array([[sigma_inv_m**2]])
+        self.cov: FloatArray = np.array([[sigma_inv_m * sigma_inv_m]])
         self._t: float | None = None
         self._lp: list[float] | None = None  # two low-pass stages of F, then of v
         self._f_slow = math.nan  # grade_tau low-pass of F_lp and y (F_hp = F_lp - F_slow)
@@ -362,7 +362,9 @@ class MassGradeEstimator:
     # -- helpers ----------------------------------------------------------------------
 
     def _mass_std(self) -> float:
-        return math.sqrt(max(float(self.cov[0, 0]), 0.0)) / float(self.theta[0]) ** 2
+        # products, not ** 2: pow() and the compiled kernel's square differ in the last bit
+        theta = float(self.theta[0])
+        return math.sqrt(max(float(self.cov[0, 0]), 0.0)) / (theta * theta)
 
     def _estimate(self, excited: bool, valid: bool) -> MassGradeEstimate:
         mass = 1.0 / float(self.theta[0])
@@ -469,7 +471,7 @@ class MassGradeEstimator:
                 (f_hp,),
                 y_hp,
                 (forgetting_factor(dt, c.mass_tau),),
-                c.accel_noise_density**2 / dt,
+                c.accel_noise_density * c.accel_noise_density / dt,
                 (True,),
             )
             if math.isfinite(float(theta[0])) and math.isfinite(float(cov[0, 0])):

@@ -39,6 +39,11 @@ from vd_observer_node.kernel.estimation import (
     E_AERO,
     E_FX,
     E_FZ,
+    E_MASS,
+    E_MASS_CONVERGED,
+    E_MASS_EXCITED,
+    E_MASS_STD,
+    E_MASS_USED,
     E_MU,
     E_MU_VALID,
     E_ROLL,
@@ -248,6 +253,11 @@ def run_cascade_compiled(
             )
             for kind, count in counter.counts.items()
         },
+        mass=est[:, E_MASS].copy(),
+        mass_std=est[:, E_MASS_STD].copy(),
+        mass_converged=est[:, E_MASS_CONVERGED] != 0.0,
+        mass_used=est[:, E_MASS_USED].copy(),
+        mass_excited=est[:, E_MASS_EXCITED] != 0.0,
     )
 
 

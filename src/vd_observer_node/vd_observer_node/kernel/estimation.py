@@ -9,14 +9,20 @@ equal outputs (1e-9) and equal fault counts.
 Array layouts:
 
 * ``prm`` float64 (`N_PARAMS`,): see `estimator_params`;
-* ``prm[27]`` is the torque source code (`drivetrain.TORQUE_*`);
-* ``scal`` (3,): stamp of the last sample (nan before the first), slope [rad], 1.0 once an
-  estimate exists; ``held`` (14,): last finite inputs (omega, omega_dot, torque, v, accel);
+* ``prm[27]`` is the torque source code (`drivetrain.TORQUE_*`); ``prm[28:]`` the online
+  mass (`mass_grade.MassGradeEstimator`'s settings, ``prm[28]`` 1.0 where it runs);
+* ``scal`` (`N_SCAL`,): stamp of the last sample (nan before the first), slope [rad], 1.0 once
+  an estimate exists, then the online mass's state (the ``_M_*`` slots: its stamp, filters,
+  1/m and its variance, the last estimate); ``held`` (14,): last finite inputs (omega,
+  omega_dot, torque, v, accel);
 * three low-pass filters (force (order, 5), slope (order, 1), speed (order, 1)), each
   ``stages``, ``prev`` (d,) and ``meta`` (3,): initialised, has a previous output, last dt;
 * ``est`` (`EST_SIZE`,): one estimate packed (see the ``E_*`` offsets): the last one in the
   state, the output of `estimator_update`;
-* ``counts`` int64 (12,): the `faults.ESTIMATOR_FAULTS` kinds in order, then rejections.
+* ``counts`` int64 (13,): the `faults.ESTIMATOR_FAULTS` kinds in order, then rejections.
+
+The online mass mirrors `mass_grade.MassGradeEstimator.update` (its scalar RLS is
+`mass_grade.rls_step` with one parameter written out), as `Estimator` drives it.
 """
 
 from __future__ import annotations
@@ -47,6 +53,11 @@ from vd_observer_node.kernel._jit import jit
 __all__ = [
     'EST_SIZE',
     'E_AERO',
+    'E_MASS',
+    'E_MASS_CONVERGED',
+    'E_MASS_EXCITED',
+    'E_MASS_STD',
+    'E_MASS_USED',
     'E_FX',
     'E_FZ',
     'E_MU',
@@ -81,14 +92,34 @@ E_SLOPE: Final = 22
 E_SLOPE_VALID: Final = 23
 E_MU_VALID: Final = 24
 E_TORQUE_SOURCE: Final = 28
-EST_SIZE: Final = 29
+E_MASS: Final = 29
+E_MASS_STD: Final = 30
+E_MASS_CONVERGED: Final = 31
+E_MASS_USED: Final = 32
+E_MASS_EXCITED: Final = 33
+EST_SIZE: Final = 34
 
 # parameters
 _MASS, _GRAVITY, _RADIUS, _J_FRONT, _J_REAR, _DRAG, _C0, _C1, _REG = range(9)
 _H, _A, _B, _L, _LT_CODE, _FORCE_TAU, _SLOPE_TAU, _ACC_CODE, _ORDER = range(9, 18)
 _MIN_LOAD, _MIN_EXC, _MAX_SINE, _MIN_SPEED, _SLIP_EPS, _MAX_GAP, _MAX_MU = range(18, 25)
 _STATIC_FRONT, _STATIC_REAR, _TORQUE_SOURCE = 25, 26, 27
-N_PARAMS: Final = 28
+# online mass (MassGradeConfig; theta bounds 1/m; the slope bound as a sine; warm-up [s])
+_M_ON, _M_TAU, _M_GRADE_TAU, _M_FILTER_TAU, _M_NOISE, _M_STD_RATIO, _M_MIN_SPEED = range(28, 35)
+_M_SLOPE_MIN_SPEED, _M_MIN_ACCEL, _M_MIN_FORCE, _M_MIN_CHANGE, _M_MAX_RATE = range(35, 40)
+_M_THETA_MIN, _M_THETA_MAX, _M_CONV_RATIO, _M_MIN_EXC_TIME, _M_MAX_SINE = range(40, 45)
+_M_MAX_GAP, _M_WARMUP = 45, 46
+N_PARAMS: Final = 47
+
+# online mass state in scal: its stamp (nan: none), the low-pass started (0/1) and its two
+# stages of F then v, the slow low-passes of F and y (nan: none), its own slope, excited
+# time, time since the (re)start, converged (0/1), 1/m (nan: fresh, set from prm at the next
+# update) and its variance, has a last estimate (0/1) and that estimate's mass, std,
+# converged, used, excited
+_M_T, _M_LP_ON, _M_F1, _M_F2, _M_V1, _M_V2, _M_F_SLOW, _M_Y_SLOW = range(3, 11)
+_M_SLOPE, _M_EXC_T, _M_RUN, _M_CONV, _M_THETA, _M_COV, _M_HAS_LAST = range(11, 18)
+_M_LAST = 18  # mass, std, converged, used, excited: 5 slots
+N_SCAL: Final = 23
 
 # fault slots (ESTIMATOR_FAULTS order) and the rejection count
 _NON_FINITE_STAMP, _NON_FINITE_VALUE, _DUPLICATE, _OUT_OF_ORDER, _GAP, _JUMP_BACK = range(6)
@@ -145,6 +176,27 @@ def estimator_params(
     prm[_STATIC_FRONT] = static[0]
     prm[_STATIC_REAR] = static[2]
     prm[_TORQUE_SOURCE] = torque_source
+    m = config.mass
+    on = config.mass_adaptation and torque_source == TORQUE_MEASURED
+    prm[_M_ON] = 1.0 if on else 0.0
+    prm[_M_TAU] = m.mass_tau
+    prm[_M_GRADE_TAU] = m.grade_tau
+    prm[_M_FILTER_TAU] = m.filter_tau
+    prm[_M_NOISE] = m.accel_noise_density
+    prm[_M_STD_RATIO] = m.initial_mass_std_ratio
+    prm[_M_MIN_SPEED] = m.min_speed
+    prm[_M_SLOPE_MIN_SPEED] = m.slope_min_speed
+    prm[_M_MIN_ACCEL] = m.min_accel
+    prm[_M_MIN_FORCE] = m.min_force_ratio
+    prm[_M_MIN_CHANGE] = m.min_force_change_ratio
+    prm[_M_MAX_RATE] = m.max_force_rate
+    prm[_M_THETA_MIN] = 1.0 / (vehicle.mass * m.mass_max_ratio)
+    prm[_M_THETA_MAX] = 1.0 / (vehicle.mass * m.mass_min_ratio)
+    prm[_M_CONV_RATIO] = m.converged_std_ratio
+    prm[_M_MIN_EXC_TIME] = m.min_excited_time
+    prm[_M_MAX_SINE] = math.sin(m.max_slope)
+    prm[_M_MAX_GAP] = m.max_gap
+    prm[_M_WARMUP] = 3.0 * (2.0 * m.filter_tau + m.grade_tau)  # MassGradeEstimator.warmup
     return prm
 
 
@@ -157,7 +209,8 @@ class EstimatorState:
 
     def __init__(self, order: int) -> None:
         """Zeroed state for filters of `order` stages."""
-        self.scal = np.zeros(3)
+        self.scal = np.zeros(N_SCAL)
+        self.scal[_M_THETA] = math.nan  # the online mass is set from prm at its first update
         self.held = np.zeros(14)
         self.f_stages = np.zeros((order, 5))
         self.f_prev = np.zeros(5)
@@ -278,6 +331,170 @@ def _empty(prm: FloatArray, t: float, est: FloatArray) -> None:
     est[E_FZ + 2] = prm[_STATIC_REAR]
     est[E_FZ + 3] = prm[_STATIC_REAR]
     est[E_TORQUE_SOURCE] = prm[_TORQUE_SOURCE]
+    _mass_fresh_out(prm, est)
+
+
+@jit
+def _mass_fresh_out(prm: FloatArray, est: FloatArray) -> None:
+    """The mass fields before any update (`Estimator._fixed_mass` after a reset)."""
+    m0 = prm[_MASS]
+    est[E_MASS_CONVERGED] = 0.0
+    est[E_MASS_USED] = m0
+    est[E_MASS_EXCITED] = 0.0
+    if prm[_M_ON] == 0.0:
+        est[E_MASS] = m0
+        est[E_MASS_STD] = 0.0
+        return
+    theta = 1.0 / m0
+    sigma = prm[_M_STD_RATIO] / m0
+    est[E_MASS] = 1.0 / theta
+    est[E_MASS_STD] = math.sqrt(max(sigma * sigma, 0.0)) / (theta * theta)
+
+
+@jit
+def _mass_reset(prm: FloatArray, scal: FloatArray) -> None:
+    """`MassGradeEstimator.reset`: nominal 1/m and prior variance, filters empty."""
+    m0 = prm[_MASS]
+    scal[_M_T] = math.nan
+    scal[_M_LP_ON] = 0.0
+    scal[_M_F_SLOW] = math.nan
+    scal[_M_Y_SLOW] = math.nan
+    scal[_M_SLOPE] = 0.0
+    scal[_M_EXC_T] = 0.0
+    scal[_M_RUN] = 0.0
+    scal[_M_CONV] = 0.0
+    scal[_M_THETA] = 1.0 / m0
+    sigma = prm[_M_STD_RATIO] / m0
+    scal[_M_COV] = sigma * sigma
+    scal[_M_HAS_LAST] = 0.0
+
+
+@jit
+def _mass_out(prm: FloatArray, scal: FloatArray, excited: bool, est: FloatArray) -> None:
+    """`MassGradeEstimator._estimate` (its mass fields) into ``est``."""
+    theta = scal[_M_THETA]
+    mass = 1.0 / theta
+    est[E_MASS] = mass
+    est[E_MASS_STD] = math.sqrt(max(scal[_M_COV], 0.0)) / (theta * theta)
+    est[E_MASS_CONVERGED] = scal[_M_CONV]
+    est[E_MASS_USED] = mass if scal[_M_CONV] != 0.0 else prm[_MASS]
+    est[E_MASS_EXCITED] = 1.0 if excited else 0.0
+
+
+@jit
+def _mass_held(prm: FloatArray, scal: FloatArray, est: FloatArray) -> None:
+    """`MassGradeEstimator.current`: the last estimate, or the fresh one."""
+    if scal[_M_HAS_LAST] != 0.0:
+        for j in range(5):
+            est[E_MASS + j] = scal[_M_LAST + j]
+    else:
+        _mass_out(prm, scal, False, est)
+
+
+@jit
+def _mass_update(
+    prm: FloatArray, scal: FloatArray, t: float, sum_fx: float, speed: float, est: FloatArray
+) -> bool:
+    """`MassGradeEstimator.update` (its mass fields into ``est``); returns whether the
+    mass clamp acted (the caller counts 'mass_clamped'). Squares are products on both
+    sides: numba's ``x ** 2`` and CPython's pow() differ in the last bit."""
+    if math.isnan(scal[_M_THETA]):
+        _mass_reset(prm, scal)
+    if not (math.isfinite(sum_fx) and math.isfinite(speed)):
+        _mass_held(prm, scal, est)
+        return False
+    # faults.classify_stamp (t is finite: the estimator took it)
+    last = scal[_M_T]
+    dt = 0.0
+    if not math.isnan(last):
+        dt = t - last
+        if dt == 0.0 or (dt < 0.0 and -dt <= prm[_M_MAX_GAP]):
+            _mass_held(prm, scal, est)
+            return False
+        if dt < 0.0 or dt > prm[_M_MAX_GAP]:
+            _mass_reset(prm, scal)
+            dt = 0.0
+    scal[_M_T] = t
+    gravity = prm[_GRAVITY]
+    m0 = prm[_MASS]
+    weight = m0 * gravity
+    direction = 1.0 if speed >= 0.0 else -1.0
+    force = sum_fx - direction * prm[_DRAG] * speed * speed
+    if dt == 0.0 or scal[_M_LP_ON] == 0.0:
+        scal[_M_LP_ON] = 1.0
+        scal[_M_F1] = force
+        scal[_M_F2] = force
+        scal[_M_V1] = speed
+        scal[_M_V2] = speed
+        accel = 0.0
+        force_rate = 0.0
+    else:
+        tau = prm[_M_FILTER_TAU]
+        w = 1.0 if tau <= 0.0 else -math.expm1(-dt / tau)
+        f1, f2, v1, v2 = scal[_M_F1], scal[_M_F2], scal[_M_V1], scal[_M_V2]
+        f1 += w * (force - f1)
+        f2_new = f2 + w * (f1 - f2)
+        v1 += w * (speed - v1)
+        v2_new = v2 + w * (v1 - v2)
+        accel = (v2_new - v2) / dt
+        force_rate = (f2_new - f2) / dt
+        scal[_M_F1], scal[_M_F2], scal[_M_V1], scal[_M_V2] = f1, f2_new, v1, v2_new
+    f_lp, v_lp = scal[_M_F2], scal[_M_V2]
+    c_r = prm[_C0] * (1.0 + prm[_C1] * abs(v_lp) / _KMH_REFERENCE)
+    y = accel + direction * gravity * c_r * math.cos(scal[_M_SLOPE])
+    if dt == 0.0 or math.isnan(scal[_M_F_SLOW]):
+        scal[_M_F_SLOW], scal[_M_Y_SLOW] = f_lp, y
+    else:
+        w_slow = -math.expm1(-dt / prm[_M_GRADE_TAU])
+        scal[_M_F_SLOW] += w_slow * (f_lp - scal[_M_F_SLOW])
+        scal[_M_Y_SLOW] += w_slow * (y - scal[_M_Y_SLOW])
+    f_hp = f_lp - scal[_M_F_SLOW]
+    y_hp = y - scal[_M_Y_SLOW]
+    scal[_M_RUN] += dt
+    excited = (
+        dt > 0.0
+        and scal[_M_RUN] >= prm[_M_WARMUP]
+        and abs(speed) >= prm[_M_MIN_SPEED]
+        and (abs(accel) >= prm[_M_MIN_ACCEL] or abs(f_lp) >= prm[_M_MIN_FORCE] * weight)
+        and abs(f_hp) >= prm[_M_MIN_CHANGE] * weight
+        and abs(force_rate) <= prm[_M_MAX_RATE] * weight
+    )
+    clamped = False
+    if excited:
+        # mass_grade.rls_step with one parameter, every product in the reference's order
+        tau = prm[_M_TAU]
+        lam = 1.0 if math.isinf(tau) or dt <= 0.0 else math.exp(-dt / tau)
+        d = 1.0 / math.sqrt(lam)
+        p = scal[_M_COV] * (d * d)
+        noise_var = prm[_M_NOISE] * prm[_M_NOISE] / dt
+        theta = scal[_M_THETA]
+        p_phi = p * f_hp
+        k = p_phi / (f_hp * p_phi + noise_var)
+        innovation = y_hp - f_hp * theta
+        a = 1.0 - k * f_hp
+        p_new = a * p * a + noise_var * (k * k)
+        p_new = 0.5 * (p_new + p_new)
+        theta_new = theta + k * innovation
+        if math.isfinite(theta_new) and math.isfinite(p_new):
+            if not prm[_M_THETA_MIN] <= theta_new <= prm[_M_THETA_MAX]:
+                clamped = True
+                theta_new = min(max(theta_new, prm[_M_THETA_MIN]), prm[_M_THETA_MAX])
+            scal[_M_THETA], scal[_M_COV] = theta_new, p_new
+        scal[_M_EXC_T] += dt
+        theta = scal[_M_THETA]
+        std = math.sqrt(max(scal[_M_COV], 0.0)) / (theta * theta)
+        if scal[_M_EXC_T] >= prm[_M_MIN_EXC_TIME] and std * scal[_M_THETA] <= prm[_M_CONV_RATIO]:
+            scal[_M_CONV] = 1.0
+    if abs(speed) >= prm[_M_SLOPE_MIN_SPEED]:
+        m_used = 1.0 / scal[_M_THETA] if scal[_M_CONV] != 0.0 else m0
+        sine = (f_lp / m_used - y) / gravity
+        bound = prm[_M_MAX_SINE]
+        scal[_M_SLOPE] = math.asin(min(max(sine, -bound), bound))
+    _mass_out(prm, scal, excited, est)
+    for j in range(5):
+        scal[_M_LAST + j] = est[E_MASS + j]
+    scal[_M_HAS_LAST] = 1.0
+    return clamped
 
 
 @jit
@@ -292,6 +509,7 @@ def estimator_reset(
     scal[0] = math.nan
     scal[1] = 0.0
     scal[2] = 0.0
+    scal[_M_THETA] = math.nan  # the online mass starts again (from prm) at the next update
     held[:] = 0.0
     f_meta[:] = 0.0
     s_meta[:] = 0.0
@@ -320,9 +538,26 @@ def _estimate(
     est: FloatArray,
 ) -> None:
     """`Estimator._estimate` into the packed estimate ``est``."""
-    mass, gravity, radius = prm[_MASS], prm[_GRAVITY], prm[_RADIUS]
+    gravity, radius = prm[_GRAVITY], prm[_RADIUS]
     v = x[12]
     accel = x[13]
+    no_torque = int(prm[_TORQUE_SOURCE]) == TORQUE_NONE
+    fx_raw = np.zeros(4)
+    if not no_torque:
+        for i in range(4):
+            inertia = prm[_J_FRONT] if i < 2 else prm[_J_REAR]
+            fx_raw[i] = (x[8 + i] - inertia * x[4 + i]) / radius
+    fx_sum = fx_raw[0] + fx_raw[1] + fx_raw[2] + fx_raw[3]
+    # the online mass (Estimator._mass_step) first: the rest uses mass_used
+    if prm[_M_ON] != 0.0:
+        ok = body_ok and wheel_ok[0] and wheel_ok[1] and wheel_ok[2] and wheel_ok[3]
+        if _mass_update(prm, scal, t, fx_sum if ok else math.nan, v, est):
+            counts[_MASS_CLAMPED] += 1
+        if not ok:
+            est[E_MASS_EXCITED] = 0.0
+    else:
+        _mass_fresh_out(prm, est)
+    mass = est[E_MASS_USED]
     reg = prm[_REG]
     direction = math.tanh(v / reg) if reg > 0.0 else (1.0 if v > 0 else (-1.0 if v < 0 else v))
     aero = prm[_DRAG] * v * v
@@ -331,14 +566,6 @@ def _estimate(
     slope_prev = scal[1]
     cos_prev, sin_prev = math.cos(slope_prev), math.sin(slope_prev)
     weight = mass * gravity
-    no_torque = int(prm[_TORQUE_SOURCE]) == TORQUE_NONE
-
-    fx_raw = np.zeros(4)
-    if not no_torque:
-        for i in range(4):
-            inertia = prm[_J_FRONT] if i < 2 else prm[_J_REAR]
-            fx_raw[i] = (x[8 + i] - inertia * x[4 + i]) / radius
-    fx_sum = fx_raw[0] + fx_raw[1] + fx_raw[2] + fx_raw[3]
     rolling_sum = c_roll * weight * cos_prev
     if int(prm[_LT_CODE]) == 0 and not no_torque:
         ground = fx_sum - direction * rolling_sum
@@ -533,6 +760,11 @@ def estimates_from_packed(est: FloatArray) -> Estimates:
         slope=float(est[E_SLOPE]),
         slope_valid=bool(est[E_SLOPE_VALID] != 0.0),
         torque_source=int(est[E_TORQUE_SOURCE]),
+        mass=float(est[E_MASS]),
+        mass_std=float(est[E_MASS_STD]),
+        mass_converged=bool(est[E_MASS_CONVERGED] != 0.0),
+        mass_used=float(est[E_MASS_USED]),
+        mass_excited=bool(est[E_MASS_EXCITED] != 0.0),
     )
 
 
