@@ -107,7 +107,7 @@ def test_the_per_stamp_chains_with_mass_adaptation() -> None:
     for k in range(len(rec.t)):
         args = (float(rec.t[k]), rec.angle[k], float(rec.speed[k]), rec.torque[k])
         p, q = python.update(*args).estimates, compiled.update(*args).estimates
-        for f in MASS_FIELDS + ('fz', 'mu', 'slope'):
+        for f in (*MASS_FIELDS, 'fz', 'mu', 'slope'):
             assert_close(getattr(q, f), getattr(p, f), f)
         converged |= p.mass_converged
     assert converged
