@@ -31,6 +31,7 @@ from vd_sim_node.ros_common import (
 )
 from vd_sim_node.topics import (
     ESTIMATES_FRICTION,
+    ESTIMATES_MASS,
     ESTIMATES_RESISTANCES,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
@@ -40,7 +41,7 @@ from vd_sim_node.topics import (
 )
 from vd_sim_node.vehicle.params import default_vehicle_file
 
-from vd_msgs.msg import Friction, Resistances, Slope, TireForces, WheelStates
+from vd_msgs.msg import Friction, MassEstimate, Resistances, Slope, TireForces, WheelStates
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.faults import merge_reports, summarise
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
@@ -60,6 +61,7 @@ from vd_observer_node.raw_io import (
     aligned_input,
     input_matcher,
     mapped_input,
+    mass_values,
     merge_status,
 )
 
@@ -125,6 +127,7 @@ class EstimatorNode(Node):
         self.pub_friction = self.create_publisher(Friction, ESTIMATES_FRICTION, STREAM_QOS)
         self.pub_resist = self.create_publisher(Resistances, ESTIMATES_RESISTANCES, STREAM_QOS)
         self.pub_slope = self.create_publisher(Slope, ESTIMATES_SLOPE, STREAM_QOS)
+        self.pub_mass = self.create_publisher(MassEstimate, ESTIMATES_MASS, STREAM_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._codec = Encoders()
         self.counts = {
@@ -197,6 +200,9 @@ class EstimatorNode(Node):
             codec('vd_msgs/msg/Slope', frame).encode(
                 stamp_ns, [float(est.slope), bool(est.slope_valid), est.torque_source]
             )
+        )
+        self.pub_mass.publish(
+            codec('vd_msgs/msg/MassEstimate', frame).encode(stamp_ns, mass_values(est))
         )
 
     def publish_diagnostics(self) -> None:

@@ -48,6 +48,7 @@ from vd_sim_node.topics import (
     ESTIMATES_ALERTS,
     ESTIMATES_FRICTION,
     ESTIMATES_FRICTION_POTENTIAL,
+    ESTIMATES_MASS,
     ESTIMATES_RESISTANCES,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
@@ -61,6 +62,7 @@ from vd_msgs.msg import (
     Alerts,
     Friction,
     FrictionPotential,
+    MassEstimate,
     Resistances,
     Slope,
     TireForces,
@@ -87,6 +89,7 @@ from vd_observer_node.raw_io import (
     InputWatch,
     input_matcher,
     mapped_input,
+    mass_values,
     merge_status,
 )
 from vd_observer_node.situation.alerts import AlertConfig
@@ -104,6 +107,7 @@ _OUTPUTS = (
     ('friction', Friction, ESTIMATES_FRICTION, 'vd_msgs/msg/Friction'),
     ('resistances', Resistances, ESTIMATES_RESISTANCES, 'vd_msgs/msg/Resistances'),
     ('slope', Slope, ESTIMATES_SLOPE, 'vd_msgs/msg/Slope'),
+    ('mass', MassEstimate, ESTIMATES_MASS, 'vd_msgs/msg/MassEstimate'),
     (
         'potential',
         FrictionPotential,
@@ -279,6 +283,7 @@ class PipelineNode(Node):
         pubs['slope'].publish(
             codec('slope', frame).encode(stamp_ns, [e.slope, e.slope_valid, e.torque_source])
         )
+        pubs['mass'].publish(codec('mass', frame).encode(stamp_ns, mass_values(e)))
         pot = sit.potential
         pubs['potential'].publish(
             codec('potential', frame).encode(

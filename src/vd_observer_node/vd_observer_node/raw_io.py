@@ -21,6 +21,7 @@ from typing import Any
 from vd_observer_node.bag.cdr_message import AlertsCodec, MessageCodec
 from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.estimation.alignment import LatestAligner, StampAligner
+from vd_observer_node.estimation.estimator import Estimates
 from vd_observer_node.estimation.faults import ERROR, OK, WARN
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
@@ -34,9 +35,16 @@ __all__ = [
     'aligned_input',
     'input_matcher',
     'mapped_input',
+    'mass_values',
     'matched_inputs',
     'merge_status',
 ]
+
+
+def mass_values(est: Estimates) -> list[float | bool]:
+    """The vd_msgs/MassEstimate fields of one estimate, in CDR order (`MessageCodec.encode`):
+    mass [kg], mass_std [kg], mass_used [kg], converged, excited."""
+    return [est.mass, est.mass_std, est.mass_used, est.mass_converged, est.mass_excited]
 
 
 class Encoders:

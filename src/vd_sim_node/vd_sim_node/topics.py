@@ -19,6 +19,7 @@ __all__ = [
     'ESTIMATES_ALERTS',
     'ESTIMATES_FRICTION',
     'ESTIMATES_FRICTION_POTENTIAL',
+    'ESTIMATES_MASS',
     'ESTIMATES_NAMESPACE',
     'ESTIMATES_RESISTANCES',
     'ESTIMATES_SLOPE',
@@ -67,6 +68,7 @@ ESTIMATES_TIRE_FORCES: Final = '/vd/estimates/tire_forces'
 ESTIMATES_FRICTION: Final = '/vd/estimates/friction'
 ESTIMATES_RESISTANCES: Final = '/vd/estimates/resistances'
 ESTIMATES_SLOPE: Final = '/vd/estimates/slope'
+ESTIMATES_MASS: Final = '/vd/estimates/mass'
 # The alerts node's outputs.
 ESTIMATES_ALERTS: Final = '/vd/estimates/alerts'
 ESTIMATES_FRICTION_POTENTIAL: Final = '/vd/estimates/friction_potential'
@@ -95,6 +97,7 @@ ESTIMATES: Final = {
     ESTIMATES_FRICTION: 'vd_msgs/msg/Friction',
     ESTIMATES_RESISTANCES: 'vd_msgs/msg/Resistances',
     ESTIMATES_SLOPE: 'vd_msgs/msg/Slope',
+    ESTIMATES_MASS: 'vd_msgs/msg/MassEstimate',
 }
 ALERTS: Final = {
     ESTIMATES_ALERTS: 'vd_msgs/msg/Alerts',

@@ -41,6 +41,7 @@ _MAX_TAIL = 8
 
 VD_MSG_TYPES = (
     'vd_msgs/msg/Friction',
+    'vd_msgs/msg/MassEstimate',
     'vd_msgs/msg/Resistances',
     'vd_msgs/msg/Slope',
     'vd_msgs/msg/TireForces',

@@ -41,6 +41,7 @@ from vd_sim_node.topics import (
     ESTIMATES_ALERTS,
     ESTIMATES_FRICTION,
     ESTIMATES_FRICTION_POTENTIAL,
+    ESTIMATES_MASS,
     ESTIMATES_RESISTANCES,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
@@ -259,6 +260,13 @@ def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str,
             'angle': result.slope,
             'valid': result.slope_valid,
             'torque_source': source,
+        },
+        ESTIMATES_MASS: {
+            'mass': result.mass,
+            'mass_std': result.mass_std,
+            'mass_used': result.mass_used,
+            'converged': result.mass_converged,
+            'excited': result.mass_excited,
         },
     }
 
