@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_MEASURED, TORQUE_NONE
 from vd_observer_node.estimation.estimator import Estimates, Estimator, EstimatorConfig
 from vd_observer_node.estimation.mass_grade import MassGradeConfig
+from vd_observer_node.tools.replay import load_replay_config
 
 M0 = VEHICLE.mass
 G = VEHICLE.gravity
@@ -186,3 +188,19 @@ def test_mass_settings_from_a_flat_or_nested_mapping() -> None:
         EstimatorConfig.from_mapping({'mass.nope': 1.0})
     with pytest.raises(ConfigurationError, match='mass_min_ratio'):
         EstimatorConfig.from_mapping({'mass.mass_min_ratio': 1.5})
+
+
+def test_vd_replay_config_takes_the_mass_settings(tmp_path: Path) -> None:
+    path = tmp_path / 'replay.yaml'
+    path.write_text(
+        'estimator:\n  mass_adaptation: true\n  mass:\n    min_speed: 2.0\n'
+        '  mass.grade_tau: 0.4\n',
+        encoding='utf-8',
+    )
+    config = load_replay_config(path).estimator
+    assert config == EstimatorConfig(
+        mass_adaptation=True, mass=MassGradeConfig(min_speed=2.0, grade_tau=0.4)
+    )
+    path.write_text('estimator:\n  mass:\n    min_speeed: 2.0\n', encoding='utf-8')
+    with pytest.raises(ConfigurationError, match='min_speeed'):
+        load_replay_config(path)
