@@ -21,7 +21,7 @@ from typing import Any
 from vd_observer_node.bag.cdr_message import AlertsCodec, MessageCodec
 from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.estimation.alignment import LatestAligner, StampAligner
-from vd_observer_node.estimation.estimator import Estimates
+from vd_observer_node.estimation.estimator import MASS_MESSAGE_FIELDS, Estimates
 from vd_observer_node.estimation.faults import ERROR, OK, WARN
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
@@ -44,7 +44,7 @@ __all__ = [
 def mass_values(est: Estimates) -> list[float | bool]:
     """The vd_msgs/MassEstimate fields of one estimate, in CDR order (`MessageCodec.encode`):
     mass [kg], mass_std [kg], mass_used [kg], converged, excited."""
-    return [est.mass, est.mass_std, est.mass_used, est.mass_converged, est.mass_excited]
+    return [getattr(est, attr) for _, attr in MASS_MESSAGE_FIELDS]
 
 
 class Encoders:

@@ -49,6 +49,7 @@ from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
 __all__ = [
     'LOAD_TRANSFER_SOURCES',
+    'MASS_MESSAGE_FIELDS',
     'MASS_PREFIX',
     'SLOPE_ACCEL_SOURCES',
     'Estimates',
@@ -64,6 +65,15 @@ LOAD_TRANSFER_SOURCES: Final = ('tire_forces', 'acceleration')
 SLOPE_ACCEL_SOURCES: Final = ('speed', 'observer')
 #: Prefix of the online mass settings in a flat mapping (`EstimatorConfig.from_mapping`).
 MASS_PREFIX: Final = 'mass.'
+#: The online mass as published (vd_msgs/MassEstimate): each field after the header, in CDR
+#: order, and the attribute of `Estimates` (and `cascade.CascadeResult`) it carries.
+MASS_MESSAGE_FIELDS: Final = (
+    ('mass', 'mass'),
+    ('mass_std', 'mass_std'),
+    ('mass_used', 'mass_used'),
+    ('converged', 'mass_converged'),
+    ('excited', 'mass_excited'),
+)
 
 
 @dataclass(frozen=True)

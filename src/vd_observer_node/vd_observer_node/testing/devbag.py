@@ -41,6 +41,7 @@ from vd_observer_node.bag.alerts_cdr import ALERTS_TYPE as _ALERTS_TYPE
 from vd_observer_node.bag.alerts_cdr import encode_alerts
 from vd_observer_node.bag.cdr_batch import encode_batch
 from vd_observer_node.bag.writer import BagWriter
+from vd_observer_node.estimation.estimator import MASS_MESSAGE_FIELDS
 from vd_observer_node.tools.report.topics import (
     ALERT_TOPICS,
     ESTIMATE_TOPICS,
@@ -258,11 +259,5 @@ def cascade_topics(result: Any, wheel_angle: np.ndarray) -> dict[str, dict[str, 
             'valid': result.slope_valid,
             'torque_source': source,
         },
-        ESTIMATES_MASS: {
-            'mass': result.mass,
-            'mass_std': result.mass_std,
-            'mass_used': result.mass_used,
-            'converged': result.mass_converged,
-            'excited': result.mass_excited,
-        },
+        ESTIMATES_MASS: {field: getattr(result, attr) for field, attr in MASS_MESSAGE_FIELDS},
     }

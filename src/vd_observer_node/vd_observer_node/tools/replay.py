@@ -67,7 +67,7 @@ from vd_observer_node.estimation.drivetrain import (
     engine_wheel_torques_record,
     torque_source_code,
 )
-from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.estimation.estimator import MASS_MESSAGE_FIELDS, EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.decode import (
@@ -261,13 +261,7 @@ def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str,
             'valid': result.slope_valid,
             'torque_source': source,
         },
-        ESTIMATES_MASS: {
-            'mass': result.mass,
-            'mass_std': result.mass_std,
-            'mass_used': result.mass_used,
-            'converged': result.mass_converged,
-            'excited': result.mass_excited,
-        },
+        ESTIMATES_MASS: {field: getattr(result, attr) for field, attr in MASS_MESSAGE_FIELDS},
     }
 
 
