@@ -23,6 +23,7 @@ from test_kernel import (
 from test_mass_estimator import _inputs
 from test_mass_grade import _drive
 from vd_observer_node.chain import ChainSettings, PythonChain
+from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_MEASURED, TORQUE_NONE
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.mass_grade import MassGradeConfig
 from vd_observer_node.kernel.chain import CompiledChain
@@ -42,7 +43,13 @@ PINNED = EstimatorConfig(
 MASS_FIELDS = ('mass', 'mass_std', 'mass_converged', 'mass_used', 'mass_excited')
 
 
-def _both(config: EstimatorConfig, mass: float, duration: float, jump: bool = False) -> Estimator:
+def _both(
+    config: EstimatorConfig,
+    mass: float,
+    duration: float,
+    jump: bool = False,
+    source: int = TORQUE_MEASURED,
+) -> Estimator:
     """Reference and compiled estimator on one synthetic drive; bit-equal outputs."""
     t, omega, omega_dot, v, torque = _inputs(_drive(mass, duration=duration))
     accel = np.gradient(v, t)
@@ -57,7 +64,8 @@ def _both(config: EstimatorConfig, mass: float, duration: float, jump: bool = Fa
         )
     torque = torque.copy()
     torque[5000:5100:3, 2] = math.nan  # held inputs: no mass update there
-    reference, compiled = Estimator(VEHICLE, config), CompiledEstimator(VEHICLE, config)
+    reference = Estimator(VEHICLE, config, source)
+    compiled = CompiledEstimator(VEHICLE, config, source)
     for k in range(t.size):
         args = (float(t[k]), omega[k], omega_dot[k], float(v[k]), float(accel[k]), torque[k])
         p, q = reference.update(*args), compiled.update(*args)
@@ -111,3 +119,10 @@ def test_the_per_stamp_chains_with_mass_adaptation() -> None:
             assert_close(getattr(q, f), getattr(p, f), f)
         converged |= p.mass_converged
     assert converged
+
+
+@pytest.mark.parametrize('source', [TORQUE_ENGINE, TORQUE_NONE])
+def test_without_measured_torques_both_keep_the_files_mass(source: int) -> None:
+    reference = _both(EstimatorConfig(mass_adaptation=True), M0 + 300.0, 8.0, source=source)
+    assert reference.last is not None and reference.last.mass_used == M0
+    assert reference.last.mass_std == 0.0
