@@ -7,11 +7,14 @@ collected in :attr:`BagReader.problems` instead: a damaged chunk whose framing i
 skipped and reading goes on; damaged framing ends the file.
 
 Messages come in file order (chunk by chunk), which is log-time order for bags recorded live.
-The whole MCAP file is read into memory (fine for bags up to a few GB).
+Files are memory-mapped, and the pages behind the read position are handed back to the OS as
+the scan goes on, so a pass over a bag of any size holds a bounded part of it in memory;
+:meth:`BagReader.topic_array_blocks` gives the messages in blocks for the same reason.
 """
 
 from __future__ import annotations
 
+import mmap
 import os
 import struct
 import zlib
@@ -40,6 +43,16 @@ __all__ = [
 _PREFIX = fmt.RECORD_PREFIX
 _MAX_CHUNK = 1 << 31  # [B] refuse to inflate a chunk claiming more (damaged size field)
 _KNOWN_OPS = frozenset(int(op) for op in fmt.Op)
+#: [B] read pages are given back to the OS in steps of this size (bounded resident memory)
+_RELEASE_STEP = 32 << 20
+
+
+def _map_file(file: Path) -> bytes | mmap.mmap:
+    """The file's bytes, memory-mapped (b'' for an empty file, which mmap refuses)."""
+    with file.open('rb') as handle:
+        if os.fstat(handle.fileno()).st_size == 0:
+            return b''
+        return mmap.mmap(handle.fileno(), 0, access=mmap.ACCESS_READ)
 
 
 class RawMessage(NamedTuple):
@@ -150,7 +163,7 @@ class _FileScan:
     def __init__(
         self,
         path: Path,
-        buf: bytes,
+        buf: bytes | mmap.mmap,
         *,
         recover: bool,
         problems: list[BagCorruptError],
@@ -167,6 +180,19 @@ class _FileScan:
         self.channel_counts: dict[int, int] = {}
         self.reached_end = False
         self._decompressors = _Decompressors()
+        self._released = 0
+
+    def _release(self, upto: int) -> None:
+        """Give the mapped pages before byte ``upto`` back to the OS (they are re-read from
+        the page cache if touched again), so resident memory does not grow with the file."""
+        buf = self.buf
+        if not isinstance(buf, mmap.mmap) or upto - self._released < _RELEASE_STEP:
+            return
+        start = self._released - self._released % mmap.PAGESIZE
+        stop = upto - upto % mmap.PAGESIZE
+        if stop > start and hasattr(buf, 'madvise'):
+            buf.madvise(mmap.MADV_DONTNEED, start, stop - start)
+        self._released = upto
 
     def _damage(self, offset: int, reason: str) -> None:
         """Report damage: raise in strict mode, collect in recover mode."""
@@ -264,6 +290,7 @@ class _FileScan:
                 self._damage(pos, 'footer before the data end record')
                 return
             pos = end
+            self._release(pos)
 
     def _count(self, channel_id: int, offset: int) -> bool:
         if channel_id not in self.channels:
@@ -439,10 +466,23 @@ class _FileScan:
     def _data_end(self, offset: int, body: memoryview) -> None:
         if len(body) >= 4:
             (crc,) = struct.unpack_from('<I', body)
-            if crc and zlib.crc32(memoryview(self.buf)[:offset]) != crc:
+            if crc and self._crc(offset) != crc:
                 self._damage(offset, 'data section CRC mismatch')
         self.reached_end = True
         self._check_tail(offset)
+
+    def _crc(self, stop: int) -> int:
+        """CRC-32 of bytes [0, stop), in steps whose pages are released after use."""
+        crc = 0
+        self._released = 0
+        view = memoryview(self.buf)
+        try:
+            for start in range(0, stop, _RELEASE_STEP):
+                crc = zlib.crc32(view[start : min(start + _RELEASE_STEP, stop)], crc)
+                self._release(min(start + _RELEASE_STEP, stop))
+        finally:
+            view.release()
+        return crc
 
     def _check_tail(self, data_end_offset: int) -> None:
         """Check the footer and, when present, the summary statistics against what was read."""
@@ -598,7 +638,7 @@ class BagReader:
     def _scans(self, problems: list[BagCorruptError] | None = None) -> Iterator[_FileScan]:
         for file in self.files:
             try:
-                buf = file.read_bytes()
+                buf = _map_file(file)
             except OSError as exc:
                 raise BagNotFoundError(f'{file}: cannot read: {exc.strerror or exc}') from exc
             yield _FileScan(
