@@ -28,7 +28,12 @@ import numpy as np
 import zstandard
 
 from vd_observer_node.bag import mcap_format as fmt
-from vd_observer_node.bag.errors import BagCorruptError, BagFormatError, BagNotFoundError
+from vd_observer_node.bag.errors import (
+    BagCorruptError,
+    BagFormatError,
+    BagNotFoundError,
+    BagUsageError,
+)
 from vd_observer_node.bag.metadata import read_metadata_file_paths
 from vd_observer_node.bag.typestore import decoding_type, deserialize, register_definition
 
@@ -634,6 +639,8 @@ class BagReader:
         self.recover = recover
         self.problems: list[BagCorruptError] = []
         self._topics: dict[str, TopicInfo] | None = None
+        #: damage found by the pass of :attr:`topics` (kept for the passes after it)
+        self._topic_problems: list[BagCorruptError] = []
 
     def _scans(self, problems: list[BagCorruptError] | None = None) -> Iterator[_FileScan]:
         for file in self.files:
@@ -721,10 +728,38 @@ class BagReader:
 
     def topic_arrays(self, topics: Iterable[str] | None = None) -> dict[str, TopicArrays]:
         """All messages grouped per topic (for batch processing such as offline replay)."""
+        return next(self.topic_array_blocks(topics, block_messages=None), {})
+
+    def topic_array_blocks(
+        self, topics: Iterable[str] | None = None, *, block_messages: int | None = 65536
+    ) -> Iterator[dict[str, TopicArrays]]:
+        """The selected messages grouped per topic, in blocks of about `block_messages`.
+
+        Blocks follow file order (chunk by chunk, file by file): a block ends at the first
+        chunk boundary after `block_messages` selected messages, so it holds at most that
+        many plus one chunk's worth, whatever the bag's size; together with the released
+        pages of the memory map this bounds the resident memory of a pass. A topic appears
+        in a block only if the block has messages of it. Concatenated, the blocks are
+        :meth:`topic_arrays` (tested).
+
+        Args:
+            topics: topic names to keep; None keeps all.
+            block_messages: messages per block (>= 1); None: one block with everything.
+                An empty selection gives no block.
+
+        Raises:
+            BagUsageError: block_messages < 1.
+            BagCorruptError: damage found (strict mode), after the blocks before it.
+            BagFormatError: a file is not MCAP.
+        """
+        if block_messages is not None and block_messages < 1:
+            raise BagUsageError(f'block_messages must be >= 1, got {block_messages}')
         selected = None if topics is None else set(topics)
         times: dict[str, list[np.ndarray]] = {}
         datas: dict[str, list[bytes]] = {}
         types: dict[str, str] = {}
+        held = 0
+        infos = self.topics  # before the scan: a first pass must not add its damage twice
         self.problems.clear()
         for scan in self._scans():
             select = _ChannelSelector(scan, selected)
@@ -733,7 +768,8 @@ class BagReader:
                 for channel_id in channels:
                     topic, msgtype = select.names[channel_id]
                     if topic not in times:
-                        times[topic], datas[topic], types[topic] = [], [], msgtype
+                        times[topic], datas[topic] = [], []
+                        types.setdefault(topic, msgtype)
                     if len(channels) == 1:
                         times[topic].append(batch.log)
                         datas[topic].extend(batch.datas)
@@ -741,7 +777,21 @@ class BagReader:
                         members = np.flatnonzero(batch.channel == channel_id)
                         times[topic].append(batch.log[members])
                         datas[topic].extend([batch.datas[k] for k in members.tolist()])
-        infos = self.topics
+                held += len(batch.datas)
+                if block_messages is not None and held >= block_messages:
+                    yield self._block(times, datas, types, infos)
+                    times, datas, held = {}, {}, 0
+        self._add_problems(self._topic_problems)
+        if times:
+            yield self._block(times, datas, types, infos)
+
+    @staticmethod
+    def _block(
+        times: dict[str, list[np.ndarray]],
+        datas: dict[str, list[bytes]],
+        types: dict[str, str],
+        infos: dict[str, TopicInfo],
+    ) -> dict[str, TopicArrays]:
         return {
             t: TopicArrays(
                 types[t],
@@ -764,11 +814,14 @@ class BagReader:
                         pass
                 scans.append(scan)
             self._topics = self._topic_infos(scans)
-            known = {(str(p.path), p.offset, p.reason) for p in self.problems}
-            self.problems.extend(
-                p for p in found if (str(p.path), p.offset, p.reason) not in known
-            )
+            self._topic_problems = found
+            self._add_problems(found)
         return self._topics
+
+    def _add_problems(self, found: list[BagCorruptError]) -> None:
+        """Add to :attr:`problems` those of `found` not yet in it (same file, offset, reason)."""
+        known = {(str(p.path), p.offset, p.reason) for p in self.problems}
+        self.problems.extend(p for p in found if (str(p.path), p.offset, p.reason) not in known)
 
     @staticmethod
     def _topic_infos(scans: list[_FileScan]) -> dict[str, TopicInfo]:
