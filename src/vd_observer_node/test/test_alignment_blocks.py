@@ -71,15 +71,16 @@ def test_blocks_give_the_sets_of_the_whole_record(seed: int, blocks: int, alignm
 
 def test_samples_wait_for_the_other_inputs() -> None:
     aligner = BlockAligner(2, 'exact', 0.1)
-    common, out = aligner.push([np.array([1, 2, 3]), np.zeros(0, dtype=np.int64)],
-                               [{'v': np.array([10, 20, 30])}, {'v': np.zeros(0)}])  # fmt: skip
+    none = np.zeros(0, dtype=np.int64)
+    common, out = aligner.push(
+        [np.array([1, 2, 3]), none], [{'v': np.array([10, 20, 30])}, {'v': none}]
+    )
     assert len(common) == 0 and aligner.carried == 3
-    common, out = aligner.push([np.zeros(0, dtype=np.int64), np.array([2, 3])],
-                               [{'v': np.zeros(0, dtype=np.int64)}, {'v': np.array([5, 6])}])  # fmt: skip
+    common, out = aligner.push([none, np.array([2, 3])], [{'v': none}, {'v': np.array([5, 6])}])
     # 2 is final (both inputs are at 3 or later); 3 may still get a repeat
     np.testing.assert_array_equal(common, [2])
     np.testing.assert_array_equal(out[0]['v'], [20])
-    common, out = aligner.push([np.zeros(0, dtype=np.int64)] * 2, [{}, {}], final=True)
+    common, out = aligner.push([none, none], [{}, {}], final=True)
     np.testing.assert_array_equal(common, [3])
     assert aligner.used == [2, 2] and aligner.carried == 0
 
