@@ -363,6 +363,10 @@ class BlockAligner:
         self.stale = 0
         self.used = [0] * inputs
 
+    def held(self, k: int) -> dict[str, np.ndarray]:
+        """The payload columns of input `k`'s samples carried to the next block."""
+        return self._columns[k]
+
     @property
     def carried(self) -> int:
         """Samples held for the next block (all inputs)."""
@@ -410,9 +414,7 @@ class BlockAligner:
             # the driving stamps that are final, with every sample of the others: the newest
             # not-later one of each is among them
             drive = np.flatnonzero(ready[0])
-            found = align_latest(
-                [self._stamps[0][drive], *self._stamps[1:]], self._max_age_ns
-            )
+            found = align_latest([self._stamps[0][drive], *self._stamps[1:]], self._max_age_ns)
             indexes = [drive[found.indexes[0]], *found.indexes[1:]]
             keep = [~ready[0], *(self._held_after(k, ready[k], final) for k in range(1, n))]
         else:
