@@ -119,6 +119,27 @@ def test_python_kernel_in_tiny_blocks_equals_one_block(vd_bag: Path, tmp_path: P
     _check(vd_bag, tmp_path, kernel='python', situation=False)
 
 
+def test_a_bag_out_of_log_time_order_is_replayed_as_one_block(
+    vd_bag: Path, tmp_path: Path
+) -> None:
+    """A truth topic appended after the rest of the drive (earlier log times later in the
+    file): the streamed replay notices and starts again in one block, same output."""
+    reader = BagReader(vd_bag)
+    last = next(t for t in reader.topics if t.startswith('/vd/truth/'))
+    bag = tmp_path / 'appended'
+    with BagWriter(bag, chunk_size=CHUNK) as writer:
+        for name, info in reader.topics.items():
+            writer.add_topic(name, info.msgtype, info.qos_profiles_yaml)
+        for m in reader.raw_messages():
+            if m.topic != last:
+                writer.write(m.topic, m.data, m.log_time_ns)
+        for m in reader.raw_messages([last]):
+            writer.write(m.topic, m.data, m.log_time_ns)
+    _check(bag, tmp_path)
+    logs = [log for _, log, _ in _messages(tmp_path / 'tiny')]
+    assert logs == sorted(logs)
+
+
 def test_a_failed_replay_leaves_no_output(vd_bag: Path, tmp_path: Path) -> None:
     from vd_observer_node.errors import ConfigurationError
 

@@ -473,18 +473,20 @@ def replay_bag(
     estimator_vehicle = vehicle or EstimatorVehicle.from_params(params)
     if source == 'engine' and drivetrain is None:
         drivetrain = Drivetrain.from_params(params)
-    monitor = None
-    if situation:
-        tire = params.tire
-        monitor_class: Any = SituationMonitor
-        if compiled:
-            from vd_observer_node.kernel.chain import warm_up
-            from vd_observer_node.kernel.situation import CompiledSituationMonitor
+    curves = TyreCurves.from_tire(params.tire)
+    monitor_class: Any = SituationMonitor
+    if situation and compiled:
+        from vd_observer_node.kernel.chain import warm_up
+        from vd_observer_node.kernel.situation import CompiledSituationMonitor
 
-            monitor_class = CompiledSituationMonitor
-            warm_up(TyreCurves.from_tire(tire))
-        monitor = monitor_class(
-            TyreCurves.from_tire(tire),
+        monitor_class = CompiledSituationMonitor
+        warm_up(curves)
+
+    def new_monitor() -> Any:
+        if not situation:
+            return None
+        return monitor_class(
+            curves,
             estimator_vehicle.static_wheel_loads[[0, 2]],
             estimator_vehicle.effective_radius,
             observer=observer_config,
@@ -492,6 +494,7 @@ def replay_bag(
             friction=friction_config,
             situation=situation_config,
         )
+
     extra = dict(cascade_kwargs or {})
     clash = sorted({'torque_source', 'engine', 'drivetrain', 'state'} & set(extra))
     if clash:
@@ -501,17 +504,20 @@ def replay_bag(
     torque_kwargs: dict[str, Any] = {}
     if source != 'measured':  # the default call stays as it was (injected cascades)
         torque_kwargs = {'torque_source': source, 'drivetrain': drivetrain}
-    run = _Run(
-        mapping=mapping,
-        cascade=cascade,
-        vehicle=estimator_vehicle,
-        observer_config=observer_config,
-        estimator_config=estimator_config,
-        cascade_kwargs={**torque_kwargs, **extra},
-        drivetrain=drivetrain if source == 'engine' else None,
-        monitor=monitor,
-        compiled=compiled,
-    )
+
+    def new_run() -> _Run:
+        return _Run(
+            mapping=mapping,
+            cascade=cascade,
+            vehicle=estimator_vehicle,
+            observer_config=observer_config,
+            estimator_config=estimator_config,
+            cascade_kwargs={**torque_kwargs, **extra},
+            drivetrain=drivetrain if source == 'engine' else None,
+            monitor=new_monitor(),
+            compiled=compiled,
+        )
+
     raw_topics = [*inputs, *truth]
     total_in = sum(topics[t].message_count for t in raw_topics)
     bar = tqdm(
@@ -525,46 +531,84 @@ def replay_bag(
     # The per-stamp monitor costs ~20x a message read or written: a bar of its own in
     # samples (at most one per wheel message), so the message bar's rate stays true.
     phase = tqdm(
-        total=topics[mapping.wheels.topic].message_count if monitor is not None else 0,
+        total=topics[mapping.wheels.topic].message_count if situation else 0,
         unit='sample',
         unit_scale=True,
         desc='alerts',
-        disable=not progress or monitor is None,
+        disable=not progress or not situation,
         file=sys.stderr,
         position=1,
         leave=False,
     )
     existed = target.exists()
-    try:
-        with bar, phase, BagWriter(out_bag) as writer:
-            merged = _MergedWriter(writer, topics, len(raw_topics), bar)
-            for topic in raw_topics:
-                merged.declare(topic, topics[topic].msgtype)
-            blocks = reader.topic_array_blocks(raw_topics, block_messages=block_messages)
-            for arrays in blocks:
-                bar.update(sum(len(a.datas) for a in arrays.values()))
-                for topic in raw_topics:
-                    arr = arrays.get(topic)
-                    if arr is not None:
-                        # a bag recorded before a vd_msgs field was added: copied in today's
-                        # layout, so the output holds one definition per type
-                        datas = upgrade_batch(arr.msgtype, arr.decoding_type, arr.datas)
-                        merged.add(topic, arr.msgtype, arr.log_time_ns, datas)
-                run.block(arrays, merged, phase, final=False)
-                # what comes next is logged at or after the newest log time read (bags are
-                # in log-time order), the estimates of the carried stamps at their wheel
-                # message's log time: everything before both is final
-                merged.flush(min(run.carried_log_ns(), merged.newest_ns))
-            run.block({}, merged, phase, final=True)
-            merged.flush(None)
-    except BaseException:
+
+    def clear() -> None:
         # no half-written output: a new attempt must not find the folder taken
         shutil.rmtree(target, ignore_errors=True)
         if existed:
             target.mkdir(parents=True, exist_ok=True)
+
+    try:
+        with bar, phase:
+            run = new_run()
+            try:
+                written = _stream(reader, out_bag, run, raw_topics, bar, phase, block_messages)
+            except _OutOfOrderError:
+                # The files are not in log-time order (e.g. a topic appended after the rest):
+                # what was written cannot take what comes. Start again with the whole bag in
+                # one block, as before streaming (memory then grows with the bag).
+                clear()
+                bar.reset(total=2 * total_in)
+                phase.reset(total=phase.total)
+                run = new_run()
+                written = _stream(reader, out_bag, run, raw_topics, bar, phase, None)
+    except BaseException:
+        clear()
         raise
     wall = time.perf_counter() - started
-    return run.report(merged.written, wall)
+    return run.report(written, wall)
+
+
+class _OutOfOrderError(Exception):
+    """A message logged before what the streamed replay already wrote (internal signal)."""
+
+
+def _stream(
+    reader: BagReader,
+    out_bag: str | os.PathLike[str],
+    run: _Run,
+    raw_topics: list[str],
+    bar: Any,
+    phase: Any,
+    block_messages: int | None,
+) -> int:
+    """Replay the bag block by block into `out_bag`; the number of messages written.
+
+    Raises:
+        _OutOfOrderError: the bag's files are not in log-time order (with more than one block).
+    """
+    topics = reader.topics
+    with BagWriter(out_bag) as writer:
+        merged = _MergedWriter(writer, topics, len(raw_topics), bar)
+        for topic in raw_topics:
+            merged.declare(topic, topics[topic].msgtype)
+        for arrays in reader.topic_array_blocks(raw_topics, block_messages=block_messages):
+            bar.update(sum(len(a.datas) for a in arrays.values()))
+            for topic in raw_topics:
+                arr = arrays.get(topic)
+                if arr is not None:
+                    # a bag recorded before a vd_msgs field was added: copied in today's
+                    # layout, so the output holds one definition per type
+                    datas = upgrade_batch(arr.msgtype, arr.decoding_type, arr.datas)
+                    merged.add(topic, arr.msgtype, arr.log_time_ns, datas)
+            run.block(arrays, merged, phase, final=False)
+            # what comes next is logged at or after the newest log time read (bags are in
+            # log-time order; checked by `merged.add`), the estimates of the carried stamps at
+            # their wheel message's log time: everything before both is final
+            merged.flush(min(run.carried_log_ns(), merged.newest_ns))
+        run.block({}, merged, phase, final=True)
+        merged.flush(None)
+    return merged.written
 
 
 class _MergedWriter:
@@ -589,6 +633,7 @@ class _MergedWriter:
         self._seq: list[np.ndarray] = []
         self._datas: list[bytes] = []
         self.newest_ns = -1  # [ns] newest log time of an input or truth message added
+        self._flushed = -1  # [ns] everything logged before this was written
         self.written = 0
 
     def declare(self, topic: str, msgtype: str) -> int:
@@ -603,10 +648,16 @@ class _MergedWriter:
         return k
 
     def add(self, topic: str, msgtype: str, log_ns: np.ndarray, datas: list[bytes]) -> None:
-        """Hold messages of one topic (in their order) until they can be written."""
+        """Hold messages of one topic (in their order) until they can be written.
+
+        Raises:
+            _OutOfOrderError: an input or truth message logged before what was written.
+        """
         k = self.declare(topic, msgtype)
         n = len(datas)
         log = np.asarray(log_ns, dtype=np.int64)
+        if k < self._raw and n and int(log.min()) < self._flushed:
+            raise _OutOfOrderError(topic)
         self._log.append(log)
         self._which.append(np.full(n, k, dtype=np.int64))
         self._seq.append(np.arange(self._counts[k], self._counts[k] + n, dtype=np.int64))
@@ -623,6 +674,8 @@ class _MergedWriter:
         which = np.concatenate(self._which)
         seq = np.concatenate(self._seq)
         ready = np.ones(len(log), dtype=bool) if before_ns is None else log < before_ns
+        if before_ns is not None:
+            self._flushed = max(self._flushed, before_ns)
         order = np.flatnonzero(ready)
         order = order[np.lexsort((seq[order], which[order], log[order]))]
         datas = self._datas
