@@ -16,7 +16,9 @@ from typing import Any
 import numpy as np
 import pytest
 from vd_observer_node.bag import BagReader, BagWriter
-from vd_observer_node.inputs.mapping import mapping_from_dict
+from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.inputs.decode import decode_engine, decode_input, input_stats
+from vd_observer_node.inputs.mapping import ENGINE_INPUT, default_mapping, mapping_from_dict
 from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
 from vd_observer_node.testing.standard_bags import (
     STANDARD_MAPPING,
@@ -104,6 +106,20 @@ def test_vd_topics_in_tiny_blocks_equal_one_block(
 ) -> None:
     report = _check(vd_bag, tmp_path, torque_source=source)
     assert report.samples == 1201
+    # the input summary, accumulated per block, is `input_stats` of each whole input
+    mapping = dataclasses.replace(default_mapping(), torque_source=source)
+    arrays = BagReader(vd_bag).topic_arrays([s.topic for s in mapping.used_specs])
+    expected = tuple(
+        input_stats(
+            spec,
+            decode_engine(spec, arrays[spec.topic])
+            if spec.name == ENGINE_INPUT
+            else decode_input(spec, arrays[spec.topic]),
+            ObserverConfig().max_gap,
+        )
+        for spec in mapping.used_specs
+    )
+    assert report.inputs == expected
     if source == 'engine':  # the clutch slip and the upshift are in the drive
         assert 0.0 < report.torque_valid_fraction < 1.0
 
