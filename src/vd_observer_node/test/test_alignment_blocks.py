@@ -7,6 +7,8 @@ samples used are those of one call on everything.
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -85,8 +87,43 @@ def test_samples_wait_for_the_other_inputs() -> None:
     assert aligner.used == [2, 2] and aligner.carried == 0
 
 
+@pytest.mark.parametrize('alignment', ['exact', 'latest'])
+def test_a_stopped_input_holds_the_others_no_longer_than_max_wait(alignment: str) -> None:
+    """The second input stops for most of the record: with max_wait the carry stays small
+    and the sets are still those of the whole record (blocks cut at common stamps)."""
+    drive = np.arange(0, 30_000, 10, dtype=np.int64)
+    other = np.arange(0, 30_000, 30, dtype=np.int64) + (3 if alignment == 'latest' else 0)
+    other = other[(other < 5_000) | (other >= 25_000)]  # stopped from 5 to 25 us
+    stamps = [drive, other]
+    whole = align_stamps(stamps, alignment, max_age=5e-8)
+    carried: dict[float | None, int] = {}
+    for wait in (2e-6, None):
+        aligner = BlockAligner(2, alignment, 5e-8, max_wait=wait)
+        got: list[np.ndarray] = []
+        index: list[list[np.ndarray]] = [[], []]
+        most = 0
+        edges = np.arange(0, 30_500, 500)
+        for b, (lo, hi) in enumerate(itertools.pairwise(edges)):
+            parts = [s[(s >= lo) & (s < hi)] for s in stamps]
+            columns = [{'i': np.flatnonzero((s >= lo) & (s < hi))} for s in stamps]
+            common, out = aligner.push(parts, columns, final=b == len(edges) - 2)
+            got.append(common)
+            for k in range(2):
+                index[k].append(out[k]['i'])
+            most = max(most, aligner.carried)
+        np.testing.assert_array_equal(np.concatenate(got), whole.stamp_ns)
+        for k in range(2):
+            np.testing.assert_array_equal(np.concatenate(index[k]), whole.indexes[k])
+        assert aligner.stale == whole.stale
+        carried[wait] = most
+    # 2 us + one block of 0.5 us: at most ~250 + 85 samples; without limit the 20 us gap's
+    assert carried[2e-6] < 400 < 1500 < carried[None]
+
+
 def test_configuration_errors() -> None:
     with pytest.raises(ConfigurationError, match='alignment'):
         BlockAligner(2, 'nearest', 0.1)
     with pytest.raises(ConfigurationError, match='inputs'):
         BlockAligner(0, 'exact', 0.1)
+    with pytest.raises(ConfigurationError, match='max_wait'):
+        BlockAligner(2, 'exact', 0.1, max_wait=0.0)

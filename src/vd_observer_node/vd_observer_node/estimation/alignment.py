@@ -331,22 +331,33 @@ class BlockAligner:
     Samples carry payload columns (any arrays whose first axis is the sample), returned at the
     matched samples, so the caller needs no indexes into its own blocks.
 
+    With ``max_wait``, an input that has fallen more than that behind the most advanced one
+    (stopped, or not started yet) holds nobody: stamps older than the newest stamp of any
+    input minus ``max_wait`` are final too, so the carry stays bounded by ``max_wait`` of
+    samples. The sets are still those of `align_stamps` unless an input delivers a sample
+    more than ``max_wait`` after another input delivered a later stamp (a late sample: not
+    matched any more, as above).
+
     Attributes:
         stale: 'latest': driving stamps dropped so far (`Alignment.stale`).
         used: per input, samples that went into a set so far (each counted once, also a held
             sample that serves several driving stamps).
     """
 
-    def __init__(self, inputs: int, alignment: str, max_age: float) -> None:
+    def __init__(
+        self, inputs: int, alignment: str, max_age: float, max_wait: float | None = None
+    ) -> None:
         """Create the aligner.
 
         Args:
             inputs: number of inputs (>= 1; the first drives with 'latest').
             alignment: one of `ALIGNMENTS`.
             max_age: [s] the oldest a held sample may be ('latest').
+            max_wait: [s] > 0, the longest an input is waited for (class docstring); None:
+                without limit.
 
         Raises:
-            ConfigurationError: unknown policy, or no input.
+            ConfigurationError: unknown policy, no input, or max_wait <= 0.
         """
         if alignment not in ALIGNMENTS:
             raise ConfigurationError(
@@ -354,8 +365,11 @@ class BlockAligner:
             )
         if inputs < 1:
             raise ConfigurationError(f'inputs must be >= 1, got {inputs}')
+        if max_wait is not None and not max_wait > 0:
+            raise ConfigurationError(f'max_wait must be > 0, got {max_wait}')
         self._latest = alignment == 'latest'
         self._max_age_ns = round(max_age * 1e9)
+        self._max_wait_ns = None if max_wait is None else round(max_wait * 1e9)
         self._stamps: list[IntArray] = [np.zeros(0, dtype=np.int64) for _ in range(inputs)]
         self._columns: list[dict[str, np.ndarray]] = [{} for _ in range(inputs)]
         self._used: list[BoolArray] = [np.zeros(0, dtype=bool) for _ in range(inputs)]
@@ -402,14 +416,17 @@ class BlockAligner:
             for name, value in columns[k].items():
                 held = self._columns[k].get(name)
                 self._columns[k][name] = value if held is None else np.concatenate([held, value])
-        newest = self._newest
+        known = [v for v in self._newest if v is not None]
         if final:
             ready = [np.ones(len(s), dtype=bool) for s in self._stamps]
-        elif any(v is None for v in newest):
+        elif not known:
             ready = [np.zeros(len(s), dtype=bool) for s in self._stamps]
         else:
-            horizon = min(v for v in newest if v is not None)
-            ready = [s < horizon for s in self._stamps]
+            # final: what every input has passed (an input with nothing yet holds all) ...
+            lowest = min(known) if len(known) == len(self._newest) else np.iinfo(np.int64).min
+            if self._max_wait_ns is not None:  # ... or what one input passed long ago
+                lowest = max(lowest, max(known) - self._max_wait_ns)
+            ready = [s < lowest for s in self._stamps]
         if self._latest and n > 1:
             # the driving stamps that are final, with every sample of the others: the newest
             # not-later one of each is among them

@@ -97,6 +97,7 @@ __all__ = [
     'ALERT_TOPICS',
     'BLOCK_MESSAGES',
     'ESTIMATE_TOPICS',
+    'MAX_WAIT_S',
     'SENSOR_TOPICS',
     'TRUTH_PREFIX',
     'ReplayConfig',
@@ -114,6 +115,9 @@ ALERT_TOPICS = dict(ALERTS)
 _WRITE_BLOCK = 65536  # messages per vectorized write (and progress-bar update)
 #: messages read per block by default: bounds the replay's memory (docs/bags.md)
 BLOCK_MESSAGES = 1 << 17
+#: [s] an input whose stamps fall this far behind another's (stopped) holds the others no
+#: longer (`BlockAligner` max_wait): bounds the carry between blocks
+MAX_WAIT_S = 10.0
 _SITUATION_BLOCK = 1000  # samples per progress-bar update of the situation phase
 
 
@@ -756,7 +760,9 @@ class _Run:
         self.monitor = monitor
         self.compiled = compiled
         self.state = CascadeState()
-        self.aligner = BlockAligner(len(self.used), mapping.alignment, mapping.max_age)
+        self.aligner = BlockAligner(
+            len(self.used), mapping.alignment, mapping.max_age, max_wait=MAX_WAIT_S
+        )
         self.gaps = [_GapStats(s, observer_config.max_gap) for s in self.used]
         self.frame_id: str | None = None
         self.samples = 0
