@@ -40,7 +40,7 @@ from vd_sim_node.topics import (
 )
 
 
-def _null_cascade(t: np.ndarray, angle: np.ndarray, *_: object) -> CascadeResult:
+def _null_cascade(t: np.ndarray, angle: np.ndarray, *_: object, **__: object) -> CascadeResult:
     """Zero estimates of the right shapes: isolates the bag pipeline's own cost."""
     n = len(t)
     w = np.zeros((n, 4))

@@ -7,11 +7,14 @@ collected in :attr:`BagReader.problems` instead: a damaged chunk whose framing i
 skipped and reading goes on; damaged framing ends the file.
 
 Messages come in file order (chunk by chunk), which is log-time order for bags recorded live.
-The whole MCAP file is read into memory (fine for bags up to a few GB).
+Files are memory-mapped, and the pages behind the read position are handed back to the OS as
+the scan goes on, so a pass over a bag of any size holds a bounded part of it in memory;
+:meth:`BagReader.topic_array_blocks` gives the messages in blocks for the same reason.
 """
 
 from __future__ import annotations
 
+import mmap
 import os
 import struct
 import zlib
@@ -25,7 +28,12 @@ import numpy as np
 import zstandard
 
 from vd_observer_node.bag import mcap_format as fmt
-from vd_observer_node.bag.errors import BagCorruptError, BagFormatError, BagNotFoundError
+from vd_observer_node.bag.errors import (
+    BagCorruptError,
+    BagFormatError,
+    BagNotFoundError,
+    BagUsageError,
+)
 from vd_observer_node.bag.metadata import read_metadata_file_paths
 from vd_observer_node.bag.typestore import decoding_type, deserialize, register_definition
 
@@ -40,6 +48,16 @@ __all__ = [
 _PREFIX = fmt.RECORD_PREFIX
 _MAX_CHUNK = 1 << 31  # [B] refuse to inflate a chunk claiming more (damaged size field)
 _KNOWN_OPS = frozenset(int(op) for op in fmt.Op)
+#: [B] read pages are given back to the OS in steps of this size (bounded resident memory)
+_RELEASE_STEP = 32 << 20
+
+
+def _map_file(file: Path) -> bytes | mmap.mmap:
+    """The file's bytes, memory-mapped (b'' for an empty file, which mmap refuses)."""
+    with file.open('rb') as handle:
+        if os.fstat(handle.fileno()).st_size == 0:
+            return b''
+        return mmap.mmap(handle.fileno(), 0, access=mmap.ACCESS_READ)
 
 
 class RawMessage(NamedTuple):
@@ -150,7 +168,7 @@ class _FileScan:
     def __init__(
         self,
         path: Path,
-        buf: bytes,
+        buf: bytes | mmap.mmap,
         *,
         recover: bool,
         problems: list[BagCorruptError],
@@ -167,6 +185,19 @@ class _FileScan:
         self.channel_counts: dict[int, int] = {}
         self.reached_end = False
         self._decompressors = _Decompressors()
+        self._released = 0
+
+    def _release(self, upto: int) -> None:
+        """Give the mapped pages before byte ``upto`` back to the OS (they are re-read from
+        the page cache if touched again), so resident memory does not grow with the file."""
+        buf = self.buf
+        if not isinstance(buf, mmap.mmap) or upto - self._released < _RELEASE_STEP:
+            return
+        start = self._released - self._released % mmap.PAGESIZE
+        stop = upto - upto % mmap.PAGESIZE
+        if stop > start and hasattr(buf, 'madvise'):
+            buf.madvise(mmap.MADV_DONTNEED, start, stop - start)
+        self._released = upto
 
     def _damage(self, offset: int, reason: str) -> None:
         """Report damage: raise in strict mode, collect in recover mode."""
@@ -264,6 +295,7 @@ class _FileScan:
                 self._damage(pos, 'footer before the data end record')
                 return
             pos = end
+            self._release(pos)
 
     def _count(self, channel_id: int, offset: int) -> bool:
         if channel_id not in self.channels:
@@ -439,10 +471,23 @@ class _FileScan:
     def _data_end(self, offset: int, body: memoryview) -> None:
         if len(body) >= 4:
             (crc,) = struct.unpack_from('<I', body)
-            if crc and zlib.crc32(memoryview(self.buf)[:offset]) != crc:
+            if crc and self._crc(offset) != crc:
                 self._damage(offset, 'data section CRC mismatch')
         self.reached_end = True
         self._check_tail(offset)
+
+    def _crc(self, stop: int) -> int:
+        """CRC-32 of bytes [0, stop), in steps whose pages are released after use."""
+        crc = 0
+        self._released = 0
+        view = memoryview(self.buf)
+        try:
+            for start in range(0, stop, _RELEASE_STEP):
+                crc = zlib.crc32(view[start : min(start + _RELEASE_STEP, stop)], crc)
+                self._release(min(start + _RELEASE_STEP, stop))
+        finally:
+            view.release()
+        return crc
 
     def _check_tail(self, data_end_offset: int) -> None:
         """Check the footer and, when present, the summary statistics against what was read."""
@@ -594,11 +639,13 @@ class BagReader:
         self.recover = recover
         self.problems: list[BagCorruptError] = []
         self._topics: dict[str, TopicInfo] | None = None
+        #: damage found by the pass of :attr:`topics` (kept for the passes after it)
+        self._topic_problems: list[BagCorruptError] = []
 
     def _scans(self, problems: list[BagCorruptError] | None = None) -> Iterator[_FileScan]:
         for file in self.files:
             try:
-                buf = file.read_bytes()
+                buf = _map_file(file)
             except OSError as exc:
                 raise BagNotFoundError(f'{file}: cannot read: {exc.strerror or exc}') from exc
             yield _FileScan(
@@ -681,10 +728,38 @@ class BagReader:
 
     def topic_arrays(self, topics: Iterable[str] | None = None) -> dict[str, TopicArrays]:
         """All messages grouped per topic (for batch processing such as offline replay)."""
+        return next(self.topic_array_blocks(topics, block_messages=None), {})
+
+    def topic_array_blocks(
+        self, topics: Iterable[str] | None = None, *, block_messages: int | None = 65536
+    ) -> Iterator[dict[str, TopicArrays]]:
+        """The selected messages grouped per topic, in blocks of about `block_messages`.
+
+        Blocks follow file order (chunk by chunk, file by file): a block ends at the first
+        chunk boundary after `block_messages` selected messages, so it holds at most that
+        many plus one chunk's worth, whatever the bag's size; together with the released
+        pages of the memory map this bounds the resident memory of a pass. A topic appears
+        in a block only if the block has messages of it. Concatenated, the blocks are
+        :meth:`topic_arrays` (tested).
+
+        Args:
+            topics: topic names to keep; None keeps all.
+            block_messages: messages per block (>= 1); None: one block with everything.
+                An empty selection gives no block.
+
+        Raises:
+            BagUsageError: block_messages < 1.
+            BagCorruptError: damage found (strict mode), after the blocks before it.
+            BagFormatError: a file is not MCAP.
+        """
+        if block_messages is not None and block_messages < 1:
+            raise BagUsageError(f'block_messages must be >= 1, got {block_messages}')
         selected = None if topics is None else set(topics)
         times: dict[str, list[np.ndarray]] = {}
         datas: dict[str, list[bytes]] = {}
         types: dict[str, str] = {}
+        held = 0
+        infos = self.topics  # before the scan: a first pass must not add its damage twice
         self.problems.clear()
         for scan in self._scans():
             select = _ChannelSelector(scan, selected)
@@ -693,7 +768,8 @@ class BagReader:
                 for channel_id in channels:
                     topic, msgtype = select.names[channel_id]
                     if topic not in times:
-                        times[topic], datas[topic], types[topic] = [], [], msgtype
+                        times[topic], datas[topic] = [], []
+                        types.setdefault(topic, msgtype)
                     if len(channels) == 1:
                         times[topic].append(batch.log)
                         datas[topic].extend(batch.datas)
@@ -701,7 +777,21 @@ class BagReader:
                         members = np.flatnonzero(batch.channel == channel_id)
                         times[topic].append(batch.log[members])
                         datas[topic].extend([batch.datas[k] for k in members.tolist()])
-        infos = self.topics
+                held += len(batch.datas)
+                if block_messages is not None and held >= block_messages:
+                    yield self._block(times, datas, types, infos)
+                    times, datas, held = {}, {}, 0
+        self._add_problems(self._topic_problems)
+        if times:
+            yield self._block(times, datas, types, infos)
+
+    @staticmethod
+    def _block(
+        times: dict[str, list[np.ndarray]],
+        datas: dict[str, list[bytes]],
+        types: dict[str, str],
+        infos: dict[str, TopicInfo],
+    ) -> dict[str, TopicArrays]:
         return {
             t: TopicArrays(
                 types[t],
@@ -724,11 +814,14 @@ class BagReader:
                         pass
                 scans.append(scan)
             self._topics = self._topic_infos(scans)
-            known = {(str(p.path), p.offset, p.reason) for p in self.problems}
-            self.problems.extend(
-                p for p in found if (str(p.path), p.offset, p.reason) not in known
-            )
+            self._topic_problems = found
+            self._add_problems(found)
         return self._topics
+
+    def _add_problems(self, found: list[BagCorruptError]) -> None:
+        """Add to :attr:`problems` those of `found` not yet in it (same file, offset, reason)."""
+        known = {(str(p.path), p.offset, p.reason) for p in self.problems}
+        self.problems.extend(p for p in found if (str(p.path), p.offset, p.reason) not in known)
 
     @staticmethod
     def _topic_infos(scans: list[_FileScan]) -> dict[str, TopicInfo]:

@@ -14,7 +14,7 @@ the replay), and the two give the same sets on the same data:
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any, Final, NamedTuple
 
 import numpy as np
@@ -25,6 +25,7 @@ from vd_observer_node.errors import ConfigurationError
 __all__ = [
     'ALIGNMENTS',
     'Alignment',
+    'BlockAligner',
     'LatestAligner',
     'StampAligner',
     'align_exact',
@@ -33,6 +34,7 @@ __all__ = [
 ]
 
 IntArray = NDArray[np.int64]
+BoolArray = NDArray[np.bool_]
 #: Alignment policies (module docstring).
 ALIGNMENTS: Final = ('exact', 'latest')
 
@@ -313,3 +315,150 @@ def align_stamps(stamps: list[IntArray], alignment: str, max_age: float) -> Alig
     if alignment == 'latest':
         return align_latest(stamps, round(max_age * 1e9))
     raise ConfigurationError(f'alignment {alignment!r} is unknown (use one of {ALIGNMENTS})')
+
+
+class BlockAligner:
+    """`align_stamps` over inputs given in blocks (the streamed replay), with bounded carry.
+
+    Each :meth:`push` adds a block of samples per input and returns the sets that can no
+    longer change; the other samples are carried to the next block, never dropped. A stamp is
+    final once every input has delivered a later one (the horizon: the smallest of the
+    inputs' newest stamps), as `LatestAligner` waits live. With each input's stamps
+    non-decreasing in arrival order, the sets of all blocks together are those of
+    `align_stamps` on the whole record, in the same order (tested); a sample arriving after
+    the horizon passed its stamp is not matched any more (it stays unused, as live).
+
+    Samples carry payload columns (any arrays whose first axis is the sample), returned at the
+    matched samples, so the caller needs no indexes into its own blocks.
+
+    With ``max_wait``, an input that has fallen more than that behind the most advanced one
+    (stopped, or not started yet) holds nobody: stamps older than the newest stamp of any
+    input minus ``max_wait`` are final too, so the carry stays bounded by ``max_wait`` of
+    samples. The sets are still those of `align_stamps` unless an input delivers a sample
+    more than ``max_wait`` after another input delivered a later stamp (a late sample: not
+    matched any more, as above).
+
+    Attributes:
+        stale: 'latest': driving stamps dropped so far (`Alignment.stale`).
+        used: per input, samples that went into a set so far (each counted once, also a held
+            sample that serves several driving stamps).
+    """
+
+    def __init__(
+        self, inputs: int, alignment: str, max_age: float, max_wait: float | None = None
+    ) -> None:
+        """Create the aligner.
+
+        Args:
+            inputs: number of inputs (>= 1; the first drives with 'latest').
+            alignment: one of `ALIGNMENTS`.
+            max_age: [s] the oldest a held sample may be ('latest').
+            max_wait: [s] > 0, the longest an input is waited for (class docstring); None:
+                without limit.
+
+        Raises:
+            ConfigurationError: unknown policy, no input, or max_wait <= 0.
+        """
+        if alignment not in ALIGNMENTS:
+            raise ConfigurationError(
+                f'alignment {alignment!r} is unknown (use one of {ALIGNMENTS})'
+            )
+        if inputs < 1:
+            raise ConfigurationError(f'inputs must be >= 1, got {inputs}')
+        if max_wait is not None and not max_wait > 0:
+            raise ConfigurationError(f'max_wait must be > 0, got {max_wait}')
+        self._latest = alignment == 'latest'
+        self._max_age_ns = round(max_age * 1e9)
+        self._max_wait_ns = None if max_wait is None else round(max_wait * 1e9)
+        self._stamps: list[IntArray] = [np.zeros(0, dtype=np.int64) for _ in range(inputs)]
+        self._columns: list[dict[str, np.ndarray]] = [{} for _ in range(inputs)]
+        self._used: list[BoolArray] = [np.zeros(0, dtype=bool) for _ in range(inputs)]
+        self._newest: list[int | None] = [None] * inputs
+        self.stale = 0
+        self.used = [0] * inputs
+
+    def held(self, k: int) -> dict[str, np.ndarray]:
+        """The payload columns of input `k`'s samples carried to the next block."""
+        return self._columns[k]
+
+    @property
+    def carried(self) -> int:
+        """Samples held for the next block (all inputs)."""
+        return sum(len(s) for s in self._stamps)
+
+    def push(
+        self,
+        stamps: Sequence[IntArray],
+        columns: Sequence[Mapping[str, np.ndarray]],
+        final: bool = False,
+    ) -> tuple[IntArray, list[dict[str, np.ndarray]]]:
+        """Add one block per input; return the sets now final.
+
+        Args:
+            stamps: per input, shape (N_i,), int64 [ns], in arrival order (N_i may be 0).
+            columns: per input, payload arrays of first dimension N_i (the same names in
+                every block of an input).
+            final: the last block: everything carried is aligned now.
+
+        Returns:
+            The sets' stamps (shape (M,), int64 [ns], sorted, as `Alignment.stamp_ns`) and,
+            per input, its payload columns at each set's sample (first dimension M).
+        """
+        n = len(self._stamps)
+        for k in range(n):
+            block = np.asarray(stamps[k], dtype=np.int64)
+            if block.size:
+                top = int(block.max())
+                old = self._newest[k]
+                self._newest[k] = top if old is None else max(old, top)
+            self._stamps[k] = np.concatenate([self._stamps[k], block])
+            self._used[k] = np.concatenate([self._used[k], np.zeros(block.size, dtype=bool)])
+            for name, value in columns[k].items():
+                held = self._columns[k].get(name)
+                self._columns[k][name] = value if held is None else np.concatenate([held, value])
+        known = [v for v in self._newest if v is not None]
+        if final:
+            ready = [np.ones(len(s), dtype=bool) for s in self._stamps]
+        elif not known:
+            ready = [np.zeros(len(s), dtype=bool) for s in self._stamps]
+        else:
+            # final: what every input has passed (an input with nothing yet holds all) ...
+            lowest = min(known) if len(known) == len(self._newest) else np.iinfo(np.int64).min
+            if self._max_wait_ns is not None:  # ... or what one input passed long ago
+                lowest = max(lowest, max(known) - self._max_wait_ns)
+            ready = [s < lowest for s in self._stamps]
+        if self._latest and n > 1:
+            # the driving stamps that are final, with every sample of the others: the newest
+            # not-later one of each is among them
+            drive = np.flatnonzero(ready[0])
+            found = align_latest([self._stamps[0][drive], *self._stamps[1:]], self._max_age_ns)
+            indexes = [drive[found.indexes[0]], *found.indexes[1:]]
+            keep = [~ready[0], *(self._held_after(k, ready[k], final) for k in range(1, n))]
+        else:
+            picked = [np.flatnonzero(r) for r in ready]
+            found = align_exact([s[p] for s, p in zip(self._stamps, picked, strict=True)])
+            indexes = [p[i] for p, i in zip(picked, found.indexes, strict=True)]
+            keep = [~r for r in ready]
+        self.stale += found.stale
+        out = []
+        for k in range(n):
+            self._used[k][indexes[k]] = True
+            out.append({name: v[indexes[k]] for name, v in self._columns[k].items()})
+            drop = ~keep[k]
+            self.used[k] += int(np.count_nonzero(self._used[k][drop]))
+            self._stamps[k] = self._stamps[k][keep[k]]
+            self._used[k] = self._used[k][keep[k]]
+            self._columns[k] = {name: v[keep[k]] for name, v in self._columns[k].items()}
+        return found.stamp_ns, out
+
+    def _held_after(self, k: int, ready: BoolArray, final: bool) -> BoolArray:
+        """The samples of a held ('latest') input still needed: those not final and the
+        newest final one (what `align_latest` holds for the next driving stamps)."""
+        keep = ~ready
+        if final or not ready.any():
+            return keep
+        stamps = self._stamps[k]
+        below = np.flatnonzero(ready)
+        order = np.argsort(stamps[below], kind='stable')
+        keep[below[order[-1]]] = True
+        return keep

@@ -7,6 +7,7 @@ offline figures are those the nodes would produce on the same stamps.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -23,7 +24,7 @@ from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.observer import Observer, ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
-__all__ = ['CascadeResult', 'checked_engine', 'checked_record', 'run_cascade']
+__all__ = ['CascadeResult', 'CascadeState', 'checked_engine', 'checked_record', 'run_cascade']
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -88,6 +89,24 @@ class CascadeResult:
     mass_converged: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     mass_used: FloatArray = field(default_factory=lambda: np.zeros(0))
     mass_excited: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+
+
+@dataclass
+class CascadeState:
+    """What one call of a cascade function hands to the next, so a record can be run in blocks.
+
+    Pass a fresh state to the first call of `run_cascade` (or
+    :func:`vd_observer_node.kernel.chain.run_cascade_compiled`) and the same one to the calls
+    on the following blocks: the first call stores its observers, estimator and torque path
+    here and the later ones go on from them, so the blocks give what one call on the whole
+    record gives (tested). The settings of the first call hold for the later ones; a state
+    belongs to one function (kernel) and one record.
+
+    Attributes:
+        parts: the function's state objects (None before the first call).
+    """
+
+    parts: tuple[Any, ...] | None = None
 
 
 def checked_record(
@@ -156,6 +175,7 @@ def run_cascade(
     torque_source: str = 'measured',
     engine: ArrayLike | None = None,
     drivetrain: Drivetrain | None = None,
+    state: CascadeState | None = None,
 ) -> CascadeResult:
     """Run observers and estimator over a record sampled at common stamps.
 
@@ -179,6 +199,8 @@ def run_cascade(
         engine: shape (N, 3): engine torque [N m], gear (0 neutral, -1 reverse), engine speed
             [rad/s] (nan if not measured); needed by the engine path only.
         drivetrain: the vehicle's driveline; needed by the engine path only.
+        state: carried from the previous block of the record (`CascadeState`); None: the
+            record is whole. ``faults`` are then the totals since the first block.
 
     Raises:
         InputShapeError: inconsistent shapes.
@@ -190,8 +212,6 @@ def run_cascade(
     )
     n = stamps.shape[0]
     source, engine_record = checked_engine(n, torque_source, engine, drivetrain)
-    observer = Observer(observer_config or ObserverConfig())
-    estimator = Estimator(vehicle, estimator_config, source)
     wheel4 = np.zeros((n, 4))
     out = {
         k: wheel4.copy()
@@ -206,9 +226,16 @@ def run_cascade(
     wheel_valid = np.zeros((n, 4), dtype=bool)
     slope_valid = np.zeros(n, dtype=bool)
     torque_valid = np.full(n, source != torque_source_code('none'))
-    engine_path = (
-        EnginePath(drivetrain) if drivetrain is not None and source == TORQUE_ENGINE else None
-    )
+    if state is not None and state.parts is not None:
+        observer, estimator, engine_path = state.parts
+    else:
+        observer = Observer(observer_config or ObserverConfig())
+        estimator = Estimator(vehicle, estimator_config, source)
+        engine_path = (
+            EnginePath(drivetrain) if drivetrain is not None and source == TORQUE_ENGINE else None
+        )
+        if state is not None:
+            state.parts = (observer, estimator, engine_path)
     use_measured = estimator_speed == 'measured'
     for k in range(n):
         tk = float(stamps[k])

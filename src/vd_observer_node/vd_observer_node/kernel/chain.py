@@ -17,7 +17,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.chain import ChainOutput, ChainSettings, engine_row
 from vd_observer_node.errors import InputShapeError
-from vd_observer_node.estimation.cascade import CascadeResult, checked_engine, checked_record
+from vd_observer_node.estimation.cascade import (
+    CascadeResult,
+    CascadeState,
+    checked_engine,
+    checked_record,
+)
 from vd_observer_node.estimation.drivetrain import (
     TORQUE_ENGINE,
     TORQUE_NONE,
@@ -159,14 +164,16 @@ def _cascade_block(
     eprm: FloatArray, escal: FloatArray, held: FloatArray, fst: FloatArray, fpr: FloatArray,
     fme: FloatArray, sst: FloatArray, spr: FloatArray, sme: FloatArray, vst: FloatArray,
     vpr: FloatArray, vme: FloatArray, last: FloatArray, ecnt: NDArray[np.int64],
-    measured: bool, dprm: FloatArray, t: FloatArray, angles: FloatArray, speeds: FloatArray,
-    torques: FloatArray, engine: FloatArray, wheel: FloatArray, wheel_valid: BoolArray,
-    body: FloatArray, est: FloatArray, torque_valid: BoolArray,
+    measured: bool, dprm: FloatArray, escl: FloatArray, t: FloatArray, angles: FloatArray,
+    speeds: FloatArray, torques: FloatArray, engine: FloatArray, wheel: FloatArray,
+    wheel_valid: BoolArray, body: FloatArray, est: FloatArray, torque_valid: BoolArray,
 ) -> None:  # fmt: skip
-    """`_cascade_step` over N stamps; wheel (N, 3, 4), body (N, 3), est (N, EST_SIZE)."""
+    """`_cascade_step` over N stamps; wheel (N, 3, 4), body (N, 3), est (N, EST_SIZE).
+
+    ``escl`` (2,) is the engine path's state (`_cascade_step`), carried from block to block.
+    """
     body1 = np.empty((3, 1))
     body_valid = np.empty(1, dtype=np.bool_)
-    escl = np.array([-np.inf, np.nan])
     for k in range(t.shape[0]):
         torque_valid[k] = _cascade_step(
             wprm, wlip, wz, wfl, wact, wpt, wpf, wsc, wcnt, sprm, slip_, sz, sfl, sact, spt,
@@ -192,8 +199,12 @@ def run_cascade_compiled(
     torque_source: str = 'measured',
     engine: ArrayLike | None = None,
     drivetrain: Drivetrain | None = None,
+    state: CascadeState | None = None,
 ) -> CascadeResult:
     """`cascade.run_cascade` (same arguments and result) in one compiled loop.
+
+    With `state` (a `CascadeState` of this function), a record is run block by block as
+    `run_cascade` does it.
 
     Raises:
         InputShapeError: inconsistent shapes.
@@ -210,8 +221,16 @@ def run_cascade_compiled(
         if drivetrain is not None and source == TORQUE_ENGINE
         else np.zeros(0)
     )
-    wheels, speed = _observers(observer_config or ObserverConfig())
-    estimator = CompiledEstimator(vehicle, estimator_config, source)
+    if state is not None and state.parts is not None:
+        wheels, speed, estimator, escl = state.parts
+    else:
+        wheels, speed = _observers(observer_config or ObserverConfig())
+        estimator = CompiledEstimator(vehicle, estimator_config, source)
+        # the engine path's state: the stamp the clutch last slipped or the gear changed
+        # (-inf before), the last gear (nan)
+        escl = np.array([-np.inf, np.nan])
+        if state is not None:
+            state.parts = (wheels, speed, estimator, escl)
     wheel = np.zeros((n, 3, 4))
     wheel_valid = np.zeros((n, 4), dtype=np.bool_)
     body = np.zeros((n, 3))
@@ -220,8 +239,8 @@ def run_cascade_compiled(
     block: Any = _cascade_block  # its leading arguments come as tuples
     block(
         *_diff_args(wheels), *_diff_args(speed), *_estimator_args(estimator),
-        estimator_speed == 'measured', dprm, stamps, angles, speeds, torques, engine_record,
-        wheel, wheel_valid, body, est, torque_valid,
+        estimator_speed == 'measured', dprm, escl, stamps, angles, speeds, torques,
+        engine_record, wheel, wheel_valid, body, est, torque_valid,
     )  # fmt: skip
     if source == TORQUE_NONE:
         torque_valid[:] = False

@@ -1,6 +1,7 @@
 """Offline replay: run the ROS-free observer/estimator cascade over a bag, write a new bag.
 
-Pipeline (whole arrays, no per-message decoding in Python):
+Pipeline (arrays, no per-message decoding in Python), block by block of the bag so that memory
+stays bounded (`BLOCK_MESSAGES`; the state of every step carries over to the next block):
 
 1. read the three sensor topics and every ``/vd/truth/*`` topic as raw CDR;
 2. batch-decode the sensors to numpy (:mod:`.cdr_batch`);
@@ -15,7 +16,8 @@ Pipeline (whole arrays, no per-message decoding in Python):
 5. batch-encode the estimates (and the observer's filtered speed on
    ``/vd/observer/body_velocity``, as the live observer node publishes it), stamped with the
    wheel-angle header stamp they derive from and logged at that message's log time;
-6. write inputs (raw), truth (raw) and estimates, merged in log-time order, to OUT_BAG.
+6. write inputs (raw), truth (raw) and estimates, merged in log-time order, to OUT_BAG (each
+   message as soon as nothing logged earlier can come any more).
 
 Inputs' own ``/vd/estimates/*`` and ``/vd/observer/*`` topics (a live recording) are not
 copied: the output holds the replayed ones only.
@@ -24,6 +26,7 @@ copied: the output holds the replayed ones only.
 from __future__ import annotations
 
 import os
+import shutil
 import sys
 import threading
 import time
@@ -59,8 +62,8 @@ from vd_observer_node.bag.errors import BagExistsError, ReplayInputError
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.errors import ConfigurationError
-from vd_observer_node.estimation.alignment import align_stamps
-from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.estimation.alignment import BlockAligner
+from vd_observer_node.estimation.cascade import CascadeResult, CascadeState, run_cascade
 from vd_observer_node.estimation.drivetrain import (
     TORQUE_SOURCES,
     Drivetrain,
@@ -71,12 +74,17 @@ from vd_observer_node.estimation.estimator import MASS_MESSAGE_FIELDS, Estimator
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.decode import (
+    InputSeries,
     InputStats,
     decode_engine,
     decode_input,
-    input_stats,
 )
-from vd_observer_node.inputs.mapping import ENGINE_INPUT, InputMapping, default_mapping
+from vd_observer_node.inputs.mapping import (
+    ENGINE_INPUT,
+    InputMapping,
+    InputSpec,
+    default_mapping,
+)
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.situation.monitor import (
@@ -88,7 +96,9 @@ from vd_observer_node.situation.monitor import (
 
 __all__ = [
     'ALERT_TOPICS',
+    'BLOCK_MESSAGES',
     'ESTIMATE_TOPICS',
+    'MAX_WAIT_S',
     'SENSOR_TOPICS',
     'TRUTH_PREFIX',
     'ReplayConfig',
@@ -104,6 +114,11 @@ ESTIMATE_TOPICS = {**OBSERVER, **ESTIMATES}
 #: Written by the situation monitor phase (``situation=True``), as the alerts node publishes.
 ALERT_TOPICS = dict(ALERTS)
 _WRITE_BLOCK = 65536  # messages per vectorized write (and progress-bar update)
+#: messages read per block by default: bounds the replay's memory (docs/bags.md)
+BLOCK_MESSAGES = 1 << 17
+#: [s] an input whose stamps fall this far behind another's (stopped) holds the others no
+#: longer (`BlockAligner` max_wait): bounds the carry between blocks
+MAX_WAIT_S = 10.0
 _SITUATION_BLOCK = 1000  # samples per progress-bar update of the situation phase
 
 
@@ -370,8 +385,15 @@ def replay_bag(
     mapping: InputMapping | None = None,
     torque_source: str | None = None,
     drivetrain: Drivetrain | None = None,
+    block_messages: int | None = BLOCK_MESSAGES,
 ) -> ReplayReport:
     """Replay a bag's sensor topics through the cascade and write inputs, truth and estimates.
+
+    The bag is processed in blocks of messages (`BagReader.topic_array_blocks`) and the output
+    written as they go, so memory is bounded by the block size, not the bag length; the
+    alignment, cascade, monitor and summary carry their state from block to block, and the
+    output is the same whatever the block size (tested) for bags in log-time order whose
+    inputs' stamps do not go back in time.
 
     Args:
         in_bag: input bag folder or .mcap file.
@@ -380,8 +402,9 @@ def replay_bag(
         observer_config: observer settings; default ObserverConfig().
         estimator_config: estimator settings; default EstimatorConfig().
         progress: show a tqdm progress bar on stderr.
-        cascade: the array cascade (injectable for tests); signature of ``run_cascade``;
-            default the one of `kernel`.
+        cascade: the array cascade (injectable for tests); signature of ``run_cascade``,
+            called once per block with ``state=`` (a `CascadeState` to carry); default the
+            one of `kernel`.
         cascade_kwargs: further keyword arguments of the cascade (settings added to
             ``run_cascade`` later, so the replay can match the live nodes' parameters).
         vehicle_file: vehicle YAML of the estimator vehicle (unless ``vehicle`` is given) and
@@ -406,6 +429,8 @@ def replay_bag(
             read; Fx, mu and slope invalid); None: the mapping's ``torque_source``.
         drivetrain: the engine path's driveline; default that of ``vehicle_file``
             (`Drivetrain.from_params`).
+        block_messages: input and truth messages read per block (>= 1; about 20 s of a
+            1 kHz drive by default); None: the whole bag in one block.
 
     Raises:
         ReplayInputError: a sensor topic is missing or has the wrong type.
@@ -416,6 +441,8 @@ def replay_bag(
     started = time.perf_counter()
     if kernel not in ('compiled', 'python'):
         raise ConfigurationError(f"kernel must be 'compiled' or 'python', got {kernel!r}")
+    if block_messages is not None and block_messages < 1:
+        raise ConfigurationError(f'block_messages must be >= 1, got {block_messages}')
     compiled = kernel == 'compiled'
     if cascade is None:
         if compiled:
@@ -452,18 +479,20 @@ def replay_bag(
     estimator_vehicle = vehicle or EstimatorVehicle.from_params(params)
     if source == 'engine' and drivetrain is None:
         drivetrain = Drivetrain.from_params(params)
-    monitor = None
-    if situation:
-        tire = params.tire
-        monitor_class: Any = SituationMonitor
-        if compiled:
-            from vd_observer_node.kernel.chain import warm_up
-            from vd_observer_node.kernel.situation import CompiledSituationMonitor
+    curves = TyreCurves.from_tire(params.tire)
+    monitor_class: Any = SituationMonitor
+    if situation and compiled:
+        from vd_observer_node.kernel.chain import warm_up
+        from vd_observer_node.kernel.situation import CompiledSituationMonitor
 
-            monitor_class = CompiledSituationMonitor
-            warm_up(TyreCurves.from_tire(tire))
-        monitor = monitor_class(
-            TyreCurves.from_tire(tire),
+        monitor_class = CompiledSituationMonitor
+        warm_up(curves)
+
+    def new_monitor() -> Any:
+        if not situation:
+            return None
+        return monitor_class(
+            curves,
             estimator_vehicle.static_wheel_loads[[0, 2]],
             estimator_vehicle.effective_radius,
             observer=observer_config,
@@ -471,7 +500,32 @@ def replay_bag(
             friction=friction_config,
             situation=situation_config,
         )
-    total_in = sum(topics[t].message_count for t in [*inputs, *truth])
+
+    extra = dict(cascade_kwargs or {})
+    clash = sorted({'torque_source', 'engine', 'drivetrain', 'state'} & set(extra))
+    if clash:
+        raise ConfigurationError(
+            f'cascade settings: {clash[0]} is set by the torque source, not the config'
+        )
+    torque_kwargs: dict[str, Any] = {}
+    if source != 'measured':  # the default call stays as it was (injected cascades)
+        torque_kwargs = {'torque_source': source, 'drivetrain': drivetrain}
+
+    def new_run() -> _Run:
+        return _Run(
+            mapping=mapping,
+            cascade=cascade,
+            vehicle=estimator_vehicle,
+            observer_config=observer_config,
+            estimator_config=estimator_config,
+            cascade_kwargs={**torque_kwargs, **extra},
+            drivetrain=drivetrain if source == 'engine' else None,
+            monitor=new_monitor(),
+            compiled=compiled,
+        )
+
+    raw_topics = [*inputs, *truth]
+    total_in = sum(topics[t].message_count for t in raw_topics)
     bar = tqdm(
         total=2 * total_in,
         unit='msg',
@@ -480,130 +534,370 @@ def replay_bag(
         disable=not progress,
         file=sys.stderr,
     )
-    with bar:
-        arrays: dict[str, TopicArrays] = {}
-        for topic, arr in reader.topic_arrays([*inputs, *truth]).items():
-            arrays[topic] = arr
-            bar.update(len(arr.datas))
-        radius = estimator_vehicle.effective_radius
-        used = mapping.used_specs  # wheels, body speed, and the torque input of the path
-        decoded = [
-            decode_engine(s, arrays[s.topic])
-            if s.name == ENGINE_INPUT
-            else decode_input(s, arrays[s.topic], radius)
-            for s in used
-        ]
-        max_gap_s = observer_config.max_gap
-        input_summary = tuple(
-            input_stats(s, d, max_gap_s) for s, d in zip(used, decoded, strict=True)
+    # The per-stamp monitor costs ~20x a message read or written: a bar of its own in
+    # samples (at most one per wheel message), so the message bar's rate stays true.
+    phase = tqdm(
+        total=topics[mapping.wheels.topic].message_count if situation else 0,
+        unit='sample',
+        unit_scale=True,
+        desc='alerts',
+        disable=not progress or not situation,
+        file=sys.stderr,
+        position=1,
+        leave=False,
+    )
+    existed = target.exists()
+
+    def clear() -> None:
+        # no half-written output: a new attempt must not find the folder taken
+        shutil.rmtree(target, ignore_errors=True)
+        if existed:
+            target.mkdir(parents=True, exist_ok=True)
+
+    try:
+        with bar, phase:
+            run = new_run()
+            try:
+                written = _stream(reader, out_bag, run, raw_topics, bar, phase, block_messages)
+            except _OutOfOrderError:
+                # The files are not in log-time order (e.g. a topic appended after the rest):
+                # what was written cannot take what comes. Start again with the whole bag in
+                # one block, as before streaming (memory then grows with the bag).
+                clear()
+                bar.reset(total=2 * total_in)
+                phase.reset(total=phase.total)
+                run = new_run()
+                written = _stream(reader, out_bag, run, raw_topics, bar, phase, None)
+    except BaseException:
+        clear()
+        raise
+    wall = time.perf_counter() - started
+    return run.report(written, wall)
+
+
+class _OutOfOrderError(Exception):
+    """A message logged before what the streamed replay already wrote (internal signal)."""
+
+
+def _stream(
+    reader: BagReader,
+    out_bag: str | os.PathLike[str],
+    run: _Run,
+    raw_topics: list[str],
+    bar: Any,
+    phase: Any,
+    block_messages: int | None,
+) -> int:
+    """Replay the bag block by block into `out_bag`; the number of messages written.
+
+    Raises:
+        _OutOfOrderError: the bag's files are not in log-time order (with more than one block).
+    """
+    topics = reader.topics
+    with BagWriter(out_bag) as writer:
+        merged = _MergedWriter(writer, topics, len(raw_topics), bar)
+        for topic in raw_topics:
+            merged.declare(topic, topics[topic].msgtype)
+        for arrays in reader.topic_array_blocks(raw_topics, block_messages=block_messages):
+            bar.update(sum(len(a.datas) for a in arrays.values()))
+            for topic in raw_topics:
+                arr = arrays.get(topic)
+                if arr is not None:
+                    # a bag recorded before a vd_msgs field was added: copied in today's
+                    # layout, so the output holds one definition per type
+                    datas = upgrade_batch(arr.msgtype, arr.decoding_type, arr.datas)
+                    merged.add(topic, arr.msgtype, arr.log_time_ns, datas)
+            run.block(arrays, merged, phase, final=False)
+            # what comes next is logged at or after the newest log time read (bags are in
+            # log-time order; checked by `merged.add`), the estimates of the carried stamps at
+            # their wheel message's log time: everything before both is final
+            merged.flush(min(run.carried_log_ns(), merged.newest_ns))
+        run.block({}, merged, phase, final=True)
+        merged.flush(None)
+    return merged.written
+
+
+class _MergedWriter:
+    """Writes the replay's messages in log-time order as the blocks come.
+
+    Messages are held until :meth:`flush` is told that nothing earlier can come any more;
+    the order is that of one stable sort of everything by log time with ties in topic order
+    (inputs, truth, estimates, alerts) and then in arrival order, which is how the whole
+    replay wrote them.
+    """
+
+    def __init__(self, writer: BagWriter, infos: Mapping[str, Any], raw: int, bar: Any) -> None:
+        self._writer = writer
+        self._infos = infos
+        self._raw = raw  # the first `raw` topics are the copied inputs and truth
+        self._bar = bar
+        self._names: list[str] = []
+        self._index: dict[str, int] = {}
+        self._counts: list[int] = []
+        self._log: list[np.ndarray] = []
+        self._which: list[np.ndarray] = []
+        self._seq: list[np.ndarray] = []
+        self._datas: list[bytes] = []
+        self.newest_ns = -1  # [ns] newest log time of an input or truth message added
+        self._flushed = -1  # [ns] everything logged before this was written
+        self.written = 0
+
+    def declare(self, topic: str, msgtype: str) -> int:
+        """The topic's index (in first-declared order), declared to the writer once."""
+        k = self._index.get(topic)
+        if k is None:
+            info = self._infos.get(topic)
+            self._writer.add_topic(topic, msgtype, info.qos_profiles_yaml if info else '')
+            k = self._index[topic] = len(self._names)
+            self._names.append(topic)
+            self._counts.append(0)
+        return k
+
+    def add(self, topic: str, msgtype: str, log_ns: np.ndarray, datas: list[bytes]) -> None:
+        """Hold messages of one topic (in their order) until they can be written.
+
+        Raises:
+            _OutOfOrderError: an input or truth message logged before what was written.
+        """
+        k = self.declare(topic, msgtype)
+        n = len(datas)
+        log = np.asarray(log_ns, dtype=np.int64)
+        if k < self._raw and n and int(log.min()) < self._flushed:
+            raise _OutOfOrderError(topic)
+        self._log.append(log)
+        self._which.append(np.full(n, k, dtype=np.int64))
+        self._seq.append(np.arange(self._counts[k], self._counts[k] + n, dtype=np.int64))
+        self._datas.extend(datas)
+        self._counts[k] += n
+        if k < self._raw and n:
+            self.newest_ns = max(self.newest_ns, int(log.max()))
+
+    def flush(self, before_ns: int | None) -> None:
+        """Write the held messages logged before `before_ns` [ns] (None: all), in order."""
+        if not self._log:
+            return
+        log = np.concatenate(self._log)
+        which = np.concatenate(self._which)
+        seq = np.concatenate(self._seq)
+        ready = np.ones(len(log), dtype=bool) if before_ns is None else log < before_ns
+        if before_ns is not None:
+            self._flushed = max(self._flushed, before_ns)
+        order = np.flatnonzero(ready)
+        order = order[np.lexsort((seq[order], which[order], log[order]))]
+        datas = self._datas
+        for start in range(0, len(order), _WRITE_BLOCK):
+            sel = order[start : start + _WRITE_BLOCK]
+            self._writer.write_interleaved(
+                self._names, which[sel], [datas[k] for k in sel.tolist()], log[sel]
+            )
+            self._bar.update(int(np.count_nonzero(which[sel] < self._raw)))
+        self.written += len(order)
+        rest = np.flatnonzero(~ready)
+        self._log, self._which, self._seq = [log[rest]], [which[rest]], [seq[rest]]
+        self._datas = [datas[k] for k in rest.tolist()]
+
+
+class _GapStats:
+    """`input_stats` of one input accumulated block by block (equal with in-order stamps)."""
+
+    def __init__(self, spec: InputSpec, max_gap_s: float) -> None:
+        self._spec = spec
+        self._max_gap_s = max_gap_s
+        self._limit = round(max_gap_s * 1e9)
+        self._last: int | None = None
+        self._messages = 0
+        self._longest = 0
+        self._long = 0
+
+    def add(self, stamp_ns: np.ndarray) -> None:
+        """Count one block's stamps [ns] (shape (N,), int64)."""
+        if not stamp_ns.size:
+            return
+        stamps = np.sort(stamp_ns)
+        if self._last is not None:
+            stamps = np.concatenate([[self._last], stamps])
+        gaps = np.diff(stamps)
+        if gaps.size:
+            self._longest = max(self._longest, int(gaps.max()))
+            self._long += int(np.count_nonzero(gaps > self._limit))
+        self._messages += len(stamp_ns)
+        self._last = int(stamps[-1])
+
+    def stats(self) -> InputStats:
+        """The figures so far (`input_stats`)."""
+        return InputStats(
+            name=self._spec.name,
+            topic=self._spec.topic,
+            messages=self._messages,
+            longest_gap_s=self._longest * 1e-9,
+            long_gaps=self._long,
+            max_gap_s=self._max_gap_s,
         )
-        angles, speed = decoded[0], decoded[1]
-        aligned = align_stamps([d.stamp_ns for d in decoded], mapping.alignment, mapping.max_age)
-        common, index = aligned.stamp_ns, aligned.indexes
-        sensor_count = sum(len(d.stamp_ns) for d in decoded)
-        bar.set_postfix_str(f'cascade on {len(common)} samples')
+
+
+class _Run:
+    """The replay's state from block to block: alignment, cascade, monitor and the totals."""
+
+    def __init__(
+        self,
+        *,
+        mapping: InputMapping,
+        cascade: Callable[..., CascadeResult],
+        vehicle: EstimatorVehicle,
+        observer_config: ObserverConfig,
+        estimator_config: EstimatorConfig | None,
+        cascade_kwargs: dict[str, Any],
+        drivetrain: Drivetrain | None,
+        monitor: Any,
+        compiled: bool,
+    ) -> None:
+        self.mapping = mapping
+        self.used = mapping.used_specs  # wheels, body speed, and the torque input of the path
+        self.cascade = cascade
+        self.vehicle = vehicle
+        self.observer_config = observer_config
+        self.estimator_config = estimator_config
+        self.cascade_kwargs = cascade_kwargs
+        self.drivetrain = drivetrain
+        self.monitor = monitor
+        self.compiled = compiled
+        self.state = CascadeState()
+        self.aligner = BlockAligner(
+            len(self.used), mapping.alignment, mapping.max_age, max_wait=MAX_WAIT_S
+        )
+        self.gaps = [_GapStats(s, observer_config.max_gap) for s in self.used]
+        self.frame_id: str | None = None
+        self.samples = 0
+        self.sensor_messages = 0
+        self.sensor_log = (np.iinfo(np.int64).max, np.iinfo(np.int64).min)
+        self.torque_valid = 0
+        self.cascade_time = 0.0
+        self.situation_time = 0.0
+        self.result: CascadeResult | None = None
+
+    def carried_log_ns(self) -> int:
+        """[ns] the earliest log time of a wheel message carried to the next block."""
+        held = self.aligner.held(0).get('log')
+        return int(held.min()) if held is not None and held.size else np.iinfo(np.int64).max
+
+    def _decode(self, spec: InputSpec, arrays: Mapping[str, TopicArrays]) -> InputSeries:
+        arr = arrays.get(spec.topic)
+        if arr is None or not arr.datas:
+            width = 3 if spec.name == ENGINE_INPUT else spec.width
+            return InputSeries(
+                np.zeros(0, dtype=np.int64), np.zeros((0, width)), np.zeros(0, dtype=np.bytes_)
+            )
+        if spec.name == ENGINE_INPUT:
+            return decode_engine(spec, arr)
+        return decode_input(spec, arr, self.vehicle.effective_radius)
+
+    def block(
+        self,
+        arrays: Mapping[str, TopicArrays],
+        merged: _MergedWriter,
+        phase: Any,
+        *,
+        final: bool,
+    ) -> None:
+        """Decode, align, run and encode one block; hand its estimates to `merged`."""
+        used = self.used
+        decoded = [self._decode(s, arrays) for s in used]
+        for gaps, d in zip(self.gaps, decoded, strict=True):
+            gaps.add(d.stamp_ns)
+        self.sensor_messages += sum(len(d.stamp_ns) for d in decoded)
+        for spec in used:
+            arr = arrays.get(spec.topic)
+            if arr is not None and arr.log_time_ns.size:
+                low, high = self.sensor_log
+                log = arr.log_time_ns
+                self.sensor_log = (min(low, int(log.min())), max(high, int(log.max())))
+        wheels_log = arrays[used[0].topic].log_time_ns if used[0].topic in arrays else None
+        columns: list[dict[str, np.ndarray]] = [
+            {'v': decoded[0].values, 'frame': decoded[0].frame_ids,
+             'log': wheels_log if wheels_log is not None else np.zeros(0, dtype=np.int64)},
+            *({'v': d.values} for d in decoded[1:]),
+        ]  # fmt: skip
+        common, picked = self.aligner.push([d.stamp_ns for d in decoded], columns, final)
+        n = len(common)
+        if n and self.frame_id is None:
+            self.frame_id = picked[0]['frame'][0].decode()
+        frame_id = self.frame_id or ''
         cascade_start = time.perf_counter()
         t = common.astype(np.float64) * 1e-9
-        ia = index[0]
-        wheel_angle = angles.values[ia]
-        body_speed = speed.values[index[1], 0]
-        wheel_torque = (
-            decoded[2].values[index[2]] if source == 'measured' else np.zeros((len(t), 4))
-        )
-        engine = decoded[2].values[index[2]] if source == 'engine' else None
-        extra = dict(cascade_kwargs or {})
-        clash = sorted({'torque_source', 'engine', 'drivetrain'} & set(extra))
-        if clash:
-            raise ConfigurationError(
-                f'cascade settings: {clash[0]} is set by the torque source, not the config'
-            )
-        torque_kwargs: dict[str, Any] = {}
-        if source != 'measured':  # the default call stays as it was (injected cascades)
-            torque_kwargs = {'torque_source': source, 'engine': engine, 'drivetrain': drivetrain}
-        result = cascade(
+        wheel_angle = picked[0]['v']
+        body_speed = picked[1]['v'][:, 0]
+        source = self.mapping.torque_source
+        wheel_torque = picked[2]['v'] if source == 'measured' else np.zeros((n, 4))
+        engine = picked[2]['v'] if source == 'engine' else None
+        kwargs = dict(self.cascade_kwargs)
+        if engine is not None:
+            kwargs['engine'] = engine
+        result = self.cascade(
             t,
             wheel_angle,
             body_speed,
             wheel_torque,
-            estimator_vehicle,
-            observer_config,
-            estimator_config,
-            **torque_kwargs,
-            **extra,
+            self.vehicle,
+            self.observer_config,
+            self.estimator_config,
+            state=self.state,
+            **kwargs,
         )
-        cascade_time = time.perf_counter() - cascade_start
-        if engine is not None and drivetrain is not None:
+        self.cascade_time += time.perf_counter() - cascade_start
+        self.result = result
+        self.samples += n
+        self.torque_valid += int(np.count_nonzero(result.torque_valid))
+        if engine is not None and self.drivetrain is not None:
             # the situation monitor gets the torques the engine path gave the estimator
             # (0 where the path had none: a gear the box lacks)
-            derived = engine_wheel_torques_record(engine, drivetrain, result.omega_dot)
+            derived = engine_wheel_torques_record(engine, self.drivetrain, result.omega_dot)
             wheel_torque = np.where(np.isfinite(derived), derived, 0.0)
         situation_values: dict[str, dict[str, np.ndarray]] = {}
-        situation_time = [0.0]
         failure: list[BaseException] = []
 
         def run_monitor() -> None:
-            # The per-stamp loop costs ~20x a message read or written: a bar of its own in
-            # samples, so the message bar's rate and remaining time stay true.
             situation_start = time.perf_counter()
             try:
-                with tqdm(
-                    total=len(common),
-                    unit='sample',
-                    unit_scale=True,
-                    desc='alerts',
-                    disable=not progress,
-                    file=sys.stderr,
-                    position=1,
-                    leave=False,
-                ) as phase:
-                    runner: dict[str, Any] = {}
-                    if compiled:
-                        from vd_observer_node.kernel.chain import run_situation_compiled
+                runner: dict[str, Any] = {}
+                if self.compiled:
+                    from vd_observer_node.kernel.chain import run_situation_compiled
 
-                        # larger blocks: a compiled call's cost is mostly its fixed Python overhead
-                        runner = {'runner': run_situation_compiled, 'block': 20 * _SITUATION_BLOCK}
-                    situation_values.update(
-                        situation_topics(
-                            wheel_angle,
-                            body_speed,
-                            wheel_torque,
-                            result,
-                            monitor,
-                            phase.update,
-                            **runner,
-                        )
+                    # larger blocks: a compiled call's cost is mostly its fixed Python overhead
+                    runner = {'runner': run_situation_compiled, 'block': 20 * _SITUATION_BLOCK}
+                situation_values.update(
+                    situation_topics(
+                        wheel_angle,
+                        body_speed,
+                        wheel_torque,
+                        result,
+                        self.monitor,
+                        phase.update,
+                        **runner,
                     )
+                )
             except BaseException as exc:  # re-raised by the caller after the join
                 failure.append(exc)
-            situation_time[0] = time.perf_counter() - situation_start
+            self.situation_time += time.perf_counter() - situation_start
 
         worker = None
-        if monitor is not None:
-            bar.set_postfix_str(f'alerts on {len(common)} samples')
-            if compiled:
+        if self.monitor is not None:
+            if self.compiled:
                 # The compiled monitor releases the GIL: it runs on the second core while this
                 # thread encodes the cascade's topics.
                 worker = threading.Thread(target=run_monitor, name='replay-monitor')
                 worker.start()
             else:
                 run_monitor()
-        frames = angles.frame_ids[ia]
-        frame_id = frames[0].decode() if len(frames) else ''
-        log_ns = arrays[mapping.wheels.topic].log_time_ns[ia]
-        outputs: list[tuple[str, str, np.ndarray, list[bytes]]] = []
-        for topic in [*inputs, *truth]:
-            arr = arrays[topic]
-            # a bag recorded before a vd_msgs field was added: copied in today's layout, so
-            # the output holds one definition per type
-            datas = upgrade_batch(arr.msgtype, arr.decoding_type, arr.datas)
-            outputs.append((topic, arr.msgtype, arr.log_time_ns, datas))
+        log_ns = picked[0]['log']
         # the sensor's angles as the observer node publishes them; with speeds, the observer's
-        observed_angle = result.angle if mapping.wheel_input == 'speed' else wheel_angle
-        for topic, values in _estimates(result, observed_angle).items():
-            datas = encode_batch(ESTIMATE_TOPICS[topic], common, frame_id, values)
-            outputs.append((topic, ESTIMATE_TOPICS[topic], log_ns, datas))
-        if worker is not None:
-            worker.join()
+        observed = result.angle if self.mapping.wheel_input == 'speed' else wheel_angle
+        try:
+            for topic, values in _estimates(result, observed).items():
+                datas = encode_batch(ESTIMATE_TOPICS[topic], common, frame_id, values)
+                merged.add(topic, ESTIMATE_TOPICS[topic], log_ns, datas)
+        finally:
+            if worker is not None:
+                worker.join()
         if failure:
             raise failure[0]
         for topic, values in situation_values.items():
@@ -612,53 +906,26 @@ def replay_bag(
                 datas = encode_alerts(common, frame_id, values)
             else:
                 datas = encode_batch(msgtype, common, frame_id, values)
-            outputs.append((topic, msgtype, log_ns, datas))
-        bar.set_postfix_str('writing')
-        written = _write_merged(out_bag, reader, outputs, bar, total_in)
-    wall = time.perf_counter() - started
-    sensor_log = np.concatenate([arrays[t].log_time_ns for t in inputs])
-    return ReplayReport(
-        samples=len(common),
-        sensor_messages=sensor_count,
-        messages_written=written,
-        bag_duration_s=float(sensor_log.max() - sensor_log.min()) * 1e-9,
-        wall_time_s=wall,
-        cascade_time_s=cascade_time,
-        unmatched=sensor_count - len(common) - sum(len(np.unique(i)) for i in index[1:]),
-        situation_time_s=situation_time[0],
-        stale=aligned.stale,
-        faults=dict(result.faults),
-        inputs=input_summary,
-        torque_source=TORQUE_SOURCES[result.torque_source],
-        torque_valid_fraction=float(np.mean(result.torque_valid)) if len(common) else 0.0,
-    )
+            merged.add(topic, msgtype, log_ns, datas)
 
-
-def _write_merged(
-    out_bag: str | os.PathLike[str],
-    reader: BagReader,
-    outputs: list[tuple[str, str, np.ndarray, list[bytes]]],
-    bar: Any,
-    progress_budget: int,
-) -> int:
-    """Write all topics interleaved in log-time order (stable: input order within a time)."""
-    log = np.concatenate([o[2] for o in outputs])
-    which = np.concatenate([np.full(len(o[3]), k, dtype=np.int64) for k, o in enumerate(outputs)])
-    order = np.argsort(log, kind='stable')
-    topics = reader.topics
-    total = len(order)
-    with BagWriter(out_bag) as writer:
-        for name, msgtype, _, _ in outputs:
-            info = topics.get(name)
-            qos = info.qos_profiles_yaml if info is not None else ''
-            writer.add_topic(name, msgtype, qos)
-        names = [o[0] for o in outputs]
-        datas = [d for o in outputs for d in o[3]]
-        done = 0
-        for start in range(0, total, _WRITE_BLOCK):
-            sel = order[start : start + _WRITE_BLOCK]
-            writer.write_interleaved(names, which[sel], [datas[k] for k in sel.tolist()], log[sel])
-            stop = start + len(sel)
-            bar.update(stop * progress_budget // total - done * progress_budget // total)
-            done = stop
-    return total
+    def report(self, written: int, wall: float) -> ReplayReport:
+        """The replay's figures once every block ran."""
+        result = self.result
+        if result is None:  # not reached: the final block always runs the cascade
+            raise ReplayInputError('replay ended before its last block')
+        low, high = self.sensor_log
+        return ReplayReport(
+            samples=self.samples,
+            sensor_messages=self.sensor_messages,
+            messages_written=written,
+            bag_duration_s=float(high - low) * 1e-9 if high >= low else 0.0,
+            wall_time_s=wall,
+            cascade_time_s=self.cascade_time,
+            unmatched=self.sensor_messages - self.samples - sum(self.aligner.used[1:]),
+            situation_time_s=self.situation_time,
+            stale=self.aligner.stale,
+            faults=dict(result.faults),
+            inputs=tuple(g.stats() for g in self.gaps),
+            torque_source=TORQUE_SOURCES[result.torque_source],
+            torque_valid_fraction=self.torque_valid / self.samples if self.samples else 0.0,
+        )
