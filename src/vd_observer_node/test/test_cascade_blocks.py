@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 from vd_observer_node.estimation.cascade import CascadeResult, CascadeState, run_cascade
 from vd_observer_node.estimation.drivetrain import Drivetrain
+from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.kernel.chain import run_cascade_compiled
@@ -90,12 +91,16 @@ def _concat(parts: list[CascadeResult]) -> CascadeResult:
     ('source', 'wheel_input'),
     [('measured', 'angle'), ('engine', 'angle'), ('none', 'angle'), ('measured', 'speed')],
 )
+@pytest.mark.parametrize('mass_adaptation', [False, True])
 def test_blocks_with_a_carried_state_equal_the_whole_record(
-    record: dict[str, np.ndarray], kernel: str, source: str, wheel_input: str
-) -> None:
+    record: dict[str, np.ndarray], kernel: str, source: str, wheel_input: str,
+    mass_adaptation: bool,
+) -> None:  # fmt: skip
     run: Any = run_cascade if kernel == 'python' else run_cascade_compiled
     wheels = record['angle'] if wheel_input == 'angle' else record['omega']
     observer = ObserverConfig(wheel_input=wheel_input)
+    # the online mass lives in the estimator's state: carried with it
+    estimator = EstimatorConfig(mass_adaptation=mass_adaptation)
     kwargs: dict[str, Any] = {}
     if source != 'measured':
         kwargs = {'torque_source': source, 'drivetrain': DRIVETRAIN}
@@ -107,13 +112,15 @@ def test_blocks_with_a_carried_state_equal_the_whole_record(
             extra['engine'] = record['engine'][sl]
         return run(  # type: ignore[no-any-return]
             record['t'][sl], wheels[sl], record['speed'][sl], record['torque'][sl], VEHICLE,
-            observer, None, state=state, **extra,
+            observer, estimator, state=state, **extra,
         )  # fmt: skip
 
     whole = call(slice(0, n), None)
     assert sum(whole.faults.values()) > 0  # the faults are counted, so carried
     if source == 'engine':
         assert whole.torque_valid.any() and not whole.torque_valid.all()
+    if mass_adaptation and source == 'measured':
+        assert whole.mass_excited.any()  # the mass estimate moved: its state is carried
     state = CascadeState()
     bounds = _bounds(n, seed=len(source) + len(wheel_input))
     parts = [call(slice(a, b), state) for a, b in itertools.pairwise(bounds)]
