@@ -63,6 +63,7 @@ __all__ = [
     'already_active',
     'axle_utilisation',
     'channel_episodes',
+    'data_conditions',
     'evaluate_alerts',
     'evaluate_alerts_section',
     'false_alarms',
@@ -789,6 +790,23 @@ def paired_alert_data(
     return replace(data, **kw)
 
 
+def data_conditions(data: AlertData, settings: AlertSettings) -> tuple[BoolArray, BoolArray]:
+    """The truth and the relaxed truth conditions of paired rows, each shape (N, 3, 4)."""
+    cfg = settings
+    truth = truth_conditions(
+        data.slip, data.mu, data.peak_slip, data.peak_mu, low_friction_ratio=cfg.low_friction_ratio
+    )
+    relaxed = truth_conditions(
+        data.slip,
+        data.mu,
+        data.peak_slip,
+        data.peak_mu,
+        scale=cfg.relaxed_scale,
+        low_friction_ratio=cfg.low_friction_ratio,
+    )
+    return truth, relaxed
+
+
 def evaluate_alerts_section(
     data: AlertData, settings: AlertSettings | None = None, notes: tuple[str, ...] = ()
 ) -> AlertsSection:
@@ -797,21 +815,7 @@ def evaluate_alerts_section(
     episodes: list[AlertEpisode] = []
     alarms: list[FalseAlarm] = []
     if data.level is not None:
-        truth = truth_conditions(
-            data.slip,
-            data.mu,
-            data.peak_slip,
-            data.peak_mu,
-            low_friction_ratio=cfg.low_friction_ratio,
-        )
-        relaxed = truth_conditions(
-            data.slip,
-            data.mu,
-            data.peak_slip,
-            data.peak_mu,
-            scale=cfg.relaxed_scale,
-            low_friction_ratio=cfg.low_friction_ratio,
-        )
+        truth, relaxed = data_conditions(data, cfg)
         episodes, alarms = evaluate_alerts(data.t, truth, relaxed, data.level, data.onset, cfg)
     segments: list[MuMaxSegment] = []
     if data.mu_max is not None:

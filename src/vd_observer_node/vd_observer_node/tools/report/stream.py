@@ -55,6 +55,7 @@ from vd_observer_node.tools.report.alerts import (
     ALERT_KINDS,
     NO_COMMON_STAMP,
     AlertData,
+    AlertEpisode,
     AlertSettings,
     AlertsSection,
     FalseAlarm,
@@ -66,10 +67,10 @@ from vd_observer_node.tools.report.alerts import (
     alerts_section,
     axle_utilisation,
     channel_episodes,
+    data_conditions,
     false_alarms,
     paired_alert_data,
     segments_from_peaks,
-    truth_conditions,
 )
 from vd_observer_node.tools.report.errors import ReportInputError, StampOrderError
 from vd_observer_node.tools.report.evaluate import (
@@ -682,7 +683,7 @@ def _add_counts(counts: np.ndarray, codes: np.ndarray) -> np.ndarray:
 @dataclass
 class _Channel:
     last_start: float | None = None  # [s] the last raw onset (episodes merge against it)
-    episodes: list = field(default_factory=list)  # type: ignore[type-arg]
+    episodes: list[AlertEpisode] = field(default_factory=list)
     alarms: list[FalseAlarm] = field(default_factory=list)
 
 
@@ -742,17 +743,7 @@ class _AlertStream:
     def _episodes(self, d: AlertData, lo: int, hi: int) -> None:
         cfg, tt = self.cfg, d.t
         assert d.level is not None
-        truth = truth_conditions(
-            d.slip, d.mu, d.peak_slip, d.peak_mu, low_friction_ratio=cfg.low_friction_ratio
-        )
-        relaxed = truth_conditions(
-            d.slip,
-            d.mu,
-            d.peak_slip,
-            d.peak_mu,
-            scale=cfg.relaxed_scale,
-            low_friction_ratio=cfg.low_friction_ratio,
-        )
+        truth, relaxed = data_conditions(d, cfg)
         floor = 0 if self.first_row_is_first else 1  # row 0 of a trimmed buffer has no edge
         for kind, name in enumerate(ALERT_KINDS):
             for wheel in range(4):
