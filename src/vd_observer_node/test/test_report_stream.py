@@ -32,7 +32,7 @@ from vd_observer_node.tools.fleet.process import (
     bag_figures_whole,
     process_bag,
 )
-from vd_observer_node.tools.report.alerts import truth_conditions
+from vd_observer_node.tools.report.alerts import AlertSettings, truth_conditions
 from vd_observer_node.tools.report.errors import ReportInputError, StampOrderError
 from vd_observer_node.tools.report.evaluate import AccuracyReport, evaluate
 from vd_observer_node.tools.report.load import load_bag_series
@@ -298,3 +298,36 @@ def test_fleet_row_figures_equal_the_whole_bag_path(tmp_path: Path) -> None:
         for block in (17, 200_000):
             assert bag_figures(replayed, str(bag), block) == whole
         assert whole[0]['has_truth'] is True and whole[0]['distance_m'] is not None
+
+
+def test_state_held_between_blocks_is_bounded_not_the_bag(
+    paper: tuple[Any, dict, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """While the 12 s bag streams in blocks of 1000 messages (~50 stamps), the alert rows
+    kept (the 2 s windows either side of the rows scored, plus a block) and the rows waiting
+    in a stamp join (at most a block) stay far below the bag's 2401 stamps."""
+    from vd_observer_node.tools.report import stream
+
+    kept: list[int] = []
+    waiting: list[int] = []
+    feed, pop = stream._AlertStream.feed, stream._StampJoin.pop
+
+    def feed_and_count(self: Any, data: Any) -> None:
+        feed(self, data)
+        kept.append(0 if self.buffer is None else int(self.buffer.t.size))
+
+    def pop_and_count(self: Any, final: bool) -> Any:
+        out = pop(self, final)
+        waiting.append(
+            max(sum(c.stamp_ns.size for c in chunks) for chunks in self._chunks.values())
+        )
+        return out
+
+    monkeypatch.setattr(stream._AlertStream, 'feed', feed_and_count)
+    monkeypatch.setattr(stream._StampJoin, 'pop', pop_and_count)
+    evaluate_bag(paper[2], block_messages=1000)
+    probe = stream._AlertStream(AlertSettings(), judged=True, mu_max=True)
+    window = round((probe.lookback + probe.lookahead) * RATE)  # rows either side of those scored
+    block_stamps = 1000 // 16  # messages per block over the bag's topics per stamp (>= 16)
+    assert len(kept) > 20 and window < max(kept) <= window + block_stamps < 2401
+    assert len(waiting) > 20 and max(waiting) <= block_stamps
