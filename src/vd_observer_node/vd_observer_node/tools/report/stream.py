@@ -130,16 +130,14 @@ def iter_topic_blocks(
     """
     infos = reader.topics
     kinds = {t: (infos[t].msgtype, reader.decoding_type(t)) for t in topics}
-    pending: dict[str, list[bytes]] = {}
-    count = 0
-    for msg in reader.raw_messages(topics):
-        pending.setdefault(msg.topic, []).append(msg.data)
-        count += 1
-        if count >= block_messages:
-            yield _decode(pending, kinds)
-            pending, count = {}, 0
-    if count:
-        yield _decode(pending, kinds)
+    messages = reader.raw_messages(topics)
+    while True:
+        pending: dict[str, list[bytes]] = {t: [] for t in topics}
+        for topic, _, _, data, _ in itertools.islice(messages, block_messages):
+            pending[topic].append(data)
+        if not any(pending.values()):
+            return
+        yield _decode({t: d for t, d in pending.items() if d}, kinds)
 
 
 def _decode(
