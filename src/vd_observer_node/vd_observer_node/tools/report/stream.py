@@ -2,15 +2,17 @@
 
 :func:`evaluate_bag` gives the same :class:`~.evaluate.AccuracyReport` as
 ``evaluate(load_bag_series(bag))`` (the reference, kept for ``vd report`` and its figures)
-without holding the bag's series: it reads the bag twice in file order, in blocks of
-``block_messages`` messages decoded per topic (:func:`iter_topic_blocks`).
+without holding the bag's series: it reads the bag in file order, in blocks of
+``block_messages`` messages decoded per topic (:func:`iter_topic_blocks`), in two passes.
 
-* Pass 1 (:class:`_Scout`) finds what every sample's verdict depends on: the first and last
-  stamps (t = 0, the duration), the true slope steps and gear changes (a sample is excluded
-  when an event lies within +-0.5 s of it, possibly *after* it), the static wheel loads (the
-  first second of true Fz), the torque path; and, for ``vd fleet``, the distance and the
-  alert activations.
-* Pass 2 pairs estimate and truth by header stamp as the blocks arrive (:class:`_StampJoin`:
+* Pass 1 finds what every sample's verdict depends on before any sample is judged: the first
+  stamp of every topic (t = 0; read only until each topic has been seen), then over the
+  slope truth, the gear and the true forces only (:data:`_EVENT_TOPICS`), the true slope
+  steps and gear changes (a sample is excluded when an event lies within +-0.5 s of it,
+  possibly *after* it) and the static wheel loads (the first second of true Fz).
+* Pass 2 reads every topic: it checks the stamps' order and counts them (the last stamp, the
+  torque path, and for ``vd fleet`` the distance and the alert activations; :class:`_Scout`),
+  pairs estimate and truth by header stamp as the blocks arrive (:class:`_StampJoin`:
   rows wait only until every topic of the pair has passed their stamp) and adds the paired
   rows into running sums (:class:`_StatsSum`: sums of squares, sums, maxima, counts), the slope
   convergence trackers, the alert-episode state machines (:class:`_AlertStream`: a window of
@@ -191,11 +193,18 @@ class _Distance:
         return self.total if self.stamps >= 2 and self.finite > 1 else None
 
 
-class _Scout:
-    """Pass 1: stamps, events, static loads, torque path, distance and alert activations."""
+#: Topics pass 1 reads: what every sample's verdict depends on (events, static loads).
+_EVENT_TOPICS = (TRUTH_SLOPE, GEAR_TOPIC, TRUTH_TIRE_FORCES)
 
-    def __init__(self, cfg: EvaluationSettings) -> None:
+
+class _Scout:
+    """Per topic: stamps in order, first and last stamps, counts; and either (``events``,
+    pass 1) the slope steps, gear changes and static loads, or (pass 2) the torque path, the
+    distance and the alert activations."""
+
+    def __init__(self, cfg: EvaluationSettings, *, events: bool) -> None:
         self.cfg = cfg
+        self.events = events
         self.first: dict[str, int] = {}
         self.last: dict[str, int] = {}
         self.counts: dict[str, int] = {}
@@ -222,9 +231,10 @@ class _Scout:
             self.first.setdefault(topic, int(stamps[0]))
             self.last[topic] = int(stamps[-1])
             self.counts[topic] = self.counts.get(topic, 0) + int(stamps.size)
-            self._events(topic, part)
+            if (topic in _EVENT_TOPICS) == self.events:
+                self._take(topic, part)
 
-    def _events(self, topic: str, part: TopicSeries) -> None:
+    def _take(self, topic: str, part: TopicSeries) -> None:
         stamps, values = part.stamp_ns, part.values
         if topic == TRUTH_SLOPE:
             deg = np.degrees(values['angle'].astype(np.float64))
@@ -235,7 +245,8 @@ class _Scout:
         elif topic == GEAR_TOPIC:
             gear = values['gear']
             ext, k = _with_previous(self._gear, gear)
-            self.gear_changes_ns.extend(stamps[np.flatnonzero(ext[1:] != ext[:-1]) + 1 - k])
+            changes = np.flatnonzero(ext[1:] != ext[:-1]) + 1 - k
+            self.gear_changes_ns.extend(stamps[changes].tolist())
             self._gear = gear[-1]
         elif topic == TRUTH_TIRE_FORCES:
             if self._loads_until is None:
@@ -872,19 +883,17 @@ def evaluate_bag(
     reader = BagReader(path)
     skipped: dict[str, str] = {}
     selected = select_report_topics(reader, skipped)
-    scout = _Scout(cfg)
-    for block in iter_topic_blocks(reader, selected, block_messages):
-        scout.feed(block)
-    present = [name for name in selected if name in scout.first]
-    skipped.update({name: 'no messages' for name in selected if name not in scout.first})
+    first = _first_stamps(reader, selected)
+    present = [name for name in selected if name in first]
+    skipped.update({name: 'no messages' for name in selected if name not in first})
     if not present:
         raise ReportInputError(f'{Path(path)}: none of the vd topics found in the bag')
-    t0 = min(scout.first.values())
-    last = max(scout.last.values())
-    speed = next((d for d in scout.distance.values() if d.first is not None), None)
-    activations = None
-    if ALERT_TOPIC in scout.first:
-        activations = {kind: int(scout.activations[k].sum()) for k, kind in enumerate(ALERT_KINDS)}
+    t0 = min(first.values())
+    scout = _Scout(cfg, events=True)
+    event_topics = [t for t in present if t in _EVENT_TOPICS]
+    for block in iter_topic_blocks(reader, event_topics, block_messages):
+        scout.feed(block)
+    tally = _Scout(cfg, events=False)
     report: AccuracyReport | None = None
     no_report = ''
     try:
@@ -892,10 +901,10 @@ def evaluate_bag(
             reader,
             path,
             scout,
+            tally,
             present,
             skipped,
             t0,
-            last,
             cfg,
             static_loads,
             alert_settings,
@@ -903,6 +912,11 @@ def evaluate_bag(
         )
     except ReportInputError as exc:
         no_report = str(exc)
+    last = max(tally.last.values())
+    speed = next((d for d in tally.distance.values() if d.first is not None), None)
+    activations = None
+    if ALERT_TOPIC in tally.first:
+        activations = {kind: int(tally.activations[k].sum()) for k, kind in enumerate(ALERT_KINDS)}
     return StreamedEvaluation(
         report,
         no_report,
@@ -914,21 +928,42 @@ def evaluate_bag(
     )
 
 
+def _first_stamps(reader: BagReader, topics: list[str]) -> dict[str, int]:
+    """[ns] header stamp of each topic's first message in file order (topics without a
+    message left out); reads only as far as every topic has been seen."""
+    first: dict[str, int] = {}
+    for topic, msgtype, _, data, _ in reader.raw_messages(topics):
+        if topic not in first:
+            fields_ = decode_topic(msgtype, reader.decoding_type(topic), [data])
+            first[topic] = int(fields_.stamp_ns[0])
+            if len(first) == len(topics):
+                break
+    return first
+
+
 def _second_pass(
     reader: BagReader,
     path: str | os.PathLike[str],
     scout: _Scout,
+    tally: _Scout,
     present: list[str],
     skipped: dict[str, str],
     t0: int,
-    last: int,
     cfg: EvaluationSettings,
     static_loads: FloatArray | None,
     alert_settings: AlertSettings | None,
     block_messages: int,
 ) -> AccuracyReport:
+    """Pass 2 over every topic: the tally (``tally``) and, with truth, the report.
+
+    Raises:
+        ReportInputError: no truth topic (after the pass: the tally is complete).
+        StampOrderError: a topic's stamps go backwards.
+    """
     have = set(present)
     if not any(t in have for t in TRUTH_TOPICS):
+        for block in iter_topic_blocks(reader, present, block_messages):
+            tally.feed(block)
         raise ReportInputError(
             f'{Path(path)}: no truth topics (need at least one of {TRUTH_NAMESPACE}*: '
             + ', '.join(name.rsplit('/', 1)[1] for name in TRUTH_TOPICS)
@@ -961,11 +996,6 @@ def _second_pass(
         section_topics = tuple(alert_section_topics(have))
         alert_join = _StampJoin(section_topics)
         alerts = _AlertStream(acfg, ALERT_TOPIC in have, ESTIMATED_POTENTIAL_TOPIC in have)
-    wanted = sorted(
-        {*[t for key in joins for t in (*key, *joins[key][0].optional)], truth_topic}
-        | (set(alert_join.names) if alert_join else set())
-    )
-    wanted = [t for t in present if t in wanted]
 
     def drain(final: bool) -> None:
         for join, quantities in joins.values():
@@ -980,7 +1010,8 @@ def _second_pass(
             if final:
                 alerts.finish()
 
-    for block in iter_topic_blocks(reader, wanted, block_messages):
+    for block in iter_topic_blocks(reader, present, block_messages):
+        tally.feed(block)  # first: it refuses stamps going backwards
         part = block.get(truth_topic)
         if part is not None and part.stamp_ns.size:
             mask = evaluation_mask(
@@ -1020,19 +1051,19 @@ def _second_pass(
         if slope is not None and slope.convergence is not None and slope.rows and steps.size
         else []
     )
-    notes.extend(closing_notes(have, scout.torque_note(), skipped, []))
+    notes.extend(closing_notes(have, tally.torque_note(), skipped, []))
     section: AlertsSection | None = None
     if section_skip:
         notes.append(section_skip)
     elif alerts is not None and alerts.rows == 0:
         notes.append(NO_COMMON_STAMP)
     elif alerts is not None:
-        dropped = scout.counts[TRUE_POTENTIAL_TOPIC] - alerts.rows
+        dropped = tally.counts[TRUE_POTENTIAL_TOPIC] - alerts.rows
         section = alerts.result(tuple(alert_data_notes(have, dropped)))
     return AccuracyReport(
         bag=str(Path(path)),
         first_stamp_s=t0 * 1e-9,
-        duration_s=(last - t0) * 1e-9,
+        duration_s=(max(tally.last.values()) - t0) * 1e-9,
         settings=cfg,
         slope_steps_s=tuple(steps.tolist()),
         gear_changes_s=tuple(gears.tolist()),
