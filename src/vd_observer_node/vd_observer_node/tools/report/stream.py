@@ -20,7 +20,7 @@ without holding the bag's series: it reads the bag in file order, in blocks of
   1 s back and ahead) and the μ_max accumulators per axle and road segment.
 
 Memory: one block of raw and decoded messages, the rows of the pairs still waiting for their
-partner (none in a replayed bag: the topics of one stamp are written together), ~3 s of alert
+partner (none in a replayed bag: the topics of one stamp are written together), ~4 s of alert
 rows, and the results (episodes, segments, events) - not the bag's length.
 
 Figures equal the reference's exactly where they are counts, times, maxima or per-sample
