@@ -304,8 +304,9 @@ def test_state_held_between_blocks_is_bounded_not_the_bag(
     paper: tuple[Any, dict, Path], monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """While the 12 s bag streams in blocks of 1000 messages (~50 stamps), the alert rows
-    kept (the 2 s windows either side of the rows scored, plus a block) and the rows waiting
-    in a stamp join (at most a block) stay far below the bag's 2401 stamps."""
+    kept (the 2 s windows either side of the rows scored, plus a block), the rows waiting in
+    a stamp join (at most a block) and the paired rows held for the events (0.5 s, 1 s at the
+    start, plus a block) stay far below the bag's 2401 stamps."""
     from vd_observer_node.tools.report import stream
 
     kept: list[int] = []
@@ -323,6 +324,15 @@ def test_state_held_between_blocks_is_bounded_not_the_bag(
         )
         return out
 
+    held: list[int] = []
+    delayed = stream._delayed_rows
+
+    def delayed_and_count(queue: Any, horizon: int) -> Any:
+        out = delayed(queue, horizon)
+        held.append(sum(stamps.size for stamps, _, _ in queue))
+        return out
+
+    monkeypatch.setattr(stream, '_delayed_rows', delayed_and_count)
     monkeypatch.setattr(stream._AlertStream, 'feed', feed_and_count)
     monkeypatch.setattr(stream._StampJoin, 'pop', pop_and_count)
     evaluate_bag(paper[2], block_messages=1000)
@@ -331,3 +341,7 @@ def test_state_held_between_blocks_is_bounded_not_the_bag(
     block_stamps = 1000 // 16  # messages per block over the bag's topics per stamp (>= 16)
     assert len(kept) > 20 and window < max(kept) <= window + block_stamps < 2401
     assert len(waiting) > 20 and max(waiting) <= block_stamps
+    # rows held until the slope truth and the gear are 0.5 s (+1 ms) past them, and at the
+    # start until the first second of true forces (the static loads) is read; plus a block
+    assert len(held) > 20 and 0 < max(held) <= round(1.0 * RATE) + block_stamps
+    assert max(held[len(held) // 2 :]) <= round(0.501 * RATE) + block_stamps

@@ -3,25 +3,26 @@
 :func:`evaluate_bag` gives the same :class:`~.evaluate.AccuracyReport` as
 ``evaluate(load_bag_series(bag))`` (the reference, kept for ``vd report`` and its figures)
 without holding the bag's series: it reads the bag in file order, in blocks of
-``block_messages`` messages decoded per topic (:func:`iter_topic_blocks`), in two passes.
+``block_messages`` messages decoded per topic (:func:`iter_topic_blocks`).
 
-* Pass 1 finds what every sample's verdict depends on before any sample is judged: the first
-  stamp of every topic (t = 0; read only until each topic has been seen), then over the
-  slope truth, the gear and the true forces only (:data:`_EVENT_TOPICS`), the true slope
-  steps and gear changes (a sample is excluded when an event lies within +-0.5 s of it,
-  possibly *after* it) and the static wheel loads (the first second of true Fz).
-* Pass 2 reads every topic: it checks the stamps' order and counts them (the last stamp, the
-  torque path, and for ``vd fleet`` the distance and the alert activations; :class:`_Scout`),
-  pairs estimate and truth by header stamp as the blocks arrive (:class:`_StampJoin`:
-  rows wait only until every topic of the pair has passed their stamp) and adds the paired
-  rows into running sums (:class:`_StatsSum`: sums of squares, sums, maxima, counts), the slope
-  convergence trackers, the alert-episode state machines (:class:`_AlertStream`: a window of
-  ~2 s of rows around the rows being scored, since a false alarm and a detection look up to
-  1 s back and ahead) and the μ_max accumulators per axle and road segment.
+* A first look reads each topic's first message only (t = 0 is the earliest stamp).
+* One pass then reads every topic: it checks the stamps' order and counts them (the last
+  stamp, the torque path, and for ``vd fleet`` the distance and the alert activations), finds
+  the true slope steps, gear changes and static loads as they come (:class:`_Scout`), pairs
+  estimate and truth by header stamp (:class:`_StampJoin`: rows wait only until every topic
+  of the pair has passed their stamp), holds the paired rows until the events that could
+  exclude them are known (a sample within +-0.5 s of a step or shift is excluded, also one
+  *before* it: rows wait until the slope truth and the gear are 0.5 s past them, and for the
+  first second's true forces), then adds them into running sums (:class:`_StatsSum`: sums
+  of squares, sums, maxima, counts) and the slope convergence trackers; the alert-episode
+  state machines (:class:`_AlertStream`: ~2 s of rows either side of the rows being scored,
+  since a false alarm and a detection look up to 1 s back and ahead) and the μ_max
+  accumulators per axle and road segment take the paired alert rows.
 
 Memory: one block of raw and decoded messages, the rows of the pairs still waiting for their
-partner (none in a replayed bag: the topics of one stamp are written together), ~4 s of alert
-rows, and the results (episodes, segments, events) - not the bag's length.
+partner (none in a replayed bag: the topics of one stamp are written together) or for the
+events (~0.5 s), ~4 s of alert rows, and the results (episodes, segments, events) - not the
+bag's length.
 
 Figures equal the reference's exactly where they are counts, times, maxima or per-sample
 decisions; means and RMS values add the samples in another order (blocks, not numpy's pairwise
@@ -159,7 +160,7 @@ def _with_previous(previous: np.ndarray | None, values: np.ndarray) -> tuple[np.
     return np.concatenate([previous[None], values]), 1
 
 
-# -- pass 1 -----------------------------------------------------------------------------------
+# -- tallies and events ---------------------------------------------------------------------------
 
 
 class _Distance:
@@ -193,18 +194,13 @@ class _Distance:
         return self.total if self.stamps >= 2 and self.finite > 1 else None
 
 
-#: Topics pass 1 reads: what every sample's verdict depends on (events, static loads).
-_EVENT_TOPICS = (TRUTH_SLOPE, GEAR_TOPIC, TRUTH_TIRE_FORCES)
-
-
 class _Scout:
-    """Per topic: stamps in order, first and last stamps, counts; and either (``events``,
-    pass 1) the slope steps, gear changes and static loads, or (pass 2) the torque path, the
-    distance and the alert activations."""
+    """Per topic: stamps in order, first and last stamps, counts; the slope steps, gear
+    changes and static loads found so far; the torque path, the distance and the alert
+    activations."""
 
-    def __init__(self, cfg: EvaluationSettings, *, events: bool) -> None:
+    def __init__(self, cfg: EvaluationSettings) -> None:
         self.cfg = cfg
-        self.events = events
         self.first: dict[str, int] = {}
         self.last: dict[str, int] = {}
         self.counts: dict[str, int] = {}
@@ -231,8 +227,7 @@ class _Scout:
             self.first.setdefault(topic, int(stamps[0]))
             self.last[topic] = int(stamps[-1])
             self.counts[topic] = self.counts.get(topic, 0) + int(stamps.size)
-            if (topic in _EVENT_TOPICS) == self.events:
-                self._take(topic, part)
+            self._take(topic, part)
 
     def _take(self, topic: str, part: TopicSeries) -> None:
         stamps, values = part.stamp_ns, part.values
@@ -269,6 +264,11 @@ class _Scout:
             self.activations += rising.sum(axis=0)
             self._level = active[-1]
 
+    def loads_known(self) -> bool:
+        """The true forces of the first ``settle_s`` (the static loads) have all been read."""
+        until = self._loads_until
+        return until is not None and self.last.get(TRUTH_TIRE_FORCES, until) > until
+
     def static_loads(self) -> FloatArray | None:
         if not self._loads:
             return None
@@ -283,7 +283,7 @@ class _Scout:
         return torque_path_note(np.array(sorted(self.torque_codes)))
 
 
-# -- pass 2: pairing by stamp -----------------------------------------------------------------
+# -- pairing by stamp -----------------------------------------------------------------------------
 
 
 class _StampJoin:
@@ -378,7 +378,7 @@ def _rows_of(series: TopicSeries, rows: slice | np.ndarray) -> TopicSeries:
     return TopicSeries(series.stamp_ns[rows], {k: v[rows] for k, v in series.values.items()})
 
 
-# -- pass 2: accuracy of the estimated quantities ---------------------------------------------
+# -- accuracy of the estimated quantities ---------------------------------------------------------
 
 
 class _StatsSum:
@@ -405,22 +405,46 @@ class _StatsSum:
         return ErrorStats(math.sqrt(self.squares / n), self.max_abs, self.total / n, n)
 
 
+@dataclass
+class _Events:
+    """What the verdict of a sample depends on, as far as the bag has been read: the true
+    slope steps and gear changes [s] (``events`` = both) and the static loads [N]."""
+
+    steps: FloatArray = field(default_factory=lambda: np.zeros(0))
+    gears: FloatArray = field(default_factory=lambda: np.zeros(0))
+    events: FloatArray = field(default_factory=lambda: np.zeros(0))
+    loads: FloatArray | None = None
+
+
 class _Convergence:
     """Slope convergence after each true step, as ``metrics.convergence_times`` and
-    ``evaluate._convergence`` take it, from the compared slope samples in stamp order."""
+    ``evaluate._convergence`` take it, from the compared slope samples in stamp order.
 
-    def __init__(self, steps: FloatArray, cfg: EvaluationSettings) -> None:
-        self.steps = steps.tolist()
+    Steps are added as they are found; samples come only once every step up to them is known
+    (so a new step lies after every sample seen: the one before it is the last seen)."""
+
+    def __init__(self, known: _Events, cfg: EvaluationSettings) -> None:
+        self.known = known
         self.cfg = cfg
-        self.delays: list[float | None] = [None] * len(self.steps)
-        self._open: list[float | None] = [None] * len(self.steps)  # start of a good stretch
-        self._before: list[float | None] = [None] * len(self.steps)
-        self._after: list[float | None] = [None] * len(self.steps)
+        self.steps: list[float] = []
+        self.delays: list[float | None] = []
+        self._open: list[float | None] = []  # start of a good stretch
+        self._before: list[float | None] = []
+        self._after: list[float | None] = []
         self._first: float | None = None
         self._last: float | None = None
 
     def feed(self, t: FloatArray, estimate: FloatArray, truth: FloatArray) -> None:
+        for step in self.known.steps.tolist()[len(self.steps) :]:
+            self.steps.append(step)
+            self.delays.append(None)
+            self._open.append(None)
+            self._before.append(self._last)
+            self._after.append(None)
         if t.size == 0 or not self.steps:
+            if t.size:
+                self._first = float(truth[0]) if self._first is None else self._first
+                self._last = float(truth[-1])
             return
         if self._first is None:
             self._first = float(truth[0])
@@ -465,16 +489,8 @@ class _Convergence:
 class _Quantity:
     """One estimated quantity against its truth: ``evaluate``'s metrics, streamed."""
 
-    def __init__(
-        self,
-        spec: _Spec,
-        cfg: EvaluationSettings,
-        t0: int,
-        events: FloatArray,
-        loads: FloatArray | None,
-        steps: FloatArray,
-    ) -> None:
-        self.spec, self.cfg, self.t0, self.events, self.loads = spec, cfg, t0, events, loads
+    def __init__(self, spec: _Spec, cfg: EvaluationSettings, t0: int, known: _Events) -> None:
+        self.spec, self.cfg, self.t0, self.known = spec, cfg, t0, known
         self.rows = 0
         self.overall = _StatsSum()
         self.wheels = [_StatsSum() for _ in range(4)]
@@ -485,7 +501,7 @@ class _Quantity:
         self.base = _StatsSum()  # slope: every sample of the window, valid or not
         self.base_count = 0
         self.mask_count = 0
-        self.convergence = _Convergence(steps, cfg) if spec.key == 'slope' else None
+        self.convergence = _Convergence(known, cfg) if spec.key == 'slope' else None
 
     def feed(
         self,
@@ -501,9 +517,10 @@ class _Quantity:
         self.per_wheel = estimate.ndim == 2
         t = (stamps - self.t0) * 1e-9
         mask = evaluation_mask(
-            t, start=cfg.settle_s, events=self.events, half_width=cfg.exclusion_half_width_s
+            t, start=cfg.settle_s, events=self.known.events, half_width=cfg.exclusion_half_width_s
         )
         base = mask
+        loads = self.known.loads
         if spec.key == 'mu':
             valid = est['valid'].astype(bool)
             excited = np.zeros(valid.shape, dtype=bool)
@@ -529,9 +546,9 @@ class _Quantity:
         elif spec.key == 'fx' and row_mask.any():
             self.peak = float(np.maximum(self.peak, np.abs(true[row_mask]).max()))
             self.peak_seen = True
-        elif spec.key == 'fz' and self.loads is not None:
+        elif spec.key == 'fz' and loads is not None:
             with np.errstate(divide='ignore', invalid='ignore'):
-                ratio = error / self.loads[None, :]
+                ratio = error / loads[None, :]
             self.relative.add(ratio, row_mask)
         elif spec.key == 'slope':
             self.base.add(error, base)
@@ -554,11 +571,12 @@ class _Quantity:
             extras['max_abs_truth'] = peak
             rms = overall.rms
             extras['rms_pct_of_max_truth'] = 100.0 * rms / peak if peak > 0 else math.nan
-        elif spec.key == 'fz' and self.loads is not None:
+        elif spec.key == 'fz' and self.known.loads is not None:
             rel = self.relative.result()
             extras['rms_pct_of_static'] = 100.0 * rel.rms
             extras['max_pct_of_static'] = 100.0 * rel.max_abs
-            for name, load in zip(('FL', 'FR', 'RL', 'RR'), self.loads.tolist(), strict=True):
+            loads = self.known.loads.tolist()
+            for name, load in zip(('FL', 'FR', 'RL', 'RR'), loads, strict=True):
                 extras[f'static_load_{name}'] = load
         elif spec.key == 'slope':
             extras['valid_pct'] = 100.0 * float(self.mask_count) / max(self.base_count, 1)
@@ -567,7 +585,7 @@ class _Quantity:
         return QuantityMetrics(spec.key, spec.title, spec.unit, overall, wheels, extras, note)
 
 
-# -- pass 2: alerts and μ_max -----------------------------------------------------------------
+# -- alerts and μ_max -----------------------------------------------------------------------------
 
 
 def _concat_data(a: AlertData | None, b: AlertData) -> AlertData:
@@ -862,7 +880,7 @@ def evaluate_bag(
     alert_settings: AlertSettings | None = None,
     block_messages: int = DEFAULT_BLOCK_MESSAGES,
 ) -> StreamedEvaluation:
-    """The report's figures of a bag in two streamed passes (see the module docstring).
+    """The report's figures of a bag, streamed (see the module docstring).
 
     Args:
         path: bag folder or .mcap file.
@@ -889,18 +907,13 @@ def evaluate_bag(
     if not present:
         raise ReportInputError(f'{Path(path)}: none of the vd topics found in the bag')
     t0 = min(first.values())
-    scout = _Scout(cfg, events=True)
-    event_topics = [t for t in present if t in _EVENT_TOPICS]
-    for block in iter_topic_blocks(reader, event_topics, block_messages):
-        scout.feed(block)
-    tally = _Scout(cfg, events=False)
+    tally = _Scout(cfg)
     report: AccuracyReport | None = None
     no_report = ''
     try:
-        report = _second_pass(
+        report = _the_pass(
             reader,
             path,
-            scout,
             tally,
             present,
             skipped,
@@ -941,10 +954,39 @@ def _first_stamps(reader: BagReader, topics: list[str]) -> dict[str, int]:
     return first
 
 
-def _second_pass(
+def _delayed_rows(
+    queue: list[tuple[np.ndarray, dict[str, dict[str, np.ndarray]], dict[str, BoolArray]]],
+    horizon: int,
+) -> list[tuple[np.ndarray, dict[str, dict[str, np.ndarray]], dict[str, BoolArray]]]:
+    """Take the paired rows with stamps up to ``horizon`` [ns] out of ``queue`` (in order)."""
+    out = []
+    while queue:
+        stamps, rows, present = queue[0]
+        cut = int(np.searchsorted(stamps, horizon, side='right'))
+        if cut == stamps.size:
+            out.append(queue.pop(0))
+            continue
+        take = slice(0, cut)
+        keep = slice(cut, None)
+        out.append(
+            (
+                stamps[take],
+                {n: {k: v[take] for k, v in r.items()} for n, r in rows.items()},
+                {n: v[take] for n, v in present.items()},
+            )
+        )
+        queue[0] = (
+            stamps[keep],
+            {n: {k: v[keep] for k, v in r.items()} for n, r in rows.items()},
+            {n: v[keep] for n, v in present.items()},
+        )
+        break
+    return out
+
+
+def _the_pass(
     reader: BagReader,
     path: str | os.PathLike[str],
-    scout: _Scout,
     tally: _Scout,
     present: list[str],
     skipped: dict[str, str],
@@ -954,7 +996,11 @@ def _second_pass(
     alert_settings: AlertSettings | None,
     block_messages: int,
 ) -> AccuracyReport:
-    """Pass 2 over every topic: the tally (``tally``) and, with truth, the report.
+    """The pass over every topic: the tally (``tally``) and, with truth, the report.
+
+    Paired rows wait (:func:`_delayed_rows`) until the events that may exclude them are known:
+    the slope truth and the gear have passed their stamp + ``exclusion_half_width_s`` (+1 ms
+    against rounding), and the first ``settle_s`` of true forces (the static loads) are read.
 
     Raises:
         ReportInputError: no truth topic (after the pass: the tally is complete).
@@ -969,13 +1015,33 @@ def _second_pass(
             + ', '.join(name.rsplit('/', 1)[1] for name in TRUTH_TOPICS)
             + ')'
         )
-    jumps = ((np.array(scout.slope_jumps_ns, dtype=np.int64) - t0) * 1e-9).astype(np.float64)
-    steps = merge_times(jumps, _STEP_MERGE_S)
-    gears = (np.array(scout.gear_changes_ns, dtype=np.int64) - t0) * 1e-9
-    events = np.concatenate([steps, gears])
-    loads = static_loads if static_loads is not None else scout.static_loads()
+    known = _Events(loads=static_loads)
+    margin_ns = round(cfg.exclusion_half_width_s * 1e9) + 1_000_000
+    event_topics = [t for t in (TRUTH_SLOPE, GEAR_TOPIC) if t in have]
+
+    def horizon(final: bool) -> int:
+        """[ns] stamps up to this are judged for good; refreshes ``known``."""
+        jumps = (np.array(tally.slope_jumps_ns, dtype=np.int64) - t0) * 1e-9
+        known.steps = merge_times(jumps.astype(np.float64), _STEP_MERGE_S)
+        known.gears = ((np.array(tally.gear_changes_ns, dtype=np.int64) - t0) * 1e-9).astype(
+            np.float64
+        )
+        known.events = np.concatenate([known.steps, known.gears])
+        loads_pending = static_loads is None and known.loads is None
+        if loads_pending and (final or tally.loads_known()):
+            known.loads = tally.static_loads()
+        if final:
+            return _NEVER
+        if loads_pending and TRUTH_TIRE_FORCES in have and not tally.loads_known():
+            return -1
+        seen = [tally.last.get(t) for t in event_topics]
+        if any(s is None for s in seen):
+            return -1
+        return min([_NEVER, *[int(s) - margin_ns for s in seen if s is not None]])
+
     # one join per (estimate, truth) pair; μ also needs the true forces where they exist
     joins: dict[tuple[str, str], tuple[_StampJoin, list[_Quantity]]] = {}
+    waiting: dict[tuple[str, str], list] = {}  # type: ignore[type-arg]
     notes: list[str] = []
     for spec in _SPECS:
         has_est, has_truth = spec.est_topic in have, spec.truth_topic in have
@@ -985,9 +1051,11 @@ def _second_pass(
                 forces = spec.est_topic == ESTIMATES_FRICTION and TRUTH_TIRE_FORCES in have
                 optional: tuple[str, ...] = (TRUTH_TIRE_FORCES,) if forces else ()
                 joins[key] = (_StampJoin(key, optional), [])
-            joins[key][1].append(_Quantity(spec, cfg, t0, events, loads, steps))
+                waiting[key] = []
+            joins[key][1].append(_Quantity(spec, cfg, t0, known))
     truth_topic = next(t for t in TRUTH_TOPICS if t in have)
     window = [0, 0]  # evaluated, all samples of the first truth topic
+    truth_waiting: list[np.ndarray] = []
     section_skip = alert_section_skip(have)
     alerts: _AlertStream | None = None
     alert_join: _StampJoin | None = None
@@ -998,11 +1066,25 @@ def _second_pass(
         alerts = _AlertStream(acfg, ALERT_TOPIC in have, ESTIMATED_POTENTIAL_TOPIC in have)
 
     def drain(final: bool) -> None:
-        for join, quantities in joins.values():
+        until = horizon(final)
+        for key, (join, quantities) in joins.items():
             got = join.pop(final)
-            if got is not None:  # zero rows too: a quantity learns its shape
-                for q in quantities:
-                    q.feed(*got)
+            if got is not None:
+                waiting[key].append(got)
+            for ready in _delayed_rows(waiting[key], until):
+                for q in quantities:  # zero rows too: a quantity learns its shape
+                    q.feed(*ready)
+        stamps = np.concatenate(truth_waiting) if truth_waiting else np.zeros(0, np.int64)
+        cut = int(np.searchsorted(stamps, until, side='right'))
+        truth_waiting[:] = [stamps[cut:]] if cut < stamps.size else []
+        mask = evaluation_mask(
+            (stamps[:cut] - t0) * 1e-9,
+            start=cfg.settle_s,
+            events=known.events,
+            half_width=cfg.exclusion_half_width_s,
+        )
+        window[0] += int(mask.sum())
+        window[1] += int(mask.size)
         if alert_join is not None and alerts is not None:
             got = alert_join.pop(final)
             if got is not None and got[0].size:
@@ -1014,14 +1096,7 @@ def _second_pass(
         tally.feed(block)  # first: it refuses stamps going backwards
         part = block.get(truth_topic)
         if part is not None and part.stamp_ns.size:
-            mask = evaluation_mask(
-                (part.stamp_ns - t0) * 1e-9,
-                start=cfg.settle_s,
-                events=events,
-                half_width=cfg.exclusion_half_width_s,
-            )
-            window[0] += int(mask.sum())
-            window[1] += int(mask.size)
+            truth_waiting.append(part.stamp_ns)
         for join, _ in joins.values():
             join.push(block)
         if alert_join is not None:
@@ -1048,7 +1123,7 @@ def _second_pass(
     slope = next((q for _, qs in joins.values() for q in qs if q.spec.key == 'slope'), None)
     convergence = (
         slope.convergence.result()
-        if slope is not None and slope.convergence is not None and slope.rows and steps.size
+        if slope is not None and slope.convergence is not None and slope.rows and known.steps.size
         else []
     )
     notes.extend(closing_notes(have, tally.torque_note(), skipped, []))
@@ -1065,8 +1140,8 @@ def _second_pass(
         first_stamp_s=t0 * 1e-9,
         duration_s=(max(tally.last.values()) - t0) * 1e-9,
         settings=cfg,
-        slope_steps_s=tuple(steps.tolist()),
-        gear_changes_s=tuple(gears.tolist()),
+        slope_steps_s=tuple(known.steps.tolist()),
+        gear_changes_s=tuple(known.gears.tolist()),
         evaluated_fraction=window[0] / window[1] if window[1] else 0.0,
         quantities=tuple(quantities),
         convergence=tuple(convergence),
