@@ -107,6 +107,9 @@ __all__ = ['DEFAULT_BLOCK_MESSAGES', 'StreamedEvaluation', 'evaluate_bag', 'iter
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+#: Rows paired on common stamps: (stamps (M,), topic -> field -> rows, optional topic -> (M,)
+#: bool where it has the stamp).
+_Paired = tuple[np.ndarray, dict[str, dict[str, np.ndarray]], dict[str, BoolArray]]
 
 #: Messages per block: ~20 topics x 10 k stamps; a few tens of MiB decoded.
 DEFAULT_BLOCK_MESSAGES = 200_000
@@ -315,9 +318,7 @@ class _StampJoin:
                 part = _rows_of(part, part.stamp_ns > self._done)
             self._chunks[name].append(part)
 
-    def pop(
-        self, final: bool
-    ) -> tuple[np.ndarray, dict[str, dict[str, np.ndarray]], dict[str, BoolArray]] | None:
+    def pop(self, final: bool) -> _Paired | None:
         """Resolved rows: (common stamps (M,), topic -> field -> rows (M, ...), optional topic
         -> (M,) bool where it has the stamp (its rows are meaningless elsewhere)); None while
         a topic has not been seen (and not ``final``)."""
@@ -954,10 +955,7 @@ def _first_stamps(reader: BagReader, topics: list[str]) -> dict[str, int]:
     return first
 
 
-def _delayed_rows(
-    queue: list[tuple[np.ndarray, dict[str, dict[str, np.ndarray]], dict[str, BoolArray]]],
-    horizon: int,
-) -> list[tuple[np.ndarray, dict[str, dict[str, np.ndarray]], dict[str, BoolArray]]]:
+def _delayed_rows(queue: list[_Paired], horizon: int) -> list[_Paired]:
     """Take the paired rows with stamps up to ``horizon`` [ns] out of ``queue`` (in order)."""
     out = []
     while queue:
@@ -1041,7 +1039,7 @@ def _the_pass(
 
     # one join per (estimate, truth) pair; μ also needs the true forces where they exist
     joins: dict[tuple[str, str], tuple[_StampJoin, list[_Quantity]]] = {}
-    waiting: dict[tuple[str, str], list] = {}  # type: ignore[type-arg]
+    waiting: dict[tuple[str, str], list[_Paired]] = {}
     notes: list[str] = []
     for spec in _SPECS:
         has_est, has_truth = spec.est_topic in have, spec.truth_topic in have
