@@ -1,8 +1,10 @@
 """The per-bag function of the fleet: one bag in, one result row out, never an exception.
 
 :func:`process_bag` runs the offline replay (:func:`vd_observer_node.tools.replay.replay_bag`)
-into a temporary bag, reads that back with the report's loader and computes the row of the
-fleet report with the report's metrics (:func:`vd_observer_node.tools.report.evaluate`). The
+into a temporary bag, then computes the row of the fleet report with the report's metrics,
+streamed over that bag in bounded memory (:func:`bag_figures`, via
+:func:`vd_observer_node.tools.report.stream.evaluate_bag`; the whole-bag reference
+:func:`bag_figures_whole` gives the same figures and takes bags whose stamps go backwards). The
 local process pool and the Dask workers call this same function, so their results are the
 same bit for bit. Any failure of a bag (missing, corrupt, truncated, missing topics, wrong
 types, a bug) becomes the row's ``error``; the run goes on with the next bag.
@@ -26,7 +28,9 @@ import numpy as np
 from vd_sim_node.topics import ESTIMATES_ALERTS, OBSERVER_BODY_VELOCITY, SENSORS_BODY_VELOCITY
 
 from vd_observer_node.tools.report.alerts import ALERT_KINDS, activation_indices
-from vd_observer_node.tools.report.errors import ReportInputError
+from vd_observer_node.tools.report.errors import ReportInputError, StampOrderError
+from vd_observer_node.tools.report.evaluate import AccuracyReport
+from vd_observer_node.tools.report.stream import DEFAULT_BLOCK_MESSAGES, evaluate_bag
 
 __all__ = [
     'RECORD_VERSION',
@@ -34,6 +38,8 @@ __all__ = [
     'TARGET_COLUMNS',
     'TEXT_COLUMNS',
     'FleetSettings',
+    'bag_figures',
+    'bag_figures_whole',
     'bag_id',
     'bag_stat',
     'dumps_record',
@@ -197,13 +203,14 @@ def _alert_counts(series: Any) -> dict[str, int | None]:
     }
 
 
-def _truth_figures(series: Any, row: dict[str, Any]) -> list[dict[str, Any]]:
-    """Fill the accuracy and alert-scoring columns; return the μ_max segments."""
-    from vd_observer_node.tools.report.evaluate import evaluate
+def _truth_figures(report: AccuracyReport | None, row: dict[str, Any]) -> list[dict[str, Any]]:
+    """Fill the accuracy and alert-scoring columns; return the μ_max segments.
 
-    try:
-        report, _ = evaluate(series)
-    except ReportInputError:
+    Args:
+        report: the bag's accuracy report, None when the bag has no truth.
+        row: the row to fill.
+    """
+    if report is None:
         row['has_truth'] = False
         return []
     row['has_truth'] = True
@@ -238,6 +245,63 @@ def _truth_figures(series: Any, row: dict[str, Any]) -> list[dict[str, Any]]:
         row['mu_max_rms_worst'] = max(rms) if rms else None
         row['mu_max_max_abs_worst'] = max(worst) if worst else None
     return segments
+
+
+def bag_figures(
+    path: str | os.PathLike[str], bag: str, block_messages: int = DEFAULT_BLOCK_MESSAGES
+) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """The row's figures of an evaluated (replayed) bag, streamed in bounded memory.
+
+    Args:
+        path: the bag to evaluate.
+        bag: the bag's name in the fleet (for errors).
+        block_messages: messages decoded at a time (see :func:`evaluate_bag`).
+
+    Returns:
+        (row columns from ``duration_s`` on, μ_max segments).
+
+    Raises:
+        ReportInputError: none of the vd topics in the bag.
+        StampOrderError: stamps go backwards: use :func:`bag_figures_whole`.
+        BagError: the bag cannot be read.
+    """
+    try:
+        found = evaluate_bag(path, block_messages=block_messages)
+    except ReportInputError as exc:
+        raise ReportInputError(f'{bag}: none of the vd topics found in the bag') from exc
+    row: dict[str, Any] = {
+        'duration_s': _finite((found.last_stamp_ns - found.first_stamp_ns) * 1e-9),
+        'distance_m': _finite(found.distance_m),
+    }
+    for kind in ALERT_KINDS:
+        row[f'alerts_{kind}'] = None if found.activations is None else found.activations[kind]
+    segments = _truth_figures(found.report, row)
+    return row, segments
+
+
+def bag_figures_whole(
+    path: str | os.PathLike[str], bag: str
+) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """:func:`bag_figures` from the whole decoded bag (``load_bag_series``): the reference,
+    and the path for bags whose stamps go backwards. Memory grows with the bag's length."""
+    from vd_observer_node.tools.report.evaluate import evaluate
+    from vd_observer_node.tools.report.load import load_bag_series
+
+    series = load_bag_series(path, progress=False)
+    if not series.topics:
+        raise ReportInputError(f'{bag}: none of the vd topics found in the bag')
+    first = min(int(s.stamp_ns[0]) for s in series.topics.values())
+    last = max(int(s.stamp_ns[-1]) for s in series.topics.values())
+    row: dict[str, Any] = {
+        'duration_s': _finite((last - first) * 1e-9),
+        'distance_m': _finite(_distance(series)),
+    }
+    row.update(_alert_counts(series))
+    try:
+        report: AccuracyReport | None = evaluate(series)[0]
+    except ReportInputError:
+        report = None
+    return row, _truth_figures(report, row)
 
 
 def _replay(bag: str, target: Path, settings: FleetSettings) -> Any:
@@ -281,8 +345,6 @@ def process_bag(bag: str, settings: FleetSettings) -> dict[str, Any]:
         ``timing`` (wall times [s], ``samples``; never part of the report, which must not
         depend on the machine). Never raises for a bad bag.
     """
-    from vd_observer_node.tools.report.load import load_bag_series
-
     started = time.perf_counter()
     row = _empty_row(bag)
     record: dict[str, Any] = {
@@ -319,16 +381,14 @@ def process_bag(bag: str, settings: FleetSettings) -> dict[str, Any]:
             row['faults_total'] = sum(faults.values())
             row['faults'] = ' '.join(f'{k}={v}' for k, v in faults.items())
         report_start = time.perf_counter()
-        series = load_bag_series(evaluated, progress=False)
-        if not series.topics:
-            raise ReportInputError(f'{bag}: none of the vd topics found in the bag')
-        if row['duration_s'] is None:
-            first = min(int(s.stamp_ns[0]) for s in series.topics.values())
-            last = max(int(s.stamp_ns[-1]) for s in series.topics.values())
-            row['duration_s'] = _finite((last - first) * 1e-9)
-        row['distance_m'] = _finite(_distance(series))
-        row.update(_alert_counts(series))
-        record['mu_max_segments'] = _truth_figures(series, row)
+        try:
+            figures, segments = bag_figures(evaluated, bag)
+        except StampOrderError:  # stamps out of order: the whole-bag path sorts them
+            figures, segments = bag_figures_whole(evaluated, bag)
+        if row['duration_s'] is not None:  # the replay's own duration
+            del figures['duration_s']
+        row.update(figures)
+        record['mu_max_segments'] = segments
         timing['report_s'] = time.perf_counter() - report_start
         if settings.keep_dir is not None and work is not None:
             final = Path(settings.keep_dir) / record['id']

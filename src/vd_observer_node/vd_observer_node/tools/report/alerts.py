@@ -28,6 +28,7 @@ wheels FL=0, FR=1, RL=2, RR=3; axles 0 front, 1 rear. Time in seconds.
 from __future__ import annotations
 
 import math
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Final
 
@@ -45,6 +46,7 @@ from vd_observer_node.tools.report.topics import (
 __all__ = [
     'ALERT_KINDS',
     'AXLE_NAMES',
+    'NO_COMMON_STAMP',
     'ROAD_NAMES',
     'AlertData',
     'AlertEpisode',
@@ -54,12 +56,19 @@ __all__ = [
     'MuMaxSegment',
     'activation_indices',
     'alert_data',
+    'alert_data_notes',
+    'alert_section_skip',
+    'alert_section_topics',
+    'alerts_section',
     'already_active',
     'axle_utilisation',
+    'channel_episodes',
+    'data_conditions',
     'evaluate_alerts',
     'evaluate_alerts_section',
     'false_alarms',
     'mu_max_errors',
+    'paired_alert_data',
     'road_name',
     'score_episodes',
     'segments_from_peaks',
@@ -434,20 +443,56 @@ def evaluate_alerts(
             for stamp in false_alarms(tt, acts, rel[:, kind, wheel], cfg).tolist():
                 alarms.append(FalseAlarm(name, wheel, stamp))
             onsets = truth_episodes(tt, tru[:, kind, wheel], cfg)
-            active_at = lev[np.searchsorted(tt, onsets), kind, wheel] > 0
-            was_active = already_active(onsets, acts, active_at, cfg)
-            scored = score_episodes(onsets, acts, cfg, active_at_onset=active_at)
-            for (true_onset, det, delay, status), prior in zip(
-                scored, was_active.tolist(), strict=True
-            ):
-                reported = None
-                if det is not None and ons is not None:
-                    value = float(ons[int(np.searchsorted(tt, det)), kind, wheel])
-                    reported = value if math.isfinite(value) else None
-                episodes.append(
-                    AlertEpisode(name, wheel, true_onset, det, delay, reported, status, prior)
+            episodes.extend(
+                channel_episodes(
+                    name,
+                    wheel,
+                    tt,
+                    onsets,
+                    acts,
+                    lev[:, kind, wheel],
+                    None if ons is None else ons[:, kind, wheel],
+                    cfg,
                 )
+            )
     return episodes, alarms
+
+
+def channel_episodes(
+    kind: str,
+    wheel: int,
+    t: FloatArray,
+    onsets: FloatArray,
+    activations: FloatArray,
+    level: np.ndarray,
+    onset: FloatArray | None,
+    settings: AlertSettings,
+) -> list[AlertEpisode]:
+    """The episodes of one (kind, wheel) channel with their detection.
+
+    Args:
+        kind: alert kind name.
+        wheel: 0..3.
+        t: shape (N,), [s] increasing; must cover every onset's stamp and the activations
+            from ``early_s`` before the first onset to ``max_delay_s`` after the last.
+        onsets: shape (E,), [s] true onsets (stamps among ``t``).
+        activations: shape (A,), [s] the channel's activation stamps, increasing.
+        level: shape (N,), the channel's alert level on ``t``.
+        onset: shape (N,), [s] the alert's own onset stamp on ``t`` (nan while inactive), or
+            None.
+        settings: definitions.
+    """
+    active_at = level[np.searchsorted(t, onsets)] > 0
+    was_active = already_active(onsets, activations, active_at, settings)
+    scored = score_episodes(onsets, activations, settings, active_at_onset=active_at)
+    out: list[AlertEpisode] = []
+    for (true_onset, det, delay, status), prior in zip(scored, was_active.tolist(), strict=True):
+        reported = None
+        if det is not None and onset is not None:
+            value = float(onset[int(np.searchsorted(t, det))])
+            reported = value if math.isfinite(value) else None
+        out.append(AlertEpisode(kind, wheel, true_onset, det, delay, reported, status, prior))
+    return out
 
 
 # -- friction potential ----------------------------------------------------------------------
@@ -641,66 +686,125 @@ def alert_data(series: BagSeries) -> tuple[AlertData | None, list[str]]:
         (no true friction potential, or neither alerts nor a friction-potential estimate).
     """
     topics = series.topics
-    need = [TRUE_POTENTIAL_TOPIC, TRUTH_FRICTION]
-    missing = [name for name in need if name not in topics]
-    if missing:
-        return None, [
-            'alerts section skipped: no '
-            + ' or '.join(missing)
-            + ' in the bag (recorded before the simulator published the true friction '
-            'potential, or without truth)'
-        ]
-    if ALERT_TOPIC not in topics and ESTIMATED_POTENTIAL_TOPIC not in topics:
-        return None, [
-            f'alerts section skipped: neither {ALERT_TOPIC} nor {ESTIMATED_POTENTIAL_TOPIC} '
-            'in the bag (run the alerts node, or `vd replay` the bag)'
-        ]
-    notes: list[str] = []
-    present = [name for name in (*need, ALERT_TOPIC, ESTIMATED_POTENTIAL_TOPIC) if name in topics]
+    skip = alert_section_skip(set(topics))
+    if skip:
+        return None, [skip]
+    present = alert_section_topics(set(topics))
     stamps = topics[present[0]].stamp_ns
     for name in present[1:]:
         stamps = np.intersect1d(stamps, topics[name].stamp_ns)
     if stamps.size == 0:
-        return None, ['alerts section skipped: no stamp common to the alerts and the truth']
+        return None, [NO_COMMON_STAMP]
     t0 = min(int(s.stamp_ns[0]) for s in topics.values())
+    rows = {
+        name: {k: v[_rows(topics[name].stamp_ns, stamps)] for k, v in topics[name].values.items()}
+        for name in present
+    }
+    dropped = topics[TRUE_POTENTIAL_TOPIC].stamp_ns.size - stamps.size
+    return paired_alert_data(stamps, rows, t0), alert_data_notes(set(present), dropped)
+
+
+def alert_section_skip(present: Collection[str]) -> str:
+    """Why the section cannot be judged from a bag with these topics ('' if it can)."""
+    missing = [name for name in (TRUE_POTENTIAL_TOPIC, TRUTH_FRICTION) if name not in present]
+    if missing:
+        return (
+            'alerts section skipped: no '
+            + ' or '.join(missing)
+            + ' in the bag (recorded before the simulator published the true friction '
+            'potential, or without truth)'
+        )
+    if ALERT_TOPIC not in present and ESTIMATED_POTENTIAL_TOPIC not in present:
+        return (
+            f'alerts section skipped: neither {ALERT_TOPIC} nor {ESTIMATED_POTENTIAL_TOPIC} '
+            'in the bag (run the alerts node, or `vd replay` the bag)'
+        )
+    return ''
+
+
+def alert_section_topics(present: Collection[str]) -> list[str]:
+    """The section's topics found among ``present``, paired on their common stamps."""
+    wanted = (TRUE_POTENTIAL_TOPIC, TRUTH_FRICTION, ALERT_TOPIC, ESTIMATED_POTENTIAL_TOPIC)
+    return [name for name in wanted if name in present]
+
+
+#: Why the section is skipped when its topics share no stamp.
+NO_COMMON_STAMP = 'alerts section skipped: no stamp common to the alerts and the truth'
+
+
+def alert_data_notes(present: Collection[str], dropped: int) -> list[str]:
+    """What the section lacks: the estimate topics absent, true stamps left unmatched.
+
+    Args:
+        present: the section's topics found in the bag.
+        dropped: true friction-potential messages without a stamp common to all of them.
+    """
+    notes: list[str] = []
+    if ALERT_TOPIC not in present:
+        notes.append(f'{ALERT_TOPIC} missing: no alert delays or false alarms')
+    if ESTIMATED_POTENTIAL_TOPIC not in present:
+        notes.append(f'{ESTIMATED_POTENTIAL_TOPIC} missing: no μ_max error')
+    if dropped > 0:
+        notes.append(f'alerts section: {dropped} truth stamps without a matching estimate')
+    return notes
+
+
+def paired_alert_data(
+    stamps: np.ndarray, rows: Mapping[str, Mapping[str, np.ndarray]], t0: int
+) -> AlertData:
+    """The section's arrays from rows already paired on common stamps.
+
+    Args:
+        stamps: shape (N,), [ns] the common header stamps, increasing.
+        rows: topic -> field -> values on those stamps (first axis N), for the true friction
+            and friction potential and, when in the bag, the alerts and the estimated
+            friction potential.
+        t0: [ns] the bag's first stamp (t = 0).
+    """
     t = (stamps - t0) * 1e-9
-    fric = topics[TRUTH_FRICTION]
-    fr = _rows(fric.stamp_ns, stamps)
-    pot = topics[TRUE_POTENTIAL_TOPIC]
-    pr = _rows(pot.stamp_ns, stamps)
-    true_mu_max = pot.values['mu_max'][pr].astype(np.float64)
-    true_slip_peak = pot.values['slip_peak'][pr].astype(np.float64)
+    fric = rows[TRUTH_FRICTION]
+    pot = rows[TRUE_POTENTIAL_TOPIC]
+    true_mu_max = pot['mu_max'].astype(np.float64)
+    true_slip_peak = pot['slip_peak'].astype(np.float64)
     wheel = np.array([0, 0, 1, 1])
     data = AlertData(
         t=t,
-        slip=fric.values['slip'][fr].astype(np.float64),
-        mu=fric.values['mu'][fr].astype(np.float64),
+        slip=fric['slip'].astype(np.float64),
+        mu=fric['mu'].astype(np.float64),
         peak_slip=true_slip_peak[:, wheel],
         peak_mu=true_mu_max[:, wheel],
         true_mu_max=true_mu_max,
-        true_road_class=pot.values['road_class'][pr].astype(np.int64),
+        true_road_class=pot['road_class'].astype(np.int64),
     )
     kw: dict[str, np.ndarray] = {}
-    if ALERT_TOPIC in topics:
-        alerts = topics[ALERT_TOPIC]
-        ar = _rows(alerts.stamp_ns, stamps)
-        kw['level'] = alerts.values['level'][ar].astype(np.int64)
-        onset_ns = alerts.values['onset_ns'][ar]
+    alerts = rows.get(ALERT_TOPIC)
+    if alerts is not None:
+        kw['level'] = alerts['level'].astype(np.int64)
+        onset_ns = alerts['onset_ns']
         kw['onset'] = np.where(onset_ns > 0, (onset_ns - t0) * 1e-9, np.nan)
-    else:
-        notes.append(f'{ALERT_TOPIC} missing: no alert delays or false alarms')
-    if ESTIMATED_POTENTIAL_TOPIC in topics:
-        est = topics[ESTIMATED_POTENTIAL_TOPIC]
-        er = _rows(est.stamp_ns, stamps)
-        kw['mu_max'] = est.values['mu_max'][er].astype(np.float64)
-        kw['confidence'] = est.values['confidence'][er].astype(np.float64)
-        kw['road_class'] = est.values['road_class'][er].astype(np.int64)
-    else:
-        notes.append(f'{ESTIMATED_POTENTIAL_TOPIC} missing: no μ_max error')
-    dropped = topics[TRUE_POTENTIAL_TOPIC].stamp_ns.size - stamps.size
-    if dropped > 0:
-        notes.append(f'alerts section: {dropped} truth stamps without a matching estimate')
-    return replace(data, **kw), notes
+    est = rows.get(ESTIMATED_POTENTIAL_TOPIC)
+    if est is not None:
+        kw['mu_max'] = est['mu_max'].astype(np.float64)
+        kw['confidence'] = est['confidence'].astype(np.float64)
+        kw['road_class'] = est['road_class'].astype(np.int64)
+    return replace(data, **kw)
+
+
+def data_conditions(data: AlertData, settings: AlertSettings) -> tuple[BoolArray, BoolArray]:
+    """The truth and the relaxed truth conditions of paired rows, each shape (N, 3, 4)."""
+    cfg = settings
+    truth = truth_conditions(
+        data.slip, data.mu, data.peak_slip, data.peak_mu, low_friction_ratio=cfg.low_friction_ratio
+    )
+    relaxed = truth_conditions(
+        data.slip,
+        data.mu,
+        data.peak_slip,
+        data.peak_mu,
+        scale=cfg.relaxed_scale,
+        low_friction_ratio=cfg.low_friction_ratio,
+    )
+    return truth, relaxed
 
 
 def evaluate_alerts_section(
@@ -711,21 +815,7 @@ def evaluate_alerts_section(
     episodes: list[AlertEpisode] = []
     alarms: list[FalseAlarm] = []
     if data.level is not None:
-        truth = truth_conditions(
-            data.slip,
-            data.mu,
-            data.peak_slip,
-            data.peak_mu,
-            low_friction_ratio=cfg.low_friction_ratio,
-        )
-        relaxed = truth_conditions(
-            data.slip,
-            data.mu,
-            data.peak_slip,
-            data.peak_mu,
-            scale=cfg.relaxed_scale,
-            low_friction_ratio=cfg.low_friction_ratio,
-        )
+        truth, relaxed = data_conditions(data, cfg)
         episodes, alarms = evaluate_alerts(data.t, truth, relaxed, data.level, data.onset, cfg)
     segments: list[MuMaxSegment] = []
     if data.mu_max is not None:
@@ -740,6 +830,32 @@ def evaluate_alerts_section(
             true_road_class=data.true_road_class,
             settings=cfg,
         )
+    return alerts_section(
+        cfg, int(data.t.size), data.level is not None, episodes, alarms, segments, notes
+    )
+
+
+def alerts_section(
+    settings: AlertSettings,
+    samples: int,
+    judged: bool,
+    episodes: Sequence[AlertEpisode],
+    alarms: Sequence[FalseAlarm],
+    segments: Sequence[MuMaxSegment],
+    notes: tuple[str, ...] = (),
+) -> AlertsSection:
+    """The section from its scored episodes, false alarms and μ_max segments: counts, goals.
+
+    Args:
+        settings: the definitions used.
+        samples: evaluated stamps.
+        judged: the bag has alerts (False: no delay or false-alarm goal).
+        episodes: kind-major, then wheel, then time.
+        alarms: in the same order.
+        segments: axle-major, then time.
+        notes: what was left out and why.
+    """
+    cfg = settings
     counts = {
         'episodes': len(episodes),
         'met': sum(e.status == 'met' for e in episodes),
@@ -748,7 +864,7 @@ def evaluate_alerts_section(
         'false_alarms': len(alarms),
     }
     targets: dict[str, tuple[float, float, bool]] = {}
-    if data.level is not None:
+    if judged:
         delays = [e.delay_s for e in episodes if e.delay_s is not None]
         if episodes:
             worst = max(delays) if len(delays) == len(episodes) else math.inf
@@ -765,7 +881,7 @@ def evaluate_alerts_section(
         targets['mu_max within 0.1 while excited [%]'] = (share, 100.0, bool(share >= 100.0))
     return AlertsSection(
         settings=cfg,
-        samples=int(data.t.size),
+        samples=samples,
         episodes=tuple(episodes),
         false_alarms=tuple(alarms),
         mu_max=tuple(segments),

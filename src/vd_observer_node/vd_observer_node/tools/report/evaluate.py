@@ -8,6 +8,7 @@ and gear changes (found in ``/vd/sensors/wheel_torques.gear``).
 
 from __future__ import annotations
 
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -32,6 +33,7 @@ from vd_sim_node.topics import (
     TRUTH_WHEEL_STATES,
 )
 
+from vd_observer_node.inputs.decode import InputStats
 from vd_observer_node.tools.report.alerts import (
     AlertSettings,
     AlertsSection,
@@ -59,7 +61,11 @@ __all__ = [
     'QuantityMetrics',
     'SlopeConvergence',
     'build_comparisons',
+    'closing_notes',
     'evaluate',
+    'quantity_note',
+    'torque_path',
+    'torque_path_note',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -482,11 +488,7 @@ def evaluate(
             continue
         overall, wheels = _wheel_stats(c)
         extras = _extras(c, loads, cfg)
-        note = ''
-        if c.key == 'mu':
-            note = f'|Fx_true| > {cfg.mu_excitation:g} Fz_true and estimate valid'
-        elif c.key == 'slope':
-            note = 'where the estimate is valid'
+        if c.key == 'slope':
             base = evaluation_mask(
                 c.t,
                 start=cfg.settle_s,
@@ -495,8 +497,7 @@ def evaluate(
             )
             extras['valid_pct'] = 100.0 * float(c.mask.sum()) / max(int(base.sum()), 1)
             extras['rms_incl_invalid'] = error_stats(c.estimate, c.truth, base).rms
-        if overall.samples == 0:
-            note = (note + '; ' if note else '') + 'no sample in the evaluation window'
+        note = quantity_note(c.key, cfg, overall.samples)
         quantities.append(QuantityMetrics(c.key, c.title, c.unit, overall, wheels, extras, note))
     convergence = _convergence(comparisons, steps, cfg, notes)
     truth_t = (series.topics[present_truth[0]].stamp_ns - t0) * 1e-9
@@ -506,23 +507,9 @@ def evaluate(
         events=np.concatenate([steps, gears]),
         half_width=cfg.exclusion_half_width_s,
     )
-    if GEAR_TOPIC not in series.topics:
-        notes.append(f'{GEAR_TOPIC} missing: gear shifts not excluded')
-    if TRUTH_SLOPE not in series.topics:
-        notes.append(f'{TRUTH_SLOPE} missing: slope steps not excluded, no convergence times')
-    if not any(t in series.topics for t in ESTIMATE_TOPICS):
-        notes.append(
-            f'no {OBSERVER_NAMESPACE}* or {ESTIMATES_NAMESPACE}* topic: nothing to compare '
-            '(compute them offline with `vd replay IN OUT`)'
-        )
-    path = torque_path(series)
-    if path:
-        notes.append(path)
-    missing_truth = [t for t in TRUTH_TOPICS if t not in series.topics]
-    if missing_truth:
-        notes.append('truth topics missing: ' + ', '.join(missing_truth))
-    notes.extend(f'{name} skipped: {why}' for name, why in series.skipped.items())
-    notes.extend(f'input {stats.text()}' for stats in series.inputs)
+    notes.extend(
+        closing_notes(set(series.topics), torque_path(series), series.skipped, series.inputs)
+    )
     data, alert_notes = alert_data(series)
     section = (
         None
@@ -548,6 +535,58 @@ def evaluate(
     return report, comparisons
 
 
+def quantity_note(key: str, cfg: EvaluationSettings, samples: int) -> str:
+    """The caveat printed with a quantity's metrics ('' for none).
+
+    Args:
+        key: the quantity ('mu', 'slope', ...).
+        cfg: evaluation settings.
+        samples: elements its overall statistics were taken over.
+    """
+    note = ''
+    if key == 'mu':
+        note = f'|Fx_true| > {cfg.mu_excitation:g} Fz_true and estimate valid'
+    elif key == 'slope':
+        note = 'where the estimate is valid'
+    if samples == 0:
+        note = (note + '; ' if note else '') + 'no sample in the evaluation window'
+    return note
+
+
+def closing_notes(
+    present: Collection[str],
+    torque: str,
+    skipped: Mapping[str, str],
+    inputs: Sequence[InputStats],
+) -> list[str]:
+    """The report's notes on what the bag lacks, after the comparisons' own notes.
+
+    Args:
+        present: the topics decoded from the bag.
+        torque: the torque-path note (:func:`torque_path`), '' for none.
+        skipped: topic -> why it was not used.
+        inputs: the mapped inputs' arrival summaries.
+    """
+    notes: list[str] = []
+    if GEAR_TOPIC not in present:
+        notes.append(f'{GEAR_TOPIC} missing: gear shifts not excluded')
+    if TRUTH_SLOPE not in present:
+        notes.append(f'{TRUTH_SLOPE} missing: slope steps not excluded, no convergence times')
+    if not any(t in present for t in ESTIMATE_TOPICS):
+        notes.append(
+            f'no {OBSERVER_NAMESPACE}* or {ESTIMATES_NAMESPACE}* topic: nothing to compare '
+            '(compute them offline with `vd replay IN OUT`)'
+        )
+    if torque:
+        notes.append(torque)
+    missing_truth = [t for t in TRUTH_TOPICS if t not in present]
+    if missing_truth:
+        notes.append('truth topics missing: ' + ', '.join(missing_truth))
+    notes.extend(f'{name} skipped: {why}' for name, why in skipped.items())
+    notes.extend(f'input {stats.text()}' for stats in inputs)
+    return notes
+
+
 #: Names of vd_msgs' TORQUE_* codes (estimation.drivetrain.TORQUE_SOURCES).
 _TORQUE_PATHS = {
     0: 'measured wheel torques',
@@ -563,11 +602,17 @@ def torque_path(series: BagSeries) -> str:
     if forces is None:
         return ''
     codes = forces.values.get('torque_source')
+    return torque_path_note(None if codes is None else np.unique(codes))
+
+
+def torque_path_note(codes: np.ndarray | None) -> str:
+    """The torque-path note from the distinct torque_source codes of the tyre-force estimates
+    (shape (K,), sorted; None: the field is not in the bag's messages)."""
     if codes is None:
         return (
             'torque path: not recorded (estimates from before the torque_source field: measured)'
         )
-    names = [_TORQUE_PATHS.get(int(c), f'unknown code {int(c)}') for c in np.unique(codes)]
+    names = [_TORQUE_PATHS.get(int(c), f'unknown code {int(c)}') for c in codes]
     return 'torque path: ' + '; '.join(names)
 
 

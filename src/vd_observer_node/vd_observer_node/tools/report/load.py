@@ -28,7 +28,7 @@ from vd_observer_node.tools.report.topics import (
     TRUTH_TOPICS,
 )
 
-__all__ = ['BagSeries', 'TopicSeries', 'load_bag_series']
+__all__ = ['BagSeries', 'TopicSeries', 'decode_topic', 'load_bag_series', 'select_report_topics']
 
 _WANTED = {**SENSOR_TOPICS, **ESTIMATE_TOPICS, **ALERT_TOPICS, **TRUTH_TOPICS}
 _PROGRESS_AFTER_S = 1.0  # [s] show a bar only when reading is slow enough to need one
@@ -75,6 +75,45 @@ def _sorted(fields: BatchFields) -> TopicSeries:
     return TopicSeries(stamp, dict(fields.values))
 
 
+def select_report_topics(reader: BagReader, skipped: dict[str, str]) -> list[str]:
+    """The report's topics in the bag with the expected type and messages.
+
+    Args:
+        reader: the bag.
+        skipped: filled with topic -> why it is not used (wrong type, no messages).
+
+    Returns:
+        Topic names, in the order of the vd topic contract.
+    """
+    infos = reader.topics
+    selected: list[str] = []
+    for name, msgtype in _WANTED.items():
+        info = infos.get(name)
+        if info is None:
+            continue
+        if info.msgtype != msgtype:
+            skipped[name] = f'type {info.msgtype}, expected {msgtype}'
+        elif info.message_count == 0:
+            skipped[name] = 'no messages'
+        else:
+            selected.append(name)
+    return selected
+
+
+def decode_topic(msgtype: str, decoding_type: str, datas: list[bytes]) -> BatchFields:
+    """Batch-decode messages of one report topic (alerts have their own variable layout).
+
+    Args:
+        msgtype: the topic's type.
+        decoding_type: the type to decode with: the bag's own definition when it predates a
+            vd_msgs field (:meth:`BagReader.decoding_type`).
+        datas: CDR bytes of the messages.
+    """
+    if msgtype == ALERTS_TYPE:
+        return decode_alerts(datas)
+    return decode_batch(decoding_type, datas)
+
+
 def load_bag_series(
     path: str | os.PathLike[str],
     *,
@@ -99,17 +138,7 @@ def load_bag_series(
     reader = BagReader(path)
     infos = reader.topics
     series = BagSeries(Path(path))
-    selected: list[str] = []
-    for name, msgtype in _WANTED.items():
-        info = infos.get(name)
-        if info is None:
-            continue
-        if info.msgtype != msgtype:
-            series.skipped[name] = f'type {info.msgtype}, expected {msgtype}'
-        elif info.message_count == 0:
-            series.skipped[name] = 'no messages'
-        else:
-            selected.append(name)
+    selected = select_report_topics(reader, series.skipped)
     total = sum(infos[name].message_count for name in selected)
     bar = tqdm(
         total=total,
@@ -127,9 +156,7 @@ def load_bag_series(
             if arr is None or not arr.datas:
                 series.skipped[name] = 'no messages'
                 continue
-            decode = decode_alerts if arr.msgtype == ALERTS_TYPE else None
-            # decoding_type: the bag's own definition when it predates a vd_msgs field
-            fields = decode(arr.datas) if decode else decode_batch(arr.decoding_type, arr.datas)
+            fields = decode_topic(arr.msgtype, arr.decoding_type, arr.datas)
             series.topics[name] = _sorted(fields)
             series.message_count += len(arr.datas)
             bar.update(len(arr.datas))

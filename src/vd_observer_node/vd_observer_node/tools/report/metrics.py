@@ -20,7 +20,9 @@ __all__ = [
     'convergence_times',
     'error_stats',
     'evaluation_mask',
+    'merge_times',
     'relative_error_stats',
+    'selected_errors',
     'step_times',
 ]
 
@@ -86,14 +88,26 @@ def relative_error_stats(
     return _stats(ratio, mask)
 
 
-def _stats(error: FloatArray, mask: ArrayLike | None) -> ErrorStats:
+def selected_errors(error: FloatArray, mask: ArrayLike | None) -> FloatArray:
+    """The finite elements of ``error`` where ``mask`` holds, flattened (shape (K,)).
+
+    Args:
+        error: any shape, e.g. (N,) or (N, 4).
+        mask: bool, broadcastable to that shape ((N,) masks rows of an (N, 4) array), or
+            None (everything finite).
+    """
     select = np.isfinite(error)
     if mask is not None:
         m = np.asarray(mask, dtype=bool)
         if m.ndim < error.ndim:  # a per-row mask for a per-wheel array
             m = m.reshape(m.shape + (1,) * (error.ndim - m.ndim))
         select &= np.broadcast_to(m, error.shape)
-    values = error[select]
+    values: FloatArray = error[select]
+    return values
+
+
+def _stats(error: FloatArray, mask: ArrayLike | None) -> ErrorStats:
+    values = selected_errors(error, mask)
     if values.size == 0:
         return _EMPTY
     return ErrorStats(
@@ -124,7 +138,7 @@ def step_times(
     times = np.asarray(t, dtype=np.float64)
     values = np.asarray(signal, dtype=np.float64)
     jumps = np.flatnonzero(np.abs(np.diff(values)) > min_jump) + 1
-    return _merge(times[jumps], merge_s)
+    return merge_times(times[jumps], merge_s)
 
 
 def change_times(t: ArrayLike, values: ArrayLike, merge_s: float = 0.0) -> FloatArray:
@@ -141,10 +155,16 @@ def change_times(t: ArrayLike, values: ArrayLike, merge_s: float = 0.0) -> Float
     times = np.asarray(t, dtype=np.float64)
     v = np.asarray(values)
     changes = np.flatnonzero(v[1:] != v[:-1]) + 1
-    return _merge(times[changes], merge_s)
+    return merge_times(times[changes], merge_s)
 
 
-def _merge(times: FloatArray, merge_s: float) -> FloatArray:
+def merge_times(times: FloatArray, merge_s: float) -> FloatArray:
+    """Event times without those within ``merge_s`` of the previous one (0: keep all).
+
+    Args:
+        times: shape (K,), [s] increasing.
+        merge_s: [s].
+    """
     if times.size == 0 or merge_s <= 0.0:
         return times
     keep = np.ones(times.size, dtype=bool)
