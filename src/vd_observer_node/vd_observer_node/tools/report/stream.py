@@ -53,7 +53,7 @@ from vd_sim_node.topics import (
     TRUTH_TIRE_FORCES,
 )
 
-from vd_observer_node.bag.reader import BagReader
+from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.tools.report.alerts import (
     ALERT_KINDS,
     NO_COMMON_STAMP,
@@ -120,11 +120,13 @@ _STEP_MERGE_S = 0.5  # [s] metrics.step_times' default merge window (the referen
 def iter_topic_blocks(
     reader: BagReader, topics: list[str], block_messages: int = DEFAULT_BLOCK_MESSAGES
 ) -> Iterator[dict[str, TopicSeries]]:
-    """The bag's messages of ``topics`` in file order, ``block_messages`` at a time, decoded
-    per topic (stamps in file order, not sorted).
+    """The bag's messages of ``topics`` in file order, at most ``block_messages`` at a time,
+    decoded per topic (stamps in file order, not sorted).
 
-    A local batching helper over :meth:`BagReader.raw_messages`; a reader that yields
-    per-topic blocks itself can replace it.
+    Reads with :meth:`BagReader.topic_array_blocks` (per-topic batches of whole chunks, so no
+    per-message Python) and cuts each of its blocks into pieces of ``block_messages``,
+    merged across topics by log time (each topic's running maximum, so a topic's own order is
+    kept even where its log times go back).
 
     Args:
         reader: the bag.
@@ -136,14 +138,32 @@ def iter_topic_blocks(
     """
     infos = reader.topics
     kinds = {t: (infos[t].msgtype, reader.decoding_type(t)) for t in topics}
-    messages = reader.raw_messages(topics)
-    while True:
-        pending: dict[str, list[bytes]] = {t: [] for t in topics}
-        for topic, _, _, data, _ in itertools.islice(messages, block_messages):
-            pending[topic].append(data)
-        if not any(pending.values()):
-            return
-        yield _decode({t: d for t, d in pending.items() if d}, kinds)
+    for arrays in reader.topic_array_blocks(topics, block_messages=block_messages):
+        for piece in _pieces(arrays, block_messages):
+            yield _decode(piece, kinds)
+
+
+def _pieces(
+    arrays: Mapping[str, TopicArrays], block_messages: int
+) -> Iterator[dict[str, list[bytes]]]:
+    """One block of the reader cut into pieces of at most ``block_messages`` messages."""
+    names = [t for t in arrays if arrays[t].datas]
+    total = sum(len(arrays[t].datas) for t in names)
+    if total <= block_messages:
+        yield {t: arrays[t].datas for t in names}
+        return
+    keys = np.concatenate([np.maximum.accumulate(arrays[t].log_time_ns) for t in names])
+    which = np.concatenate([np.full(len(arrays[t].datas), k) for k, t in enumerate(names)])
+    order = np.argsort(keys, kind='stable')  # stable: a topic's rows stay in its order
+    taken = [0] * len(names)
+    for start in range(0, total, block_messages):
+        counts = np.bincount(which[order[start : start + block_messages]], minlength=len(names))
+        piece = {}
+        for k, name in enumerate(names):
+            if counts[k]:
+                piece[name] = arrays[name].datas[taken[k] : taken[k] + int(counts[k])]
+                taken[k] += int(counts[k])
+        yield piece
 
 
 def _decode(
