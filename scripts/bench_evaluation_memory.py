@@ -7,7 +7,7 @@
 For recording-like bags (20 topics at ``--rate`` Hz, the layout of a live demo recording:
 sensors, truth, observer, estimates and alerts; :func:`write_recording_like_bag`) of
 ``--minutes`` each, one fresh process per (bag, path) evaluates the bag and prints its peak
-RSS (``ru_maxrss``) and wall time:
+RSS (``VmHWM``) and wall time:
 
 * whole: ``evaluate(load_bag_series(bag))``, the reference (``vd report``), every topic decoded
   into arrays of the bag's length (only for bags up to ``--whole-up-to`` minutes: ~300 MiB
@@ -15,10 +15,10 @@ RSS (``ru_maxrss``) and wall time:
 * streamed: :func:`vd_observer_node.tools.report.stream.evaluate_bag`, what ``vd fleet``'s
   worker runs, in blocks of ``--block`` messages.
 
-The bag's file size is printed next to the peaks: today's ``BagReader`` reads a bag file into
-memory whole before it iterates, so that much of any peak is the reader's, not the
-evaluation's ("streamed - file" is the evaluation's own share). The load average is printed:
-wall times on a shared machine are indicative only; memory figures are not affected.
+The bag's file size is printed next to the peaks (``BagReader`` memory-maps the file and
+hands read pages back, so the file is not part of the streamed peak). The load average is
+printed: wall times on a shared machine are indicative only; memory figures are not
+affected.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_sim_nod
 from vd_observer_node.testing.fleet_bags import write_recording_like_bag
 
 _PROBE = """
-import json, resource, sys, time
+import json, sys, time
 sys.path[:0] = json.loads(sys.argv[3])
 path, bag, block = sys.argv[1], sys.argv[2], int(sys.argv[4])
 started = time.perf_counter()
@@ -49,7 +49,9 @@ else:
     from vd_observer_node.tools.report.stream import evaluate_bag
     report = evaluate_bag(bag, block_messages=block).report
 wall = time.perf_counter() - started
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+# VmHWM, not ru_maxrss: Linux carries the bench parent's high-water mark (it made the bag)
+# across fork + exec into ru_maxrss
+peak = next(int(l.split()[1]) for l in open('/proc/self/status') if l.startswith('VmHWM'))
 print(json.dumps({'peak_kib': peak, 'wall_s': wall, 'quantities': len(report.quantities)}))
 """
 
@@ -85,7 +87,7 @@ def main() -> None:
     args = parser.parse_args()
     minutes = [float(m) for m in args.minutes.split(',')]
     print(f'evaluation memory: recording-like bags, 20 topics at {args.rate:g} Hz')
-    print(f'{"bag":>8} {"file":>9} {"whole":>10} {"streamed":>10} {"str-file":>9}   wall (load)')
+    print(f'{"bag":>8} {"file":>9} {"whole":>10} {"streamed":>10}   wall (load)')
     with tempfile.TemporaryDirectory(prefix='vd-bench-eval-') as tmp:
         for m in minutes:
             bag = Path(tmp) / f'bag_{m:g}min'
@@ -98,18 +100,11 @@ def main() -> None:
             walls = f'streamed {streamed["wall_s"]:.1f} s'
             if whole:
                 walls = f'whole {whole["wall_s"]:.1f} s, ' + walls
-            print(
-                f'{m:6g} m {size:7.0f} M {w} {s:8.0f} M {s - size:7.0f} M   {walls} '
-                f'(load {_load()})'
-            )
+            print(f'{m:6g} m {size:7.0f} M {w} {s:8.0f} M   {walls} (load {_load()})')
             for p in bag.rglob('*'):
                 if p.is_file():
                     p.unlink()
-    print(
-        'peak RSS [MiB] of one process evaluating one bag; "str-file": streamed minus the bag '
-        "file, which today's BagReader holds in memory whole (the streamed reader of issue 17's "
-        'replay work removes it)'
-    )
+    print('peak RSS [MiB] (VmHWM) of one process evaluating one bag')
 
 
 if __name__ == '__main__':
