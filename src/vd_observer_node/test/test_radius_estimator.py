@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 from numpy.typing import NDArray
-from test_kernel import VEHICLE
+from test_kernel import VEHICLE, check_record, inject_faults, scenario_record
 from test_mass_grade import _drive
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_MEASURED
@@ -189,3 +189,24 @@ def test_the_compiled_estimator_keeps_the_files_radius_on_the_engine_path() -> N
     reference = _both(BOTH, _fwd_inputs(M0, 0.97 * R0, 15.0), source=TORQUE_ENGINE)
     assert reference.radius_estimator is None
     assert reference.last is not None and reference.last.radius_used == R0
+
+
+#: converges within the kernel tests' 14 s records (the defaults need more free rolling)
+QUICK = EstimatorConfig(
+    radius_adaptation=True,
+    mass_adaptation=True,
+    radius=RollingRadiusConfig(min_free_time=0.2, converged_std_ratio=0.03, min_speed=2.0),
+)
+
+
+@pytest.mark.parametrize('name', ['paper_table1', 'braking_low_mu'])
+def test_the_cascade_with_radius_adaptation_equals_the_reference(name: str) -> None:
+    reference = check_record(scenario_record(name, 'encoder'), estimator=QUICK)
+    assert (reference.radius_free_wheels > 0).any()
+    assert reference.radius_converged.any()
+
+
+def test_the_cascade_with_radius_adaptation_and_injected_faults() -> None:
+    rec = inject_faults(scenario_record('paper_table1', 'encoder'), np.random.default_rng(7))
+    reference = check_record(rec, estimator=QUICK)
+    assert reference.faults['estimator.gap'] > 0 and (reference.radius_free_wheels > 0).any()
