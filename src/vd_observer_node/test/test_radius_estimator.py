@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +21,7 @@ from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_MEASURE
 from vd_observer_node.estimation.estimator import Estimates, Estimator, EstimatorConfig
 from vd_observer_node.estimation.rolling_radius import RollingRadiusConfig
 from vd_observer_node.kernel.estimation import CompiledEstimator
+from vd_observer_node.tools.replay import load_replay_config
 
 FloatArray = NDArray[np.float64]
 R0 = VEHICLE.effective_radius
@@ -210,3 +212,21 @@ def test_the_cascade_with_radius_adaptation_and_injected_faults() -> None:
     rec = inject_faults(scenario_record('paper_table1', 'encoder'), np.random.default_rng(7))
     reference = check_record(rec, estimator=QUICK)
     assert reference.faults['estimator.gap'] > 0 and (reference.radius_free_wheels > 0).any()
+
+
+def test_vd_replay_config_takes_the_radius_settings(tmp_path: Path) -> None:
+    path = tmp_path / 'replay.yaml'
+    path.write_text(
+        'estimator:\n  radius_adaptation: true\n  radius:\n    min_speed: 2.0\n'
+        '  radius.tau: 100.0\n  mass_waits_for_radius: false\n',
+        encoding='utf-8',
+    )
+    config = load_replay_config(path).estimator
+    assert config == EstimatorConfig(
+        radius_adaptation=True,
+        radius=RollingRadiusConfig(min_speed=2.0, tau=100.0),
+        mass_waits_for_radius=False,
+    )
+    path.write_text('estimator:\n  radius:\n    min_speeed: 2.0\n', encoding='utf-8')
+    with pytest.raises(ConfigurationError, match='min_speeed'):
+        load_replay_config(path)
