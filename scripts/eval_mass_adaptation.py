@@ -212,7 +212,7 @@ def figures(
     """Run the cascade in each configuration; mass, R_eff, slope, Fz and mu figures of each.
 
     The slope "after convergence" is over one window for every configuration: the moving
-    samples after the mass of 'both' (else of 'mass') has converged.
+    samples after the mass of 'both' (where it never converged, of 'mass') has converged.
     """
     _, _, _, est_kw = SENSORS[sensors]
     filter_tau = est_kw.get('slope_filter_tau', EstimatorConfig().slope_filter_tau)
@@ -229,7 +229,11 @@ def figures(
     mask = evaluation_mask(sim.t, sim.events)
     moving = mask & (np.abs(sim.speed_true) > 0.5)
     t_conv = next(
-        (out[n]['mass_converged_at'] for n in ('both', 'mass') if n in out),
+        (
+            out[n]['mass_converged_at']
+            for n in ('both', 'mass')
+            if n in out and math.isfinite(out[n]['mass_converged_at'])
+        ),
         float('nan'),
     )
     after = moving & (sim.t >= t_conv) if math.isfinite(t_conv) else np.zeros_like(moving)
