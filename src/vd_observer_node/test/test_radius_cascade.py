@@ -12,12 +12,10 @@ import dataclasses
 
 import numpy as np
 import pytest
-from test_mass_cascade import CONFIG, PARAMS, RATE_HZ, SENSORS, VEHICLE, _cascade
-from vd_observer_node.chain import ChainSettings, PythonChain
+from test_mass_cascade import CONFIG, PARAMS, SENSORS, VEHICLE, _cascade, chain_run
 from vd_observer_node.estimation.cascade import run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import WARN
-from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_sim_node.vehicle.scenario import (
     PiecewiseConstant,
     Scenario,
@@ -92,19 +90,7 @@ def test_a_drive_without_free_rolling_keeps_the_files_radius_and_says_so() -> No
 
 def test_a_radius_beyond_its_bounds_is_clamped_and_reported_on_the_diagnostics() -> None:
     sim = _drive(0.85, 40.0)  # beyond scale_min (0.9)
-    settings = ChainSettings(
-        vehicle=VEHICLE, curves=TyreCurves.from_tire(PARAMS.tire), estimator=ON, kernel='python'
-    )
-    chain = PythonChain(settings)
-    reports = []
-    radius = np.empty(sim.t.size)
-    for k in range(sim.t.size):
-        out = chain.update(
-            float(sim.t[k]), sim.wheel_angle[k], float(sim.body_speed[k]), sim.wheel_torque[k]
-        )
-        radius[k] = out.estimates.radius_used
-        if k % int(RATE_HZ) == 0:  # the nodes report once a second
-            reports.append(chain.fault_report())
+    radius, reports = chain_run(sim, ON, 'radius_used')
     assert np.all(np.isfinite(radius))
     assert np.min(radius) >= ON.radius.scale_min * R0 * (1.0 - 1e-12)
     assert radius[-1] == pytest.approx(ON.radius.scale_min * R0, rel=1e-9)

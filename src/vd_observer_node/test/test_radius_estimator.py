@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 from test_kernel import VEHICLE, check_record, inject_faults, scenario_record
+from test_kernel_mass import equal_estimators
 from test_mass_grade import _drive
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_MEASURED
@@ -65,17 +66,7 @@ def _both(
     config: EstimatorConfig, inputs: tuple[FloatArray, ...], source: int = TORQUE_MEASURED
 ) -> Estimator:
     """Reference and compiled estimator on the same inputs; bit-equal outputs and faults."""
-    t, omega, omega_dot, v, accel, torque = inputs
-    reference = Estimator(VEHICLE, config, source)
-    compiled = CompiledEstimator(VEHICLE, config, source)
-    for k in range(t.size):
-        args = (float(t[k]), omega[k], omega_dot[k], float(v[k]), float(accel[k]), torque[k])
-        p, q = reference.update(*args), compiled.update(*args)
-        for f in dataclasses.fields(p):
-            a, b = np.asarray(getattr(p, f.name)), np.asarray(getattr(q, f.name))
-            assert np.array_equal(a, b), (k, f.name, a, b)
-    assert reference.faults.counts == compiled.faults.counts
-    return reference
+    return equal_estimators(config, source, inputs)
 
 
 def test_the_radius_converges_and_fx_uses_it() -> None:

@@ -144,6 +144,7 @@ _M_LAST = 18  # mass, std, converged, used, excited: 5 slots
 _R_T, _R_LP_ON, _R_V1, _R_V2, _R_THETA, _R_COV, _R_FREE_T, _R_CONV = range(23, 31)
 _R_HAS_LAST, _R_LAST = 31, 32  # _R_LAST: 5 slots
 N_SCAL: Final = 37
+assert _M_COV == _M_THETA + 1 and _R_COV == _R_THETA + 1  # _rls1_bounded's layout
 
 # fault slots (ESTIMATOR_FAULTS order) and the rejection count
 _NON_FINITE_STAMP, _NON_FINITE_VALUE, _DUPLICATE, _OUT_OF_ORDER, _GAP, _JUMP_BACK = range(6)
@@ -435,6 +436,39 @@ def _mass_held(prm: FloatArray, scal: FloatArray, est: FloatArray) -> None:
 
 
 @jit
+def _rls1_bounded(
+    scal: FloatArray,
+    slot: int,
+    phi: float,
+    y: float,
+    lam: float,
+    noise_var: float,
+    lo: float,
+    hi: float,
+) -> bool:
+    """`mass_grade.rls_step` with one parameter on ``scal[slot]`` (its variance in
+    ``scal[slot + 1]``), every product in the reference's order, then the estimators' clamp
+    to ``[lo, hi]``; a non-finite result is dropped. Returns whether the clamp acted."""
+    d = 1.0 / math.sqrt(lam)
+    p = scal[slot + 1] * (d * d)
+    theta = scal[slot]
+    p_phi = p * phi
+    k = p_phi / (phi * p_phi + noise_var)
+    innovation = y - phi * theta
+    a = 1.0 - k * phi
+    p_new = a * p * a + noise_var * (k * k)
+    p_new = 0.5 * (p_new + p_new)
+    theta_new = theta + k * innovation
+    clamped = False
+    if math.isfinite(theta_new) and math.isfinite(p_new):
+        if not lo <= theta_new <= hi:
+            clamped = True
+            theta_new = min(max(theta_new, lo), hi)
+        scal[slot], scal[slot + 1] = theta_new, p_new
+    return clamped
+
+
+@jit
 def _mass_update(
     prm: FloatArray, scal: FloatArray, t: float, sum_fx: float, speed: float, est: FloatArray
 ) -> bool:
@@ -504,25 +538,12 @@ def _mass_update(
     )
     clamped = False
     if excited:
-        # mass_grade.rls_step with one parameter, every product in the reference's order
         tau = prm[_M_TAU]
         lam = 1.0 if math.isinf(tau) or dt <= 0.0 else math.exp(-dt / tau)
-        d = 1.0 / math.sqrt(lam)
-        p = scal[_M_COV] * (d * d)
-        noise_var = prm[_M_NOISE] * prm[_M_NOISE] / dt
-        theta = scal[_M_THETA]
-        p_phi = p * f_hp
-        k = p_phi / (f_hp * p_phi + noise_var)
-        innovation = y_hp - f_hp * theta
-        a = 1.0 - k * f_hp
-        p_new = a * p * a + noise_var * (k * k)
-        p_new = 0.5 * (p_new + p_new)
-        theta_new = theta + k * innovation
-        if math.isfinite(theta_new) and math.isfinite(p_new):
-            if not prm[_M_THETA_MIN] <= theta_new <= prm[_M_THETA_MAX]:
-                clamped = True
-                theta_new = min(max(theta_new, prm[_M_THETA_MIN]), prm[_M_THETA_MAX])
-            scal[_M_THETA], scal[_M_COV] = theta_new, p_new
+        clamped = _rls1_bounded(
+            scal, _M_THETA, f_hp, y_hp, lam, prm[_M_NOISE] * prm[_M_NOISE] / dt,
+            prm[_M_THETA_MIN], prm[_M_THETA_MAX],
+        )  # fmt: skip
         scal[_M_EXC_T] += dt
         theta = scal[_M_THETA]
         std = math.sqrt(max(scal[_M_COV], 0.0)) / (theta * theta)
@@ -644,25 +665,12 @@ def _radius_update(
     ):
         n_free = 0
     else:
-        # mass_grade.rls_step with one parameter, every product in the reference's order
         tau = prm[_R_TAU]
         lam = math.exp(-dt / tau) if math.isfinite(tau) else 1.0
-        d = 1.0 / math.sqrt(lam)
-        p = scal[_R_COV] * (d * d)
-        noise_var = prm[_R_NOISE] * prm[_R_NOISE] / dt
-        theta = scal[_R_THETA]
-        p_phi = p * mean_omega
-        k = p_phi / (mean_omega * p_phi + noise_var)
-        innovation = speed - mean_omega * theta
-        a = 1.0 - k * mean_omega
-        p_new = a * p * a + noise_var * (k * k)
-        p_new = 0.5 * (p_new + p_new)
-        theta_new = theta + k * innovation
-        if math.isfinite(theta_new) and math.isfinite(p_new):
-            if not prm[_R_LO] <= theta_new <= prm[_R_HI]:
-                clamped = True
-                theta_new = min(max(theta_new, prm[_R_LO]), prm[_R_HI])
-            scal[_R_THETA], scal[_R_COV] = theta_new, p_new
+        clamped = _rls1_bounded(
+            scal, _R_THETA, mean_omega, speed, lam, prm[_R_NOISE] * prm[_R_NOISE] / dt,
+            prm[_R_LO], prm[_R_HI],
+        )  # fmt: skip
         scal[_R_FREE_T] += dt
         if (
             scal[_R_FREE_T] >= prm[_R_MIN_FREE_T]
