@@ -436,6 +436,20 @@ def _mass_held(prm: FloatArray, scal: FloatArray, est: FloatArray) -> None:
 
 
 @jit
+def _stamp_dt(last: float, t: float, max_gap: float) -> float:
+    """`faults.classify_stamp` for a finite stamp ``t`` after ``last`` (nan: none): the step
+    dt [s] (0.0 at the start), nan to hold (repeated or slightly older), -1.0 to restart."""
+    if math.isnan(last):
+        return 0.0
+    dt = t - last
+    if dt == 0.0 or (dt < 0.0 and -dt <= max_gap):
+        return math.nan
+    if dt < 0.0 or dt > max_gap:
+        return -1.0
+    return dt
+
+
+@jit
 def _rls1_bounded(
     scal: FloatArray,
     slot: int,
@@ -480,17 +494,13 @@ def _mass_update(
     if not (math.isfinite(sum_fx) and math.isfinite(speed)):
         _mass_held(prm, scal, est)
         return False
-    # faults.classify_stamp (t is finite: the estimator took it)
-    last = scal[_M_T]
-    dt = 0.0
-    if not math.isnan(last):
-        dt = t - last
-        if dt == 0.0 or (dt < 0.0 and -dt <= prm[_M_MAX_GAP]):
-            _mass_held(prm, scal, est)
-            return False
-        if dt < 0.0 or dt > prm[_M_MAX_GAP]:
-            _mass_reset(prm, scal)
-            dt = 0.0
+    dt = _stamp_dt(scal[_M_T], t, prm[_M_MAX_GAP])
+    if math.isnan(dt):
+        _mass_held(prm, scal, est)
+        return False
+    if dt < 0.0:
+        _mass_reset(prm, scal)
+        dt = 0.0
     scal[_M_T] = t
     gravity = prm[_GRAVITY]
     m0 = prm[_MASS]
@@ -624,17 +634,13 @@ def _radius_update(
     whether the radius clamp acted (the caller counts 'radius_clamped')."""
     if math.isnan(scal[_R_THETA]):
         _radius_reset(prm, scal)
-    # faults.classify_stamp (t is finite: the estimator took it)
-    last = scal[_R_T]
-    dt = 0.0
-    if not math.isnan(last):
-        dt = t - last
-        if dt == 0.0 or (dt < 0.0 and -dt <= prm[_R_MAX_GAP]):
-            _radius_held(prm, scal, est)
-            return False
-        if dt < 0.0 or dt > prm[_R_MAX_GAP]:
-            _radius_reset(prm, scal)
-            dt = 0.0
+    dt = _stamp_dt(scal[_R_T], t, prm[_R_MAX_GAP])
+    if math.isnan(dt):
+        _radius_held(prm, scal, est)
+        return False
+    if dt < 0.0:
+        _radius_reset(prm, scal)
+        dt = 0.0
     scal[_R_T] = t
     if dt == 0.0 or scal[_R_LP_ON] == 0.0:
         scal[_R_LP_ON] = 1.0
