@@ -28,7 +28,9 @@ steps and gear shifts.
 Usage:
     python scripts/eval_mass_adaptation.py [--scenario PATH ...] [--cases nominal,+125kg]
         [--sensors ideal,noisy] [--set key=value ...]   (--set: MassGradeConfig)
-        [--configs off,mass,radius,both,eager]
+        [--configs off,mass,radius,both,eager] [--cost]
+    --cost: instead, the compiled cascade's time per sample in each configuration (best of 3;
+    indicative, the load average is printed)
 """
 
 from __future__ import annotations
@@ -250,6 +252,7 @@ def main() -> None:
     parser.add_argument('--sensors', default='ideal,noisy')
     parser.add_argument('--set', action='append', default=[], help='MassGradeConfig key=value')
     parser.add_argument('--configs', default=','.join(CONFIGS))
+    parser.add_argument('--cost', action='store_true', help='time per sample instead')
     args = parser.parse_args()
     overrides: dict[str, Any] = {}
     for item in args.set:
@@ -264,6 +267,9 @@ def main() -> None:
         f'load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}'
     )
     print(f'mass {config} (filter_tau: the estimator slope_filter_tau of each case)')
+    if args.cost:
+        _print_cost(nominal, vehicle, args.configs.split(','))
+        return
     for path in args.scenario or SCENARIOS:
         scenario = load_scenario(path)
         for sensors in args.sensors.split(','):
@@ -275,6 +281,19 @@ def main() -> None:
                 for name in configs:
                     _print_run(name, f[name], case, sensors)
                 sys.stdout.flush()
+
+
+def _print_cost(nominal: VehicleParams, vehicle: EstimatorVehicle, configs: list[str]) -> None:
+    """The compiled cascade's time per sample per configuration, mass_drive, noisy sensors."""
+    _, sim = simulate_case(nominal, load_scenario(SCENARIOS[0]), 'Reff-3%', 'noisy')
+    _cascade(sim, vehicle, 'noisy')  # compile (or load numba's cache) first
+    for name in configs:
+        best = math.inf
+        for _ in range(3):
+            start = time.perf_counter()
+            _cascade(sim, vehicle, 'noisy', **CONFIGS[name])
+            best = min(best, time.perf_counter() - start)
+        print(f'  [{name:6s}] {1e6 * best / sim.t.size:.2f} us per sample ({sim.t.size} samples)')
 
 
 def _verdicts(f: dict[str, Any], case: str) -> list[str]:
