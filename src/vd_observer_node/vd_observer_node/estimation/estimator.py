@@ -27,7 +27,7 @@ or whose torque is untrusted does not update it; a clamp is counted as 'radius_c
 With both adaptations on and `mass_waits_for_radius`, the mass is not updated (it stays the
 file's) until the radius has converged: an early mass would keep the radius's bias.
 The speed sensor's scale and R_eff are not separable from v and omega: the radius is the
-one the speed sensor sees (see docs/estimation.md section 7.2).
+one the speed sensor sees (see docs/estimation.md section 7.1).
 
 All outputs are finite always: a non-finite input is replaced by its last finite value and
 the affected validity flags are cleared; a non-finite, repeated or slightly older stamp
