@@ -1,21 +1,23 @@
 #!/usr/bin/env python3
-"""Online mass estimation inside the cascade against a car that is not the vehicle file (issue 16).
+"""Online mass and rolling radius inside the cascade against a car that is not its file (issue 16).
 
 For each case of the scenario family (nominal; +125, +400, -50 kg with the CG moved back
-with the load; R_eff -3 % / +1 %; engine torque signal +-10 N m), with ideal sensors and
-with a 96 counts/rev encoder plus 0.05 m/s speed noise at 1 kHz: simulates the TRUE car
-(``vd_sim_node.vehicle.variants``) and runs the compiled cascade with the NOMINAL vehicle file
-twice, with ``EstimatorConfig.mass_adaptation`` off (the file's mass) and on (the estimator's
-online mass, ``estimation.mass_grade`` inside ``Estimator``: Fz, mu, rolling resistance and
-slope use ``mass_used``), and prints:
+with the load; R_eff -3 % / +1 %; +125 kg with R_eff -3 %; engine torque signal +-10 N m),
+with ideal sensors and with a 96 counts/rev encoder plus 0.05 m/s speed noise at 1 kHz:
+simulates the TRUE car (``vd_sim_node.vehicle.variants``) and runs the compiled cascade with
+the NOMINAL vehicle file five times: adaptation off (the file's mass and R_eff), mass only
+(``EstimatorConfig.mass_adaptation``: Fz, mu, rolling resistance and slope use ``mass_used``),
+radius only (``radius_adaptation``: Fx and the slip use ``radius_used``), both (the mass
+waits for a converged radius, the default ``mass_waits_for_radius``) and both without that
+wait ("eager"), and prints:
 
 * mass error after convergence (final and worst after the converged flag) and the time to
   converge from the first excited sample,
 * slope RMS, whole run and after convergence, off and on,
 * mu RMS and Fz RMS (per wheel, and the sum of the four) off and on; the CG, which moves
   with the load, is not estimated,
-* R_eff from the free-rolling wheels (``estimation.rolling_radius``, standalone: not wired)
-  on the cascade's omega: error at the end and after 60 s of free rolling.
+* R_eff (the estimator's, ``radius``): error at the end and after 60 s of free rolling, and
+  when it converged.
 
 The verdicts are issue 16's goals, for the noisy sensors (the whole-run slope includes the
 time before convergence, when the file's mass is used by design).
@@ -26,6 +28,9 @@ steps and gear shifts.
 Usage:
     python scripts/eval_mass_adaptation.py [--scenario PATH ...] [--cases nominal,+125kg]
         [--sensors ideal,noisy] [--set key=value ...]   (--set: MassGradeConfig)
+        [--configs off,mass,radius,both,eager] [--cost]
+    --cost: instead, the compiled cascade's time per sample in each configuration (best of 3;
+    indicative, the load average is printed)
 """
 
 from __future__ import annotations
@@ -53,7 +58,6 @@ from vd_observer_node.estimation.cascade import CascadeResult  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.estimation.mass_grade import MassGradeConfig  # noqa: E402
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
-from vd_observer_node.estimation.rolling_radius import run_rolling_radius  # noqa: E402
 from vd_observer_node.estimation.vehicle import EstimatorVehicle  # noqa: E402
 from vd_observer_node.kernel.chain import run_cascade_compiled  # noqa: E402
 from vd_sim_node.vehicle.params import VehicleParams, load_vehicle  # noqa: E402
@@ -73,6 +77,7 @@ CASES: dict[str, tuple[Callable[[VehicleParams], VehicleParams], float]] = {
     '-50kg': (lambda vp: loaded(vp, -50.0), 0.0),
     'Reff-3%': (lambda vp: tyre_radius_scale(vp, 0.97), 0.0),
     'Reff+1%': (lambda vp: tyre_radius_scale(vp, 1.01), 0.0),
+    '+125kg&Reff-3%': (lambda vp: tyre_radius_scale(loaded(vp, 125.0), 0.97), 0.0),
     'torque+10': (lambda vp: vp, 10.0),
     'torque-10': (lambda vp: vp, -10.0),
 }
@@ -91,6 +96,7 @@ SENSORS: dict[str, tuple[int, float, dict[str, Any], dict[str, Any]]] = {
 SLOPE_GOAL_DEG = {'+125kg': 0.25, '+400kg': 0.3}
 MASS_GOAL_PCT = 2.0
 CONVERGE_GOAL_S = 15.0
+REFF_GOAL_PCT = 0.3
 
 
 def simulate_case(
@@ -142,56 +148,99 @@ def _errors(
     }
 
 
+#: the estimator's adaptation settings of each configuration the script compares
+CONFIGS: dict[str, dict[str, Any]] = {
+    'off': {},
+    'mass': {'mass_adaptation': True},
+    'radius': {'radius_adaptation': True},
+    'both': {'mass_adaptation': True, 'radius_adaptation': True},
+    'eager': {'mass_adaptation': True, 'radius_adaptation': True, 'mass_waits_for_radius': False},
+}
+
+
+def _mass_figures(res: CascadeResult, sim: SimResult, m_true: float) -> dict[str, float]:
+    """Mass error (final, worst after convergence) and the time to converge of one run."""
+    dt = float(sim.t[1] - sim.t[0])
+    nan = float('nan')
+    conv = np.flatnonzero(res.mass_converged)
+    excited = np.flatnonzero(res.mass_excited)
+    out = {
+        'mass_final': float(res.mass[-1]),
+        'mass_final_err_pct': 100.0 * (res.mass[-1] - m_true) / m_true,
+        'mass_final_std': float(res.mass_std[-1]),
+        'excited_s_total': float(res.mass_excited.sum() * dt),
+        'mass_clamped': res.faults.get('estimator.mass_clamped', 0),
+        'mass_worst_err_pct': nan,
+        'converge_s_from_first_excitation': nan,
+        'excited_s_to_converge': nan,
+        'mass_converged_at': nan,
+    }
+    if conv.size:
+        worst = float(np.max(np.abs(res.mass[conv[0] :] - m_true)))
+        out['mass_worst_err_pct'] = 100.0 * worst / m_true
+        first = float(sim.t[excited[0]]) if excited.size else nan
+        out['converge_s_from_first_excitation'] = float(sim.t[conv[0]]) - first
+        out['excited_s_to_converge'] = float(res.mass_excited[: conv[0] + 1].sum() * dt)
+        out['mass_converged_at'] = float(sim.t[conv[0]])
+    return out
+
+
+def _radius_figures(res: CascadeResult, sim: SimResult, r_true: float) -> dict[str, float]:
+    """R_eff error at the end and after 60 s of free rolling, and when it converged."""
+    dt = float(sim.t[1] - sim.t[0])
+    free_s = np.cumsum(res.radius_free_wheels > 0) * dt
+    k60 = int(np.searchsorted(free_s, 60.0))
+    conv = np.flatnonzero(res.radius_converged)
+    nan = float('nan')
+    return {
+        'reff_final_err_pct': 100.0 * (res.radius[-1] - r_true) / r_true,
+        'reff_err_60s_free_pct': (
+            100.0 * (res.radius[k60] - r_true) / r_true if k60 < free_s.size else nan
+        ),
+        'reff_free_s': float(free_s[-1]),
+        'reff_converged_at': float(sim.t[conv[0]]) if conv.size else nan,
+        'reff_clamped': res.faults.get('estimator.radius_clamped', 0),
+    }
+
+
 def figures(
     sim: SimResult,
     true_vp: VehicleParams,
     vehicle: EstimatorVehicle,
     sensors: str,
     config: MassGradeConfig,
-) -> dict[str, Any]:
-    """Run the cascade off and on; the mass, slope, Fz and mu figures of both."""
+    configs: list[str],
+) -> dict[str, dict[str, Any]]:
+    """Run the cascade in each configuration; mass, R_eff, slope, Fz and mu figures of each.
+
+    The slope "after convergence" is over one window for every configuration: the moving
+    samples after the mass of 'both' (where it never converged, of 'mass') has converged.
+    """
     _, _, _, est_kw = SENSORS[sensors]
     filter_tau = est_kw.get('slope_filter_tau', EstimatorConfig().slope_filter_tau)
     mass_cfg = dataclasses.replace(config, filter_tau=filter_tau)
-    off = _cascade(sim, vehicle, sensors)
-    on = _cascade(sim, vehicle, sensors, mass_adaptation=True, mass=mass_cfg)
-    dt = float(sim.t[1] - sim.t[0])
     m_true = true_vp.chassis.mass
-    out: dict[str, Any] = {'mass_true': m_true}
-    conv = np.flatnonzero(on.mass_converged)
-    excited = np.flatnonzero(on.mass_excited)
-    out['mass_final'] = float(on.mass[-1])
-    out['mass_final_err_pct'] = 100.0 * (on.mass[-1] - m_true) / m_true
-    out['mass_final_std'] = float(on.mass_std[-1])
-    nan = float('nan')
-    if conv.size:
-        out['mass_worst_err_pct'] = 100.0 * float(np.max(np.abs(on.mass[conv[0] :] - m_true)))
-        out['mass_worst_err_pct'] /= m_true
-        first = float(sim.t[excited[0]]) if excited.size else nan
-        out['converge_s_from_first_excitation'] = float(sim.t[conv[0]]) - first
-        out['excited_s_to_converge'] = float(on.mass_excited[: conv[0] + 1].sum() * dt)
-    else:
-        out['mass_worst_err_pct'] = nan
-        out['converge_s_from_first_excitation'] = nan
-        out['excited_s_to_converge'] = nan
-    out['excited_s_total'] = float(on.mass_excited.sum() * dt)
-    out['mass_clamped'] = on.faults.get('estimator.mass_clamped', 0)
+    r_true = true_vp.wheel.effective_radius
+    runs = {
+        name: _cascade(sim, vehicle, sensors, mass=mass_cfg, **CONFIGS[name]) for name in configs
+    }
+    out: dict[str, dict[str, Any]] = {name: {'mass_true': m_true} for name in configs}
+    for name, res in runs.items():
+        out[name].update(_mass_figures(res, sim, m_true))
+        out[name].update(_radius_figures(res, sim, r_true))
     mask = evaluation_mask(sim.t, sim.events)
     moving = mask & (np.abs(sim.speed_true) > 0.5)
-    after = moving & (sim.t >= sim.t[conv[0]]) if conv.size else np.zeros_like(moving)
-    out['off'] = _errors(off, sim, m_true, vehicle, after)
-    out['on'] = _errors(on, sim, m_true, vehicle, after)
-
-    # R_eff from the free-rolling wheels (standalone, not wired into the estimator)
-    r_true = true_vp.wheel.effective_radius
-    rr = run_rolling_radius(sim.t, off.omega, sim.wheel_torque, sim.body_speed, vehicle)
-    out['reff_final_err_pct'] = 100.0 * (rr.radius[-1] - r_true) / r_true
-    free_s = np.cumsum(rr.free_wheels > 0) * dt
-    k60 = int(np.searchsorted(free_s, 60.0))
-    out['reff_free_s'] = float(free_s[-1])
-    out['reff_err_60s_free_pct'] = (
-        100.0 * (rr.radius[k60] - r_true) / r_true if k60 < free_s.size else nan
+    t_conv = next(
+        (
+            out[n]['mass_converged_at']
+            for n in ('both', 'mass')
+            if n in out and math.isfinite(out[n]['mass_converged_at'])
+        ),
+        float('nan'),
     )
+    after = moving & (sim.t >= t_conv) if math.isfinite(t_conv) else np.zeros_like(moving)
+    for name, res in runs.items():
+        out[name].update(_errors(res, sim, m_true, vehicle, after))
     return out
 
 
@@ -202,6 +251,8 @@ def main() -> None:
     parser.add_argument('--cases', default=','.join(CASES))
     parser.add_argument('--sensors', default='ideal,noisy')
     parser.add_argument('--set', action='append', default=[], help='MassGradeConfig key=value')
+    parser.add_argument('--configs', default=','.join(CONFIGS))
+    parser.add_argument('--cost', action='store_true', help='time per sample instead')
     args = parser.parse_args()
     overrides: dict[str, Any] = {}
     for item in args.set:
@@ -216,57 +267,74 @@ def main() -> None:
         f'load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}'
     )
     print(f'mass {config} (filter_tau: the estimator slope_filter_tau of each case)')
+    if args.cost:
+        _print_cost(nominal, vehicle, args.configs.split(','))
+        return
     for path in args.scenario or SCENARIOS:
         scenario = load_scenario(path)
         for sensors in args.sensors.split(','):
             for case in args.cases.split(','):
                 true_vp, sim = simulate_case(nominal, scenario, case, sensors)
-                f = figures(sim, true_vp, vehicle, sensors, config)
-                slope_goal = SLOPE_GOAL_DEG.get(case)
-                off, on = f['off'], f['on']
-                verdicts = []
-                if sensors == 'noisy':
-                    if slope_goal is not None:
-                        ok = on['slope'] <= slope_goal
-                        verdicts.append(
-                            f'slope<={slope_goal} whole run {"MET" if ok else "MISSED"}'
-                        )
-                        ok = on['slope_after'] <= slope_goal
-                        verdicts.append(f'after convergence {"MET" if ok else "MISSED"}')
-                    if case == 'nominal':
-                        ok = on['slope'] <= off['slope'] + 1e-3
-                        verdicts.append(f'nominal no worse {"MET" if ok else "MISSED"}')
-                    if case.endswith('kg') or case == 'nominal':
-                        ok = f['mass_worst_err_pct'] <= MASS_GOAL_PCT
-                        verdicts.append(f'mass<={MASS_GOAL_PCT}% {"MET" if ok else "MISSED"}')
-                        ok = f['converge_s_from_first_excitation'] <= CONVERGE_GOAL_S
-                        verdicts.append(
-                            f'converge<={CONVERGE_GOAL_S:g}s {"MET" if ok else "MISSED"}'
-                        )
-                print(f'== {scenario.name} / {sensors} / {case}  ' + '; '.join(verdicts))
-                print(
-                    f'   mass true {f["mass_true"]:.0f} kg, final {f["mass_final"]:.1f} kg '
-                    f'({f["mass_final_err_pct"]:+.2f} %, std {f["mass_final_std"]:.1f} kg), '
-                    f'worst after convergence {f["mass_worst_err_pct"]:.2f} %, '
-                    f'converged {f["converge_s_from_first_excitation"]:.1f} s after the first '
-                    f'excitation ({f["excited_s_to_converge"]:.1f} s excited; '
-                    f'{f["excited_s_total"]:.1f} s excited in all), clamped '
-                    f'{f["mass_clamped"]}'
-                )
-                print(
-                    '   off -> on: slope RMS [deg] whole run '
-                    f'{off["slope"]:.3f} -> {on["slope"]:.3f}, moving after convergence '
-                    f'{off["slope_after"]:.3f} -> {on["slope_after"]:.3f}; Fz RMS [% of static] '
-                    f'{off["fz"]:.2f} -> {on["fz"]:.2f} (sum of 4 wheels '
-                    f'{off["fz_total"]:.2f} -> {on["fz_total"]:.2f}); mu RMS '
-                    f'{off["mu"]:.4f} -> {on["mu"]:.4f}'
-                )
-                print(
-                    f'   R_eff (standalone): final {f["reff_final_err_pct"]:+.3f} %, after 60 s '
-                    f'of free rolling {f["reff_err_60s_free_pct"]:+.3f} % '
-                    f'({f["reff_free_s"]:.0f} s free in all)'
-                )
+                configs = args.configs.split(',')
+                f = figures(sim, true_vp, vehicle, sensors, config, configs)
+                print(f'== {scenario.name} / {sensors} / {case}')
+                for name in configs:
+                    _print_run(name, f[name], case, sensors)
                 sys.stdout.flush()
+
+
+def _print_cost(nominal: VehicleParams, vehicle: EstimatorVehicle, configs: list[str]) -> None:
+    """The compiled cascade's time per sample per configuration, mass_drive, noisy sensors."""
+    _, sim = simulate_case(nominal, load_scenario(SCENARIOS[0]), 'Reff-3%', 'noisy')
+    _cascade(sim, vehicle, 'noisy')  # compile (or load numba's cache) first
+    for name in configs:
+        best = math.inf
+        for _ in range(3):
+            start = time.perf_counter()
+            _cascade(sim, vehicle, 'noisy', **CONFIGS[name])
+            best = min(best, time.perf_counter() - start)
+        print(f'  [{name:6s}] {1e6 * best / sim.t.size:.2f} us per sample ({sim.t.size} samples)')
+
+
+def _verdicts(f: dict[str, Any], case: str) -> list[str]:
+    """issue 16's goals for one noisy run."""
+    verdicts = []
+    slope_goal = SLOPE_GOAL_DEG.get(case)
+    if slope_goal is not None:
+        ok = f['slope'] <= slope_goal
+        verdicts.append(f'slope<={slope_goal} whole run {"MET" if ok else "MISSED"}')
+        ok = f['slope_after'] <= slope_goal
+        verdicts.append(f'after convergence {"MET" if ok else "MISSED"}')
+    if 'kg' in case or case == 'nominal' or 'Reff' in case:
+        ok = f['mass_worst_err_pct'] <= MASS_GOAL_PCT
+        verdicts.append(f'mass<={MASS_GOAL_PCT}% {"MET" if ok else "MISSED"}')
+    ok = abs(f['reff_err_60s_free_pct']) <= REFF_GOAL_PCT
+    verdicts.append(f'R_eff<={REFF_GOAL_PCT}% {"MET" if ok else "MISSED"}')
+    return verdicts
+
+
+def _print_run(name: str, f: dict[str, Any], case: str, sensors: str) -> None:
+    """The lines of one configuration of one case."""
+    verdicts = _verdicts(f, case) if sensors == 'noisy' and name in ('both', 'eager') else []
+    print(
+        f'  [{name:6s}] slope RMS [deg] {f["slope"]:.3f}, after conv. {f["slope_after"]:.3f}; '
+        f'Fz RMS {f["fz"]:.2f} % (sum {f["fz_total"]:.2f} %); mu RMS {f["mu"]:.4f}'
+        + ('  ' + '; '.join(verdicts) if verdicts else '')
+    )
+    if CONFIGS[name].get('mass_adaptation'):
+        print(
+            f'           mass final {f["mass_final_err_pct"]:+.2f} % (std '
+            f'{f["mass_final_std"]:.1f} kg), worst after conv. {f["mass_worst_err_pct"]:.2f} %, '
+            f'converged at {f["mass_converged_at"]:.1f} s, '
+            f'{f["converge_s_from_first_excitation"]:.1f} s after the first excitation '
+            f'({f["excited_s_total"]:.1f} s excited in all), clamped {f["mass_clamped"]}'
+        )
+    if CONFIGS[name].get('radius_adaptation'):
+        print(
+            f'           R_eff final {f["reff_final_err_pct"]:+.3f} %, after 60 s of free '
+            f'rolling {f["reff_err_60s_free_pct"]:+.3f} % ({f["reff_free_s"]:.0f} s free), '
+            f'converged at {f["reff_converged_at"]:.1f} s, clamped {f["reff_clamped"]}'
+        )
 
 
 if __name__ == '__main__':

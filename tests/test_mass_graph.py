@@ -1,8 +1,10 @@
-"""The online mass live (estimator_node, pipeline_node) equals offline replay, and is recorded.
+"""The online mass and rolling radius live (estimator_node, pipeline_node) equal offline replay,
+and are recorded.
 
-sim_node (short launch) -> the estimation node(s) with mass adaptation on, recorded by
-recorder_node; `vd replay` with the same estimator settings must compute, for every sensor
-stamp, the same /vd/estimates/mass and the same loads and slope that used it (1e-9).
+sim_node (short launch) -> the estimation node(s) with mass and radius adaptation on, recorded
+by recorder_node; `vd replay` with the same estimator settings must compute, for every sensor
+stamp, the same /vd/estimates/mass, /vd/estimates/rolling_radius and the same loads and slope
+that used them (1e-9).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.tools.replay import replay_bag
 from vd_sim_node.topics import (
     ESTIMATES_MASS,
+    ESTIMATES_ROLLING_RADIUS,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
     SENSORS_WHEEL_ANGLES,
@@ -38,10 +41,18 @@ MASS_PARAMS = {
     'mass.min_excited_time': 0.3,
     'mass.converged_std_ratio': 0.2,
     'mass.grade_tau': 0.2,
+    # the radius too, without holding the mass back (the launch has little free rolling)
+    'radius_adaptation': True,
+    'mass_waits_for_radius': False,
+    'radius.min_speed': 1.0,
+    'radius.min_free_time': 0.1,
+    'radius.max_accel': 5.0,  # a launch: the rear wheels roll freely while it accelerates
+    'radius.converged_std_ratio': 0.03,
 }
 CONFIG = EstimatorConfig.from_mapping(MASS_PARAMS)
 FIELDS = {
     ESTIMATES_MASS: ('mass', 'mass_std', 'mass_used', 'converged', 'excited'),
+    ESTIMATES_ROLLING_RADIUS: ('radius', 'radius_std', 'radius_used', 'converged', 'free_wheels'),
     ESTIMATES_TIRE_FORCES: ('fx', 'fz'),
     ESTIMATES_SLOPE: ('angle', 'valid'),
 }
@@ -96,6 +107,8 @@ def test_the_live_mass_is_recorded_and_equals_the_replays(
     assert sorted(live[ESTIMATES_MASS]) == stamps
     assert any(live[ESTIMATES_MASS][s].excited for s in stamps)
     assert live[ESTIMATES_MASS][stamps[-1]].converged  # so Fz and the slope used it
+    assert sorted(live[ESTIMATES_ROLLING_RADIUS]) == stamps
+    assert any(live[ESTIMATES_ROLLING_RADIUS][s].free_wheels for s in stamps)
 
     offline_bag = tmp_path / 'offline'
     replay_bag(bag, offline_bag, progress=False, estimator_config=CONFIG)

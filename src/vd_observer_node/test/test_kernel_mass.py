@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+from numpy.typing import NDArray
 from test_kernel import (
     CURVES,
     VEHICLE,
@@ -64,6 +65,15 @@ def _both(
         )
     torque = torque.copy()
     torque[5000:5100:3, 2] = math.nan  # held inputs: no mass update there
+    return equal_estimators(config, source, (t, omega, omega_dot, v, accel, torque))
+
+
+def equal_estimators(
+    config: EstimatorConfig, source: int, inputs: tuple[NDArray[np.float64], ...]
+) -> Estimator:
+    """Reference and compiled estimator on (t, omega, omega_dot, v, accel, torque): every
+    output of every stamp bit-equal, and the fault counts equal. Returns the reference."""
+    t, omega, omega_dot, v, accel, torque = inputs
     reference = Estimator(VEHICLE, config, source)
     compiled = CompiledEstimator(VEHICLE, config, source)
     for k in range(t.size):

@@ -17,7 +17,7 @@ import pytest
 from vd_observer_node.chain import ChainSettings, PythonChain
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
-from vd_observer_node.estimation.faults import WARN
+from vd_observer_node.estimation.faults import WARN, FaultReport
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_sim_node.vehicle.params import load_vehicle
@@ -101,21 +101,33 @@ def test_a_cruise_that_never_accelerates_keeps_the_files_mass_and_says_so() -> N
         np.testing.assert_array_equal(getattr(on, name), getattr(off, name), err_msg=name)
 
 
-def test_a_far_wrong_mass_is_bounded_and_reported_on_the_diagnostics() -> None:
-    sim = _drive(1500.0, 40.0)  # 2.7 times the file: beyond mass_max_ratio (2)
+def chain_run(
+    sim: SimResult, config: EstimatorConfig, name: str
+) -> tuple[np.ndarray, list[FaultReport]]:
+    """The per-stamp Python chain (what the nodes run) over `sim`: the estimate `name` per
+    stamp and the fault report once a second, as the nodes publish it."""
     settings = ChainSettings(
-        vehicle=VEHICLE, curves=TyreCurves.from_tire(PARAMS.tire), estimator=ON, kernel='python'
+        vehicle=VEHICLE,
+        curves=TyreCurves.from_tire(PARAMS.tire),
+        estimator=config,
+        kernel='python',
     )
     chain = PythonChain(settings)
     reports = []
-    mass = np.empty(sim.t.size)
+    values = np.empty(sim.t.size)
     for k in range(sim.t.size):
         out = chain.update(
             float(sim.t[k]), sim.wheel_angle[k], float(sim.body_speed[k]), sim.wheel_torque[k]
         )
-        mass[k] = out.estimates.mass
+        values[k] = getattr(out.estimates, name)
         if k % int(RATE_HZ) == 0:  # the nodes report once a second
             reports.append(chain.fault_report())
+    return values, reports
+
+
+def test_a_far_wrong_mass_is_bounded_and_reported_on_the_diagnostics() -> None:
+    sim = _drive(1500.0, 40.0)  # 2.7 times the file: beyond mass_max_ratio (2)
+    mass, reports = chain_run(sim, ON, 'mass')
     assert np.all(np.isfinite(mass))
     assert np.max(mass) <= ON.mass.mass_max_ratio * M0 * (1.0 + 1e-12)
     assert mass[-1] == pytest.approx(ON.mass.mass_max_ratio * M0, rel=1e-9)

@@ -33,6 +33,7 @@ from vd_sim_node.topics import (
     ESTIMATES_FRICTION,
     ESTIMATES_MASS,
     ESTIMATES_RESISTANCES,
+    ESTIMATES_ROLLING_RADIUS,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
     OBSERVER_BODY_ACCEL,
@@ -41,7 +42,15 @@ from vd_sim_node.topics import (
 )
 from vd_sim_node.vehicle.params import default_vehicle_file
 
-from vd_msgs.msg import Friction, MassEstimate, Resistances, Slope, TireForces, WheelStates
+from vd_msgs.msg import (
+    Friction,
+    MassEstimate,
+    Resistances,
+    RollingRadiusEstimate,
+    Slope,
+    TireForces,
+    WheelStates,
+)
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.faults import merge_reports, summarise
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
@@ -63,6 +72,7 @@ from vd_observer_node.raw_io import (
     mapped_input,
     mass_values,
     merge_status,
+    radius_values,
 )
 
 __all__ = ['EstimatorNode', 'main']
@@ -128,6 +138,9 @@ class EstimatorNode(Node):
         self.pub_resist = self.create_publisher(Resistances, ESTIMATES_RESISTANCES, STREAM_QOS)
         self.pub_slope = self.create_publisher(Slope, ESTIMATES_SLOPE, STREAM_QOS)
         self.pub_mass = self.create_publisher(MassEstimate, ESTIMATES_MASS, STREAM_QOS)
+        self.pub_radius = self.create_publisher(
+            RollingRadiusEstimate, ESTIMATES_ROLLING_RADIUS, STREAM_QOS
+        )
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._codec = Encoders()
         self.counts = {
@@ -203,6 +216,9 @@ class EstimatorNode(Node):
         )
         self.pub_mass.publish(
             codec('vd_msgs/msg/MassEstimate', frame).encode(stamp_ns, mass_values(est))
+        )
+        self.pub_radius.publish(
+            codec('vd_msgs/msg/RollingRadiusEstimate', frame).encode(stamp_ns, radius_values(est))
         )
 
     def publish_diagnostics(self) -> None:

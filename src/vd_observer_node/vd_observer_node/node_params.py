@@ -30,11 +30,13 @@ from vd_observer_node.estimation.differentiator import (
 from vd_observer_node.estimation.estimator import (
     LOAD_TRANSFER_SOURCES,
     MASS_PREFIX,
+    RADIUS_PREFIX,
     SLOPE_ACCEL_SOURCES,
     EstimatorConfig,
 )
 from vd_observer_node.estimation.mass_grade import MassGradeConfig
 from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.estimation.rolling_radius import RollingRadiusConfig
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import (
     ALIGNMENTS,
@@ -210,7 +212,7 @@ OBSERVER_PARAMS: Final = [
 _ESTIMATOR_CORE: Final = [
     *dataclass_param_specs(
         EstimatorConfig,
-        skip=('mass',),
+        skip=('mass', 'radius'),
         choices={
             'load_transfer_source': LOAD_TRANSFER_SOURCES,
             'slope_accel_source': SLOPE_ACCEL_SOURCES,
@@ -220,6 +222,11 @@ _ESTIMATOR_CORE: Final = [
     *(
         ParamSpec(f'{MASS_PREFIX}{p.name}', p.default, f'online mass: {p.description}')
         for p in dataclass_param_specs(MassGradeConfig)
+    ),
+    # ... and the online rolling radius's
+    *(
+        ParamSpec(f'{RADIUS_PREFIX}{p.name}', p.default, f'online rolling radius: {p.description}')
+        for p in dataclass_param_specs(RollingRadiusConfig)
     ),
 ]
 

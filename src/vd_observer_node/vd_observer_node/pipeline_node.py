@@ -50,6 +50,7 @@ from vd_sim_node.topics import (
     ESTIMATES_FRICTION_POTENTIAL,
     ESTIMATES_MASS,
     ESTIMATES_RESISTANCES,
+    ESTIMATES_ROLLING_RADIUS,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
     OBSERVER_BODY_ACCEL,
@@ -64,6 +65,7 @@ from vd_msgs.msg import (
     FrictionPotential,
     MassEstimate,
     Resistances,
+    RollingRadiusEstimate,
     Slope,
     TireForces,
     WheelStates,
@@ -91,6 +93,7 @@ from vd_observer_node.raw_io import (
     mapped_input,
     mass_values,
     merge_status,
+    radius_values,
 )
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
@@ -108,6 +111,12 @@ _OUTPUTS = (
     ('resistances', Resistances, ESTIMATES_RESISTANCES, 'vd_msgs/msg/Resistances'),
     ('slope', Slope, ESTIMATES_SLOPE, 'vd_msgs/msg/Slope'),
     ('mass', MassEstimate, ESTIMATES_MASS, 'vd_msgs/msg/MassEstimate'),
+    (
+        'radius',
+        RollingRadiusEstimate,
+        ESTIMATES_ROLLING_RADIUS,
+        'vd_msgs/msg/RollingRadiusEstimate',
+    ),
     (
         'potential',
         FrictionPotential,
@@ -284,6 +293,7 @@ class PipelineNode(Node):
             codec('slope', frame).encode(stamp_ns, [e.slope, e.slope_valid, e.torque_source])
         )
         pubs['mass'].publish(codec('mass', frame).encode(stamp_ns, mass_values(e)))
+        pubs['radius'].publish(codec('radius', frame).encode(stamp_ns, radius_values(e)))
         pot = sit.potential
         pubs['potential'].publish(
             codec('potential', frame).encode(

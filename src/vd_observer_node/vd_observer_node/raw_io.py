@@ -21,7 +21,11 @@ from typing import Any
 from vd_observer_node.bag.cdr_message import AlertsCodec, MessageCodec
 from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.estimation.alignment import LatestAligner, StampAligner
-from vd_observer_node.estimation.estimator import MASS_MESSAGE_FIELDS, Estimates
+from vd_observer_node.estimation.estimator import (
+    MASS_MESSAGE_FIELDS,
+    RADIUS_MESSAGE_FIELDS,
+    Estimates,
+)
 from vd_observer_node.estimation.faults import ERROR, OK, WARN
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
@@ -38,6 +42,7 @@ __all__ = [
     'mass_values',
     'matched_inputs',
     'merge_status',
+    'radius_values',
 ]
 
 
@@ -45,6 +50,12 @@ def mass_values(est: Estimates) -> list[float | bool]:
     """The vd_msgs/MassEstimate fields of one estimate, in CDR order (`MessageCodec.encode`):
     mass [kg], mass_std [kg], mass_used [kg], converged, excited."""
     return [getattr(est, attr) for _, attr in MASS_MESSAGE_FIELDS]
+
+
+def radius_values(est: Estimates) -> list[float | bool | int]:
+    """The vd_msgs/RollingRadiusEstimate fields of one estimate, in CDR order: radius [m],
+    radius_std [m], radius_used [m], converged, free_wheels."""
+    return [getattr(est, attr) for _, attr in RADIUS_MESSAGE_FIELDS]
 
 
 class Encoders:

@@ -22,6 +22,7 @@ __all__ = [
     'ESTIMATES_MASS',
     'ESTIMATES_NAMESPACE',
     'ESTIMATES_RESISTANCES',
+    'ESTIMATES_ROLLING_RADIUS',
     'ESTIMATES_SLOPE',
     'ESTIMATES_TIRE_FORCES',
     'NAMESPACE',
@@ -69,6 +70,7 @@ ESTIMATES_FRICTION: Final = '/vd/estimates/friction'
 ESTIMATES_RESISTANCES: Final = '/vd/estimates/resistances'
 ESTIMATES_SLOPE: Final = '/vd/estimates/slope'
 ESTIMATES_MASS: Final = '/vd/estimates/mass'
+ESTIMATES_ROLLING_RADIUS: Final = '/vd/estimates/rolling_radius'
 # The alerts node's outputs.
 ESTIMATES_ALERTS: Final = '/vd/estimates/alerts'
 ESTIMATES_FRICTION_POTENTIAL: Final = '/vd/estimates/friction_potential'
@@ -98,6 +100,7 @@ ESTIMATES: Final = {
     ESTIMATES_RESISTANCES: 'vd_msgs/msg/Resistances',
     ESTIMATES_SLOPE: 'vd_msgs/msg/Slope',
     ESTIMATES_MASS: 'vd_msgs/msg/MassEstimate',
+    ESTIMATES_ROLLING_RADIUS: 'vd_msgs/msg/RollingRadiusEstimate',
 }
 ALERTS: Final = {
     ESTIMATES_ALERTS: 'vd_msgs/msg/Alerts',

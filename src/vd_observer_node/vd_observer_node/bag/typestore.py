@@ -43,6 +43,7 @@ VD_MSG_TYPES = (
     'vd_msgs/msg/Friction',
     'vd_msgs/msg/MassEstimate',
     'vd_msgs/msg/Resistances',
+    'vd_msgs/msg/RollingRadiusEstimate',
     'vd_msgs/msg/Slope',
     'vd_msgs/msg/TireForces',
     'vd_msgs/msg/WheelAngles',

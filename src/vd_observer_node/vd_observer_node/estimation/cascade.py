@@ -63,6 +63,12 @@ class CascadeResult:
         mass_converged: shape (N,), bool, the estimate is trusted and used.
         mass_used: shape (N,), [kg] the mass the stamp's Fz, mu, rolling and slope used.
         mass_excited: shape (N,), bool, the stamp updated the mass.
+        radius: shape (N,), [m] online rolling radius (`Estimates.radius`; the file's
+            without adaptation).
+        radius_std: shape (N,), [m] its standard deviation.
+        radius_converged: shape (N,), bool, the radius is trusted and used.
+        radius_used: shape (N,), [m] the radius the stamp's Fx and slip used.
+        radius_free_wheels: shape (N,), int, wheels that updated the radius (0: none).
     """
 
     t: FloatArray
@@ -89,6 +95,13 @@ class CascadeResult:
     mass_converged: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     mass_used: FloatArray = field(default_factory=lambda: np.zeros(0))
     mass_excited: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    radius: FloatArray = field(default_factory=lambda: np.zeros(0))
+    radius_std: FloatArray = field(default_factory=lambda: np.zeros(0))
+    radius_converged: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    radius_used: FloatArray = field(default_factory=lambda: np.zeros(0))
+    radius_free_wheels: NDArray[np.int64] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.int64)
+    )
 
 
 @dataclass
@@ -219,9 +232,15 @@ def run_cascade(
     }
     scalars = {
         k: np.zeros(n)
-        for k in ('speed', 'accel', 'aero', 'slope', 'mass', 'mass_std', 'mass_used')
+        for k in (
+            'speed', 'accel', 'aero', 'slope', 'mass', 'mass_std', 'mass_used', 'radius',
+            'radius_std', 'radius_used',
+        )
+    }  # fmt: skip
+    flags = {
+        k: np.zeros(n, dtype=bool) for k in ('mass_converged', 'mass_excited', 'radius_converged')
     }
-    flags = {k: np.zeros(n, dtype=bool) for k in ('mass_converged', 'mass_excited')}
+    free_wheels = np.zeros(n, dtype=np.int64)
     mu_valid = np.zeros((n, 4), dtype=bool)
     wheel_valid = np.zeros((n, 4), dtype=bool)
     slope_valid = np.zeros(n, dtype=bool)
@@ -271,6 +290,11 @@ def run_cascade(
         scalars['mass_used'][k] = est.mass_used
         flags['mass_converged'][k] = est.mass_converged
         flags['mass_excited'][k] = est.mass_excited
+        scalars['radius'][k] = est.radius
+        scalars['radius_std'][k] = est.radius_std
+        scalars['radius_used'][k] = est.radius_used
+        flags['radius_converged'][k] = est.radius_converged
+        free_wheels[k] = est.radius_free_wheels
     return CascadeResult(
         t=stamps.copy(),
         omega=out['omega'],
@@ -304,4 +328,9 @@ def run_cascade(
         mass_converged=flags['mass_converged'],
         mass_used=scalars['mass_used'],
         mass_excited=flags['mass_excited'],
+        radius=scalars['radius'],
+        radius_std=scalars['radius_std'],
+        radius_converged=flags['radius_converged'],
+        radius_used=scalars['radius_used'],
+        radius_free_wheels=free_wheels,
     )

@@ -17,6 +17,18 @@ stamp whose inputs were not all finite, or whose torque cannot be trusted, does 
 A mass that hits its clamp is counted as 'mass_clamped'. It restarts with the estimator (gap,
 time jump, overflow).
 
+Online rolling radius (`EstimatorConfig.radius_adaptation`, issue 16): per stamp, first of
+all, a `rolling_radius.RollingRadiusEstimator` takes the wheel speeds, the wheel torques and
+the body speed. Its `radius_used` (the estimate once converged, the file's R_eff before) is
+the radius of the wheel spin balance Fx = (T - J*omega_dot)/R (hence the mass's force, Fz,
+mu and the slope) and of the slip. Measured torques only (the engine path reports 0 on the
+braked wheels, which would pass for free rolling); a stamp whose inputs were not all finite
+or whose torque is untrusted does not update it; a clamp is counted as 'radius_clamped'.
+With both adaptations on and `mass_waits_for_radius`, the mass is not updated (it stays the
+file's) until the radius has converged: an early mass would keep the radius's bias.
+The speed sensor's scale and R_eff are not separable from v and omega: the radius is the
+one the speed sensor sees (see docs/estimation.md section 7.1).
+
 All outputs are finite always: a non-finite input is replaced by its last finite value and
 the affected validity flags are cleared; a non-finite, repeated or slightly older stamp
 returns the previous estimates unchanged (counted in `rejected_count`); a stamp older by more
@@ -45,12 +57,18 @@ from vd_observer_node.estimation.drivetrain import (
 from vd_observer_node.estimation.faults import ESTIMATOR_FAULTS, FaultCounter
 from vd_observer_node.estimation.filters import LowPass
 from vd_observer_node.estimation.mass_grade import MassGradeConfig, MassGradeEstimator
+from vd_observer_node.estimation.rolling_radius import (
+    RollingRadiusConfig,
+    RollingRadiusEstimator,
+)
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
 __all__ = [
     'LOAD_TRANSFER_SOURCES',
     'MASS_MESSAGE_FIELDS',
     'MASS_PREFIX',
+    'RADIUS_MESSAGE_FIELDS',
+    'RADIUS_PREFIX',
     'SLOPE_ACCEL_SOURCES',
     'Estimates',
     'Estimator',
@@ -65,6 +83,13 @@ LOAD_TRANSFER_SOURCES: Final = ('tire_forces', 'acceleration')
 SLOPE_ACCEL_SOURCES: Final = ('speed', 'observer')
 #: Prefix of the online mass settings in a flat mapping (`EstimatorConfig.from_mapping`).
 MASS_PREFIX: Final = 'mass.'
+#: Prefix of the online rolling-radius settings in a flat mapping.
+RADIUS_PREFIX: Final = 'radius.'
+#: The nested settings: `EstimatorConfig` field -> (flat-key prefix, its config class).
+_NESTED: Final[dict[str, tuple[str, Any]]] = {
+    'mass': (MASS_PREFIX, MassGradeConfig),
+    'radius': (RADIUS_PREFIX, RollingRadiusConfig),
+}
 #: The online mass as published (vd_msgs/MassEstimate): each field after the header, in CDR
 #: order, and the attribute of `Estimates` (and `cascade.CascadeResult`) it carries.
 MASS_MESSAGE_FIELDS: Final = (
@@ -73,6 +98,14 @@ MASS_MESSAGE_FIELDS: Final = (
     ('mass_used', 'mass_used'),
     ('converged', 'mass_converged'),
     ('excited', 'mass_excited'),
+)
+#: The online rolling radius as published (vd_msgs/RollingRadiusEstimate), as above.
+RADIUS_MESSAGE_FIELDS: Final = (
+    ('radius', 'radius'),
+    ('radius_std', 'radius_std'),
+    ('radius_used', 'radius_used'),
+    ('converged', 'radius_converged'),
+    ('free_wheels', 'radius_free_wheels'),
 )
 
 
@@ -107,6 +140,12 @@ class EstimatorConfig:
             converged, for Fz, mu, rolling resistance and the slope; False: the file's mass.
         mass: settings of the online mass estimator (flat keys ``mass.<name>`` in
             `from_mapping` and as node parameters).
+        radius_adaptation: estimate the effective rolling radius online from the free-rolling
+            wheels (measured torques only) and use it, once converged, in Fx and the slip;
+            False: the file's R_eff.
+        radius: settings of the online radius estimator (flat keys ``radius.<name>``).
+        mass_waits_for_radius: with both adaptations on, the mass is not updated before the
+            radius has converged (so it never learns the file's radius error).
     """
 
     load_transfer_source: str = 'tire_forces'
@@ -123,6 +162,9 @@ class EstimatorConfig:
     max_mu: float = 2.0
     mass_adaptation: bool = False
     mass: MassGradeConfig = field(default_factory=MassGradeConfig)
+    radius_adaptation: bool = False
+    radius: RollingRadiusConfig = field(default_factory=RollingRadiusConfig)
+    mass_waits_for_radius: bool = True
 
     def __post_init__(self) -> None:
         if self.load_transfer_source not in LOAD_TRANSFER_SOURCES:
@@ -149,9 +191,10 @@ class EstimatorConfig:
 
     @classmethod
     def setting_keys(cls) -> frozenset[str]:
-        """The flat keys `from_mapping` takes: the field names, ``mass.<name>`` for `mass`."""
-        nested = {f'{MASS_PREFIX}{f.name}' for f in fields(MassGradeConfig)}
-        return frozenset({f.name for f in fields(cls)} - {'mass'} | nested)
+        """The flat keys `from_mapping` takes: the field names, ``mass.<name>`` for `mass`,
+        ``radius.<name>`` for `radius`."""
+        nested = {f'{pre}{f.name}' for pre, kind in _NESTED.values() for f in fields(kind)}
+        return frozenset({f.name for f in fields(cls)} - set(_NESTED) | nested)
 
     @classmethod
     def from_mapping(cls, data: dict[str, Any]) -> EstimatorConfig:
@@ -161,14 +204,20 @@ class EstimatorConfig:
             ConfigurationError: unknown key or invalid value.
         """
         data = dict(data)
-        if isinstance(data.get('mass'), dict):  # a YAML section ``mass: {...}``
-            data.update({f'{MASS_PREFIX}{k}': v for k, v in data.pop('mass').items()})
+        for name, (prefix, _) in _NESTED.items():
+            if isinstance(data.get(name), dict):  # a YAML section ``mass: {...}``
+                data.update({f'{prefix}{k}': v for k, v in data.pop(name).items()})
         unknown = set(data) - cls.setting_keys()
         if unknown:
             raise ConfigurationError(f'unknown estimator settings: {sorted(unknown)}')
-        flat = {k: v for k, v in data.items() if not k.startswith(MASS_PREFIX)}
-        nested = {k[len(MASS_PREFIX) :]: v for k, v in data.items() if k.startswith(MASS_PREFIX)}
-        return cls(**flat, mass=MassGradeConfig.from_mapping(nested))
+        nested = {
+            name: kind.from_mapping(
+                {k[len(prefix) :]: v for k, v in data.items() if k.startswith(prefix)}
+            )
+            for name, (prefix, kind) in _NESTED.items()
+        }
+        flat = {k: v for k, v in data.items() if '.' not in k}
+        return cls(**flat, **nested)
 
 
 @dataclass(frozen=True)
@@ -194,6 +243,11 @@ class Estimates:
         mass_converged: the estimate is trusted and used (latched until a restart).
         mass_used: [kg] the mass Fz, mu, rolling resistance and slope used at this stamp.
         mass_excited: this stamp updated the mass estimate.
+        radius: [m] online effective rolling radius (the file's without adaptation).
+        radius_std: [m] its standard deviation (0 without adaptation).
+        radius_converged: the radius estimate is trusted and used (latched until a restart).
+        radius_used: [m] the radius Fx and the slip used at this stamp.
+        radius_free_wheels: wheels that updated the radius at this stamp (0: none).
     """
 
     t: float
@@ -212,6 +266,11 @@ class Estimates:
     mass_converged: bool = False
     mass_used: float = 0.0
     mass_excited: bool = False
+    radius: float = 0.0
+    radius_std: float = 0.0
+    radius_converged: bool = False
+    radius_used: float = 0.0
+    radius_free_wheels: int = 0
 
 
 def _as_wheels(name: str, value: ArrayLike) -> FloatArray:
@@ -268,6 +327,11 @@ class Estimator:
             if self.config.mass_adaptation and self.torque_source == TORQUE_MEASURED
             else None
         )
+        self.radius_estimator = (
+            RollingRadiusEstimator(vehicle, self.config.radius)
+            if self.config.radius_adaptation and self.torque_source == TORQUE_MEASURED
+            else None
+        )
         self.reset()
 
     def reset(self) -> None:
@@ -281,6 +345,8 @@ class Estimator:
         self._speed_filter.reset()
         if self.mass_estimator is not None:
             self.mass_estimator.reset()
+        if self.radius_estimator is not None:
+            self.radius_estimator.reset()
         self.last: Estimates | None = None
 
     def update(
@@ -374,9 +440,19 @@ class Estimator:
         no_torque = self.torque_source == TORQUE_NONE
         v = float(x[12])
         accel = float(x[13])
+        all_ok = bool(wheel_ok.all()) and body_ok
+        radius = self._radius_step(t, omega, torque, v, all_ok)
+        r_used = radius[3]
         # Without the torque the balance has no force: Fx is 0 (not -J*omega_dot/R).
-        fx_raw = np.zeros(4) if no_torque else phys.tire_longitudinal_force(torque, omega_dot, veh)
-        mass = self._mass_step(t, float(np.sum(fx_raw)), v, bool(wheel_ok.all()) and body_ok)
+        fx_raw = (
+            np.zeros(4)
+            if no_torque
+            else phys.tire_longitudinal_force(torque, omega_dot, veh, r_used)
+        )
+        if self.radius_estimator is not None and cfg.mass_waits_for_radius and not radius[2]:
+            mass = self._fixed_mass()
+        else:
+            mass = self._mass_step(t, float(np.sum(fx_raw)), v, all_ok)
         m_used = mass[3]
         # Same smooth sign as the simulator's rolling resistance; drag is exactly k*v*|v|.
         direction = float(phys.motion_direction(v, veh.rolling_regularisation_speed))
@@ -408,7 +484,7 @@ class Estimator:
             self.faults.count('mu_out_of_range')
             mu_valid &= ~implausible
         mu = np.where(mu_valid, mu, 0.0)
-        slip = phys.slip_ratio(omega, v, veh, cfg.slip_eps)
+        slip = phys.slip_ratio(omega, v, veh, cfg.slip_eps, r_used)
 
         forces = float(np.sum(fx_raw)) - direction * rolling_sum - aero_signed
         if cfg.slope_accel_source == 'speed' and cfg.slope_filter_tau > 0.0:
@@ -449,8 +525,43 @@ class Estimator:
             mass_converged=bool(mass[2]),
             mass_used=m_used,
             mass_excited=bool(mass[4]),
+            radius=radius[0],
+            radius_std=radius[1],
+            radius_converged=bool(radius[2]),
+            radius_used=r_used,
+            radius_free_wheels=int(radius[4]),
         )
         return self.last
+
+    def _radius_step(
+        self, t: float, omega: FloatArray, torque: FloatArray, v: float, ok: bool
+    ) -> tuple[float, ...]:
+        """Advance the online radius: (radius, radius_std, converged, radius_used, free).
+
+        Args:
+            t: stamp [s] (accepted by the estimator).
+            omega: shape (4,), [rad/s] wheel speeds.
+            torque: shape (4,), [N m] reported wheel torques.
+            v: the estimator's body speed [m/s].
+            ok: every input of the stamp was finite and the torque trusted; else the radius
+                holds (its estimator is not called).
+        """
+        est = self.radius_estimator
+        if est is None or not ok:
+            return self._fixed_radius()
+        clamped = est.faults['radius_clamped']
+        out = est.update(t, omega, torque, v)
+        if est.faults['radius_clamped'] != clamped:
+            self.faults.count('radius_clamped')
+        return out.radius, out.radius_std, float(out.converged), out.radius_used, out.free_wheels
+
+    def _fixed_radius(self) -> tuple[float, ...]:
+        """The radius fields where nothing was estimated: the file's or the estimator's."""
+        r0 = self.vehicle.effective_radius
+        if self.radius_estimator is None:
+            return r0, 0.0, 0.0, r0, 0
+        out = self.radius_estimator.current()
+        return out.radius, out.radius_std, float(out.converged), out.radius_used, 0
 
     def _mass_step(self, t: float, sum_fx: float, v: float, ok: bool) -> tuple[float, ...]:
         """Advance the online mass: (mass, mass_std, converged, mass_used, excited).
@@ -484,6 +595,7 @@ class Estimator:
     def _empty(self, t: float) -> Estimates:
         zeros = np.zeros(4)
         mass = self._fixed_mass()
+        radius = self._fixed_radius()
         return Estimates(
             t=t if math.isfinite(t) else 0.0,
             fx=zeros,
@@ -500,4 +612,7 @@ class Estimator:
             mass_std=mass[1],
             mass_converged=False,
             mass_used=mass[3],
+            radius=radius[0],
+            radius_std=radius[1],
+            radius_used=radius[3],
         )

@@ -51,6 +51,7 @@ FAULT_LEVELS: Final[Mapping[str, int]] = {
     'slope_out_of_range': WARN,
     'arcsin_domain': WARN,
     'mass_clamped': WARN,
+    'radius_clamped': WARN,
     'non_finite_output': ERROR,
 }
 
@@ -68,9 +69,11 @@ STAMP_FAULTS: Final = (
 RESTART_FAULTS: Final = frozenset({'gap', 'time_jump_back'})
 #: Kinds an observer (differentiator) can count.
 OBSERVER_FAULTS: Final = (*STAMP_FAULTS, 'non_finite_output')
-#: Kinds the estimator can count ('mass_clamped': its online mass hit a bound).
+#: Kinds the estimator can count ('mass_clamped', 'radius_clamped': its online mass or
+#: rolling radius hit a bound).
 ESTIMATOR_FAULTS: Final = (*OBSERVER_FAULTS, 'wheel_lift', 'mu_out_of_range',
-                           'slope_out_of_range', 'arcsin_domain', 'mass_clamped')  # fmt: skip
+                           'slope_out_of_range', 'arcsin_domain', 'mass_clamped',
+                           'radius_clamped')  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,10 @@ _KMH_REFERENCE = 160.0  # [km/h] speed scale of paper eq. 7
 
 
 def tire_longitudinal_force(
-    torque: ArrayLike, omega_dot: ArrayLike, vehicle: EstimatorVehicle
+    torque: ArrayLike,
+    omega_dot: ArrayLike,
+    vehicle: EstimatorVehicle,
+    radius: float | None = None,
 ) -> FloatArray:
     """Fx_i = (T_i - J_i * omega_dot_i) / R_eff, from the wheel spin balance.
 
@@ -44,13 +47,15 @@ def tire_longitudinal_force(
         torque: shape (..., 4), [N m], drive minus brake torque per wheel.
         omega_dot: shape (..., 4), [rad/s^2], wheel angular acceleration.
         vehicle: parameters (J per wheel, R_eff).
+        radius: R_eff [m] if not the vehicle's (the online estimate).
 
     Returns:
         shape (..., 4), [N], road -> tire longitudinal force, positive forward.
     """
     t = np.asarray(torque, dtype=np.float64)
     wd = np.asarray(omega_dot, dtype=np.float64)
-    return (t - vehicle.wheel_inertia * wd) / vehicle.effective_radius
+    r = vehicle.effective_radius if radius is None else radius
+    return (t - vehicle.wheel_inertia * wd) / r
 
 
 def motion_direction(speed: ArrayLike, speed_scale: float) -> FloatArray:
@@ -163,7 +168,11 @@ def utilised_friction(
 
 
 def slip_ratio(
-    omega: ArrayLike, speed: ArrayLike, vehicle: EstimatorVehicle, eps: float = 0.1
+    omega: ArrayLike,
+    speed: ArrayLike,
+    vehicle: EstimatorVehicle,
+    eps: float = 0.1,
+    radius: float | None = None,
 ) -> FloatArray:
     """Longitudinal slip s_i = (omega_i*R - v) / max(|omega_i*R|, |v|, eps).
 
@@ -171,11 +180,13 @@ def slip_ratio(
         omega: shape (..., 4), [rad/s].
         speed: shape (...), [m/s].
         eps: floor of the denominator [m/s], keeps s finite at standstill.
+        radius: R_eff [m] if not the vehicle's (the online estimate).
 
     Returns:
         shape (..., 4), [-], positive when driving.
     """
-    wheel_speed = np.asarray(omega, dtype=np.float64) * vehicle.effective_radius
+    r = vehicle.effective_radius if radius is None else radius
+    wheel_speed = np.asarray(omega, dtype=np.float64) * r
     v = np.asarray(speed, dtype=np.float64)[..., np.newaxis]
     # The tyre model's own definition, so estimate and simulation mean the same slip.
     return tire_slip_ratio(wheel_speed - v, v, eps)

@@ -1,7 +1,7 @@
 """Online effective rolling radius from free-rolling wheels (issue 16, deliverable 2, part).
 
-Standalone for now, like :mod:`.mass_grade`: not yet wired into the estimator, the kernel
-or the nodes.
+Run per stamp inside `estimator.Estimator` (``EstimatorConfig.radius_adaptation``), whose
+Fx and slip then use ``radius_used``; also usable alone (:func:`run_rolling_radius`).
 
 A wheel that carries (almost) no longitudinal force rolls without slip, so the measured
 body speed is ``v = R_eff * omega``. On a front-wheel-drive car the rear wheels roll freely
@@ -61,16 +61,18 @@ class RollingRadiusConfig:
     Attributes:
         tau: memory of the radius, [s] of free rolling; ``inf``: none.
         min_speed: a wheel is used only where ``|v| >=`` this, [m/s].
-        max_wheel_torque: ... and its reported torque ``|T_i| <=`` this, [N m] ...
-        max_accel: ... and ``|dv/dt| <=`` this, [m/s^2].
+        max_wheel_torque: a wheel is used only where its reported torque ``|T_i| <=`` this
+            (not driven, not braked), [N m].
+        max_accel: no wheel is used where ``|dv/dt| >`` this, [m/s^2].
         accel_filter_tau: time constant of the low-pass whose derivative is dv/dt, [s].
         speed_noise_density: error of v in the regression as a density, [m/s sqrt(s)];
             per-sample variance ``speed_noise_density**2 / dt``.
         initial_std_ratio: prior standard deviation of R / R_file, [-].
         scale_min: lower bound of R / R_file, [-].
         scale_max: upper bound of R / R_file, [-].
-        converged_std_ratio: converged once std(R) / R is below this ... [-]
-        min_free_time: ... after at least this much free rolling, [s].
+        converged_std_ratio: converged once std(R) / R is below this (after
+            ``min_free_time``), [-].
+        min_free_time: converged only after at least this much free rolling, [s].
         max_gap: a gap longer than this, or a stamp older by more than this, resets, [s].
     """
 
@@ -171,7 +173,9 @@ class RollingRadiusEstimator:
         """Forget everything: the file's radius, the prior covariance, empty filter."""
         r0 = self.vehicle.effective_radius
         self.theta: FloatArray = np.array([r0])
-        self.cov: FloatArray = np.array([[(self.config.initial_std_ratio * r0) ** 2]])
+        # products, not ** 2: pow() and the compiled kernel's square differ in the last bit
+        sigma = self.config.initial_std_ratio * r0
+        self.cov: FloatArray = np.array([[sigma * sigma]])
         self._t: float | None = None
         self._v_lp: list[float] | None = None
         self._free_time = 0.0
@@ -188,6 +192,10 @@ class RollingRadiusEstimator:
             free_wheels=free,
             free_time=self._free_time,
         )
+
+    def current(self) -> RollingRadiusEstimate:
+        """The last estimate (the file's radius and the prior deviation before any stamp)."""
+        return self._last or self._estimate(0)
 
     def _accept_stamp(self, t: float) -> float | None:
         """dt [s] of a usable stamp (0.0: (re)start); None to hold the last estimate."""
@@ -244,16 +252,22 @@ class RollingRadiusEstimator:
             self._v_lp = [v1, v2_new]
         free = np.abs(tq) <= c.max_wheel_torque
         n_free = int(free.sum())
+        # the mean as an explicit left-to-right sum, as the compiled twin adds it
+        mean_omega = 0.0
+        for i in range(4):
+            if free[i]:
+                mean_omega += float(w[i])
+        mean_omega /= max(n_free, 1)
         if not (dt > 0.0 and n_free and abs(speed) >= c.min_speed and abs(accel) <= c.max_accel):
             self._last = self._estimate(0)
             return self._last
         theta, cov = rls_step(
             self.theta,
             self.cov,
-            (float(np.mean(w[free])),),
+            (mean_omega,),
             speed,
             (math.exp(-dt / c.tau) if math.isfinite(c.tau) else 1.0,),
-            c.speed_noise_density**2 / dt,
+            c.speed_noise_density * c.speed_noise_density / dt,
             (True,),
         )
         if math.isfinite(float(theta[0])) and math.isfinite(float(cov[0, 0])):

@@ -51,6 +51,11 @@ from vd_observer_node.kernel.estimation import (
     E_MASS_USED,
     E_MU,
     E_MU_VALID,
+    E_RADIUS,
+    E_RADIUS_CONVERGED,
+    E_RADIUS_FREE,
+    E_RADIUS_STD,
+    E_RADIUS_USED,
     E_ROLL,
     E_SLIP,
     E_SLOPE,
@@ -277,6 +282,11 @@ def run_cascade_compiled(
         mass_converged=est[:, E_MASS_CONVERGED] != 0.0,
         mass_used=est[:, E_MASS_USED].copy(),
         mass_excited=est[:, E_MASS_EXCITED] != 0.0,
+        radius=est[:, E_RADIUS].copy(),
+        radius_std=est[:, E_RADIUS_STD].copy(),
+        radius_converged=est[:, E_RADIUS_CONVERGED] != 0.0,
+        radius_used=est[:, E_RADIUS_USED].copy(),
+        radius_free_wheels=est[:, E_RADIUS_FREE].astype(np.int64),
     )
 
 

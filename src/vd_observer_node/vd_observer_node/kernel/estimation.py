@@ -11,18 +11,22 @@ Array layouts:
 * ``prm`` float64 (`N_PARAMS`,): see `estimator_params`;
 * ``prm[27]`` is the torque source code (`drivetrain.TORQUE_*`); ``prm[28:]`` the online
   mass (`mass_grade.MassGradeEstimator`'s settings, ``prm[28]`` 1.0 where it runs);
+  ``prm[47:60]`` the online rolling radius (`rolling_radius.RollingRadiusEstimator`'s
+  settings, ``prm[47]`` 1.0 where it runs), ``prm[60]`` `mass_waits_for_radius`;
 * ``scal`` (`N_SCAL`,): stamp of the last sample (nan before the first), slope [rad], 1.0 once
   an estimate exists, then the online mass's state (the ``_M_*`` slots: its stamp, filters,
-  1/m and its variance, the last estimate); ``held`` (14,): last finite inputs (omega,
+  1/m and its variance, the last estimate), then the online radius's (the ``_R_*`` slots);
+  ``held`` (14,): last finite inputs (omega,
   omega_dot, torque, v, accel);
 * three low-pass filters (force (order, 5), slope (order, 1), speed (order, 1)), each
   ``stages``, ``prev`` (d,) and ``meta`` (3,): initialised, has a previous output, last dt;
 * ``est`` (`EST_SIZE`,): one estimate packed (see the ``E_*`` offsets): the last one in the
   state, the output of `estimator_update`;
-* ``counts`` int64 (13,): the `faults.ESTIMATOR_FAULTS` kinds in order, then rejections.
+* ``counts`` int64 (14,): the `faults.ESTIMATOR_FAULTS` kinds in order, then rejections.
 
 The online mass mirrors `mass_grade.MassGradeEstimator.update` (its scalar RLS is
-`mass_grade.rls_step` with one parameter written out), as `Estimator` drives it.
+`mass_grade.rls_step` with one parameter written out), as `Estimator` drives it; so does
+the online radius `rolling_radius.RollingRadiusEstimator.update`.
 """
 
 from __future__ import annotations
@@ -62,6 +66,11 @@ __all__ = [
     'E_MASS_USED',
     'E_MU',
     'E_MU_VALID',
+    'E_RADIUS',
+    'E_RADIUS_CONVERGED',
+    'E_RADIUS_FREE',
+    'E_RADIUS_STD',
+    'E_RADIUS_USED',
     'E_ROLL',
     'E_SLIP',
     'E_SLOPE',
@@ -97,7 +106,12 @@ E_MASS_STD: Final = 30
 E_MASS_CONVERGED: Final = 31
 E_MASS_USED: Final = 32
 E_MASS_EXCITED: Final = 33
-EST_SIZE: Final = 34
+E_RADIUS: Final = 34
+E_RADIUS_STD: Final = 35
+E_RADIUS_CONVERGED: Final = 36
+E_RADIUS_USED: Final = 37
+E_RADIUS_FREE: Final = 38
+EST_SIZE: Final = 39
 
 # parameters
 _MASS, _GRAVITY, _RADIUS, _J_FRONT, _J_REAR, _DRAG, _C0, _C1, _REG = range(9)
@@ -109,7 +123,11 @@ _M_ON, _M_TAU, _M_GRADE_TAU, _M_FILTER_TAU, _M_NOISE, _M_STD_RATIO, _M_MIN_SPEED
 _M_SLOPE_MIN_SPEED, _M_MIN_ACCEL, _M_MIN_FORCE, _M_MIN_CHANGE, _M_MAX_RATE = range(35, 40)
 _M_THETA_MIN, _M_THETA_MAX, _M_CONV_RATIO, _M_MIN_EXC_TIME, _M_MAX_SINE = range(40, 45)
 _M_MAX_GAP, _M_WARMUP = 45, 46
-N_PARAMS: Final = 47
+# online rolling radius (RollingRadiusConfig; the bounds in [m]; the forgetting time [s])
+_R_ON, _R_TAU, _R_MIN_SPEED, _R_MAX_TORQUE, _R_MAX_ACCEL, _R_ACC_TAU = range(47, 53)
+_R_NOISE, _R_STD_RATIO, _R_LO, _R_HI, _R_CONV_RATIO, _R_MIN_FREE_T = range(53, 59)
+_R_MAX_GAP, _M_WAITS = 59, 60
+N_PARAMS: Final = 61
 
 # online mass state in scal: its stamp (nan: none), the low-pass started (0/1) and its two
 # stages of F then v, the slow low-passes of F and y (nan: none), its own slope, excited
@@ -119,12 +137,19 @@ N_PARAMS: Final = 47
 _M_T, _M_LP_ON, _M_F1, _M_F2, _M_V1, _M_V2, _M_F_SLOW, _M_Y_SLOW = range(3, 11)
 _M_SLOPE, _M_EXC_T, _M_RUN, _M_CONV, _M_THETA, _M_COV, _M_HAS_LAST = range(11, 18)
 _M_LAST = 18  # mass, std, converged, used, excited: 5 slots
-N_SCAL: Final = 23
+# online radius state in scal: its stamp (nan: none), the dv/dt low-pass started (0/1) and
+# its two stages, R (nan: fresh, set from prm at the next update) and its variance, free
+# rolling time, converged (0/1), has a last estimate (0/1) and that estimate's radius, std,
+# converged, used, free wheels
+_R_T, _R_LP_ON, _R_V1, _R_V2, _R_THETA, _R_COV, _R_FREE_T, _R_CONV = range(23, 31)
+_R_HAS_LAST, _R_LAST = 31, 32  # _R_LAST: 5 slots
+N_SCAL: Final = 37
+assert _M_COV == _M_THETA + 1 and _R_COV == _R_THETA + 1  # _rls1_bounded's layout
 
 # fault slots (ESTIMATOR_FAULTS order) and the rejection count
 _NON_FINITE_STAMP, _NON_FINITE_VALUE, _DUPLICATE, _OUT_OF_ORDER, _GAP, _JUMP_BACK = range(6)
 _NON_FINITE_OUTPUT, _WHEEL_LIFT, _MU_RANGE, _SLOPE_RANGE, _ARCSIN = range(6, 11)
-_MASS_CLAMPED, _REJECTED = 11, 12
+_MASS_CLAMPED, _RADIUS_CLAMPED, _REJECTED = 11, 12, 13
 assert ESTIMATOR_FAULTS == (
     'non_finite_stamp',
     'non_finite_value',
@@ -138,6 +163,7 @@ assert ESTIMATOR_FAULTS == (
     'slope_out_of_range',
     'arcsin_domain',
     'mass_clamped',
+    'radius_clamped',
 )
 _KMH_REFERENCE: Final = 160.0  # [km/h] speed scale of paper eq. 7 (estimators.py)
 
@@ -197,6 +223,22 @@ def estimator_params(
     prm[_M_MAX_SINE] = math.sin(m.max_slope)
     prm[_M_MAX_GAP] = m.max_gap
     prm[_M_WARMUP] = 3.0 * (2.0 * m.filter_tau + m.grade_tau)  # MassGradeEstimator.warmup
+    r = config.radius
+    r0 = vehicle.effective_radius
+    prm[_R_ON] = 1.0 if config.radius_adaptation and torque_source == TORQUE_MEASURED else 0.0
+    prm[_R_TAU] = r.tau
+    prm[_R_MIN_SPEED] = r.min_speed
+    prm[_R_MAX_TORQUE] = r.max_wheel_torque
+    prm[_R_MAX_ACCEL] = r.max_accel
+    prm[_R_ACC_TAU] = r.accel_filter_tau
+    prm[_R_NOISE] = r.speed_noise_density
+    prm[_R_STD_RATIO] = r.initial_std_ratio
+    prm[_R_LO] = r.scale_min * r0
+    prm[_R_HI] = r.scale_max * r0
+    prm[_R_CONV_RATIO] = r.converged_std_ratio
+    prm[_R_MIN_FREE_T] = r.min_free_time
+    prm[_R_MAX_GAP] = r.max_gap
+    prm[_M_WAITS] = 1.0 if config.mass_waits_for_radius else 0.0
     return prm
 
 
@@ -211,6 +253,7 @@ class EstimatorState:
         """Zeroed state for filters of `order` stages."""
         self.scal = np.zeros(N_SCAL)
         self.scal[_M_THETA] = math.nan  # the online mass is set from prm at its first update
+        self.scal[_R_THETA] = math.nan  # ... and so is the online radius
         self.held = np.zeros(14)
         self.f_stages = np.zeros((order, 5))
         self.f_prev = np.zeros(5)
@@ -332,6 +375,7 @@ def _empty(prm: FloatArray, t: float, est: FloatArray) -> None:
     est[E_FZ + 3] = prm[_STATIC_REAR]
     est[E_TORQUE_SOURCE] = prm[_TORQUE_SOURCE]
     _mass_fresh_out(prm, est)
+    _radius_fresh_out(prm, est)
 
 
 @jit
@@ -392,6 +436,53 @@ def _mass_held(prm: FloatArray, scal: FloatArray, est: FloatArray) -> None:
 
 
 @jit
+def _stamp_dt(last: float, t: float, max_gap: float) -> float:
+    """`faults.classify_stamp` for a finite stamp ``t`` after ``last`` (nan: none): the step
+    dt [s] (0.0 at the start), nan to hold (repeated or slightly older), -1.0 to restart."""
+    if math.isnan(last):
+        return 0.0
+    dt = t - last
+    if dt == 0.0 or (dt < 0.0 and -dt <= max_gap):
+        return math.nan
+    if dt < 0.0 or dt > max_gap:
+        return -1.0
+    return dt
+
+
+@jit
+def _rls1_bounded(
+    scal: FloatArray,
+    slot: int,
+    phi: float,
+    y: float,
+    lam: float,
+    noise_var: float,
+    lo: float,
+    hi: float,
+) -> bool:
+    """`mass_grade.rls_step` with one parameter on ``scal[slot]`` (its variance in
+    ``scal[slot + 1]``), every product in the reference's order, then the estimators' clamp
+    to ``[lo, hi]``; a non-finite result is dropped. Returns whether the clamp acted."""
+    d = 1.0 / math.sqrt(lam)
+    p = scal[slot + 1] * (d * d)
+    theta = scal[slot]
+    p_phi = p * phi
+    k = p_phi / (phi * p_phi + noise_var)
+    innovation = y - phi * theta
+    a = 1.0 - k * phi
+    p_new = a * p * a + noise_var * (k * k)
+    p_new = 0.5 * (p_new + p_new)
+    theta_new = theta + k * innovation
+    clamped = False
+    if math.isfinite(theta_new) and math.isfinite(p_new):
+        if not lo <= theta_new <= hi:
+            clamped = True
+            theta_new = min(max(theta_new, lo), hi)
+        scal[slot], scal[slot + 1] = theta_new, p_new
+    return clamped
+
+
+@jit
 def _mass_update(
     prm: FloatArray, scal: FloatArray, t: float, sum_fx: float, speed: float, est: FloatArray
 ) -> bool:
@@ -403,17 +494,13 @@ def _mass_update(
     if not (math.isfinite(sum_fx) and math.isfinite(speed)):
         _mass_held(prm, scal, est)
         return False
-    # faults.classify_stamp (t is finite: the estimator took it)
-    last = scal[_M_T]
-    dt = 0.0
-    if not math.isnan(last):
-        dt = t - last
-        if dt == 0.0 or (dt < 0.0 and -dt <= prm[_M_MAX_GAP]):
-            _mass_held(prm, scal, est)
-            return False
-        if dt < 0.0 or dt > prm[_M_MAX_GAP]:
-            _mass_reset(prm, scal)
-            dt = 0.0
+    dt = _stamp_dt(scal[_M_T], t, prm[_M_MAX_GAP])
+    if math.isnan(dt):
+        _mass_held(prm, scal, est)
+        return False
+    if dt < 0.0:
+        _mass_reset(prm, scal)
+        dt = 0.0
     scal[_M_T] = t
     gravity = prm[_GRAVITY]
     m0 = prm[_MASS]
@@ -461,25 +548,12 @@ def _mass_update(
     )
     clamped = False
     if excited:
-        # mass_grade.rls_step with one parameter, every product in the reference's order
         tau = prm[_M_TAU]
         lam = 1.0 if math.isinf(tau) or dt <= 0.0 else math.exp(-dt / tau)
-        d = 1.0 / math.sqrt(lam)
-        p = scal[_M_COV] * (d * d)
-        noise_var = prm[_M_NOISE] * prm[_M_NOISE] / dt
-        theta = scal[_M_THETA]
-        p_phi = p * f_hp
-        k = p_phi / (f_hp * p_phi + noise_var)
-        innovation = y_hp - f_hp * theta
-        a = 1.0 - k * f_hp
-        p_new = a * p * a + noise_var * (k * k)
-        p_new = 0.5 * (p_new + p_new)
-        theta_new = theta + k * innovation
-        if math.isfinite(theta_new) and math.isfinite(p_new):
-            if not prm[_M_THETA_MIN] <= theta_new <= prm[_M_THETA_MAX]:
-                clamped = True
-                theta_new = min(max(theta_new, prm[_M_THETA_MIN]), prm[_M_THETA_MAX])
-            scal[_M_THETA], scal[_M_COV] = theta_new, p_new
+        clamped = _rls1_bounded(
+            scal, _M_THETA, f_hp, y_hp, lam, prm[_M_NOISE] * prm[_M_NOISE] / dt,
+            prm[_M_THETA_MIN], prm[_M_THETA_MAX],
+        )  # fmt: skip
         scal[_M_EXC_T] += dt
         theta = scal[_M_THETA]
         std = math.sqrt(max(scal[_M_COV], 0.0)) / (theta * theta)
@@ -498,6 +572,125 @@ def _mass_update(
 
 
 @jit
+def _radius_fresh_out(prm: FloatArray, est: FloatArray) -> None:
+    """The radius fields before any update (`Estimator._fixed_radius` after a reset)."""
+    r0 = prm[_RADIUS]
+    est[E_RADIUS] = r0
+    est[E_RADIUS_CONVERGED] = 0.0
+    est[E_RADIUS_USED] = r0
+    est[E_RADIUS_FREE] = 0.0
+    sigma = prm[_R_STD_RATIO] * r0
+    est[E_RADIUS_STD] = math.sqrt(max(sigma * sigma, 0.0)) if prm[_R_ON] != 0.0 else 0.0
+
+
+@jit
+def _radius_reset(prm: FloatArray, scal: FloatArray) -> None:
+    """`RollingRadiusEstimator.reset`: the file's radius, prior variance, filter empty."""
+    r0 = prm[_RADIUS]
+    scal[_R_T] = math.nan
+    scal[_R_LP_ON] = 0.0
+    scal[_R_THETA] = r0
+    sigma = prm[_R_STD_RATIO] * r0
+    scal[_R_COV] = sigma * sigma
+    scal[_R_FREE_T] = 0.0
+    scal[_R_CONV] = 0.0
+    scal[_R_HAS_LAST] = 0.0
+
+
+@jit
+def _radius_out(prm: FloatArray, scal: FloatArray, free: int, est: FloatArray) -> None:
+    """`RollingRadiusEstimator._estimate` into ``est``."""
+    radius = scal[_R_THETA]
+    est[E_RADIUS] = radius
+    est[E_RADIUS_STD] = math.sqrt(max(scal[_R_COV], 0.0))
+    est[E_RADIUS_CONVERGED] = scal[_R_CONV]
+    est[E_RADIUS_USED] = radius if scal[_R_CONV] != 0.0 else prm[_RADIUS]
+    est[E_RADIUS_FREE] = free
+
+
+@jit
+def _radius_held(prm: FloatArray, scal: FloatArray, est: FloatArray) -> None:
+    """`RollingRadiusEstimator.current`: the last estimate, or the fresh one."""
+    if math.isnan(scal[_R_THETA]):
+        _radius_reset(prm, scal)
+    if scal[_R_HAS_LAST] != 0.0:
+        for j in range(5):
+            est[E_RADIUS + j] = scal[_R_LAST + j]
+    else:
+        _radius_out(prm, scal, 0, est)
+
+
+@jit
+def _radius_update(
+    prm: FloatArray,
+    scal: FloatArray,
+    t: float,
+    omega: FloatArray,
+    torque: FloatArray,
+    speed: float,
+    est: FloatArray,
+) -> bool:
+    """`RollingRadiusEstimator.update` on finite inputs (its fields into ``est``); returns
+    whether the radius clamp acted (the caller counts 'radius_clamped')."""
+    if math.isnan(scal[_R_THETA]):
+        _radius_reset(prm, scal)
+    dt = _stamp_dt(scal[_R_T], t, prm[_R_MAX_GAP])
+    if math.isnan(dt):
+        _radius_held(prm, scal, est)
+        return False
+    if dt < 0.0:
+        _radius_reset(prm, scal)
+        dt = 0.0
+    scal[_R_T] = t
+    if dt == 0.0 or scal[_R_LP_ON] == 0.0:
+        scal[_R_LP_ON] = 1.0
+        scal[_R_V1] = speed
+        scal[_R_V2] = speed
+        accel = 0.0
+    else:
+        tau = prm[_R_ACC_TAU]
+        a = 1.0 if tau <= 0.0 else -math.expm1(-dt / tau)
+        v1, v2 = scal[_R_V1], scal[_R_V2]
+        v1 += a * (speed - v1)
+        v2_new = v2 + a * (v1 - v2)
+        accel = (v2_new - v2) / dt
+        scal[_R_V1], scal[_R_V2] = v1, v2_new
+    n_free = 0
+    mean_omega = 0.0
+    for i in range(4):
+        if abs(torque[i]) <= prm[_R_MAX_TORQUE]:
+            n_free += 1
+            mean_omega += omega[i]
+    mean_omega /= max(n_free, 1)
+    clamped = False
+    if not (
+        dt > 0.0
+        and n_free > 0
+        and abs(speed) >= prm[_R_MIN_SPEED]
+        and abs(accel) <= prm[_R_MAX_ACCEL]
+    ):
+        n_free = 0
+    else:
+        tau = prm[_R_TAU]
+        lam = math.exp(-dt / tau) if math.isfinite(tau) else 1.0
+        clamped = _rls1_bounded(
+            scal, _R_THETA, mean_omega, speed, lam, prm[_R_NOISE] * prm[_R_NOISE] / dt,
+            prm[_R_LO], prm[_R_HI],
+        )  # fmt: skip
+        scal[_R_FREE_T] += dt
+        if (
+            scal[_R_FREE_T] >= prm[_R_MIN_FREE_T]
+            and math.sqrt(scal[_R_COV]) <= prm[_R_CONV_RATIO] * scal[_R_THETA]
+        ):
+            scal[_R_CONV] = 1.0
+    _radius_out(prm, scal, n_free, est)
+    for j in range(5):
+        scal[_R_LAST + j] = est[E_RADIUS + j]
+    scal[_R_HAS_LAST] = 1.0
+    return clamped
+
+
+@jit
 def estimator_reset(
     held: FloatArray,
     scal: FloatArray,
@@ -510,6 +703,7 @@ def estimator_reset(
     scal[1] = 0.0
     scal[2] = 0.0
     scal[_M_THETA] = math.nan  # the online mass starts again (from prm) at the next update
+    scal[_R_THETA] = math.nan  # ... and so does the online radius
     held[:] = 0.0
     f_meta[:] = 0.0
     s_meta[:] = 0.0
@@ -538,10 +732,21 @@ def _estimate(
     est: FloatArray,
 ) -> None:
     """`Estimator._estimate` into the packed estimate ``est``."""
-    gravity, radius = prm[_GRAVITY], prm[_RADIUS]
+    gravity = prm[_GRAVITY]
     v = x[12]
     accel = x[13]
     no_torque = int(prm[_TORQUE_SOURCE]) == TORQUE_NONE
+    all_ok = body_ok and wheel_ok[0] and wheel_ok[1] and wheel_ok[2] and wheel_ok[3]
+    # the online radius (Estimator._radius_step) first: Fx and the slip use radius_used
+    if prm[_R_ON] == 0.0:
+        _radius_fresh_out(prm, est)
+    elif all_ok:
+        if _radius_update(prm, scal, t, x[0:4], x[8:12], v, est):
+            counts[_RADIUS_CLAMPED] += 1
+    else:
+        _radius_held(prm, scal, est)
+        est[E_RADIUS_FREE] = 0.0
+    radius = est[E_RADIUS_USED]
     fx_raw = np.zeros(4)
     if not no_torque:
         for i in range(4):
@@ -549,11 +754,17 @@ def _estimate(
             fx_raw[i] = (x[8 + i] - inertia * x[4 + i]) / radius
     fx_sum = fx_raw[0] + fx_raw[1] + fx_raw[2] + fx_raw[3]
     # the online mass (Estimator._mass_step) first: the rest uses mass_used
-    if prm[_M_ON] != 0.0:
-        ok = body_ok and wheel_ok[0] and wheel_ok[1] and wheel_ok[2] and wheel_ok[3]
-        if _mass_update(prm, scal, t, fx_sum if ok else math.nan, v, est):
+    waiting = prm[_R_ON] != 0.0 and prm[_M_WAITS] != 0.0 and est[E_RADIUS_CONVERGED] == 0.0
+    if prm[_M_ON] != 0.0 and waiting:
+        # Estimator._fixed_mass: the mass estimator's last (or fresh) estimate, not excited
+        if math.isnan(scal[_M_THETA]):
+            _mass_reset(prm, scal)
+        _mass_held(prm, scal, est)
+        est[E_MASS_EXCITED] = 0.0
+    elif prm[_M_ON] != 0.0:
+        if _mass_update(prm, scal, t, fx_sum if all_ok else math.nan, v, est):
             counts[_MASS_CLAMPED] += 1
-        if not ok:
+        if not all_ok:
             est[E_MASS_EXCITED] = 0.0
     else:
         _mass_fresh_out(prm, est)
@@ -765,6 +976,11 @@ def estimates_from_packed(est: FloatArray) -> Estimates:
         mass_converged=bool(est[E_MASS_CONVERGED] != 0.0),
         mass_used=float(est[E_MASS_USED]),
         mass_excited=bool(est[E_MASS_EXCITED] != 0.0),
+        radius=float(est[E_RADIUS]),
+        radius_std=float(est[E_RADIUS_STD]),
+        radius_converged=bool(est[E_RADIUS_CONVERGED] != 0.0),
+        radius_used=float(est[E_RADIUS_USED]),
+        radius_free_wheels=int(est[E_RADIUS_FREE]),
     )
 
 

@@ -19,6 +19,7 @@ from vd_sim_node.topics import (
     ESTIMATES_FRICTION_POTENTIAL,
     ESTIMATES_MASS,
     ESTIMATES_RESISTANCES,
+    ESTIMATES_ROLLING_RADIUS,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
     OBSERVER_BODY_ACCEL,
@@ -41,7 +42,7 @@ from vd_observer_node.bag.alerts_cdr import ALERTS_TYPE as _ALERTS_TYPE
 from vd_observer_node.bag.alerts_cdr import encode_alerts
 from vd_observer_node.bag.cdr_batch import encode_batch
 from vd_observer_node.bag.writer import BagWriter
-from vd_observer_node.estimation.estimator import MASS_MESSAGE_FIELDS
+from vd_observer_node.estimation.estimator import MASS_MESSAGE_FIELDS, RADIUS_MESSAGE_FIELDS
 from vd_observer_node.tools.report.topics import (
     ALERT_TOPICS,
     ESTIMATE_TOPICS,
@@ -260,4 +261,7 @@ def cascade_topics(result: Any, wheel_angle: np.ndarray) -> dict[str, dict[str, 
             'torque_source': source,
         },
         ESTIMATES_MASS: {field: getattr(result, attr) for field, attr in MASS_MESSAGE_FIELDS},
+        ESTIMATES_ROLLING_RADIUS: {
+            field: getattr(result, attr) for field, attr in RADIUS_MESSAGE_FIELDS
+        },
     }

@@ -46,6 +46,7 @@ from vd_sim_node.topics import (
     ESTIMATES_FRICTION_POTENTIAL,
     ESTIMATES_MASS,
     ESTIMATES_RESISTANCES,
+    ESTIMATES_ROLLING_RADIUS,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
     OBSERVER,
@@ -70,7 +71,11 @@ from vd_observer_node.estimation.drivetrain import (
     engine_wheel_torques_record,
     torque_source_code,
 )
-from vd_observer_node.estimation.estimator import MASS_MESSAGE_FIELDS, EstimatorConfig
+from vd_observer_node.estimation.estimator import (
+    MASS_MESSAGE_FIELDS,
+    RADIUS_MESSAGE_FIELDS,
+    EstimatorConfig,
+)
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.decode import (
@@ -277,6 +282,9 @@ def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str,
             'torque_source': source,
         },
         ESTIMATES_MASS: {field: getattr(result, attr) for field, attr in MASS_MESSAGE_FIELDS},
+        ESTIMATES_ROLLING_RADIUS: {
+            field: getattr(result, attr) for field, attr in RADIUS_MESSAGE_FIELDS
+        },
     }
 
 
