@@ -91,16 +91,18 @@ def _concat(parts: list[CascadeResult]) -> CascadeResult:
     ('source', 'wheel_input'),
     [('measured', 'angle'), ('engine', 'angle'), ('none', 'angle'), ('measured', 'speed')],
 )
-@pytest.mark.parametrize('mass_adaptation', [False, True])
+@pytest.mark.parametrize('adaptation', ['off', 'mass', 'mass+radius'])
 def test_blocks_with_a_carried_state_equal_the_whole_record(
     record: dict[str, np.ndarray], kernel: str, source: str, wheel_input: str,
-    mass_adaptation: bool,
+    adaptation: str,
 ) -> None:  # fmt: skip
     run: Any = run_cascade if kernel == 'python' else run_cascade_compiled
     wheels = record['angle'] if wheel_input == 'angle' else record['omega']
     observer = ObserverConfig(wheel_input=wheel_input)
-    # the online mass lives in the estimator's state: carried with it
-    estimator = EstimatorConfig(mass_adaptation=mass_adaptation)
+    # the online mass and radius live in the estimator's state: carried with it
+    estimator = EstimatorConfig(
+        mass_adaptation=adaptation != 'off', radius_adaptation='radius' in adaptation
+    )
     kwargs: dict[str, Any] = {}
     if source != 'measured':
         kwargs = {'torque_source': source, 'drivetrain': DRIVETRAIN}
@@ -119,8 +121,10 @@ def test_blocks_with_a_carried_state_equal_the_whole_record(
     assert sum(whole.faults.values()) > 0  # the faults are counted, so carried
     if source == 'engine':
         assert whole.torque_valid.any() and not whole.torque_valid.all()
-    if mass_adaptation and source == 'measured':
+    if adaptation == 'mass' and source == 'measured':
         assert whole.mass_excited.any()  # the mass estimate moved: its state is carried
+    if 'radius' in adaptation and source == 'measured':
+        assert (whole.radius_free_wheels > 0).any()  # the radius estimate moved
     state = CascadeState()
     bounds = _bounds(n, seed=len(source) + len(wheel_input))
     parts = [call(slice(a, b), state) for a, b in itertools.pairwise(bounds)]
