@@ -26,6 +26,7 @@ from vd_observer_node.testing.standard_bags import (
     write_standard_bag,
 )
 from vd_observer_node.tools.replay import ReplayReport, replay_bag
+from vd_sim_node.topics import TRUTH_NAMESPACE
 from vd_sim_node.vehicle.params import default_vehicle_file, load_vehicle
 from vd_sim_node.vehicle.scenario import load_scenario
 from vd_sim_node.vehicle.simulation import simulate
@@ -141,7 +142,7 @@ def test_a_bag_out_of_log_time_order_is_replayed_as_one_block(
     """A truth topic appended after the rest of the drive (earlier log times later in the
     file): the streamed replay notices and starts again in one block, same output."""
     reader = BagReader(vd_bag)
-    last = next(t for t in reader.topics if t.startswith('/vd/truth/'))
+    last = next(t for t in reader.topics if t.startswith(TRUTH_NAMESPACE))
     bag = tmp_path / 'appended'
     with BagWriter(bag, chunk_size=CHUNK) as writer:
         for name, info in reader.topics.items():

@@ -38,7 +38,9 @@ from vd_observer_node.tools.report.evaluate import AccuracyReport, evaluate
 from vd_observer_node.tools.report.load import load_bag_series
 from vd_observer_node.tools.report.stream import evaluate_bag, iter_topic_blocks
 from vd_sim_node.topics import (
+    ESTIMATES_ALERTS,
     ESTIMATES_FRICTION,
+    ESTIMATES_FRICTION_POTENTIAL,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
     OBSERVER_WHEEL_STATES,
@@ -213,8 +215,8 @@ def test_partial_bags_equal_the_reference_notes_and_all(
             for name in topics
             if name.endswith(('/slope', '/alerts')) and name != ESTIMATES_SLOPE
         ],
-        'no_wheel_truth_no_potential': [TRUTH_WHEEL_STATES, '/vd/estimates/friction_potential'],
-        'no_estimate_of_forces': [ESTIMATES_TIRE_FORCES, '/vd/estimates/alerts'],
+        'no_wheel_truth_no_potential': [TRUTH_WHEEL_STATES, ESTIMATES_FRICTION_POTENTIAL],
+        'no_estimate_of_forces': [ESTIMATES_TIRE_FORCES, ESTIMATES_ALERTS],
     }
     for name, dropped in cases.items():
         bag = tmp_path / name
