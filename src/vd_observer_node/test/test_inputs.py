@@ -345,10 +345,11 @@ def test_replay_of_standard_types_equals_replay_of_vd_topics(tmp_path: Path) -> 
     assert report.samples == round(seconds * rate)
     expected = BagReader(tmp_path / 'ours_out')
     got = BagReader(tmp_path / 'theirs_out')
-    for topic in ESTIMATE_TOPICS:
-        a = expected.topic_arrays([topic])[topic]
-        b = got.topic_arrays([topic])[topic]
-        assert a.datas == b.datas, topic  # the same CDR bytes: same stamps, same estimates
+    for topic in ESTIMATE_TOPICS:  # those written (the online mass/radius only where adapted)
+        a = expected.topic_arrays([topic]).get(topic)
+        b = got.topic_arrays([topic]).get(topic)
+        assert (a is None) == (b is None), topic
+        assert a is None or b is None or a.datas == b.datas, topic  # the same CDR bytes
     # the user's own input topics are copied to the output, with their types
     assert got.topics['/joint_states'].msgtype == 'sensor_msgs/msg/JointState'
     assert got.topics['/odom'].message_count == round(seconds * rate)

@@ -137,9 +137,17 @@ class EstimatorNode(Node):
         self.pub_friction = self.create_publisher(Friction, ESTIMATES_FRICTION, STREAM_QOS)
         self.pub_resist = self.create_publisher(Resistances, ESTIMATES_RESISTANCES, STREAM_QOS)
         self.pub_slope = self.create_publisher(Slope, ESTIMATES_SLOPE, STREAM_QOS)
-        self.pub_mass = self.create_publisher(MassEstimate, ESTIMATES_MASS, STREAM_QOS)
-        self.pub_radius = self.create_publisher(
-            RollingRadiusEstimate, ESTIMATES_ROLLING_RADIUS, STREAM_QOS
+        # The online mass and radius only when adapted: with the file's constants they would
+        # add two 1 kHz streams to a graph that is at its limit on two cores.
+        self.pub_mass = (
+            self.create_publisher(MassEstimate, ESTIMATES_MASS, STREAM_QOS)
+            if config.mass_adaptation
+            else None
+        )
+        self.pub_radius = (
+            self.create_publisher(RollingRadiusEstimate, ESTIMATES_ROLLING_RADIUS, STREAM_QOS)
+            if config.radius_adaptation
+            else None
         )
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._codec = Encoders()
@@ -214,12 +222,16 @@ class EstimatorNode(Node):
                 stamp_ns, [float(est.slope), bool(est.slope_valid), est.torque_source]
             )
         )
-        self.pub_mass.publish(
-            codec('vd_msgs/msg/MassEstimate', frame).encode(stamp_ns, mass_values(est))
-        )
-        self.pub_radius.publish(
-            codec('vd_msgs/msg/RollingRadiusEstimate', frame).encode(stamp_ns, radius_values(est))
-        )
+        if self.pub_mass is not None:
+            self.pub_mass.publish(
+                codec('vd_msgs/msg/MassEstimate', frame).encode(stamp_ns, mass_values(est))
+            )
+        if self.pub_radius is not None:
+            self.pub_radius.publish(
+                codec('vd_msgs/msg/RollingRadiusEstimate', frame).encode(
+                    stamp_ns, radius_values(est)
+                )
+            )
 
     def publish_diagnostics(self) -> None:
         # Level and message name the faults of the last period; the counters are totals.

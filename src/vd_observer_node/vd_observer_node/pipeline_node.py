@@ -201,8 +201,16 @@ class PipelineNode(Node):
             mapping, names, capacity, max_jump_back_ns=max_gap_ns, max_age_ns=max_gap_ns
         )
         self.watch = InputWatch([spec.topic for spec in specs], max_gap_ns)
+        # The online mass and radius only when adapted: with the file's constants they would
+        # add two 1 kHz streams to a graph that is at its limit on two cores.
+        adapted = {
+            'mass': settings.estimator.mass_adaptation,
+            'radius': settings.estimator.radius_adaptation,
+        }
         self.pubs = {
-            key: self.create_publisher(cls, topic, STREAM_QOS) for key, cls, topic, _ in _OUTPUTS
+            key: self.create_publisher(cls, topic, STREAM_QOS)
+            for key, cls, topic, _ in _OUTPUTS
+            if adapted.get(key, True)
         }
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._types = {key: msgtype for key, _, _, msgtype in _OUTPUTS if key != 'alerts'}
@@ -292,8 +300,10 @@ class PipelineNode(Node):
         pubs['slope'].publish(
             codec('slope', frame).encode(stamp_ns, [e.slope, e.slope_valid, e.torque_source])
         )
-        pubs['mass'].publish(codec('mass', frame).encode(stamp_ns, mass_values(e)))
-        pubs['radius'].publish(codec('radius', frame).encode(stamp_ns, radius_values(e)))
+        if 'mass' in pubs:
+            pubs['mass'].publish(codec('mass', frame).encode(stamp_ns, mass_values(e)))
+        if 'radius' in pubs:
+            pubs['radius'].publish(codec('radius', frame).encode(stamp_ns, radius_values(e)))
         pot = sit.potential
         pubs['potential'].publish(
             codec('potential', frame).encode(

@@ -242,11 +242,15 @@ def load_replay_config(path: str | os.PathLike[str]) -> ReplayConfig:
     )
 
 
-def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
+def _estimates(
+    result: CascadeResult, angles: np.ndarray, config: EstimatorConfig | None = None
+) -> dict[str, dict[str, np.ndarray]]:
+    """The estimate topics of a cascade result, as the live nodes publish them: the online
+    mass and radius only where `config` adapts them (the nodes publish no constants)."""
     n = result.t.shape[0]
     zeros = np.zeros(n)
     source = np.full(n, result.torque_source, dtype=np.uint8)
-    return {
+    topics = {
         OBSERVER_WHEEL_STATES: {
             'angle': angles,
             'omega': result.omega,
@@ -281,11 +285,16 @@ def _estimates(result: CascadeResult, angles: np.ndarray) -> dict[str, dict[str,
             'valid': result.slope_valid,
             'torque_source': source,
         },
-        ESTIMATES_MASS: {field: getattr(result, attr) for field, attr in MASS_MESSAGE_FIELDS},
-        ESTIMATES_ROLLING_RADIUS: {
-            field: getattr(result, attr) for field, attr in RADIUS_MESSAGE_FIELDS
-        },
     }
+    if config is not None and config.mass_adaptation:
+        topics[ESTIMATES_MASS] = {
+            field: getattr(result, attr) for field, attr in MASS_MESSAGE_FIELDS
+        }
+    if config is not None and config.radius_adaptation:
+        topics[ESTIMATES_ROLLING_RADIUS] = {
+            field: getattr(result, attr) for field, attr in RADIUS_MESSAGE_FIELDS
+        }
+    return topics
 
 
 def _stamp_ns(seconds: np.ndarray) -> np.ndarray:
@@ -900,7 +909,7 @@ class _Run:
         # the sensor's angles as the observer node publishes them; with speeds, the observer's
         observed = result.angle if self.mapping.wheel_input == 'speed' else wheel_angle
         try:
-            for topic, values in _estimates(result, observed).items():
+            for topic, values in _estimates(result, observed, self.estimator_config).items():
                 datas = encode_batch(ESTIMATE_TOPICS[topic], common, frame_id, values)
                 merged.add(topic, ESTIMATE_TOPICS[topic], log_ns, datas)
         finally:
