@@ -250,7 +250,7 @@ def _estimates(
     n = result.t.shape[0]
     zeros = np.zeros(n)
     source = np.full(n, result.torque_source, dtype=np.uint8)
-    topics = {
+    topics: dict[str, dict[str, np.ndarray]] = {
         OBSERVER_WHEEL_STATES: {
             'angle': angles,
             'omega': result.omega,
