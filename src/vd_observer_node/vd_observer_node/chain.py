@@ -42,6 +42,7 @@ from vd_observer_node.estimation.observer import (
     WheelObserver,
     WheelState,
 )
+from vd_observer_node.estimation.torque_offset import TorqueOffset
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
@@ -138,12 +139,15 @@ class ChainOutput(NamedTuple):
         speed: speed observer output (filtered speed, accel, valid).
         estimates: estimator output for the stamp.
         situation: friction potential and the 12 alert records.
+        torque_offset: the engine-torque offset estimate (engine path with
+            ``torque_offset_adaptation`` only, else None).
     """
 
     wheel: WheelState
     speed: SpeedState
     estimates: Estimates
     situation: Situation
+    torque_offset: TorqueOffset | None = None
 
 
 class Chain(Protocol):
@@ -176,8 +180,11 @@ class PythonChain:
         self.wheels = WheelObserver(settings.observer)
         self.speed = SpeedObserver(settings.observer)
         self.estimator = Estimator(vehicle, settings.estimator, settings.source)
+        est = settings.estimator
         self.engine = (
-            EnginePath(settings.drivetrain)
+            EnginePath(
+                settings.drivetrain, est.torque_offset if est.torque_offset_adaptation else None
+            )
             if settings.drivetrain is not None and settings.source == TORQUE_ENGINE
             else None
         )
@@ -243,7 +250,8 @@ class PythonChain:
         situation = self.monitor.update(
             t, angles, speed, torques, wheel.omega, est.mu, est.mu_valid, est.fz
         )
-        return ChainOutput(wheel, body, est, situation)
+        offset = self.engine.offset if self.engine is not None else None
+        return ChainOutput(wheel, body, est, situation, offset)
 
     def fault_report(self) -> FaultReport:
         """Faults since the previous call, per part ('wheel', 'speed', 'estimator')."""

@@ -32,11 +32,13 @@ from vd_observer_node.estimation.estimator import (
     MASS_PREFIX,
     RADIUS_PREFIX,
     SLOPE_ACCEL_SOURCES,
+    TORQUE_OFFSET_PREFIX,
     EstimatorConfig,
 )
 from vd_observer_node.estimation.mass_grade import MassGradeConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.rolling_radius import RollingRadiusConfig
+from vd_observer_node.estimation.torque_offset import TorqueOffsetConfig
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import (
     ALIGNMENTS,
@@ -212,7 +214,7 @@ OBSERVER_PARAMS: Final = [
 _ESTIMATOR_CORE: Final = [
     *dataclass_param_specs(
         EstimatorConfig,
-        skip=('mass', 'radius'),
+        skip=('mass', 'radius', 'torque_offset'),
         choices={
             'load_transfer_source': LOAD_TRANSFER_SOURCES,
             'slope_accel_source': SLOPE_ACCEL_SOURCES,
@@ -227,6 +229,13 @@ _ESTIMATOR_CORE: Final = [
     *(
         ParamSpec(f'{RADIUS_PREFIX}{p.name}', p.default, f'online rolling radius: {p.description}')
         for p in dataclass_param_specs(RollingRadiusConfig)
+    ),
+    # ... and the engine-torque offset's (engine path: pipeline_node, vd replay)
+    *(
+        ParamSpec(
+            f'{TORQUE_OFFSET_PREFIX}{p.name}', p.default, f'engine-torque offset: {p.description}'
+        )
+        for p in dataclass_param_specs(TorqueOffsetConfig)
     ),
 ]
 

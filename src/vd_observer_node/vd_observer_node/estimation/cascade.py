@@ -22,9 +22,17 @@ from vd_observer_node.estimation.drivetrain import (
 )
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.observer import Observer, ObserverConfig
+from vd_observer_node.estimation.torque_offset import TorqueOffset
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
-__all__ = ['CascadeResult', 'CascadeState', 'checked_engine', 'checked_record', 'run_cascade']
+__all__ = [
+    'CascadeResult',
+    'CascadeState',
+    'OffsetRecord',
+    'checked_engine',
+    'checked_record',
+    'run_cascade',
+]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -69,6 +77,13 @@ class CascadeResult:
         radius_converged: shape (N,), bool, the radius is trusted and used.
         radius_used: shape (N,), [m] the radius the stamp's Fx and slip used.
         radius_free_wheels: shape (N,), int, wheels that updated the radius (0: none).
+        torque_offset: shape (N,), [N m] estimated offset of the engine-torque signal
+            (`torque_offset.TorqueOffset.offset`; empty unless the engine path runs with
+            ``torque_offset_adaptation``).
+        torque_offset_std: shape (N,), [N m] its standard deviation.
+        torque_offset_converged: shape (N,), bool, the offset is trusted and used.
+        torque_offset_used: shape (N,), [N m] what the engine path subtracted from the signal.
+        torque_offset_episodes: shape (N,), int, neutral episodes used so far.
     """
 
     t: FloatArray
@@ -102,6 +117,13 @@ class CascadeResult:
     radius_free_wheels: NDArray[np.int64] = field(
         default_factory=lambda: np.zeros(0, dtype=np.int64)
     )
+    torque_offset: FloatArray = field(default_factory=lambda: np.zeros(0))
+    torque_offset_std: FloatArray = field(default_factory=lambda: np.zeros(0))
+    torque_offset_converged: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    torque_offset_used: FloatArray = field(default_factory=lambda: np.zeros(0))
+    torque_offset_episodes: NDArray[np.int64] = field(
+        default_factory=lambda: np.zeros(0, dtype=np.int64)
+    )
 
 
 @dataclass
@@ -120,6 +142,51 @@ class CascadeState:
     """
 
     parts: tuple[Any, ...] | None = None
+
+
+@dataclass(frozen=True)
+class OffsetRecord:
+    """The engine-torque offset estimates of a record, as `CascadeResult` carries them.
+
+    Attributes:
+        offset: shape (N,), [N m].
+        std: shape (N,), [N m].
+        converged: shape (N,), bool.
+        used: shape (N,), [N m].
+        episodes: shape (N,), int.
+    """
+
+    offset: FloatArray
+    std: FloatArray
+    converged: BoolArray
+    used: FloatArray
+    episodes: NDArray[np.int64]
+
+    @classmethod
+    def empty(cls, n: int) -> OffsetRecord:
+        """N stamps of zeros (0: the offset is not learnt)."""
+        return cls(
+            np.zeros(n), np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n),
+            np.zeros(n, dtype=np.int64),
+        )  # fmt: skip
+
+    def store(self, k: int, estimate: TorqueOffset) -> None:
+        """Write stamp k's estimate."""
+        self.offset[k] = estimate.offset
+        self.std[k] = estimate.std
+        self.converged[k] = estimate.converged
+        self.used[k] = estimate.used
+        self.episodes[k] = estimate.episodes
+
+    def fields(self) -> dict[str, Any]:
+        """The `CascadeResult` fields (``torque_offset*``)."""
+        return {
+            'torque_offset': self.offset,
+            'torque_offset_std': self.std,
+            'torque_offset_converged': self.converged,
+            'torque_offset_used': self.used,
+            'torque_offset_episodes': self.episodes,
+        }
 
 
 def checked_record(
@@ -250,12 +317,19 @@ def run_cascade(
     else:
         observer = Observer(observer_config or ObserverConfig())
         estimator = Estimator(vehicle, estimator_config, source)
+        config = estimator_config or EstimatorConfig()
         engine_path = (
-            EnginePath(drivetrain) if drivetrain is not None and source == TORQUE_ENGINE else None
+            EnginePath(
+                drivetrain, config.torque_offset if config.torque_offset_adaptation else None
+            )
+            if drivetrain is not None and source == TORQUE_ENGINE
+            else None
         )
         if state is not None:
             state.parts = (observer, estimator, engine_path)
     use_measured = estimator_speed == 'measured'
+    learns = engine_path is not None and engine_path.offset_config is not None
+    offset = OffsetRecord.empty(n if learns else 0)
     for k in range(n):
         tk = float(stamps[k])
         wheel = observer.wheels.update(tk, angles[k])
@@ -267,6 +341,8 @@ def run_cascade(
                 tk, engine_record[k], wheel.omega, wheel.omega_dot
             )
             torque_valid[k] = torque_ok
+            if engine_path.offset is not None:
+                offset.store(k, engine_path.offset)
         est = estimator.update(
             tk, wheel.omega, wheel.omega_dot, speed, body.accel, torque, torque_ok
         )
@@ -322,7 +398,12 @@ def run_cascade(
                 ('estimator', estimator.faults),
             )
             for kind, n in counter.counts.items()
-        },
+        }
+        | (
+            {'engine.torque_offset_clamped': int(engine_path.state.offset.clamped)}
+            if learns and engine_path is not None
+            else {}
+        ),
         mass=scalars['mass'],
         mass_std=scalars['mass_std'],
         mass_converged=flags['mass_converged'],
@@ -333,4 +414,5 @@ def run_cascade(
         radius_converged=flags['radius_converged'],
         radius_used=scalars['radius_used'],
         radius_free_wheels=free_wheels,
+        **offset.fields(),
     )

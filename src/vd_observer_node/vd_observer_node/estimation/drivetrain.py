@@ -40,6 +40,12 @@ from numpy.typing import ArrayLike, NDArray
 from vd_sim_node.vehicle.params import VehicleParams
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimation.torque_offset import (
+    TorqueOffset,
+    TorqueOffsetConfig,
+    TorqueOffsetState,
+    torque_offset_step,
+)
 
 __all__ = [
     'DRIVEN_AXLES',
@@ -302,10 +308,12 @@ class EngineState(NamedTuple):
         last_unsettled: [s] stamp at which the clutch last slipped or the gear changed
             (-inf before any).
         last_gear: the previous sample's gear (`gear_number`), None before the first.
+        offset: the engine-torque offset estimator's state (`torque_offset`).
     """
 
     last_unsettled: float = -math.inf
     last_gear: int | None = None
+    offset: TorqueOffsetState = TorqueOffsetState()
 
 
 def engine_path_step(
@@ -315,11 +323,14 @@ def engine_path_step(
     engine: ArrayLike,
     wheel_omega: ArrayLike,
     wheel_omega_dot: ArrayLike,
-) -> tuple[FloatArray, bool, EngineState]:
+    offset_config: TorqueOffsetConfig | None = None,
+) -> tuple[FloatArray, bool, TorqueOffset | None, EngineState]:
     """One sample of the engine path (pure): wheel torques, whether they hold, next state.
 
     The torques hold where the clutch is closed (`clutch_engaged`) and has been for
-    ``drivetrain.clutch_settle_time`` since it last slipped or the gear changed.
+    ``drivetrain.clutch_settle_time`` since it last slipped or the gear changed. With
+    ``offset_config`` the offset of the engine-torque signal is learnt in neutral
+    (`torque_offset`) and, once converged, subtracted before the wheel torques are computed.
 
     Args:
         drivetrain: the vehicle's driveline.
@@ -329,10 +340,11 @@ def engine_path_step(
             engine speed [rad/s] (nan if not measured).
         wheel_omega: shape (4,), [rad/s] the observer's wheel speeds.
         wheel_omega_dot: shape (4,), [rad/s^2] the observer's wheel accelerations.
+        offset_config: settings of the offset estimator; None: the signal is taken as it is.
 
     Returns:
         (wheel torques (4,) [N m] as `engine_wheel_torques` gives them, torque valid, the
-        next state).
+        offset estimate after the sample (None without ``offset_config``), the next state).
 
     Raises:
         InputShapeError: an array of the wrong shape.
@@ -342,13 +354,26 @@ def engine_path_step(
         raise InputShapeError(f'engine must have shape (3,), got {row.shape}')
     engine_torque, gear, engine_speed = (float(v) for v in row)
     gear_code = gear_number(gear)  # no gear at all: nan torques, a fault
+    offset: TorqueOffset | None = None
+    offset_state = state.offset
+    if offset_config is not None:
+        offset, offset_state = torque_offset_step(
+            offset_config,
+            drivetrain.engine_inertia,
+            offset_state,
+            t,
+            engine_torque,
+            gear_code,
+            engine_speed,
+        )
+        engine_torque -= offset.used
     torque = engine_wheel_torques(engine_torque, gear_code, drivetrain, wheel_omega_dot)
     engaged = clutch_engaged(engine_speed, gear_code, wheel_omega, drivetrain)
     last_unsettled = state.last_unsettled
     if not engaged or gear_code != state.last_gear:
         last_unsettled = t
     valid = engaged and t - last_unsettled >= drivetrain.clutch_settle_time
-    return torque, valid, EngineState(last_unsettled, gear_code)
+    return torque, valid, offset, EngineState(last_unsettled, gear_code, offset_state)
 
 
 class EnginePath:
@@ -356,13 +381,19 @@ class EnginePath:
 
     Attributes:
         drivetrain: the vehicle's driveline.
+        offset_config: settings of the engine-torque offset estimator (None: off).
         state: the state after the last sample.
+        offset: the offset estimate after the last sample (None when off).
     """
 
-    def __init__(self, drivetrain: Drivetrain) -> None:
+    def __init__(
+        self, drivetrain: Drivetrain, offset_config: TorqueOffsetConfig | None = None
+    ) -> None:
         """Start with no sample seen."""
         self.drivetrain = drivetrain
+        self.offset_config = offset_config
         self.state = EngineState()
+        self.offset: TorqueOffset | None = None
 
     def update(
         self, t: float, engine: ArrayLike, wheel_omega: ArrayLike, wheel_omega_dot: ArrayLike
@@ -372,8 +403,14 @@ class EnginePath:
         Raises:
             InputShapeError: an array of the wrong shape.
         """
-        torque, valid, self.state = engine_path_step(
-            self.drivetrain, self.state, t, engine, wheel_omega, wheel_omega_dot
+        torque, valid, self.offset, self.state = engine_path_step(
+            self.drivetrain,
+            self.state,
+            t,
+            engine,
+            wheel_omega,
+            wheel_omega_dot,
+            self.offset_config,
         )
         return torque, valid
 

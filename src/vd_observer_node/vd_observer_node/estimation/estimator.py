@@ -61,6 +61,7 @@ from vd_observer_node.estimation.rolling_radius import (
     RollingRadiusConfig,
     RollingRadiusEstimator,
 )
+from vd_observer_node.estimation.torque_offset import TorqueOffsetConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
 __all__ = [
@@ -70,6 +71,7 @@ __all__ = [
     'RADIUS_MESSAGE_FIELDS',
     'RADIUS_PREFIX',
     'SLOPE_ACCEL_SOURCES',
+    'TORQUE_OFFSET_PREFIX',
     'Estimates',
     'Estimator',
     'EstimatorConfig',
@@ -85,10 +87,13 @@ SLOPE_ACCEL_SOURCES: Final = ('speed', 'observer')
 MASS_PREFIX: Final = 'mass.'
 #: Prefix of the online rolling-radius settings in a flat mapping.
 RADIUS_PREFIX: Final = 'radius.'
+#: Prefix of the engine-torque offset settings in a flat mapping.
+TORQUE_OFFSET_PREFIX: Final = 'torque_offset.'
 #: The nested settings: `EstimatorConfig` field -> (flat-key prefix, its config class).
 _NESTED: Final[dict[str, tuple[str, Any]]] = {
     'mass': (MASS_PREFIX, MassGradeConfig),
     'radius': (RADIUS_PREFIX, RollingRadiusConfig),
+    'torque_offset': (TORQUE_OFFSET_PREFIX, TorqueOffsetConfig),
 }
 #: The online mass as published (vd_msgs/MassEstimate): each field after the header, in CDR
 #: order, and the attribute of `Estimates` (and `cascade.CascadeResult`) it carries.
@@ -146,6 +151,10 @@ class EstimatorConfig:
         radius: settings of the online radius estimator (flat keys ``radius.<name>``).
         mass_waits_for_radius: with both adaptations on, the mass is not updated before the
             radius has converged (so it never learns the file's radius error).
+        torque_offset_adaptation: on the engine path, learn the offset of the engine-torque
+            signal while the gearbox is in neutral and subtract it once converged
+            (`torque_offset`); no effect on measured torques. False: the signal as it is.
+        torque_offset: settings of the offset estimator (flat keys ``torque_offset.<name>``).
     """
 
     load_transfer_source: str = 'tire_forces'
@@ -165,6 +174,8 @@ class EstimatorConfig:
     radius_adaptation: bool = False
     radius: RollingRadiusConfig = field(default_factory=RollingRadiusConfig)
     mass_waits_for_radius: bool = True
+    torque_offset_adaptation: bool = False
+    torque_offset: TorqueOffsetConfig = field(default_factory=TorqueOffsetConfig)
 
     def __post_init__(self) -> None:
         if self.load_transfer_source not in LOAD_TRANSFER_SOURCES:
@@ -192,7 +203,7 @@ class EstimatorConfig:
     @classmethod
     def setting_keys(cls) -> frozenset[str]:
         """The flat keys `from_mapping` takes: the field names, ``mass.<name>`` for `mass`,
-        ``radius.<name>`` for `radius`."""
+        ``radius.<name>`` for `radius`, ``torque_offset.<name>`` for `torque_offset`."""
         nested = {f'{pre}{f.name}' for pre, kind in _NESTED.values() for f in fields(kind)}
         return frozenset({f.name for f in fields(cls)} - set(_NESTED) | nested)
 

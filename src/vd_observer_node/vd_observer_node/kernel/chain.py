@@ -20,6 +20,7 @@ from vd_observer_node.errors import InputShapeError
 from vd_observer_node.estimation.cascade import (
     CascadeResult,
     CascadeState,
+    OffsetRecord,
     checked_engine,
     checked_record,
 )
@@ -77,6 +78,14 @@ from vd_observer_node.kernel.situation import (
     monitor_update,
     potential_from_arrays,
 )
+from vd_observer_node.kernel.torque_offset import (
+    OFFSET_CLAMPED_SLOT,
+    OFFSET_OUT_SIZE,
+    offset_from_packed,
+    offset_params,
+    offset_state,
+    offset_update,
+)
 from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_observer_node.situation.monitor import Situation, SituationSeries
 
@@ -126,9 +135,10 @@ def _cascade_step(
     eprm: FloatArray, escal: FloatArray, held: FloatArray, fst: FloatArray, fpr: FloatArray,
     fme: FloatArray, sst: FloatArray, spr: FloatArray, sme: FloatArray, vst: FloatArray,
     vpr: FloatArray, vme: FloatArray, last: FloatArray, ecnt: NDArray[np.int64],
-    measured: bool, dprm: FloatArray, escl: FloatArray, t: float, angle: FloatArray,
-    speed: float, torque: FloatArray, engine: FloatArray, wheel: FloatArray,
-    wheel_valid: BoolArray, body: FloatArray, body_valid: BoolArray, est: FloatArray,
+    measured: bool, dprm: FloatArray, escl: FloatArray, oprm: FloatArray, ost: FloatArray,
+    oout: FloatArray, t: float, angle: FloatArray, speed: float, torque: FloatArray,
+    engine: FloatArray, wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray,
+    body_valid: BoolArray, est: FloatArray,
 ) -> bool:  # fmt: skip
     """One stamp of `run_cascade`: wheel and speed observers, then the estimator.
 
@@ -136,6 +146,8 @@ def _cascade_step(
     (engine torque, gear, engine speed) instead of ``torque``; returns whether the torque
     source held (`CascadeResult.torque_valid`). ``escl`` (2,) is the engine path's state:
     the stamp the clutch last slipped or the gear changed (-inf before), the last gear (nan).
+    With ``oprm`` non-empty (`offset_params`) the engine path learns the engine-torque offset
+    (state ``ost``, estimate written to ``oout``) and subtracts it once converged.
     """
     diff_update(wprm, wlip, wz, wfl, wact, wpt, wpf, wsc, wcnt, t, angle, wheel, wheel_valid)
     sample = np.empty(1)
@@ -146,8 +158,12 @@ def _cascade_step(
     torque_ok = True
     if dprm.shape[0] > 0:
         wheel_torque = np.empty(4)
+        engine_torque = engine[0]
+        if oprm.shape[0] > 0:
+            offset_update(oprm, dprm[4], ost, t, engine[0], engine[1], engine[2], oout)
+            engine_torque = engine_torque - oout[3]
         engaged = engine_torques(
-            dprm, engine[0], engine[1], engine[2], wheel[1], wheel[2], wheel_torque
+            dprm, engine_torque, engine[1], engine[2], wheel[1], wheel[2], wheel_torque
         )
         if not engaged or engine[1] != escl[1]:
             escl[0] = t
@@ -169,23 +185,29 @@ def _cascade_block(
     eprm: FloatArray, escal: FloatArray, held: FloatArray, fst: FloatArray, fpr: FloatArray,
     fme: FloatArray, sst: FloatArray, spr: FloatArray, sme: FloatArray, vst: FloatArray,
     vpr: FloatArray, vme: FloatArray, last: FloatArray, ecnt: NDArray[np.int64],
-    measured: bool, dprm: FloatArray, escl: FloatArray, t: FloatArray, angles: FloatArray,
-    speeds: FloatArray, torques: FloatArray, engine: FloatArray, wheel: FloatArray,
-    wheel_valid: BoolArray, body: FloatArray, est: FloatArray, torque_valid: BoolArray,
+    measured: bool, dprm: FloatArray, escl: FloatArray, oprm: FloatArray, ost: FloatArray,
+    t: FloatArray, angles: FloatArray, speeds: FloatArray, torques: FloatArray,
+    engine: FloatArray, wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray,
+    est: FloatArray, torque_valid: BoolArray, offsets: FloatArray,
 ) -> None:  # fmt: skip
-    """`_cascade_step` over N stamps; wheel (N, 3, 4), body (N, 3), est (N, EST_SIZE).
+    """`_cascade_step` over N stamps; wheel (N, 3, 4), body (N, 3), est (N, EST_SIZE),
+    offsets (N, OFFSET_OUT_SIZE) where the offset is learnt, else (0, OFFSET_OUT_SIZE).
 
-    ``escl`` (2,) is the engine path's state (`_cascade_step`), carried from block to block.
+    ``escl`` (2,) and ``ost`` are the engine path's state (`_cascade_step`), carried from
+    block to block.
     """
     body1 = np.empty((3, 1))
     body_valid = np.empty(1, dtype=np.bool_)
+    oout = np.zeros(OFFSET_OUT_SIZE)
     for k in range(t.shape[0]):
         torque_valid[k] = _cascade_step(
             wprm, wlip, wz, wfl, wact, wpt, wpf, wsc, wcnt, sprm, slip_, sz, sfl, sact, spt,
             spf, ssc, scnt, eprm, escal, held, fst, fpr, fme, sst, spr, sme, vst, vpr, vme,
-            last, ecnt, measured, dprm, escl, t[k], angles[k], speeds[k], torques[k], engine[k],
-            wheel[k], wheel_valid[k], body1, body_valid, est[k],
+            last, ecnt, measured, dprm, escl, oprm, ost, oout, t[k], angles[k], speeds[k],
+            torques[k], engine[k], wheel[k], wheel_valid[k], body1, body_valid, est[k],
         )  # fmt: skip
+        if offsets.shape[0] > 0:
+            offsets[k] = oout
         body[k, 0] = body1[0, 0]
         body[k, 1] = body1[1, 0]
         body[k, 2] = body1[2, 0]
@@ -226,27 +248,37 @@ def run_cascade_compiled(
         if drivetrain is not None and source == TORQUE_ENGINE
         else np.zeros(0)
     )
+    oprm = _offset_params(estimator_config, dprm)
     if state is not None and state.parts is not None:
-        wheels, speed, estimator, escl = state.parts
+        wheels, speed, estimator, escl, ost = state.parts
     else:
         wheels, speed = _observers(observer_config or ObserverConfig())
         estimator = CompiledEstimator(vehicle, estimator_config, source)
         # the engine path's state: the stamp the clutch last slipped or the gear changed
         # (-inf before), the last gear (nan)
         escl = np.array([-np.inf, np.nan])
+        ost = offset_state()
         if state is not None:
-            state.parts = (wheels, speed, estimator, escl)
+            state.parts = (wheels, speed, estimator, escl, ost)
     wheel = np.zeros((n, 3, 4))
     wheel_valid = np.zeros((n, 4), dtype=np.bool_)
     body = np.zeros((n, 3))
     est = np.zeros((n, EST_SIZE))
     torque_valid = np.zeros(n, dtype=np.bool_)
+    offsets = np.zeros((n if oprm.shape[0] > 0 else 0, OFFSET_OUT_SIZE))
     block: Any = _cascade_block  # its leading arguments come as tuples
     block(
         *_diff_args(wheels), *_diff_args(speed), *_estimator_args(estimator),
-        estimator_speed == 'measured', dprm, escl, stamps, angles, speeds, torques,
-        engine_record, wheel, wheel_valid, body, est, torque_valid,
+        estimator_speed == 'measured', dprm, escl, oprm, ost, stamps, angles, speeds, torques,
+        engine_record, wheel, wheel_valid, body, est, torque_valid, offsets,
     )  # fmt: skip
+    learnt = OffsetRecord(
+        offsets[:, 0].copy(),
+        offsets[:, 1].copy(),
+        offsets[:, 2] != 0.0,
+        offsets[:, 3].copy(),
+        offsets[:, 4].astype(np.int64),
+    )
     if source == TORQUE_NONE:
         torque_valid[:] = False
     return CascadeResult(
@@ -276,7 +308,12 @@ def run_cascade_compiled(
                 ('estimator', estimator.faults),
             )
             for kind, count in counter.counts.items()
-        },
+        }
+        | (
+            {'engine.torque_offset_clamped': int(ost[OFFSET_CLAMPED_SLOT])}
+            if oprm.shape[0] > 0
+            else {}
+        ),
         mass=est[:, E_MASS].copy(),
         mass_std=est[:, E_MASS_STD].copy(),
         mass_converged=est[:, E_MASS_CONVERGED] != 0.0,
@@ -287,7 +324,16 @@ def run_cascade_compiled(
         radius_converged=est[:, E_RADIUS_CONVERGED] != 0.0,
         radius_used=est[:, E_RADIUS_USED].copy(),
         radius_free_wheels=est[:, E_RADIUS_FREE].astype(np.int64),
+        **learnt.fields(),
     )
+
+
+def _offset_params(config: EstimatorConfig | None, dprm: FloatArray) -> FloatArray:
+    """The offset estimator's settings where the engine path (``dprm`` non-empty) learns it,
+    else an empty array."""
+    if dprm.shape[0] == 0 or config is None or not config.torque_offset_adaptation:
+        return np.zeros(0)
+    return offset_params(config.torque_offset)
 
 
 @jit
@@ -418,6 +464,9 @@ class CompiledChain:
             self._drivetrain.params_array() if self._drivetrain is not None else np.zeros(0)
         )
         self._escl = np.array([-np.inf, np.nan])
+        self._oprm = _offset_params(settings.estimator, self._dprm)
+        self._ost = offset_state()
+        self._oout = np.zeros(OFFSET_OUT_SIZE)
         self._no_engine = np.zeros(3)
 
     def update(
@@ -447,14 +496,17 @@ class CompiledChain:
         step: Any = _cascade_step  # its leading arguments come as one tuple
         wheel, body, est = self._wheel, self._body, self._est
         step(
-            *self._args, self._measured, self._dprm, self._escl, float(t), angles,
-            float(speed), torques, row, wheel, self._wheel_valid, body, self._body_valid, est,
+            *self._args, self._measured, self._dprm, self._escl, self._oprm, self._ost,
+            self._oout, float(t), angles, float(speed), torques, row, wheel, self._wheel_valid,
+            body, self._body_valid, est,
         )  # fmt: skip
+        offset = offset_from_packed(self._oout) if self._oprm.shape[0] > 0 else None
         if self._drivetrain is not None:
             # the monitor gets the torques the engine path gave the estimator, from the
             # reference function as the replay computes them (0 where it had none)
+            used = offset.used if offset is not None else 0.0
             derived = engine_wheel_torques(
-                float(row[0]), gear_number(float(row[1])), self._drivetrain, wheel[2]
+                float(row[0]) - used, gear_number(float(row[1])), self._drivetrain, wheel[2]
             )
             torques = np.where(np.isfinite(derived), derived, 0.0)
         mu_valid = est[E_MU_VALID : E_MU_VALID + 4] != 0.0
@@ -482,6 +534,7 @@ class CompiledChain:
                 alerts_from_arrays(a.ch, a.detected),
                 monitor.slip.copy(),
             ),
+            offset,
         )
 
     def fault_report(self) -> FaultReport:

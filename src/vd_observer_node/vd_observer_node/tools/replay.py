@@ -867,6 +867,8 @@ class _Run:
         if engine is not None and self.drivetrain is not None:
             # the situation monitor gets the torques the engine path gave the estimator
             # (0 where the path had none: a gear the box lacks)
+            if result.torque_offset_used.shape[0]:
+                engine = np.column_stack((engine[:, 0] - result.torque_offset_used, engine[:, 1:]))
             derived = engine_wheel_torques_record(engine, self.drivetrain, result.omega_dot)
             wheel_torque = np.where(np.isfinite(derived), derived, 0.0)
         situation_values: dict[str, dict[str, np.ndarray]] = {}
