@@ -27,6 +27,7 @@ from vd_observer_node.estimation.estimator import (
     Estimates,
 )
 from vd_observer_node.estimation.faults import ERROR, OK, WARN
+from vd_observer_node.estimation.torque_offset import OFFSET_MESSAGE_FIELDS, TorqueOffset
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import InputMapping, InputSpec
@@ -42,6 +43,7 @@ __all__ = [
     'mass_values',
     'matched_inputs',
     'merge_status',
+    'offset_values',
     'radius_values',
 ]
 
@@ -50,6 +52,12 @@ def mass_values(est: Estimates) -> list[float | bool]:
     """The vd_msgs/MassEstimate fields of one estimate, in CDR order (`MessageCodec.encode`):
     mass [kg], mass_std [kg], mass_used [kg], converged, excited."""
     return [getattr(est, attr) for _, attr in MASS_MESSAGE_FIELDS]
+
+
+def offset_values(estimate: TorqueOffset) -> list[float | bool | int]:
+    """The vd_msgs/TorqueOffsetEstimate fields of one estimate, in CDR order: offset [N m],
+    offset_std [N m], offset_used [N m], converged, clamped, episodes."""
+    return [getattr(estimate, attr) for _, attr in OFFSET_MESSAGE_FIELDS]
 
 
 def radius_values(est: Estimates) -> list[float | bool | int]:

@@ -25,6 +25,7 @@ __all__ = [
     'ESTIMATES_ROLLING_RADIUS',
     'ESTIMATES_SLOPE',
     'ESTIMATES_TIRE_FORCES',
+    'ESTIMATES_TORQUE_OFFSET',
     'NAMESPACE',
     'OBSERVER',
     'OBSERVER_BODY_ACCEL',
@@ -71,6 +72,7 @@ ESTIMATES_RESISTANCES: Final = '/vd/estimates/resistances'
 ESTIMATES_SLOPE: Final = '/vd/estimates/slope'
 ESTIMATES_MASS: Final = '/vd/estimates/mass'
 ESTIMATES_ROLLING_RADIUS: Final = '/vd/estimates/rolling_radius'
+ESTIMATES_TORQUE_OFFSET: Final = '/vd/estimates/torque_offset'
 # The alerts node's outputs.
 ESTIMATES_ALERTS: Final = '/vd/estimates/alerts'
 ESTIMATES_FRICTION_POTENTIAL: Final = '/vd/estimates/friction_potential'
@@ -101,6 +103,7 @@ ESTIMATES: Final = {
     ESTIMATES_SLOPE: 'vd_msgs/msg/Slope',
     ESTIMATES_MASS: 'vd_msgs/msg/MassEstimate',
     ESTIMATES_ROLLING_RADIUS: 'vd_msgs/msg/RollingRadiusEstimate',
+    ESTIMATES_TORQUE_OFFSET: 'vd_msgs/msg/TorqueOffsetEstimate',
 }
 ALERTS: Final = {
     ESTIMATES_ALERTS: 'vd_msgs/msg/Alerts',

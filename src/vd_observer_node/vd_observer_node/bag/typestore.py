@@ -46,6 +46,7 @@ VD_MSG_TYPES = (
     'vd_msgs/msg/RollingRadiusEstimate',
     'vd_msgs/msg/Slope',
     'vd_msgs/msg/TireForces',
+    'vd_msgs/msg/TorqueOffsetEstimate',
     'vd_msgs/msg/WheelAngles',
     'vd_msgs/msg/WheelStates',
     'vd_msgs/msg/WheelTorques',

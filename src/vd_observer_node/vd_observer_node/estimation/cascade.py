@@ -84,6 +84,7 @@ class CascadeResult:
         torque_offset_converged: shape (N,), bool, the offset is trusted and used.
         torque_offset_used: shape (N,), [N m] what the engine path subtracted from the signal.
         torque_offset_episodes: shape (N,), int, neutral episodes used so far.
+        torque_offset_clamped: shape (N,), bool, the offset is at its bound.
     """
 
     t: FloatArray
@@ -124,6 +125,7 @@ class CascadeResult:
     torque_offset_episodes: NDArray[np.int64] = field(
         default_factory=lambda: np.zeros(0, dtype=np.int64)
     )
+    torque_offset_clamped: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 @dataclass
@@ -154,6 +156,7 @@ class OffsetRecord:
         converged: shape (N,), bool.
         used: shape (N,), [N m].
         episodes: shape (N,), int.
+        clamped: shape (N,), bool.
     """
 
     offset: FloatArray
@@ -161,13 +164,14 @@ class OffsetRecord:
     converged: BoolArray
     used: FloatArray
     episodes: NDArray[np.int64]
+    clamped: BoolArray
 
     @classmethod
     def empty(cls, n: int) -> OffsetRecord:
         """N stamps of zeros (0: the offset is not learnt)."""
         return cls(
             np.zeros(n), np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n),
-            np.zeros(n, dtype=np.int64),
+            np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool),
         )  # fmt: skip
 
     def store(self, k: int, estimate: TorqueOffset) -> None:
@@ -177,6 +181,7 @@ class OffsetRecord:
         self.converged[k] = estimate.converged
         self.used[k] = estimate.used
         self.episodes[k] = estimate.episodes
+        self.clamped[k] = estimate.clamped
 
     def fields(self) -> dict[str, Any]:
         """The `CascadeResult` fields (``torque_offset*``)."""
@@ -186,6 +191,7 @@ class OffsetRecord:
             'torque_offset_converged': self.converged,
             'torque_offset_used': self.used,
             'torque_offset_episodes': self.episodes,
+            'torque_offset_clamped': self.clamped,
         }
 
 

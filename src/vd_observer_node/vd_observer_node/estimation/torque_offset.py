@@ -28,18 +28,35 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import Any, NamedTuple
+from typing import Any, Final, NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
 
 from vd_observer_node.errors import ConfigurationError
 
 __all__ = [
+    'OFFSET_MESSAGE_FIELDS',
     'TorqueOffset',
     'TorqueOffsetConfig',
     'TorqueOffsetEstimator',
     'TorqueOffsetState',
     'offset_estimate',
+    'publish_mask',
     'torque_offset_step',
 ]
+
+#: The estimate as published (vd_msgs/TorqueOffsetEstimate): each field after the header, in
+#: CDR order, and the attribute of `TorqueOffset` it carries (`cascade.CascadeResult`'s is
+#: ``torque_offset_<attribute>``, ``torque_offset`` for ``offset``).
+OFFSET_MESSAGE_FIELDS: Final = (
+    ('offset', 'offset'),
+    ('offset_std', 'std'),
+    ('offset_used', 'used'),
+    ('converged', 'converged'),
+    ('clamped', 'clamped'),
+    ('episodes', 'episodes'),
+)
 
 
 @dataclass(frozen=True)
@@ -239,6 +256,40 @@ def torque_offset_step(
     if estimate.clamped:
         state = state._replace(clamped=state.clamped + 1.0)
     return estimate, state
+
+
+def publish_mask(
+    episodes: NDArray[np.int64],
+    converged: NDArray[np.bool_],
+    previous: tuple[int, bool] | None,
+) -> NDArray[np.bool_]:
+    """The stamps at which the estimate is published: where it changes.
+
+    The estimate changes only when a neutral episode ends, convergence changes or the learning
+    restarts, so the nodes and the replay publish it there (and at the first stamp) instead of
+    at every stamp.
+
+    Args:
+        episodes: shape (N,), episodes used after each stamp.
+        converged: shape (N,), converged after each stamp.
+        previous: (episodes, converged) of the last stamp before these (None: these are the
+            first).
+
+    Returns:
+        shape (N,), bool.
+    """
+    n = episodes.shape[0]
+    if n == 0:
+        return np.zeros(0, dtype=bool)
+    before_e = np.empty(n, dtype=np.int64)
+    before_c = np.empty(n, dtype=bool)
+    before_e[1:], before_c[1:] = episodes[:-1], converged[:-1]
+    if previous is None:
+        before_e[0], before_c[0] = -1, False  # the first stamp is always published
+    else:
+        before_e[0], before_c[0] = previous
+    out: NDArray[np.bool_] = (episodes != before_e) | (converged != before_c)
+    return out
 
 
 class TorqueOffsetEstimator:

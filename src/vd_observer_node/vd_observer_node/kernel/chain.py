@@ -278,6 +278,7 @@ def run_cascade_compiled(
         offsets[:, 2] != 0.0,
         offsets[:, 3].copy(),
         offsets[:, 4].astype(np.int64),
+        offsets[:, 5] != 0.0,
     )
     if source == TORQUE_NONE:
         torque_valid[:] = False
