@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+from adaptation_setup import model_drive
 from numpy.typing import NDArray
 from test_kernel import (
     CURVES,
@@ -22,7 +23,6 @@ from test_kernel import (
     scenario_record,
 )
 from test_mass_estimator import _inputs
-from test_mass_grade import _drive
 from vd_observer_node.chain import ChainSettings, PythonChain
 from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_MEASURED, TORQUE_NONE
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
@@ -52,7 +52,7 @@ def _both(
     source: int = TORQUE_MEASURED,
 ) -> Estimator:
     """Reference and compiled estimator on one synthetic drive; bit-equal outputs."""
-    t, omega, omega_dot, v, torque = _inputs(_drive(mass, duration=duration))
+    t, omega, omega_dot, v, torque = _inputs(model_drive(mass, duration=duration))
     accel = np.gradient(v, t)
     if jump:  # a looped record: the first 2 s again at the end
         k = 2000

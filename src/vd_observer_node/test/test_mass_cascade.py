@@ -9,61 +9,36 @@ converges and corrects the slope.
 
 from __future__ import annotations
 
-import dataclasses
-from pathlib import Path
-
 import numpy as np
 import pytest
-from vd_observer_node.chain import ChainSettings, PythonChain
-from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
-from vd_observer_node.estimation.estimator import EstimatorConfig
-from vd_observer_node.estimation.faults import WARN, FaultReport
-from vd_observer_node.estimation.vehicle import EstimatorVehicle
-from vd_observer_node.situation.friction_potential import TyreCurves
-from vd_sim_node.vehicle.params import load_vehicle
-from vd_sim_node.vehicle.scenario import (
-    PiecewiseConstant,
-    Scenario,
-    SensorSettings,
-    VehicleVariant,
-    load_scenario,
+from adaptation_setup import (
+    VEHICLE,
+    cascade,
+    chain_run,
+    looped_record,
+    simulated_mass_drive,
+    steady_drive,
 )
-from vd_sim_node.vehicle.simulation import SimResult, simulate
+from vd_observer_node.estimation.cascade import run_cascade
+from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.estimation.faults import WARN
+from vd_sim_node.vehicle.scenario import VehicleVariant
+from vd_sim_node.vehicle.simulation import SimResult
 
-CONFIG = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config'
-PARAMS = load_vehicle(CONFIG / 'clio_rl_1_1.yaml')
-VEHICLE = EstimatorVehicle.from_params(PARAMS)
 M0 = VEHICLE.mass
-RATE_HZ = 200.0
-SENSORS = SensorSettings(rate_hz=RATE_HZ, seed=4, encoder_counts_per_rev=96, speed_noise_std=0.05)
 ON = EstimatorConfig(mass_adaptation=True)
 OFF = EstimatorConfig(mass_adaptation=False)
 
 
 def _drive(extra_kg: float, duration: float) -> SimResult:
     """The first `duration` s of mass_drive with `extra_kg` on board, encoder and speed noise."""
-    scenario = load_scenario(CONFIG / 'scenarios' / 'mass_drive.yaml')
-    return simulate(
-        PARAMS,
-        dataclasses.replace(
-            scenario,
-            duration=duration,
-            sensors=SENSORS,
-            true_vehicle=VehicleVariant(extra_mass_kg=extra_kg),
-        ),
-    )
-
-
-def _cascade(sim: SimResult, config: EstimatorConfig) -> CascadeResult:
-    return run_cascade(
-        sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, VEHICLE, None, config
-    )
+    return simulated_mass_drive(VehicleVariant(extra_mass_kg=extra_kg), duration)
 
 
 def test_a_loaded_car_converges_through_the_cascade_and_the_slope_follows() -> None:
     m_true = M0 + 300.0
     sim = _drive(300.0, 60.0)
-    on, off = _cascade(sim, ON), _cascade(sim, OFF)
+    on, off = cascade(sim, ON), cascade(sim, OFF)
     assert on.mass_converged[-1]
     k0 = int(np.argmax(on.mass_converged))
     assert np.max(np.abs(on.mass[k0:] - m_true)) <= 0.03 * m_true
@@ -82,47 +57,16 @@ def test_a_loaded_car_converges_through_the_cascade_and_the_slope_follows() -> N
 
 def test_a_cruise_that_never_accelerates_keeps_the_files_mass_and_says_so() -> None:
     # 3rd gear at 15 m/s, constant part throttle on a flat road: the force never steps
-    cruise = Scenario(
-        name='cruise',
-        duration=30.0,
-        throttle=PiecewiseConstant.constant(0.15),
-        initial_gear=3,
-        initial_speed=15.0,
-        sensors=SENSORS,
-        true_vehicle=VehicleVariant(extra_mass_kg=400.0),
+    sim = steady_drive(
+        'cruise', 30.0, throttle=0.15, gear=3, speed=15.0, car=VehicleVariant(extra_mass_kg=400.0)
     )
-    sim = simulate(PARAMS, cruise)
-    on, off = _cascade(sim, ON), _cascade(sim, OFF)
+    on, off = cascade(sim, ON), cascade(sim, OFF)
     assert not on.mass_excited.any() and not on.mass_converged.any()
     np.testing.assert_allclose(on.mass, M0, rtol=1e-12)
     np.testing.assert_array_equal(on.mass_used, M0)
     assert on.mass_std[-1] == pytest.approx(ON.mass.initial_mass_std_ratio * M0, rel=1e-12)
     for name in ('fx', 'fz', 'mu', 'slope', 'rolling'):
         np.testing.assert_array_equal(getattr(on, name), getattr(off, name), err_msg=name)
-
-
-def chain_run(
-    sim: SimResult, config: EstimatorConfig, name: str
-) -> tuple[np.ndarray, list[FaultReport]]:
-    """The per-stamp Python chain (what the nodes run) over `sim`: the estimate `name` per
-    stamp and the fault report once a second, as the nodes publish it."""
-    settings = ChainSettings(
-        vehicle=VEHICLE,
-        curves=TyreCurves.from_tire(PARAMS.tire),
-        estimator=config,
-        kernel='python',
-    )
-    chain = PythonChain(settings)
-    reports = []
-    values = np.empty(sim.t.size)
-    for k in range(sim.t.size):
-        out = chain.update(
-            float(sim.t[k]), sim.wheel_angle[k], float(sim.body_speed[k]), sim.wheel_torque[k]
-        )
-        values[k] = getattr(out.estimates, name)
-        if k % int(RATE_HZ) == 0:  # the nodes report once a second
-            reports.append(chain.fault_report())
-    return values, reports
 
 
 def test_a_far_wrong_mass_is_bounded_and_reported_on_the_diagnostics() -> None:
@@ -137,17 +81,8 @@ def test_a_far_wrong_mass_is_bounded_and_reported_on_the_diagnostics() -> None:
 
 def test_a_jump_back_in_time_restarts_the_mass_at_the_files_value() -> None:
     sim = _drive(300.0, 45.0)
-    loop = sim.t < 5.0  # a looped bag: its first 5 s again at the end
-    t = np.concatenate([sim.t, sim.t[loop]])
-    res = run_cascade(
-        t,
-        np.vstack([sim.wheel_angle, sim.wheel_angle[loop]]),
-        np.concatenate([sim.body_speed, sim.body_speed[loop]]),
-        np.vstack([sim.wheel_torque, sim.wheel_torque[loop]]),
-        VEHICLE,
-        None,
-        ON,
-    )
+    # a looped bag: its first 5 s again at the end
+    res = run_cascade(*looped_record(sim, 5.0), VEHICLE, None, ON)
     n = sim.t.size
     assert res.mass_converged[n - 1] and res.mass_used[n - 1] > M0 + 150.0
     assert res.faults['estimator.time_jump_back'] == 1

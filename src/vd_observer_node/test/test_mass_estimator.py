@@ -7,22 +7,20 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from adaptation_setup import VEHICLE, G, model_drive, replay_estimator_config, series
 from numpy.typing import NDArray
-from test_mass_grade import VEHICLE, _drive
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_MEASURED, TORQUE_NONE
 from vd_observer_node.estimation.estimator import Estimates, Estimator, EstimatorConfig
 from vd_observer_node.estimation.mass_grade import MassGradeConfig
-from vd_observer_node.tools.replay import load_replay_config
 
 M0 = VEHICLE.mass
-G = VEHICLE.gravity
 FloatArray = NDArray[np.float64]
 Drive = tuple[FloatArray, FloatArray, FloatArray, FloatArray]
 
 
 def _inputs(drive: Drive) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Estimator inputs of a `_drive`: t (N,), omega (N, 4), omega_dot (N, 4), v (N,) and
+    """Estimator inputs of a `model_drive`: t (N,), omega (N, 4), omega_dot (N, 4), v (N,) and
     torque (N, 4), the wheels rolling without slip and the torques equal, so that the
     estimator's sum Fx is the drive's."""
     t, fx, v, _ = drive
@@ -46,36 +44,32 @@ def _run(drive: Drive, config: EstimatorConfig, source: int = TORQUE_MEASURED) -
     ]
 
 
-def _series(out: list[Estimates], name: str) -> FloatArray:
-    return np.array([getattr(e, name) for e in out], dtype=np.float64)
-
-
 ON = EstimatorConfig(mass_adaptation=True)
 OFF = EstimatorConfig(mass_adaptation=False)
 
 
 def test_adaptation_off_publishes_the_files_mass() -> None:
-    out = _run(_drive(M0 + 125.0, duration=3.0), OFF)
-    np.testing.assert_array_equal(_series(out, 'mass'), M0)
-    np.testing.assert_array_equal(_series(out, 'mass_used'), M0)
-    np.testing.assert_array_equal(_series(out, 'mass_std'), 0.0)
+    out = _run(model_drive(M0 + 125.0, duration=3.0), OFF)
+    np.testing.assert_array_equal(series(out, 'mass'), M0)
+    np.testing.assert_array_equal(series(out, 'mass_used'), M0)
+    np.testing.assert_array_equal(series(out, 'mass_std'), 0.0)
     assert not any(e.mass_converged or e.mass_excited for e in out)
 
 
 def test_a_loaded_car_converges_and_fz_mu_slope_use_the_estimated_mass() -> None:
     m_true = M0 + 125.0
-    drive = _drive(m_true, duration=40.0)
+    drive = model_drive(m_true, duration=40.0)
     t, slope_true = drive[0], drive[3]
     on, off = _run(drive, ON), _run(drive, OFF)
-    converged = _series(on, 'mass_converged').astype(bool)
+    converged = series(on, 'mass_converged').astype(bool)
     assert converged[-1] and not converged[0]
     k0 = int(np.argmax(converged))
-    mass, used = _series(on, 'mass'), _series(on, 'mass_used')
+    mass, used = series(on, 'mass'), series(on, 'mass_used')
     # mass_used: the file's before convergence, the estimate after
     np.testing.assert_array_equal(used[:k0], M0)
     np.testing.assert_array_equal(used[k0:], mass[k0:])
     assert np.max(np.abs(mass[k0:] - m_true)) <= 0.02 * m_true
-    assert _series(on, 'mass_excited')[:k0].any()
+    assert series(on, 'mass_excited')[:k0].any()
     # Before convergence the estimator is today's, bit for bit.
     for name in ('fz', 'mu', 'slope', 'rolling'):
         np.testing.assert_array_equal(
@@ -86,21 +80,21 @@ def test_a_loaded_car_converges_and_fz_mu_slope_use_the_estimated_mass() -> None
     # After: the loads carry the estimated weight (sum Fz = m g cos(alpha_prev), 4 wheels).
     late = slice(k0 + 1, None)
     fz_sum = np.array([e.fz.sum() for e in on])[late]
-    cos_prev = np.cos(_series(on, 'slope'))[k0:-1]
+    cos_prev = np.cos(series(on, 'slope'))[k0:-1]
     np.testing.assert_allclose(fz_sum, used[late] * G * cos_prev, rtol=1e-12)
     # ... and the slope is far better than with the file's mass.
     sel = t >= t[k0] + 1.0
-    err_on = np.degrees(_series(on, 'slope')[sel] - slope_true[sel])
-    err_off = np.degrees(_series(off, 'slope')[sel] - slope_true[sel])
+    err_on = np.degrees(series(on, 'slope')[sel] - slope_true[sel])
+    err_off = np.degrees(series(off, 'slope')[sel] - slope_true[sel])
     rms_on, rms_off = np.sqrt(np.mean(err_on**2)), np.sqrt(np.mean(err_off**2))
     assert rms_on < 0.15 and rms_off > 4.0 * rms_on
 
 
 def test_a_drive_that_never_accelerates_keeps_the_nominal_mass_and_says_so() -> None:
-    drive = _drive(M0 + 400.0, duration=30.0, force_steps=False)
+    drive = model_drive(M0 + 400.0, duration=30.0, force_steps=False)
     on, off = _run(drive, ON), _run(drive, OFF)
     assert not any(e.mass_converged or e.mass_excited for e in on)
-    np.testing.assert_allclose(_series(on, 'mass'), M0, rtol=1e-12)
+    np.testing.assert_allclose(series(on, 'mass'), M0, rtol=1e-12)
     assert on[-1].mass_std == pytest.approx(0.3 * M0, rel=1e-12)  # the prior, unchanged
     for name in ('fz', 'mu', 'slope', 'rolling', 'fx'):
         np.testing.assert_array_equal(
@@ -111,7 +105,7 @@ def test_a_drive_that_never_accelerates_keeps_the_nominal_mass_and_says_so() -> 
 
 
 def test_a_wrong_mass_is_bounded_and_counted_as_an_estimator_fault() -> None:
-    drive = _drive(5.0 * M0, duration=30.0)
+    drive = model_drive(5.0 * M0, duration=30.0)
     est = Estimator(VEHICLE, ON)
     t, omega, omega_dot, v, torque = _inputs(drive)
     accel = np.gradient(v, t)
@@ -119,7 +113,7 @@ def test_a_wrong_mass_is_bounded_and_counted_as_an_estimator_fault() -> None:
         est.update(float(t[k]), omega[k], omega_dot[k], float(v[k]), float(accel[k]), torque[k])
         for k in range(t.size)
     ]
-    mass = _series(masses, 'mass')
+    mass = series(masses, 'mass')
     assert np.all(np.isfinite(mass))
     assert np.max(mass) <= ON.mass.mass_max_ratio * M0 * (1.0 + 1e-12)
     assert est.faults.counts['mass_clamped'] > 0
@@ -128,7 +122,7 @@ def test_a_wrong_mass_is_bounded_and_counted_as_an_estimator_fault() -> None:
 
 
 def test_a_time_jump_restarts_the_mass_at_the_files_value() -> None:
-    drive = _drive(M0 + 300.0, duration=40.0)
+    drive = model_drive(M0 + 300.0, duration=40.0)
     t, omega, omega_dot, v, torque = _inputs(drive)
     accel = np.gradient(v, t)
     est = Estimator(VEHICLE, ON)
@@ -144,7 +138,7 @@ def test_a_time_jump_restarts_the_mass_at_the_files_value() -> None:
 
 
 def test_held_inputs_and_untrusted_torque_do_not_update_the_mass() -> None:
-    drive = _drive(M0 + 300.0, duration=12.0)
+    drive = model_drive(M0 + 300.0, duration=12.0)
     t, omega, omega_dot, v, torque = _inputs(drive)
     accel = np.gradient(v, t)
     est = Estimator(VEHICLE, ON)
@@ -167,8 +161,8 @@ def test_held_inputs_and_untrusted_torque_do_not_update_the_mass() -> None:
 
 @pytest.mark.parametrize('source', [TORQUE_ENGINE, TORQUE_NONE])
 def test_no_adaptation_without_measured_torques(source: int) -> None:
-    out = _run(_drive(M0 + 300.0, duration=15.0), ON, source)
-    np.testing.assert_array_equal(_series(out, 'mass_used'), M0)
+    out = _run(model_drive(M0 + 300.0, duration=15.0), ON, source)
+    np.testing.assert_array_equal(series(out, 'mass_used'), M0)
     assert not any(e.mass_excited for e in out)
 
 
@@ -191,16 +185,13 @@ def test_mass_settings_from_a_flat_or_nested_mapping() -> None:
 
 
 def test_vd_replay_config_takes_the_mass_settings(tmp_path: Path) -> None:
-    path = tmp_path / 'replay.yaml'
-    path.write_text(
+    config = replay_estimator_config(
+        tmp_path,
         'estimator:\n  mass_adaptation: true\n  mass:\n    min_speed: 2.0\n'
         '  mass.grade_tau: 0.4\n',
-        encoding='utf-8',
     )
-    config = load_replay_config(path).estimator
     assert config == EstimatorConfig(
         mass_adaptation=True, mass=MassGradeConfig(min_speed=2.0, grade_tau=0.4)
     )
-    path.write_text('estimator:\n  mass:\n    min_speeed: 2.0\n', encoding='utf-8')
     with pytest.raises(ConfigurationError, match='min_speeed'):
-        load_replay_config(path)
+        replay_estimator_config(tmp_path, 'estimator:\n  mass:\n    min_speeed: 2.0\n')

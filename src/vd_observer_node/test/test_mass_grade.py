@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from adaptation_setup import DT, VEHICLE, G, model_drive
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
@@ -23,13 +23,8 @@ from vd_observer_node.estimation.mass_grade import (
     run_mass_grade,
     slope_with_mass,
 )
-from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 
-VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
-VEHICLE = load_estimator_vehicle(VEHICLE_FILE)
 M0 = VEHICLE.mass
-G = VEHICLE.gravity
-DT = 1e-3
 
 FloatArray = NDArray[np.float64]
 
@@ -113,47 +108,9 @@ def test_forgetting_factor() -> None:
 # -- synthetic drives -------------------------------------------------------------------
 
 
-def _drive(
-    mass: float,
-    duration: float = 60.0,
-    force_steps: bool = True,
-    grade_deg: float = 3.0,
-    v0: float = 15.0,
-    seed: int = 0,
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """(t, sum_fx, speed, slope) of a car of ``mass`` obeying the estimator's model.
-
-    The force steps every 3 s between levels that keep the speed within 8-25 m/s (or holds
-    the force that keeps a constant speed); the grade is a slow sine of ``grade_deg``.
-    """
-    rng = np.random.default_rng(seed)
-    t = np.arange(0.0, duration, DT)
-    slope = np.radians(grade_deg) * np.sin(2.0 * math.pi * t / 40.0)
-    v = np.empty_like(t)
-    fx = np.empty_like(t)
-    v[0] = v0
-    level = 0.0
-    for k in range(t.size):
-        speed = v[k]
-        c_r = VEHICLE.rolling_c0 * (1.0 + VEHICLE.rolling_c1 * speed / 160.0)
-        resist = VEHICLE.drag_factor * speed**2 + mass * G * (
-            math.sin(slope[k]) + c_r * math.cos(slope[k])
-        )
-        if force_steps and k % 3000 == 0:
-            # accelerate when slow, brake when fast, else a random step
-            low, high = (
-                (0.5, 2.5) if speed < 12.0 else (-2.0, -0.5) if speed > 22.0 else (-1.5, 2.0)
-            )
-            level = rng.uniform(low, high) * 1000.0
-        fx[k] = resist + (level if force_steps else 0.0)
-        if k + 1 < t.size:
-            v[k + 1] = speed + DT * (fx[k] - resist) / mass
-    return t, fx, v, slope
-
-
 def test_the_mass_converges_on_a_drive_with_force_steps_and_a_changing_grade() -> None:
     m_true = M0 + 125.0
-    t, fx, v, slope = _drive(m_true)
+    t, fx, v, slope = model_drive(m_true)
     track = run_mass_grade(t, fx, v, VEHICLE)
     assert track.converged[-1]
     first = t[np.argmax(track.excited)]
@@ -180,7 +137,7 @@ def test_the_mass_converges_on_a_drive_with_force_steps_and_a_changing_grade() -
 
 def test_a_drive_without_excitation_keeps_the_nominal_mass_and_says_so() -> None:
     # Constant speed on a changing grade: the force follows the grade slowly, never steps.
-    t, fx, v, _ = _drive(M0 + 400.0, duration=30.0, force_steps=False)
+    t, fx, v, _ = model_drive(M0 + 400.0, duration=30.0, force_steps=False)
     track = run_mass_grade(t, fx, v, VEHICLE)
     assert not track.excited.any()
     assert not track.converged.any()
@@ -192,7 +149,7 @@ def test_a_drive_without_excitation_keeps_the_nominal_mass_and_says_so() -> None
 def test_a_wrong_mass_is_bounded_and_counted() -> None:
     # A car five times heavier than the file: the estimate stops at mass_max_ratio.
     cfg = MassGradeConfig()
-    t, fx, v, _ = _drive(5.0 * M0, duration=30.0)
+    t, fx, v, _ = model_drive(5.0 * M0, duration=30.0)
     track = run_mass_grade(t, fx, v, VEHICLE, cfg)
     assert np.all(np.isfinite(track.mass))
     assert np.max(track.mass) <= cfg.mass_max_ratio * M0 * (1.0 + 1e-12)
@@ -224,7 +181,7 @@ def test_the_wrapper_equals_filters_and_rls_steps_computed_apart() -> None:
         mass_min_ratio=0.01,
     )  # fmt: skip
     # Flat road: a grade that changes within grade_tau leaks into the mass (module doc).
-    t, fx, v, _ = _drive(M0 + 200.0, duration=8.0, seed=3, grade_deg=0.0)
+    t, fx, v, _ = model_drive(M0 + 200.0, duration=8.0, seed=3, grade_deg=0.0)
     est = MassGradeEstimator(VEHICLE, cfg)
     masses = np.array(
         [est.update(float(a), float(b), float(c)).mass for a, b, c in zip(t, fx, v, strict=True)]
@@ -273,7 +230,7 @@ def test_the_wrapper_equals_filters_and_rls_steps_computed_apart() -> None:
 
 
 def test_time_jump_back_and_gap_reset_to_the_nominal_mass() -> None:
-    t, fx, v, _ = _drive(M0 + 300.0, duration=40.0)
+    t, fx, v, _ = model_drive(M0 + 300.0, duration=40.0)
     est = MassGradeEstimator(VEHICLE)
     for a, b, c in zip(t, fx, v, strict=True):
         out = est.update(float(a), float(b), float(c))

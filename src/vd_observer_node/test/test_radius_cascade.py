@@ -8,21 +8,21 @@ is clamped and reported on the diagnostics; a jump back in time restarts at the 
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
-from test_mass_cascade import CONFIG, PARAMS, SENSORS, VEHICLE, _cascade, chain_run
+from adaptation_setup import (
+    VEHICLE,
+    cascade,
+    chain_run,
+    looped_record,
+    simulated_mass_drive,
+    steady_drive,
+)
 from vd_observer_node.estimation.cascade import run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import WARN
-from vd_sim_node.vehicle.scenario import (
-    PiecewiseConstant,
-    Scenario,
-    VehicleVariant,
-    load_scenario,
-)
-from vd_sim_node.vehicle.simulation import SimResult, simulate
+from vd_sim_node.vehicle.scenario import VehicleVariant
+from vd_sim_node.vehicle.simulation import SimResult
 
 R0 = VEHICLE.effective_radius
 ON = EstimatorConfig(radius_adaptation=True)
@@ -31,22 +31,13 @@ OFF = EstimatorConfig()
 
 def _drive(scale: float, duration: float) -> SimResult:
     """The first `duration` s of mass_drive on tyres `scale` times the file's radius."""
-    scenario = load_scenario(CONFIG / 'scenarios' / 'mass_drive.yaml')
-    return simulate(
-        PARAMS,
-        dataclasses.replace(
-            scenario,
-            duration=duration,
-            sensors=SENSORS,
-            true_vehicle=VehicleVariant(tyre_radius_scale=scale),
-        ),
-    )
+    return simulated_mass_drive(VehicleVariant(tyre_radius_scale=scale), duration)
 
 
 def test_smaller_tyres_converge_through_the_cascade_and_fx_follows() -> None:
     r_true = 0.97 * R0
     sim = _drive(0.97, 90.0)
-    on, off = _cascade(sim, ON), _cascade(sim, OFF)
+    on, off = cascade(sim, ON), cascade(sim, OFF)
     assert on.radius_converged[-1]
     k0 = int(np.argmax(on.radius_converged))
     assert abs(on.radius[-1] / r_true - 1.0) < 3e-3
@@ -68,18 +59,11 @@ def test_smaller_tyres_converge_through_the_cascade_and_fx_follows() -> None:
 
 def test_a_drive_without_free_rolling_keeps_the_files_radius_and_says_so() -> None:
     # a crawl in first gear below radius.min_speed (5 m/s): no wheel is ever used
-    crawl = Scenario(
-        name='crawl',
-        duration=20.0,
-        throttle=PiecewiseConstant.constant(0.02),
-        initial_gear=1,
-        initial_speed=3.0,
-        sensors=SENSORS,
-        true_vehicle=VehicleVariant(tyre_radius_scale=0.97),
+    sim = steady_drive(
+        'crawl', 20.0, throttle=0.02, gear=1, speed=3.0, car=VehicleVariant(tyre_radius_scale=0.97)
     )
-    sim = simulate(PARAMS, crawl)
     assert np.max(np.abs(sim.body_speed)) < ON.radius.min_speed
-    on, off = _cascade(sim, ON), _cascade(sim, OFF)
+    on, off = cascade(sim, ON), cascade(sim, OFF)
     assert not (on.radius_free_wheels > 0).any() and not on.radius_converged.any()
     np.testing.assert_array_equal(on.radius, R0)
     np.testing.assert_array_equal(on.radius_used, R0)
@@ -100,16 +84,8 @@ def test_a_radius_beyond_its_bounds_is_clamped_and_reported_on_the_diagnostics()
 
 def test_a_jump_back_in_time_restarts_the_radius_at_the_files_value() -> None:
     sim = _drive(0.97, 60.0)
-    loop = sim.t < 5.0  # a looped bag: its first 5 s again at the end
-    res = run_cascade(
-        np.concatenate([sim.t, sim.t[loop]]),
-        np.vstack([sim.wheel_angle, sim.wheel_angle[loop]]),
-        np.concatenate([sim.body_speed, sim.body_speed[loop]]),
-        np.vstack([sim.wheel_torque, sim.wheel_torque[loop]]),
-        VEHICLE,
-        None,
-        ON,
-    )
+    # a looped bag: its first 5 s again at the end
+    res = run_cascade(*looped_record(sim, 5.0), VEHICLE, None, ON)
     n = sim.t.size
     assert res.radius_converged[n - 1] and res.radius_used[n - 1] < 0.98 * R0
     assert res.faults['estimator.time_jump_back'] == 1

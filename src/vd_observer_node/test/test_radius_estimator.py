@@ -1,6 +1,6 @@
 """The online rolling radius inside `Estimator` (issue 16): reference path and its compiled twin.
 
-Drives: `test_mass_grade._drive` on a front-wheel-drive car whose tyres roll with a radius
+Drives: `adaptation_setup.model_drive` on a front-wheel-drive car whose tyres roll with a radius
 that is not the file's (the rear wheels report no torque, so they roll freely whenever the
 car does not accelerate hard). The compiled estimator must equal the reference bit for bit.
 """
@@ -13,16 +13,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from adaptation_setup import VEHICLE, model_drive, replay_estimator_config, series
 from numpy.typing import NDArray
-from test_kernel import VEHICLE, check_record, inject_faults, scenario_record
+from test_kernel import check_record, inject_faults, scenario_record
 from test_kernel_mass import equal_estimators
-from test_mass_grade import _drive
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_MEASURED
 from vd_observer_node.estimation.estimator import Estimates, Estimator, EstimatorConfig
 from vd_observer_node.estimation.rolling_radius import RollingRadiusConfig
 from vd_observer_node.kernel.estimation import CompiledEstimator
-from vd_observer_node.tools.replay import load_replay_config
 
 FloatArray = NDArray[np.float64]
 R0 = VEHICLE.effective_radius
@@ -35,7 +34,7 @@ def _fwd_inputs(
     mass: float, radius: float, duration: float, **drive: float | bool
 ) -> tuple[FloatArray, ...]:
     """(t, omega, omega_dot, v, accel, torque) of a FWD car with tyres of ``radius`` [m]."""
-    t, fx, v, _ = _drive(mass, duration=duration, **drive)  # type: ignore[arg-type]
+    t, fx, v, _ = model_drive(mass, duration=duration, **drive)  # type: ignore[arg-type]
     accel = np.gradient(v, t)
     omega = np.repeat((v / radius)[:, None], 4, axis=1)
     omega_dot = np.repeat((accel / radius)[:, None], 4, axis=1)
@@ -58,10 +57,6 @@ def _run(
     return est, out
 
 
-def _series(out: list[Estimates], name: str) -> FloatArray:
-    return np.array([getattr(e, name) for e in out], dtype=np.float64)
-
-
 def _both(
     config: EstimatorConfig, inputs: tuple[FloatArray, ...], source: int = TORQUE_MEASURED
 ) -> Estimator:
@@ -74,7 +69,7 @@ def test_the_radius_converges_and_fx_uses_it() -> None:
     inputs = _fwd_inputs(M0, r_true, 60.0)
     _, out = _run(ON, inputs)
     _, off = _run(EstimatorConfig(), inputs)
-    conv = _series(out, 'radius_converged').astype(bool)
+    conv = series(out, 'radius_converged').astype(bool)
     assert conv.any() and not conv[0]
     k0 = int(np.argmax(conv))
     assert abs(out[-1].radius / r_true - 1.0) < 1e-3
@@ -84,7 +79,7 @@ def test_the_radius_converges_and_fx_uses_it() -> None:
     assert {e.radius_free_wheels for e in out} >= {0, 2}  # the rear wheels at least
     # Fx sum with the adapted radius is the drive's force (within the radius's error),
     # with the file's it is 3 % short
-    _, fx_true, _, _ = _drive(M0, duration=60.0)
+    _, fx_true, _, _ = model_drive(M0, duration=60.0)
     late = slice(k0 + 100, None)
     err_on = np.abs(_series_sum(out, 'fx')[late] - fx_true[late])
     err_off = np.abs(_series_sum(off, 'fx')[late] - fx_true[late])
@@ -109,13 +104,13 @@ def test_the_mass_waits_for_the_radius_and_then_learns_the_true_mass() -> None:
     r_true, m_true = 0.97 * R0, M0 + 125.0
     inputs = _fwd_inputs(m_true, r_true, 120.0)
     _, out = _run(BOTH, inputs)
-    conv = _series(out, 'radius_converged').astype(bool)
+    conv = series(out, 'radius_converged').astype(bool)
     k0 = int(np.argmax(conv))
     assert conv.any()
-    assert not _series(out, 'mass_excited')[:k0].any()
+    assert not series(out, 'mass_excited')[:k0].any()
     assert all(e.mass == pytest.approx(M0, rel=1e-12) for e in out[:k0])
     _, eager = _run(dataclasses.replace(BOTH, mass_waits_for_radius=False), inputs)
-    assert _series(eager, 'mass_excited')[:k0].any()  # the eager one learns on the file's R
+    assert series(eager, 'mass_excited')[:k0].any()  # the eager one learns on the file's R
     assert out[-1].mass_converged
     assert abs(out[-1].mass / m_true - 1.0) < 0.02
 
@@ -206,18 +201,15 @@ def test_the_cascade_with_radius_adaptation_and_injected_faults() -> None:
 
 
 def test_vd_replay_config_takes_the_radius_settings(tmp_path: Path) -> None:
-    path = tmp_path / 'replay.yaml'
-    path.write_text(
+    config = replay_estimator_config(
+        tmp_path,
         'estimator:\n  radius_adaptation: true\n  radius:\n    min_speed: 2.0\n'
         '  radius.tau: 100.0\n  mass_waits_for_radius: false\n',
-        encoding='utf-8',
     )
-    config = load_replay_config(path).estimator
     assert config == EstimatorConfig(
         radius_adaptation=True,
         radius=RollingRadiusConfig(min_speed=2.0, tau=100.0),
         mass_waits_for_radius=False,
     )
-    path.write_text('estimator:\n  radius:\n    min_speeed: 2.0\n', encoding='utf-8')
     with pytest.raises(ConfigurationError, match='min_speeed'):
-        load_replay_config(path)
+        replay_estimator_config(tmp_path, 'estimator:\n  radius:\n    min_speeed: 2.0\n')

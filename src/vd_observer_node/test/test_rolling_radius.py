@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
+from adaptation_setup import DT, VEHICLE
 from numpy.typing import NDArray
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.rolling_radius import (
@@ -15,12 +15,8 @@ from vd_observer_node.estimation.rolling_radius import (
     RollingRadiusEstimator,
     run_rolling_radius,
 )
-from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 
-VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
-VEHICLE = load_estimator_vehicle(VEHICLE_FILE)
 R0 = VEHICLE.effective_radius
-DT = 1e-3
 
 FloatArray = NDArray[np.float64]
 

@@ -317,6 +317,14 @@ def run_cascade(
     mu_valid = np.zeros((n, 4), dtype=bool)
     wheel_valid = np.zeros((n, 4), dtype=bool)
     slope_valid = np.zeros(n, dtype=bool)
+    # every array but the observer's holds the `Estimates` field of its name, stamp by stamp
+    kept = {
+        k: a
+        for part in (out, scalars, flags)
+        for k, a in part.items()
+        if k not in ('angle', 'omega', 'omega_dot', 'speed', 'accel')
+    }
+    kept.update(mu_valid=mu_valid, slope_valid=slope_valid, radius_free_wheels=free_wheels)
     torque_valid = np.full(n, source != torque_source_code('none'))
     if state is not None and state.parts is not None:
         observer, estimator, engine_path = state.parts
@@ -358,25 +366,8 @@ def run_cascade(
         wheel_valid[k] = wheel.valid
         scalars['speed'][k] = body.speed
         scalars['accel'][k] = body.accel
-        out['fx'][k] = est.fx
-        out['fz'][k] = est.fz
-        out['mu'][k] = est.mu
-        out['slip'][k] = est.slip
-        out['rolling'][k] = est.rolling
-        mu_valid[k] = est.mu_valid
-        scalars['aero'][k] = est.aero
-        scalars['slope'][k] = est.slope
-        slope_valid[k] = est.slope_valid
-        scalars['mass'][k] = est.mass
-        scalars['mass_std'][k] = est.mass_std
-        scalars['mass_used'][k] = est.mass_used
-        flags['mass_converged'][k] = est.mass_converged
-        flags['mass_excited'][k] = est.mass_excited
-        scalars['radius'][k] = est.radius
-        scalars['radius_std'][k] = est.radius_std
-        scalars['radius_used'][k] = est.radius_used
-        flags['radius_converged'][k] = est.radius_converged
-        free_wheels[k] = est.radius_free_wheels
+        for name, array in kept.items():
+            array[k] = getattr(est, name)
     return CascadeResult(
         t=stamps.copy(),
         omega=out['omega'],

@@ -15,16 +15,7 @@ from typing import Any
 import numpy as np
 from vd_sim_node.topics import (
     ESTIMATES_ALERTS,
-    ESTIMATES_FRICTION,
     ESTIMATES_FRICTION_POTENTIAL,
-    ESTIMATES_MASS,
-    ESTIMATES_RESISTANCES,
-    ESTIMATES_ROLLING_RADIUS,
-    ESTIMATES_SLOPE,
-    ESTIMATES_TIRE_FORCES,
-    OBSERVER_BODY_ACCEL,
-    OBSERVER_BODY_VELOCITY,
-    OBSERVER_WHEEL_STATES,
     SENSORS_BODY_VELOCITY,
     SENSORS_WHEEL_ANGLES,
     SENSORS_WHEEL_TORQUES,
@@ -42,7 +33,9 @@ from vd_observer_node.bag.alerts_cdr import ALERTS_TYPE as _ALERTS_TYPE
 from vd_observer_node.bag.alerts_cdr import encode_alerts
 from vd_observer_node.bag.cdr_batch import encode_batch
 from vd_observer_node.bag.writer import BagWriter
-from vd_observer_node.estimation.estimator import MASS_MESSAGE_FIELDS, RADIUS_MESSAGE_FIELDS
+from vd_observer_node.estimation.cascade import CascadeResult
+from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.tools.replay import estimate_topics
 from vd_observer_node.tools.report.topics import (
     ALERT_TOPICS,
     ESTIMATE_TOPICS,
@@ -231,37 +224,20 @@ def alerts_topics(
     return out
 
 
-def cascade_topics(result: Any, wheel_angle: np.ndarray) -> dict[str, dict[str, np.ndarray]]:
-    """Observer and estimate topic values of a ``cascade.CascadeResult`` (as replay writes).
+def cascade_topics(
+    result: CascadeResult,
+    wheel_angle: np.ndarray,
+    estimator_config: EstimatorConfig | None = None,
+) -> dict[str, dict[str, np.ndarray]]:
+    """Observer and estimate topic values of a ``cascade.CascadeResult``, exactly as
+    ``vd replay`` writes them (:func:`vd_observer_node.tools.replay.estimate_topics`): the
+    online mass and rolling radius only where ``estimator_config`` adapts them, as the nodes
+    publish them.
 
     Args:
-        result: the cascade result (duck-typed).
+        result: the cascade result.
         wheel_angle: shape (N, 4), [rad], measured angles echoed in ``wheel_states.angle``.
+        estimator_config: the settings the cascade ran with (None: the defaults, which adapt
+            neither).
     """
-    source = np.full(result.t.shape[0], getattr(result, 'torque_source', 0), dtype=np.uint8)
-    return {
-        OBSERVER_WHEEL_STATES: {
-            'angle': wheel_angle,
-            'omega': result.omega,
-            'omega_dot': result.omega_dot,
-        },
-        OBSERVER_BODY_ACCEL: {'accel.linear.x': result.accel},
-        OBSERVER_BODY_VELOCITY: {'twist.linear.x': result.speed},
-        ESTIMATES_TIRE_FORCES: {'fx': result.fx, 'fz': result.fz, 'torque_source': source},
-        ESTIMATES_FRICTION: {
-            'mu': result.mu,
-            'slip': result.slip,
-            'valid': result.mu_valid,
-            'torque_source': source,
-        },
-        ESTIMATES_RESISTANCES: {'rolling': result.rolling, 'aero': result.aero},
-        ESTIMATES_SLOPE: {
-            'angle': result.slope,
-            'valid': result.slope_valid,
-            'torque_source': source,
-        },
-        ESTIMATES_MASS: {field: getattr(result, attr) for field, attr in MASS_MESSAGE_FIELDS},
-        ESTIMATES_ROLLING_RADIUS: {
-            field: getattr(result, attr) for field, attr in RADIUS_MESSAGE_FIELDS
-        },
-    }
+    return estimate_topics(result, wheel_angle, estimator_config)

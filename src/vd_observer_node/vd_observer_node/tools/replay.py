@@ -108,6 +108,7 @@ __all__ = [
     'TRUTH_PREFIX',
     'ReplayConfig',
     'ReplayReport',
+    'estimate_topics',
     'load_replay_config',
     'replay_bag',
     'situation_topics',
@@ -242,7 +243,7 @@ def load_replay_config(path: str | os.PathLike[str]) -> ReplayConfig:
     )
 
 
-def _estimates(
+def estimate_topics(
     result: CascadeResult, angles: np.ndarray, config: EstimatorConfig | None = None
 ) -> dict[str, dict[str, np.ndarray]]:
     """The estimate topics of a cascade result, as the live nodes publish them: the online
@@ -911,7 +912,7 @@ class _Run:
         # the sensor's angles as the observer node publishes them; with speeds, the observer's
         observed = result.angle if self.mapping.wheel_input == 'speed' else wheel_angle
         try:
-            for topic, values in _estimates(result, observed, self.estimator_config).items():
+            for topic, values in estimate_topics(result, observed, self.estimator_config).items():
                 datas = encode_batch(ESTIMATE_TOPICS[topic], common, frame_id, values)
                 merged.add(topic, ESTIMATE_TOPICS[topic], log_ns, datas)
         finally:
