@@ -17,7 +17,12 @@ import numpy as np
 import pytest
 import yaml
 from rosproc import RosProcess, RosProcessGroup
-from vd_sim_node.topics import ESTIMATES_SLOPE, ESTIMATES_TIRE_FORCES, OBSERVER_WHEEL_STATES
+from vd_sim_node.topics import (
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    ESTIMATES_TORQUE_OFFSET,
+    OBSERVER_WHEEL_STATES,
+)
 
 NS = 1_000_000_000
 SCRIPTS = Path(__file__).resolve().parent / 'ros_scripts'
@@ -461,6 +466,16 @@ def test_pipeline_node_on_the_engine_and_no_torque_paths_computes_what_the_repla
             strict=True,
         )
     }
+    expected_offsets = {}
+    if source == 'engine':  # the offset where it changes: the first stamp, the upshift's end
+        offsets = BagReader(tmp_path / 'replayed').topic_arrays([ESTIMATES_TORQUE_OFFSET])
+        written = decode_batch(
+            ESTIMATE_TOPICS[ESTIMATES_TORQUE_OFFSET], offsets[ESTIMATES_TORQUE_OFFSET].datas
+        )
+        expected_offsets = dict(
+            zip(written.stamp_ns.tolist(), written.values['offset'].tolist(), strict=True)
+        )
+        assert len(expected_offsets) == 2
     assert {v[2] for v in expected.values()} == {TORQUE_SOURCES.index(source)}
     # the engine path holds and does not (the launch, the upshift); none never holds
     assert {v[1] for v in expected.values()} == ({0, 1} if source == 'engine' else {0})
@@ -468,8 +483,13 @@ def test_pipeline_node_on_the_engine_and_no_torque_paths_computes_what_the_repla
     params = params_file(tmp_path / 'p.yaml', {}, input_mapping=str(mapping_file))
     pipeline = _start(procs, 'pipeline', 'pipeline_node', params)
     pipeline.wait_for(f'torque source {source}', timeout=90)
+    offset_topic = f'{ESTIMATES_TORQUE_OFFSET}=vd_msgs.msg/TorqueOffsetEstimate'
     collector = procs.python(
-        'collector', SCRIPTS / 'collect_outputs.py', '25', f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope'
+        'collector',
+        SCRIPTS / 'collect_outputs.py',
+        '25',
+        f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope',
+        *([offset_topic] if source == 'engine' else []),
     )
     collector.wait_for('SUBSCRIBED', timeout=60)
     player_params = params_file(
@@ -478,12 +498,18 @@ def test_pipeline_node_on_the_engine_and_no_torque_paths_computes_what_the_repla
     player = _start(procs, 'player', 'player_node', player_params)
     assert _wait_exit(player, 60) == 0, player.output()
     assert _wait_exit(collector, 60) == 0
+    lines = [line.split() for line in collector.output().splitlines()]
     live = {
         int(f[2]): (float(f[4]), int(f[5]), int(f[6]))
-        for f in (line.split() for line in collector.output().splitlines())
-        if f[0] == 'MSG'
+        for f in lines
+        if f[0] == 'MSG' and f[1] == ESTIMATES_SLOPE
     }
     assert len(live) > 0.9 * len(expected), (len(live), len(expected))
     assert set(live) <= set(expected)
     # the same sets in the same order through the same compiled chain: the same bits
     assert all(live[t] == expected[t] for t in live)
+    # the engine-torque offset: published where it changes, as the replay writes it
+    live_offsets = {
+        int(f[2]): float(f[4]) for f in lines if f[0] == 'MSG' and f[1] == ESTIMATES_TORQUE_OFFSET
+    }
+    assert live_offsets == expected_offsets

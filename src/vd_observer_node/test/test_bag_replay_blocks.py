@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pytest
 from vd_observer_node.bag import BagReader, BagWriter
+from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.inputs.decode import decode_engine, decode_input, input_stats
 from vd_observer_node.inputs.mapping import ENGINE_INPUT, default_mapping, mapping_from_dict
@@ -26,7 +27,7 @@ from vd_observer_node.testing.standard_bags import (
     write_standard_bag,
 )
 from vd_observer_node.tools.replay import ReplayReport, replay_bag
-from vd_sim_node.topics import TRUTH_NAMESPACE
+from vd_sim_node.topics import ESTIMATES_TORQUE_OFFSET, TRUTH_NAMESPACE
 from vd_sim_node.vehicle.params import default_vehicle_file, load_vehicle
 from vd_sim_node.vehicle.scenario import load_scenario
 from vd_sim_node.vehicle.simulation import simulate
@@ -121,8 +122,23 @@ def test_vd_topics_in_tiny_blocks_equal_one_block(
         for spec in mapping.used_specs
     )
     assert report.inputs == expected
-    if source == 'engine':  # the clutch slip and the upshift are in the drive
-        assert 0.0 < report.torque_valid_fraction < 1.0
+    offsets = [m for m in BagReader(tmp_path / 'whole').raw_messages()
+               if m.topic == ESTIMATES_TORQUE_OFFSET]  # fmt: skip
+    if source == 'measured':
+        assert offsets == []
+        return
+    # the clutch slip and the upshift are in the drive
+    assert 0.0 < report.torque_valid_fraction < 1.0
+    # the engine-torque offset where it changes only, blocks or not: the first stamp, and
+    # the stamp after the upshift's neutral (one episode; the only one in 12 s)
+    decoded = decode_batch('vd_msgs/msg/TorqueOffsetEstimate', [bytes(m.data) for m in offsets])
+    sim = _simulate(12.0, 100.0)
+    neutral_end = int(np.flatnonzero(np.diff((sim.gear == 0).astype(int)) == -1)[-1]) + 1
+    expected_ns = np.round(sim.t[[0, neutral_end]] * 1e9).astype(np.int64) + 1_000_000_000
+    np.testing.assert_array_equal(decoded.stamp_ns, expected_ns)
+    np.testing.assert_array_equal(decoded.values['episodes'], [0, 1])
+    np.testing.assert_array_equal(decoded.values['offset_used'], [0.0, 0.0])  # not converged
+    assert abs(decoded.values['offset'][1]) < 0.05  # the map is exact
 
 
 def test_standard_bag_latest_alignment_in_tiny_blocks_equals_one_block(

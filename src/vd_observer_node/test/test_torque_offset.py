@@ -42,7 +42,7 @@ DRIVETRAIN = Drivetrain.from_params(PARAMS)
 J_E = DRIVETRAIN.engine_inertia
 SETTINGS = TorqueOffsetConfig()
 ON = EstimatorConfig(torque_offset_adaptation=True)
-OFF = EstimatorConfig()
+OFF = EstimatorConfig(torque_offset_adaptation=False)
 
 
 def _synthetic(

@@ -39,6 +39,7 @@ from geometry_msgs.msg import AccelStamped, TwistStamped
 from rclpy.node import Node
 from vd_sim_node.ros_common import (
     DIAGNOSTICS_QOS,
+    STATE_QOS,
     STREAM_QOS,
     declare_parameters,
     node_status,
@@ -53,6 +54,7 @@ from vd_sim_node.topics import (
     ESTIMATES_ROLLING_RADIUS,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
+    ESTIMATES_TORQUE_OFFSET,
     OBSERVER_BODY_ACCEL,
     OBSERVER_BODY_VELOCITY,
     OBSERVER_WHEEL_STATES,
@@ -68,6 +70,7 @@ from vd_msgs.msg import (
     RollingRadiusEstimate,
     Slope,
     TireForces,
+    TorqueOffsetEstimate,
     WheelStates,
 )
 from vd_observer_node.bag.cdr_message import MessageCodec
@@ -93,6 +96,7 @@ from vd_observer_node.raw_io import (
     mapped_input,
     mass_values,
     merge_status,
+    offset_values,
     radius_values,
 )
 from vd_observer_node.situation.alerts import AlertConfig
@@ -124,6 +128,7 @@ _OUTPUTS = (
         'vd_msgs/msg/FrictionPotential',
     ),
     ('alerts', Alerts, ESTIMATES_ALERTS, 'vd_msgs/msg/Alerts'),
+    ('offset', TorqueOffsetEstimate, ESTIMATES_TORQUE_OFFSET, 'vd_msgs/msg/TorqueOffsetEstimate'),
 )
 _OBSERVER_KEYS = {f for f in ObserverConfig.__dataclass_fields__ if f != 'gains'}
 _GAIN_KEYS = set(LevantGains.__dataclass_fields__)
@@ -203,15 +208,19 @@ class PipelineNode(Node):
         self.watch = InputWatch([spec.topic for spec in specs], max_gap_ns)
         # The online mass and radius only when adapted: with the file's constants they would
         # add two 1 kHz streams to a graph that is at its limit on two cores.
+        # The engine-torque offset only where learnt, and only where it changes (STATE_QOS).
         adapted = {
             'mass': settings.estimator.mass_adaptation,
             'radius': settings.estimator.radius_adaptation,
+            'offset': self.torque_source == 'engine'
+            and settings.estimator.torque_offset_adaptation,
         }
         self.pubs = {
-            key: self.create_publisher(cls, topic, STREAM_QOS)
+            key: self.create_publisher(cls, topic, STATE_QOS if key == 'offset' else STREAM_QOS)
             for key, cls, topic, _ in _OUTPUTS
             if adapted.get(key, True)
         }
+        self._offset_last: tuple[int, bool] | None = None  # (episodes, converged) published
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._types = {key: msgtype for key, _, _, msgtype in _OUTPUTS if key != 'alerts'}
         self.encoders = Encoders()
@@ -304,6 +313,14 @@ class PipelineNode(Node):
             pubs['mass'].publish(codec('mass', frame).encode(stamp_ns, mass_values(e)))
         if 'radius' in pubs:
             pubs['radius'].publish(codec('radius', frame).encode(stamp_ns, radius_values(e)))
+        offset = out.torque_offset
+        if offset is not None and 'offset' in pubs:
+            changed = (offset.episodes, offset.converged)
+            if changed != self._offset_last:  # as vd replay writes it (publish_mask)
+                self._offset_last = changed
+                pubs['offset'].publish(
+                    codec('offset', frame).encode(stamp_ns, offset_values(offset))
+                )
         pot = sit.potential
         pubs['potential'].publish(
             codec('potential', frame).encode(

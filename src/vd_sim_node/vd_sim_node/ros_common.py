@@ -42,6 +42,7 @@ __all__ = [
     'CLOCK_QOS',
     'DIAGNOSTICS_QOS',
     'EXECUTORS',
+    'STATE_QOS',
     'STREAM_QOS',
     'TEARDOWN_TIMEOUT_S',
     'InvalidParameterError',
@@ -72,6 +73,14 @@ CLOCK_QOS = QoSProfile(
 )
 DIAGNOSTICS_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE
+)
+#: Estimates published only where they change (the engine-torque offset): the last ones are
+#: kept for subscribers that join later (transient local; volatile subscribers match too).
+STATE_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
 
 _NS = 1_000_000_000

@@ -31,6 +31,7 @@ __all__ = [
     'OffsetRecord',
     'checked_engine',
     'checked_record',
+    'offset_result_name',
     'run_cascade',
 ]
 
@@ -175,24 +176,19 @@ class OffsetRecord:
         )  # fmt: skip
 
     def store(self, k: int, estimate: TorqueOffset) -> None:
-        """Write stamp k's estimate."""
-        self.offset[k] = estimate.offset
-        self.std[k] = estimate.std
-        self.converged[k] = estimate.converged
-        self.used[k] = estimate.used
-        self.episodes[k] = estimate.episodes
-        self.clamped[k] = estimate.clamped
+        """Write stamp k's estimate (its attributes are this record's arrays)."""
+        for name in TorqueOffset._fields:
+            getattr(self, name)[k] = getattr(estimate, name)
 
     def fields(self) -> dict[str, Any]:
         """The `CascadeResult` fields (``torque_offset*``)."""
-        return {
-            'torque_offset': self.offset,
-            'torque_offset_std': self.std,
-            'torque_offset_converged': self.converged,
-            'torque_offset_used': self.used,
-            'torque_offset_episodes': self.episodes,
-            'torque_offset_clamped': self.clamped,
-        }
+        return {offset_result_name(name): getattr(self, name) for name in TorqueOffset._fields}
+
+
+def offset_result_name(attribute: str) -> str:
+    """The `CascadeResult` field of a `TorqueOffset` attribute ('std' -> 'torque_offset_std',
+    'offset' -> 'torque_offset')."""
+    return 'torque_offset' if attribute == 'offset' else f'torque_offset_{attribute}'
 
 
 def checked_record(

@@ -153,7 +153,9 @@ class EstimatorConfig:
             radius has converged (so it never learns the file's radius error).
         torque_offset_adaptation: on the engine path, learn the offset of the engine-torque
             signal while the gearbox is in neutral and subtract it once converged
-            (`torque_offset`); no effect on measured torques. False: the signal as it is.
+            (`torque_offset`); no effect on measured torques. On by default: with an exact
+            map it learns ~0 and changes nothing (docs/estimation.md 7.2). False: the signal
+            as it is.
         torque_offset: settings of the offset estimator (flat keys ``torque_offset.<name>``).
     """
 
@@ -174,7 +176,7 @@ class EstimatorConfig:
     radius_adaptation: bool = False
     radius: RollingRadiusConfig = field(default_factory=RollingRadiusConfig)
     mass_waits_for_radius: bool = True
-    torque_offset_adaptation: bool = False
+    torque_offset_adaptation: bool = True
     torque_offset: TorqueOffsetConfig = field(default_factory=TorqueOffsetConfig)
 
     def __post_init__(self) -> None:

@@ -332,7 +332,8 @@ def run_cascade_compiled(
 def _offset_params(config: EstimatorConfig | None, dprm: FloatArray) -> FloatArray:
     """The offset estimator's settings where the engine path (``dprm`` non-empty) learns it,
     else an empty array."""
-    if dprm.shape[0] == 0 or config is None or not config.torque_offset_adaptation:
+    config = config or EstimatorConfig()  # the defaults, as run_cascade takes None
+    if dprm.shape[0] == 0 or not config.torque_offset_adaptation:
         return np.zeros(0)
     return offset_params(config.torque_offset)
 

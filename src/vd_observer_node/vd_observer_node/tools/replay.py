@@ -49,6 +49,7 @@ from vd_sim_node.topics import (
     ESTIMATES_ROLLING_RADIUS,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
+    ESTIMATES_TORQUE_OFFSET,
     OBSERVER,
     OBSERVER_BODY_ACCEL,
     OBSERVER_BODY_VELOCITY,
@@ -64,7 +65,12 @@ from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.alignment import BlockAligner
-from vd_observer_node.estimation.cascade import CascadeResult, CascadeState, run_cascade
+from vd_observer_node.estimation.cascade import (
+    CascadeResult,
+    CascadeState,
+    offset_result_name,
+    run_cascade,
+)
 from vd_observer_node.estimation.drivetrain import (
     TORQUE_SOURCES,
     Drivetrain,
@@ -77,6 +83,7 @@ from vd_observer_node.estimation.estimator import (
     EstimatorConfig,
 )
 from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.estimation.torque_offset import OFFSET_MESSAGE_FIELDS, publish_mask
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.decode import (
     InputSeries,
@@ -792,6 +799,26 @@ class _Run:
         self.cascade_time = 0.0
         self.situation_time = 0.0
         self.result: CascadeResult | None = None
+        # (episodes, converged) of the last engine-torque offset written: it is written
+        # where it changes, as pipeline_node publishes it
+        self.offset_last: tuple[int, bool] | None = None
+
+    def offset_messages(
+        self, result: CascadeResult, stamp_ns: np.ndarray
+    ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """The stamps' selection and fields of the vd_msgs/TorqueOffsetEstimate messages of a
+        block (none where the engine path does not learn the offset)."""
+        if result.torque_offset.shape[0] == 0:
+            return np.zeros(stamp_ns.shape[0], dtype=bool), {}
+        episodes, converged = result.torque_offset_episodes, result.torque_offset_converged
+        mask = publish_mask(episodes, converged, self.offset_last)
+        if episodes.shape[0]:
+            self.offset_last = (int(episodes[-1]), bool(converged[-1]))
+        values = {
+            field: getattr(result, offset_result_name(attr))[mask]
+            for field, attr in OFFSET_MESSAGE_FIELDS
+        }
+        return mask, values
 
     def carried_log_ns(self) -> int:
         """[ns] the earliest log time of a wheel message carried to the next block."""
@@ -915,6 +942,11 @@ class _Run:
             for topic, values in estimate_topics(result, observed, self.estimator_config).items():
                 datas = encode_batch(ESTIMATE_TOPICS[topic], common, frame_id, values)
                 merged.add(topic, ESTIMATE_TOPICS[topic], log_ns, datas)
+            changed, values = self.offset_messages(result, common)
+            if values:
+                msgtype = ESTIMATE_TOPICS[ESTIMATES_TORQUE_OFFSET]
+                datas = encode_batch(msgtype, common[changed], frame_id, values)
+                merged.add(ESTIMATES_TORQUE_OFFSET, msgtype, log_ns[changed], datas)
         finally:
             if worker is not None:
                 worker.join()
