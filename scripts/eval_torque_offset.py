@@ -1,12 +1,12 @@
 #!/usr/bin/env python3
-"""Engine-torque offset learnt in neutral, on the engine path, against a map that is off (issue 16).
+"""Engine-torque offset learnt in neutral on the engine path, against a map that is off (#16).
 
 For each case (nominal map; engine torque signal +10 / -10 N m; +125 kg with +10 N m), with
 ideal sensors and with the encoder + speed noise of scripts/eval_mass_adaptation.py plus
 0.2 rad/s (~2 rpm) of white noise on the engine speed (a CAN engine speed is filtered; with
-1 rad/s the engine path's clutch check, 2 rad/s, rejects most samples): simulates the TRUE car and runs the
-compiled cascade on the ENGINE path (engine torque, gear, engine speed; the vehicle file's
-drivetrain) twice, with ``torque_offset_adaptation`` off and on, and prints:
+1 rad/s the engine path's clutch check, 2 rad/s, rejects most samples): simulates the TRUE
+car and runs the compiled cascade on the ENGINE path (engine torque, gear, engine speed;
+the vehicle file's drivetrain) twice, with ``torque_offset_adaptation`` off and on, and prints:
 
 * the offset estimate at the end, the worst error after it converged, when it converged and
   how many neutral episodes (shifts) it had used by then;
