@@ -27,7 +27,8 @@ FloatArray = NDArray[np.float64]
 R0 = VEHICLE.effective_radius
 M0 = VEHICLE.mass
 ON = EstimatorConfig(radius_adaptation=True)
-BOTH = EstimatorConfig(radius_adaptation=True, mass_adaptation=True)
+BOTH = EstimatorConfig(radius_adaptation=True, mass_adaptation=True, mass_waits_for_radius=True)
+EAGER = dataclasses.replace(BOTH, mass_waits_for_radius=False)
 
 
 def _fwd_inputs(
@@ -113,6 +114,20 @@ def test_the_mass_waits_for_the_radius_and_then_learns_the_true_mass() -> None:
     assert series(eager, 'mass_excited')[:k0].any()  # the eager one learns on the file's R
     assert out[-1].mass_converged
     assert abs(out[-1].mass / m_true - 1.0) < 0.02
+
+
+def test_without_the_wait_the_early_mass_is_rescaled_when_the_radius_converges() -> None:
+    r_true, m_true = 0.97 * R0, M0 + 125.0
+    _, out = _run(EAGER, _fwd_inputs(m_true, r_true, 120.0))
+    conv = series(out, 'radius_converged').astype(bool)
+    k0 = int(np.argmax(conv))
+    assert conv.any() and series(out, 'mass_excited')[:k0].sum() > 1000  # it learnt first
+    # learnt on Fx = T/R_file, the early mass is the true one times R_true/R_file ...
+    assert out[k0 - 1].mass == pytest.approx(m_true * r_true / R0, rel=0.015)
+    # ... and is rescaled by R_file/R at the stamp the radius is first used
+    jump = out[k0].mass / out[k0 - 1].mass
+    assert jump == pytest.approx(R0 / out[k0].radius_used, rel=2e-3)
+    assert abs(out[-1].mass / m_true - 1.0) < 0.01
 
 
 def test_no_free_rolling_keeps_the_files_radius_and_says_so() -> None:

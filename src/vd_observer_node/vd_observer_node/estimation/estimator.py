@@ -24,8 +24,10 @@ the radius of the wheel spin balance Fx = (T - J*omega_dot)/R (hence the mass's 
 mu and the slope) and of the slip. Measured torques only (the engine path reports 0 on the
 braked wheels, which would pass for free rolling); a stamp whose inputs were not all finite
 or whose torque is untrusted does not update it; a clamp is counted as 'radius_clamped'.
-With both adaptations on and `mass_waits_for_radius`, the mass is not updated (it stays the
-file's) until the radius has converged: an early mass would keep the radius's bias.
+With both adaptations on, the mass learnt so far is rescaled whenever the radius used changes
+(`MassGradeEstimator.rescale_force`: Fx scales with 1/R, so 1/m with R_old/R_new); with
+`mass_waits_for_radius` the mass is not updated at all (it stays the file's) until the radius
+has converged.
 The speed sensor's scale and R_eff are not separable from v and omega: the radius is the
 one the speed sensor sees (see docs/estimation.md section 7.1).
 
@@ -150,7 +152,9 @@ class EstimatorConfig:
             False: the file's R_eff.
         radius: settings of the online radius estimator (flat keys ``radius.<name>``).
         mass_waits_for_radius: with both adaptations on, the mass is not updated before the
-            radius has converged (so it never learns the file's radius error).
+            radius has converged. Off by default: the mass learnt on the file's radius is
+            rescaled when the radius converges (docs/estimation.md 7.1), so waiting only
+            delays the mass (~40 s on mass_drive).
         torque_offset_adaptation: on the engine path, learn the offset of the engine-torque
             signal while the gearbox is in neutral and subtract it once converged
             (`torque_offset`); no effect on measured torques. On by default: with an exact
@@ -175,7 +179,7 @@ class EstimatorConfig:
     mass: MassGradeConfig = field(default_factory=MassGradeConfig)
     radius_adaptation: bool = False
     radius: RollingRadiusConfig = field(default_factory=RollingRadiusConfig)
-    mass_waits_for_radius: bool = True
+    mass_waits_for_radius: bool = False
     torque_offset_adaptation: bool = True
     torque_offset: TorqueOffsetConfig = field(default_factory=TorqueOffsetConfig)
 
@@ -353,6 +357,7 @@ class Estimator:
         self._slope = 0.0
         # Last finite inputs, packed as omega (4), omega_dot (4), torque (4), speed, accel.
         self._held = np.zeros(14)
+        self._radius_prev = math.nan  # [m] the radius of the last stamp's Fx (nan: none)
         self._force_filter.reset()
         self._slope_filter.reset()
         self._speed_filter.reset()
@@ -456,13 +461,20 @@ class Estimator:
         all_ok = bool(wheel_ok.all()) and body_ok
         radius = self._radius_step(t, omega, torque, v, all_ok)
         r_used = radius[3]
+        waiting = self.radius_estimator is not None and cfg.mass_waits_for_radius and not radius[2]
+        # Fx uses another radius from now on: the mass learnt so far is rescaled to it
+        rescale = not (waiting or math.isnan(self._radius_prev) or r_used == self._radius_prev)
+        mass_est = self.mass_estimator
+        if rescale and mass_est is not None and mass_est.rescale_force(self._radius_prev / r_used):
+            self.faults.count('mass_clamped')
+        self._radius_prev = r_used
         # Without the torque the balance has no force: Fx is 0 (not -J*omega_dot/R).
         fx_raw = (
             np.zeros(4)
             if no_torque
             else phys.tire_longitudinal_force(torque, omega_dot, veh, r_used)
         )
-        if self.radius_estimator is not None and cfg.mass_waits_for_radius and not radius[2]:
+        if waiting:
             mass = self._fixed_mass()
         else:
             mass = self._mass_step(t, float(np.sum(fx_raw)), v, all_ok)

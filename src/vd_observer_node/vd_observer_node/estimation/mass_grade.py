@@ -390,6 +390,31 @@ class MassGradeEstimator:
             self._t = t
         return dt
 
+    def rescale_force(self, ratio: float) -> bool:
+        """The force fed from now on is ``ratio`` times what it was (the radius `Fx` is
+        computed with changed from R to R' = R / ratio): keep what was learnt consistent.
+
+        ``Fx = (T - J*omega_dot)/R`` scales exactly with 1/R, so the 1/m learnt on the old
+        forces is 1/m * ratio on the new ones (its variance * ratio^2), and the filters' force
+        states scale by ratio (no false step in F). The air drag, which does not scale, is
+        small against the high-passed excitation force. Nothing is changed before the first
+        excited stamp (the prior is not learnt from any force). Returns whether the
+        rescaled 1/m had to be clamped.
+        """
+        if self._excited_time <= 0.0:
+            return False
+        theta = float(self.theta[0]) / ratio
+        clamped = not self._theta_min <= theta <= self._theta_max
+        theta = min(max(theta, self._theta_min), self._theta_max)
+        self.theta = np.array([theta])
+        self.cov = self.cov / (ratio * ratio)
+        if self._lp is not None:
+            self._lp[0] *= ratio
+            self._lp[1] *= ratio
+        if not math.isnan(self._f_slow):
+            self._f_slow *= ratio
+        return clamped
+
     def current(self) -> MassGradeEstimate:
         """The last estimate (the nominal mass and prior deviation before any stamp)."""
         return self._last or self._estimate(False, False)

@@ -143,7 +143,8 @@ _M_LAST = 18  # mass, std, converged, used, excited: 5 slots
 # converged, used, free wheels
 _R_T, _R_LP_ON, _R_V1, _R_V2, _R_THETA, _R_COV, _R_FREE_T, _R_CONV = range(23, 31)
 _R_HAS_LAST, _R_LAST = 31, 32  # _R_LAST: 5 slots
-N_SCAL: Final = 37
+_RADIUS_PREV = 37  # the radius of the last stamp's Fx [m] (nan: none)
+N_SCAL: Final = 38
 assert _M_COV == _M_THETA + 1 and _R_COV == _R_THETA + 1  # _rls1_bounded's layout
 
 # fault slots (ESTIMATOR_FAULTS order) and the rejection count
@@ -254,6 +255,7 @@ class EstimatorState:
         self.scal = np.zeros(N_SCAL)
         self.scal[_M_THETA] = math.nan  # the online mass is set from prm at its first update
         self.scal[_R_THETA] = math.nan  # ... and so is the online radius
+        self.scal[_RADIUS_PREV] = math.nan
         self.held = np.zeros(14)
         self.f_stages = np.zeros((order, 5))
         self.f_prev = np.zeros(5)
@@ -572,6 +574,26 @@ def _mass_update(
 
 
 @jit
+def _mass_rescale(prm: FloatArray, scal: FloatArray, ratio: float) -> bool:
+    """`MassGradeEstimator.rescale_force`; returns whether the clamp acted."""
+    if math.isnan(scal[_M_THETA]):
+        _mass_reset(prm, scal)
+    if scal[_M_EXC_T] <= 0.0:
+        return False
+    theta = scal[_M_THETA] / ratio
+    lo, hi = prm[_M_THETA_MIN], prm[_M_THETA_MAX]
+    clamped = not lo <= theta <= hi
+    scal[_M_THETA] = min(max(theta, lo), hi)
+    scal[_M_COV] = scal[_M_COV] / (ratio * ratio)
+    if scal[_M_LP_ON] != 0.0:
+        scal[_M_F1] *= ratio
+        scal[_M_F2] *= ratio
+    if not math.isnan(scal[_M_F_SLOW]):
+        scal[_M_F_SLOW] *= ratio
+    return clamped
+
+
+@jit
 def _radius_fresh_out(prm: FloatArray, est: FloatArray) -> None:
     """The radius fields before any update (`Estimator._fixed_radius` after a reset)."""
     r0 = prm[_RADIUS]
@@ -704,6 +726,7 @@ def estimator_reset(
     scal[2] = 0.0
     scal[_M_THETA] = math.nan  # the online mass starts again (from prm) at the next update
     scal[_R_THETA] = math.nan  # ... and so does the online radius
+    scal[_RADIUS_PREV] = math.nan
     held[:] = 0.0
     f_meta[:] = 0.0
     s_meta[:] = 0.0
@@ -747,6 +770,13 @@ def _estimate(
         _radius_held(prm, scal, est)
         est[E_RADIUS_FREE] = 0.0
     radius = est[E_RADIUS_USED]
+    waiting = prm[_R_ON] != 0.0 and prm[_M_WAITS] != 0.0 and est[E_RADIUS_CONVERGED] == 0.0
+    # Estimator: Fx uses another radius from now on, the mass is rescaled to it
+    previous = scal[_RADIUS_PREV]
+    rescale = not (waiting or math.isnan(previous) or radius == previous)
+    if rescale and prm[_M_ON] != 0.0 and _mass_rescale(prm, scal, previous / radius):
+        counts[_MASS_CLAMPED] += 1
+    scal[_RADIUS_PREV] = radius
     fx_raw = np.zeros(4)
     if not no_torque:
         for i in range(4):
@@ -754,7 +784,6 @@ def _estimate(
             fx_raw[i] = (x[8 + i] - inertia * x[4 + i]) / radius
     fx_sum = fx_raw[0] + fx_raw[1] + fx_raw[2] + fx_raw[3]
     # the online mass (Estimator._mass_step) first: the rest uses mass_used
-    waiting = prm[_R_ON] != 0.0 and prm[_M_WAITS] != 0.0 and est[E_RADIUS_CONVERGED] == 0.0
     if prm[_M_ON] != 0.0 and waiting:
         # Estimator._fixed_mass: the mass estimator's last (or fresh) estimate, not excited
         if math.isnan(scal[_M_THETA]):
