@@ -94,6 +94,23 @@ class RosProcessGroup:
     def python(self, name: str, script: Path | str, *args: str, **env: str) -> RosProcess:
         return self.start(name, [sys.executable, str(script), *args], **env)
 
+    def without_discovery(self) -> RosProcessGroup:
+        """This group, for processes that must not discover any other participant.
+
+        For processes that are checked one by one and never talk (e.g. nodes refused at
+        start): ``ROS_AUTOMATIC_DISCOVERY_RANGE=OFF``, with which rmw_fastrtps admits no remote
+        participant. Started in one domain, such processes would see each other come and go,
+        and Fast DDS 3.2 can deadlock a participant that receives the endpoint removals of
+        another one in its first seconds (a discovery thread holding the PDP mutex waits for
+        the event thread, whose participant announcement waits for that mutex; the main thread
+        then blocks in its next endpoint creation): twelve refused nodes started together hung
+        one of them inside ``Node()`` before it printed its line. The processes are still
+        stopped with this group's.
+        """
+        view = RosProcessGroup({**self.env, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'OFF'}, self.log_dir)
+        view.procs = self.procs
+        return view
+
     def stop_all(self) -> None:
         for proc in reversed(self.procs):
             proc.stop()
