@@ -28,6 +28,22 @@ class RosProcess:
     def output(self) -> str:
         return self.log_path.read_text(errors='replace')
 
+    def stacks(self) -> str:
+        """The output, after asking the process for its threads' Python stacks if it runs.
+
+        vd's node entry points dump them on SIGUSR1 (vd_sim_node.entry); other processes are
+        left alone (SIGUSR1 would end them). For failure messages: where a hung node is.
+        """
+        if self.popen.poll() is None and _catches(self.popen.pid, signal.SIGUSR1):
+            size = self.log_path.stat().st_size
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.popen.pid, signal.SIGUSR1)
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline and self.log_path.stat().st_size == size:
+                time.sleep(0.05)
+            time.sleep(0.2)  # the rest of the dump
+        return self.output()
+
     def wait_for(self, text: str, timeout: float = 20.0) -> str:
         """Wait until `text` appears in the output; fail with the output if it does not."""
         deadline = time.monotonic() + timeout
@@ -41,6 +57,7 @@ class RosProcess:
         out = self.output()
         if text in out:
             return out
+        out = self.stacks()
         raise AssertionError(
             f'{self.name}: {text!r} not seen within {timeout} s '
             f'(exit code {self.popen.poll()}); output:\n{out[-4000:]}'
@@ -58,6 +75,18 @@ class RosProcess:
                 self.popen.wait(5)
         self._log.close()
         return self.popen.returncode
+
+
+def _catches(pid: int, sig: int) -> bool:
+    """True if process `pid` has a handler for `sig` (SigCgt in /proc/<pid>/status)."""
+    try:
+        status = Path(f'/proc/{pid}/status').read_text()
+    except OSError:
+        return False
+    for line in status.splitlines():
+        if line.startswith('SigCgt:'):
+            return bool(int(line.split()[1], 16) & (1 << (sig - 1)))
+    return False
 
 
 def wait_recording(recorder: RosProcess, topics: Iterable[str], timeout: float = 60.0) -> None:

@@ -67,7 +67,7 @@ def _wait_exit(proc: RosProcess, timeout: float) -> int:
     while proc.popen.poll() is None and time.monotonic() < deadline:
         time.sleep(0.1)
     code = proc.popen.poll()
-    assert code is not None, f'{proc.name} still running:\n{proc.output()}'
+    assert code is not None, f'{proc.name} still running:\n{proc.stacks()}'
     return code
 
 

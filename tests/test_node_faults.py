@@ -138,7 +138,7 @@ def _wait_exit(proc: RosProcess, timeout: float) -> int:
     deadline = time.monotonic() + timeout
     while proc.popen.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
-    assert proc.popen.poll() is not None, f'{proc.name} still running:\n{proc.output()[-3000:]}'
+    assert proc.popen.poll() is not None, f'{proc.name} still running:\n{proc.stacks()[-6000:]}'
     return int(proc.popen.returncode)
 
 
