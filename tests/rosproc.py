@@ -28,6 +28,22 @@ class RosProcess:
     def output(self) -> str:
         return self.log_path.read_text(errors='replace')
 
+    def stacks(self) -> str:
+        """The output, after asking the process for its threads' Python stacks if it runs.
+
+        vd's node entry points dump them on SIGUSR1 (vd_sim_node.entry); other processes are
+        left alone (SIGUSR1 would end them). For failure messages: where a hung node is.
+        """
+        if self.popen.poll() is None and _catches(self.popen.pid, signal.SIGUSR1):
+            size = self.log_path.stat().st_size
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(self.popen.pid, signal.SIGUSR1)
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline and self.log_path.stat().st_size == size:
+                time.sleep(0.05)
+            time.sleep(0.2)  # the rest of the dump
+        return self.output()
+
     def wait_for(self, text: str, timeout: float = 20.0) -> str:
         """Wait until `text` appears in the output; fail with the output if it does not."""
         deadline = time.monotonic() + timeout
@@ -41,6 +57,7 @@ class RosProcess:
         out = self.output()
         if text in out:
             return out
+        out = self.stacks()
         raise AssertionError(
             f'{self.name}: {text!r} not seen within {timeout} s '
             f'(exit code {self.popen.poll()}); output:\n{out[-4000:]}'
@@ -58,6 +75,18 @@ class RosProcess:
                 self.popen.wait(5)
         self._log.close()
         return self.popen.returncode
+
+
+def _catches(pid: int, sig: int) -> bool:
+    """True if process `pid` has a handler for `sig` (SigCgt in /proc/<pid>/status)."""
+    try:
+        status = Path(f'/proc/{pid}/status').read_text()
+    except OSError:
+        return False
+    for line in status.splitlines():
+        if line.startswith('SigCgt:'):
+            return bool(int(line.split()[1], 16) & (1 << (sig - 1)))
+    return False
 
 
 def wait_recording(recorder: RosProcess, topics: Iterable[str], timeout: float = 60.0) -> None:
@@ -93,6 +122,23 @@ class RosProcessGroup:
 
     def python(self, name: str, script: Path | str, *args: str, **env: str) -> RosProcess:
         return self.start(name, [sys.executable, str(script), *args], **env)
+
+    def without_discovery(self) -> RosProcessGroup:
+        """This group, for processes that must not discover any other participant.
+
+        For processes that are checked one by one and never talk (e.g. nodes refused at
+        start): ``ROS_AUTOMATIC_DISCOVERY_RANGE=OFF``, with which rmw_fastrtps admits no remote
+        participant. Started in one domain, such processes would see each other come and go,
+        and Fast DDS 3.2 can deadlock a participant that receives the endpoint removals of
+        another one in its first seconds (a discovery thread holding the PDP mutex waits for
+        the event thread, whose participant announcement waits for that mutex; the main thread
+        then blocks in its next endpoint creation): twelve refused nodes started together hung
+        one of them inside ``Node()`` before it printed its line. The processes are still
+        stopped with this group's.
+        """
+        view = RosProcessGroup({**self.env, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'OFF'}, self.log_dir)
+        view.procs = self.procs
+        return view
 
     def stop_all(self) -> None:
         for proc in reversed(self.procs):

@@ -11,6 +11,8 @@ starting (what remains unguarded is Python's own start-up).
 
 from __future__ import annotations
 
+import contextlib
+import faulthandler
 import importlib
 import signal
 import sys
@@ -44,6 +46,10 @@ def guarded_main(module: str, args: list[str] | None = None) -> int:
     """
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, _early)
+    # SIGUSR1 writes every thread's Python stack to stderr, from a C handler that needs no
+    # GIL: a node that hangs (in the middleware, say) can be asked where; the tests do so.
+    with contextlib.suppress(RuntimeError, OSError, ValueError):  # no usable stderr
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
     try:
         main = importlib.import_module(module).main
     except ImportError:

@@ -16,7 +16,9 @@ QoS choices (see the README's topic contract):
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import faulthandler
 import gc
 import importlib
 import os
@@ -44,6 +46,7 @@ __all__ = [
     'EXECUTORS',
     'STATE_QOS',
     'STREAM_QOS',
+    'TEARDOWN_BACKSTOP_GRACE_S',
     'TEARDOWN_TIMEOUT_S',
     'InvalidParameterError',
     'NodeFinished',
@@ -401,34 +404,58 @@ class StopSignals:
 
 #: [s] the middleware teardown after a node closed its outputs may take this long at most
 TEARDOWN_TIMEOUT_S = 5.0
+#: [s] after that, the backstop's grace: for a teardown stuck in C with the GIL held
+TEARDOWN_BACKSTOP_GRACE_S = 2.0
 
 
 class TeardownWatchdog:
-    """Ends the process with exit code 0 if the middleware teardown hangs.
+    """Ends the process if the middleware teardown hangs, with the exit code it was to have.
 
     Runs around what `run_node` does after the node's outputs are closed (executor shutdown,
     node destruction, rclpy shutdown). On a 2-core machine with both cores busy, a recorder
     once closed its bag and logged its stop, then stayed inside that teardown until its
     supervisor killed it 10 s later. Nothing is left to lose by then, so a teardown that
     overruns `timeout_s` is cut short: one line naming where it was stuck, stdio flushed,
-    ``os._exit(0)``.
+    ``os._exit(exit_code)`` (0 after a stop, 2 after a refusal or an error the node reported).
+
+    That line is written by a Python thread, which needs the GIL, and rclpy's C++ calls hold
+    it: a Fast DDS deadlock inside ``destroy_node`` would keep that thread waiting for good. So
+    faulthandler's watchdog, a C thread that needs no GIL, is armed too,
+    `TEARDOWN_BACKSTOP_GRACE_S` later: it writes every thread's Python stack to stderr and
+    ends the process with exit code 1.
     """
 
-    def __init__(self, timeout_s: float) -> None:
-        """Arm for `timeout_s` [s] on entering the ``with`` block."""
+    def __init__(self, timeout_s: float, exit_code: int = 0) -> None:
+        """Count `timeout_s` [s] from `arm` (or from entering the ``with`` block)."""
         self.timeout_s = timeout_s
+        self.exit_code = exit_code
         self._timer: threading.Timer | None = None
         self._main = threading.get_ident()
 
-    def __enter__(self) -> TeardownWatchdog:
+    def arm(self) -> None:
+        """Start counting, if not yet started."""
+        if self._timer is not None:
+            return
         self._timer = threading.Timer(self.timeout_s, self._expire)
         self._timer.daemon = True
         self._timer.start()
+        with contextlib.suppress(RuntimeError, OSError, ValueError):  # no usable stderr
+            faulthandler.dump_traceback_later(
+                self.timeout_s + TEARDOWN_BACKSTOP_GRACE_S, exit=True
+            )
+
+    def disarm(self) -> None:
+        """Stop counting: the teardown is over."""
+        if self._timer is not None:
+            self._timer.cancel()
+            faulthandler.cancel_dump_traceback_later()
+
+    def __enter__(self) -> TeardownWatchdog:
+        self.arm()
         return self
 
     def __exit__(self, *_exc: object) -> None:
-        if self._timer is not None:
-            self._timer.cancel()
+        self.disarm()
 
     def _expire(self) -> None:
         frame = sys._current_frames().get(self._main)
@@ -439,7 +466,7 @@ class TeardownWatchdog:
             flush=True,
         )
         sys.stdout.flush()
-        os._exit(0)
+        os._exit(self.exit_code)
 
 
 def run_node(factory: Any, args: list[str] | None = None) -> int:
@@ -453,7 +480,9 @@ def run_node(factory: Any, args: list[str] | None = None) -> int:
     recorder's bag); a callback raising `NodeFinished` ends it with 0 too.
 
     A refused parameter or a bad configuration file ends the process with ONE line on stderr
-    naming the problem (exit code 2), not a traceback.
+    naming the problem (exit code 2), not a traceback, printed and flushed before the
+    middleware teardown, which runs under `TeardownWatchdog` like any other: a node refused
+    while being built is released with the exception, so the watchdog is armed before that.
     """
     import rclpy
     from rclpy.signals import SignalHandlerOptions
@@ -476,6 +505,7 @@ def run_node(factory: Any, args: list[str] | None = None) -> int:
         return 2
     node = None
     executor = None
+    teardown = TeardownWatchdog(TEARDOWN_TIMEOUT_S)
     try:
         if not signals.stop:
             node = factory()
@@ -496,13 +526,17 @@ def run_node(factory: Any, args: list[str] | None = None) -> int:
         pass
     except KeyboardInterrupt:  # a SIGINT before our handler was installed
         pass
-    except InvalidParameterError as exc:
+    except (InvalidParameterError, VdError) as exc:
+        # parameter, configuration or file problems: one line naming it, not a traceback
         print(f'error: {exc}', file=sys.stderr, flush=True)
-        return 2
-    except VdError as exc:
-        # configuration/file problems: one line naming the parameter, not a traceback
-        print(f'error: {exc}', file=sys.stderr, flush=True)
-        return 2
+        teardown.exit_code = 2
+        if node is None:
+            # Refused while being built: the half-built node goes with `exc`, at the end of
+            # this block, and its middleware teardown (endpoints, participant) runs there.
+            teardown.arm()
+    except BaseException:
+        teardown.exit_code = 1  # as for any uncaught exception, should the teardown hang
+        raise
     finally:
         if node is not None:
             close = getattr(node, 'close', None)
@@ -512,11 +546,11 @@ def run_node(factory: Any, args: list[str] | None = None) -> int:
                 node.get_logger().info(f'stopped by {signals.name()}')
         elif signals.stop:
             print(f'stopped by {signals.name()} while starting', file=sys.stderr, flush=True)
-        with TeardownWatchdog(TEARDOWN_TIMEOUT_S):
+        with teardown:
             if node is not None:
                 if executor is not None:
                     executor.remove_node(node)
                     executor.shutdown()
                 node.destroy_node()
             rclpy.try_shutdown()
-    return 0
+    return teardown.exit_code
