@@ -7,9 +7,10 @@ with ideal sensors and with a 96 counts/rev encoder plus 0.05 m/s speed noise at
 simulates the TRUE car (``vd_sim_node.vehicle.variants``) and runs the compiled cascade with
 the NOMINAL vehicle file five times: adaptation off (the file's mass and R_eff), mass only
 (``EstimatorConfig.mass_adaptation``: Fz, mu, rolling resistance and slope use ``mass_used``),
-radius only (``radius_adaptation``: Fx and the slip use ``radius_used``), both (the mass
-waits for a converged radius, the default ``mass_waits_for_radius``) and both without that
-wait ("eager"), and prints:
+radius only (``radius_adaptation``: Fx and the slip use ``radius_used``), both (the
+defaults: the mass learns from the start and is rescaled when the radius it was learnt with
+changes) and both with ``mass_waits_for_radius`` ("wait": the mass starts once the radius
+has converged), and prints:
 
 * mass error after convergence (final and worst after the converged flag) and the time to
   converge from the first excited sample,
@@ -28,7 +29,7 @@ steps and gear shifts.
 Usage:
     python scripts/eval_mass_adaptation.py [--scenario PATH ...] [--cases nominal,+125kg]
         [--sensors ideal,noisy] [--set key=value ...]   (--set: MassGradeConfig)
-        [--configs off,mass,radius,both,eager] [--cost]
+        [--configs off,mass,radius,both,wait] [--cost]
     --cost: instead, the compiled cascade's time per sample in each configuration (best of 3;
     indicative, the load average is printed)
 """
@@ -153,8 +154,9 @@ CONFIGS: dict[str, dict[str, Any]] = {
     'off': {},
     'mass': {'mass_adaptation': True},
     'radius': {'radius_adaptation': True},
+    # the defaults: the mass learns from the start, rescaled when the radius converges
     'both': {'mass_adaptation': True, 'radius_adaptation': True},
-    'eager': {'mass_adaptation': True, 'radius_adaptation': True, 'mass_waits_for_radius': False},
+    'wait': {'mass_adaptation': True, 'radius_adaptation': True, 'mass_waits_for_radius': True},
 }
 
 
@@ -315,7 +317,7 @@ def _verdicts(f: dict[str, Any], case: str) -> list[str]:
 
 def _print_run(name: str, f: dict[str, Any], case: str, sensors: str) -> None:
     """The lines of one configuration of one case."""
-    verdicts = _verdicts(f, case) if sensors == 'noisy' and name in ('both', 'eager') else []
+    verdicts = _verdicts(f, case) if sensors == 'noisy' and name in ('both', 'wait') else []
     print(
         f'  [{name:6s}] slope RMS [deg] {f["slope"]:.3f}, after conv. {f["slope_after"]:.3f}; '
         f'Fz RMS {f["fz"]:.2f} % (sum {f["fz_total"]:.2f} %); mu RMS {f["mu"]:.4f}'
