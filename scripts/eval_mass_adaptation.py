@@ -56,6 +56,7 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 # the evaluation window and RMS of the estimator evaluation, so the figures compare
 from eval_estimators import evaluation_mask, rms  # noqa: E402
 from vd_observer_node.estimation.cascade import CascadeResult  # noqa: E402
+from vd_observer_node.estimation.drivetrain import Drivetrain  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.estimation.mass_grade import MassGradeConfig  # noqa: E402
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
@@ -116,9 +117,20 @@ def simulate_case(
     return true_vp, sim
 
 
-def _cascade(sim: SimResult, vehicle: EstimatorVehicle, sensors: str, **est: Any) -> CascadeResult:
-    """The compiled cascade of the nominal file on the true car's sensors."""
+def _cascade(
+    sim: SimResult,
+    vehicle: EstimatorVehicle,
+    sensors: str,
+    drivetrain: Drivetrain | None = None,
+    **est: Any,
+) -> CascadeResult:
+    """The compiled cascade of the nominal file on the true car's sensors: on the measured
+    wheel torques, or with `drivetrain` on the engine path (engine torque, gear, speed)."""
     _, _, obs_kw, est_kw = SENSORS[sensors]
+    engine_path: dict[str, Any] = {}
+    if drivetrain is not None:
+        engine = np.stack([sim.engine_torque, sim.gear.astype(float), sim.engine_speed], axis=1)
+        engine_path = {'torque_source': 'engine', 'engine': engine, 'drivetrain': drivetrain}
     return run_cascade_compiled(
         sim.t,
         sim.wheel_angle,
@@ -127,6 +139,7 @@ def _cascade(sim: SimResult, vehicle: EstimatorVehicle, sensors: str, **est: Any
         vehicle,
         ObserverConfig(**obs_kw),
         EstimatorConfig(**est_kw, **est),
+        **engine_path,
     )
 
 

@@ -40,13 +40,11 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 
 from eval_estimators import evaluation_mask, rms  # noqa: E402
-from eval_mass_adaptation import SCENARIOS, SENSORS, VEHICLE_FILE, simulate_case  # noqa: E402
+from eval_mass_adaptation import SCENARIOS, VEHICLE_FILE, simulate_case  # noqa: E402
+from eval_mass_adaptation import _cascade as mass_cascade  # noqa: E402
 from vd_observer_node.estimation.cascade import CascadeResult  # noqa: E402
 from vd_observer_node.estimation.drivetrain import Drivetrain  # noqa: E402
-from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
-from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
 from vd_observer_node.estimation.vehicle import EstimatorVehicle  # noqa: E402
-from vd_observer_node.kernel.chain import run_cascade_compiled  # noqa: E402
 from vd_sim_node.vehicle.params import load_vehicle  # noqa: E402
 from vd_sim_node.vehicle.scenario import load_scenario  # noqa: E402
 from vd_sim_node.vehicle.simulation import SimResult  # noqa: E402
@@ -84,18 +82,12 @@ def _simulate(scenario_path: Path, case: str, sensors: str) -> tuple[float, SimR
 def _cascade(sim: SimResult, sensors: str, adapt: bool) -> CascadeResult:
     """The compiled cascade of the nominal file on the engine path."""
     nominal = load_vehicle(VEHICLE_FILE)
-    _, _, obs_kw, est_kw = SENSORS[sensors]
-    return run_cascade_compiled(
-        sim.t,
-        sim.wheel_angle,
-        sim.body_speed,
-        sim.wheel_torque,
+    return mass_cascade(
+        sim,
         EstimatorVehicle.from_params(nominal),
-        ObserverConfig(**obs_kw),
-        EstimatorConfig(**est_kw, torque_offset_adaptation=adapt),
-        torque_source='engine',
-        engine=np.stack([sim.engine_torque, sim.gear.astype(float), sim.engine_speed], axis=1),
-        drivetrain=Drivetrain.from_params(nominal),
+        sensors,
+        Drivetrain.from_params(nominal),
+        torque_offset_adaptation=adapt,
     )
 
 

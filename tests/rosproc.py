@@ -34,7 +34,7 @@ class RosProcess:
         vd's node entry points dump them on SIGUSR1 (vd_sim_node.entry); other processes are
         left alone (SIGUSR1 would end them). For failure messages: where a hung node is.
         """
-        if self.popen.poll() is None and _catches(self.popen.pid, signal.SIGUSR1):
+        if self.popen.poll() is None and catches_signal(self.popen.pid, signal.SIGUSR1):
             size = self.log_path.stat().st_size
             with contextlib.suppress(ProcessLookupError):
                 os.kill(self.popen.pid, signal.SIGUSR1)
@@ -77,7 +77,7 @@ class RosProcess:
         return self.popen.returncode
 
 
-def _catches(pid: int, sig: int) -> bool:
+def catches_signal(pid: int, sig: int) -> bool:
     """True if process `pid` has a handler for `sig` (SigCgt in /proc/<pid>/status)."""
     try:
         status = Path(f'/proc/{pid}/status').read_text()

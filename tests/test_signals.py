@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from rosproc import RosProcess, RosProcessGroup
+from rosproc import RosProcess, RosProcessGroup, catches_signal
 from vd_observer_node.bag import BagReader
 from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
 
@@ -28,15 +28,8 @@ LATEST_S = 4.0  # [s] latest moment after the guard is in place
 
 
 def catches_sigterm(pid: int) -> bool:
-    """True once the process has a handler for SIGTERM (SigCgt in /proc/<pid>/status)."""
-    try:
-        status = Path(f'/proc/{pid}/status').read_text()
-    except OSError:
-        return False
-    for line in status.splitlines():
-        if line.startswith('SigCgt:'):
-            return bool(int(line.split()[1], 16) & (1 << (signal.SIGTERM - 1)))
-    return False
+    """True once the process has a handler for SIGTERM."""
+    return catches_signal(pid, signal.SIGTERM)
 
 
 def start_nodes(procs: RosProcessGroup, tag: str, folder: Path, played: Path) -> dict[str, Any]:
