@@ -26,6 +26,7 @@ from vd_sim_node.topics import (
     ESTIMATES_ROLLING_RADIUS,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
+    ESTIMATES_TORQUE_OFFSET,
     OBSERVER_BODY_ACCEL,
     OBSERVER_BODY_VELOCITY,
     OBSERVER_WHEEL_STATES,
@@ -36,9 +37,12 @@ from vd_sim_node.topics import (
 from vd_sim_node.vehicle.params import default_vehicle_file
 
 #: What a replay writes with the default settings: the online mass and radius topics only
-#: where adapted (off by default), as the nodes publish them.
+#: where adapted (off by default), as the nodes publish them; the engine-torque offset only
+#: on the engine path (these bags have measured wheel torques).
 DEFAULT_ESTIMATES = {
-    t: m for t, m in ESTIMATE_TOPICS.items() if t not in (ESTIMATES_MASS, ESTIMATES_ROLLING_RADIUS)
+    t: m
+    for t, m in ESTIMATE_TOPICS.items()
+    if t not in (ESTIMATES_MASS, ESTIMATES_ROLLING_RADIUS, ESTIMATES_TORQUE_OFFSET)
 }
 
 
