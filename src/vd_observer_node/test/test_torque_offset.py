@@ -14,6 +14,7 @@ from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.estimation.faults import WARN
 from vd_observer_node.estimation.torque_offset import (
     TorqueOffset,
     TorqueOffsetConfig,
@@ -267,3 +268,33 @@ def test_the_reference_cascade_and_the_chains_equal_the_compiled_one() -> None:
         assert out.torque_offset.offset == ref.torque_offset[-1]
         assert out.torque_offset.used == ref.torque_offset_used[-1]
         assert out.estimates.slope == ref.slope[-1]
+
+
+def test_both_chains_report_a_clamped_offset_on_their_diagnostics() -> None:
+    sim = _drive(10.0)
+    n = 6000  # 30 s: the offset converges at the third shift, beyond a 5 N m bound
+    bounded = dataclasses.replace(ON, torque_offset=TorqueOffsetConfig(max_offset=5.0))
+    reports = []
+    for kind in (PythonChain, CompiledChain):
+        chain = kind(
+            ChainSettings(
+                vehicle=VEHICLE,
+                curves=TyreCurves.from_tire(PARAMS.tire),
+                estimator=bounded,
+                torque_source='engine',
+                drivetrain=DRIVETRAIN,
+            )
+        )
+        assert chain.fault_report().counts['engine.torque_offset_clamped'] == 0
+        for k in range(n):
+            row = (sim.engine_torque[k], float(sim.gear[k]), sim.engine_speed[k])
+            out = chain.update(float(sim.t[k]), sim.wheel_angle[k], float(sim.body_speed[k]),
+                               sim.wheel_torque[k], row)  # fmt: skip
+        assert out.torque_offset is not None and out.torque_offset.offset == 5.0
+        report = chain.fault_report()
+        assert 'engine.torque_offset_clamped' in report.active and report.level == WARN
+        reports.append(report.counts['engine.torque_offset_clamped'])
+    assert reports[0] == reports[1] > 0
+    # the measured path has no engine part
+    plain = PythonChain(ChainSettings(vehicle=VEHICLE, curves=TyreCurves.from_tire(PARAMS.tire)))
+    assert not any(k.startswith('engine.') for k in plain.fault_report().counts)

@@ -34,7 +34,12 @@ from vd_observer_node.estimation.drivetrain import (
     torque_source_code,
 )
 from vd_observer_node.estimation.estimator import Estimates, Estimator, EstimatorConfig
-from vd_observer_node.estimation.faults import FaultReport, merge_reports
+from vd_observer_node.estimation.faults import (
+    ENGINE_FAULTS,
+    FaultCounter,
+    FaultReport,
+    merge_reports,
+)
 from vd_observer_node.estimation.observer import (
     ObserverConfig,
     SpeedObserver,
@@ -55,6 +60,7 @@ __all__ = [
     'ChainOutput',
     'ChainSettings',
     'PythonChain',
+    'chain_faults',
     'engine_row',
     'make_chain',
 ]
@@ -166,7 +172,8 @@ class Chain(Protocol):
         ...
 
     def fault_report(self) -> FaultReport:
-        """Faults since the previous call, per part ('wheel', 'speed', 'estimator')."""
+        """Faults since the previous call, per part ('wheel', 'speed', 'estimator', and
+        'engine' where the engine path learns the torque offset)."""
         ...
 
 
@@ -189,6 +196,12 @@ class PythonChain:
             else None
         )
         self._none = settings.source == TORQUE_NONE
+        # the engine path's own fault (a clamped torque offset), where it learns the offset
+        self.engine_faults = (
+            FaultCounter(ENGINE_FAULTS)
+            if self.engine is not None and self.engine.offset_config is not None
+            else None
+        )
         self.monitor = SituationMonitor(
             settings.curves,
             vehicle.static_wheel_loads[[0, 2]],
@@ -251,17 +264,29 @@ class PythonChain:
             t, angles, speed, torques, wheel.omega, est.mu, est.mu_valid, est.fz
         )
         offset = self.engine.offset if self.engine is not None else None
+        if offset is not None and offset.clamped and self.engine_faults is not None:
+            self.engine_faults.count('torque_offset_clamped')
         return ChainOutput(wheel, body, est, situation, offset)
 
     def fault_report(self) -> FaultReport:
-        """Faults since the previous call, per part ('wheel', 'speed', 'estimator')."""
-        return merge_reports(
-            {
-                'wheel': self.wheels.faults.report(),
-                'speed': self.speed.faults.report(),
-                'estimator': self.estimator.faults.report(),
-            }
+        """Faults since the previous call, per part ('wheel', 'speed', 'estimator', and
+        'engine' where the engine path learns the torque offset)."""
+        return chain_faults(
+            self.wheels.faults, self.speed.faults, self.estimator.faults, self.engine_faults
         )
+
+
+def chain_faults(
+    wheel: FaultCounter,
+    speed: FaultCounter,
+    estimator: FaultCounter,
+    engine: FaultCounter | None,
+) -> FaultReport:
+    """The chain's fault report from its parts' counters (both implementations)."""
+    parts = {'wheel': wheel.report(), 'speed': speed.report(), 'estimator': estimator.report()}
+    if engine is not None:
+        parts['engine'] = engine.report()
+    return merge_reports(parts)
 
 
 def make_chain(settings: ChainSettings) -> Chain:

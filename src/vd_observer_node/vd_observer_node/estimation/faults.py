@@ -16,6 +16,7 @@ from typing import Final
 from vd_observer_node.errors import ConfigurationError
 
 __all__ = [
+    'ENGINE_FAULTS',
     'ERROR',
     'ESTIMATOR_FAULTS',
     'FAULT_LEVELS',
@@ -52,6 +53,7 @@ FAULT_LEVELS: Final[Mapping[str, int]] = {
     'arcsin_domain': WARN,
     'mass_clamped': WARN,
     'radius_clamped': WARN,
+    'torque_offset_clamped': WARN,
     'non_finite_output': ERROR,
 }
 
@@ -74,6 +76,9 @@ OBSERVER_FAULTS: Final = (*STAMP_FAULTS, 'non_finite_output')
 ESTIMATOR_FAULTS: Final = (*OBSERVER_FAULTS, 'wheel_lift', 'mu_out_of_range',
                            'slope_out_of_range', 'arcsin_domain', 'mass_clamped',
                            'radius_clamped')  # fmt: skip
+#: Kinds the engine path can count ('torque_offset_clamped': the engine-torque offset learnt
+#: in neutral is beyond its bound, counted per stamp).
+ENGINE_FAULTS: Final = ('torque_offset_clamped',)
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node.chain import ChainOutput, ChainSettings, engine_row
+from vd_observer_node.chain import ChainOutput, ChainSettings, chain_faults, engine_row
 from vd_observer_node.errors import InputShapeError
 from vd_observer_node.estimation.cascade import (
     CascadeResult,
@@ -32,7 +32,7 @@ from vd_observer_node.estimation.drivetrain import (
     gear_number,
 )
 from vd_observer_node.estimation.estimator import EstimatorConfig
-from vd_observer_node.estimation.faults import FaultReport, merge_reports
+from vd_observer_node.estimation.faults import ENGINE_FAULTS, FaultCounter, FaultReport
 from vd_observer_node.estimation.observer import (
     WHEEL_INPUTS,
     ObserverConfig,
@@ -469,6 +469,7 @@ class CompiledChain:
         self._oprm = _offset_params(settings.estimator, self._dprm)
         self._ost = offset_state()
         self._oout = np.zeros(OFFSET_OUT_SIZE)
+        self.engine_faults = FaultCounter(ENGINE_FAULTS) if self._oprm.shape[0] > 0 else None
         self._no_engine = np.zeros(3)
 
     def update(
@@ -503,6 +504,8 @@ class CompiledChain:
             body, self._body_valid, est,
         )  # fmt: skip
         offset = offset_from_packed(self._oout) if self._oprm.shape[0] > 0 else None
+        if offset is not None and offset.clamped and self.engine_faults is not None:
+            self.engine_faults.count('torque_offset_clamped')
         if self._drivetrain is not None:
             # the monitor gets the torques the engine path gave the estimator, from the
             # reference function as the replay computes them (0 where it had none)
@@ -540,13 +543,9 @@ class CompiledChain:
         )
 
     def fault_report(self) -> FaultReport:
-        """Faults since the previous call, per part ('wheel', 'speed', 'estimator')."""
-        return merge_reports(
-            {
-                'wheel': self.wheels.faults.report(),
-                'speed': self.speed.faults.report(),
-                'estimator': self.estimator.faults.report(),
-            }
+        """Faults since the previous call (`chain.PythonChain.fault_report`)."""
+        return chain_faults(
+            self.wheels.faults, self.speed.faults, self.estimator.faults, self.engine_faults
         )
 
 
