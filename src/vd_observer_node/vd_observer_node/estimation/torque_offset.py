@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vd_observer_node.errors import ConfigurationError
+from vd_observer_node.estimation.faults import RESTART_FAULTS, classify_stamp
 
 __all__ = [
     'OFFSET_MESSAGE_FIELDS',
@@ -227,15 +228,13 @@ def torque_offset_step(
     Returns:
         (the estimate after the stamp, the next state).
     """
-    if not math.isfinite(t):
-        return offset_estimate(config, state), state
-    if not math.isnan(state.last_t):
-        dt = t - state.last_t
-        if dt == 0.0 or (dt < 0.0 and -dt <= config.max_gap):
-            return offset_estimate(config, state), state  # repeated or slightly older: hold
-        if dt < 0.0 or dt > config.max_gap:
-            # a time jump: start again, as the observers do (the fault total stays)
-            state = TorqueOffsetState(clamped=state.clamped)
+    last = None if math.isnan(state.last_t) else state.last_t
+    kind, dt = classify_stamp(last, t, config.max_gap)
+    if dt is None:
+        return offset_estimate(config, state), state  # non-finite, repeated, slightly older
+    if kind in RESTART_FAULTS:
+        # a time jump: start again, as the observers do (the fault total stays)
+        state = TorqueOffsetState(clamped=state.clamped)
     state = state._replace(last_t=t)
     neutral = gear == 0 and math.isfinite(engine_torque) and math.isfinite(engine_speed)
     if not math.isnan(state.t0):

@@ -19,6 +19,7 @@ from vd_observer_node.estimation.torque_offset import (
     TorqueOffsetState,
 )
 from vd_observer_node.kernel._jit import jit
+from vd_observer_node.kernel.estimation import _stamp_dt
 
 __all__ = [
     'OFFSET_CLAMPED_SLOT',
@@ -118,20 +119,16 @@ def offset_update(
     out: FloatArray,
 ) -> None:
     """`torque_offset_step`: advances ``s`` in place, writes the estimate into ``out``."""
-    if not math.isfinite(t):
+    dt = _stamp_dt(s[_LAST_T], t, prm[_MAX_GAP]) if math.isfinite(t) else math.nan
+    if math.isnan(dt):
         _estimate(prm, s, out)
         return
-    if not math.isnan(s[_LAST_T]):
-        dt = t - s[_LAST_T]
-        if dt == 0.0 or (dt < 0.0 and -dt <= prm[_MAX_GAP]):
-            _estimate(prm, s, out)
-            return
-        if dt < 0.0 or dt > prm[_MAX_GAP]:
-            clamped = s[_CLAMPED]
-            s[:] = 0.0
-            s[_LAST_T] = math.nan
-            s[_T0] = math.nan
-            s[_CLAMPED] = clamped
+    if dt < 0.0:
+        clamped = s[_CLAMPED]
+        s[:] = 0.0
+        s[_LAST_T] = math.nan
+        s[_T0] = math.nan
+        s[_CLAMPED] = clamped
     s[_LAST_T] = t
     neutral = gear == 0.0 and math.isfinite(engine_torque) and math.isfinite(engine_speed)
     if not math.isnan(s[_T0]):
