@@ -35,9 +35,10 @@ SIM_LAYERS: dict[str, set[str]] = {
     'topics': set(),
     'params_file': set(),
     'entry': set(),
+    'lockstep': set(),
     'bondgraph': set(),
     'vehicle': {'errors', 'bondgraph'},
-    'nodes': {'errors', 'topics', 'params_file', 'entry', 'bondgraph', 'vehicle'},
+    'nodes': {'errors', 'topics', 'params_file', 'entry', 'lockstep', 'bondgraph', 'vehicle'},
 }
 _NODE_PLUMBING = {'raw_io', 'node_params', 'entry_points', 'ros_common'}
 
