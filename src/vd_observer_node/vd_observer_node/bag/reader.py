@@ -47,7 +47,10 @@ __all__ = [
 
 _PREFIX = fmt.RECORD_PREFIX
 _MAX_CHUNK = 1 << 31  # [B] refuse to inflate a chunk claiming more (damaged size field)
-_KNOWN_OPS = frozenset(int(op) for op in fmt.Op)
+#: the only opcode that is never valid: records of 0x01-0x7F (official, later versions of the
+#: format) and 0x80-0xFF (application extensions) that we do not know are skipped, as the
+#: specification asks; a 0x00 is damage (a zero-filled tail after a crash, typically)
+_INVALID_OP = 0x00
 #: [B] read pages are given back to the OS in steps of this size (bounded resident memory)
 _RELEASE_STEP = 32 << 20
 
@@ -72,13 +75,20 @@ class RawMessage(NamedTuple):
 
 @dataclass(frozen=True)
 class TopicInfo:
-    """A topic of a bag: type, embedded definition, rosbag2 QoS metadata, message count."""
+    """A topic of a bag: type, embedded definition, rosbag2 QoS metadata, message count.
+
+    ``msgtype`` and ``definition`` are the name and data (as text) of the channel's schema,
+    '' for a channel without one; ``message_encoding`` and ``schema_encoding`` are those of
+    the channel and its schema (rosbag2: 'cdr' and 'ros2msg'; '' where not given).
+    """
 
     name: str
     msgtype: str
     message_count: int
     definition: str
     qos_profiles_yaml: str
+    message_encoding: str = ''
+    schema_encoding: str = ''
 
 
 @dataclass(frozen=True)
@@ -254,7 +264,7 @@ class _FileScan:
             op, length = _PREFIX.unpack_from(buf, pos)
             body_at = pos + _PREFIX.size
             end = body_at + length
-            if op not in _KNOWN_OPS and op < 0x80:
+            if op == _INVALID_OP:
                 self._damage(pos, f'invalid record opcode 0x{op:02x}')
                 return
             if end > size:
@@ -437,7 +447,8 @@ class _FileScan:
             length = _PREFIX.unpack_from(buf, pos)[1]
             count = struct.unpack_from('<I', buf, pos + 11)[0]
             end = pos + 9 + length
-            if end > size or length != 6 + count or count % 16:
+            # length > 6 + count: fields of a later format version after the entries
+            if end > size or length < 6 + count or count % 16:
                 return None
             pairs = np.frombuffer(buf, dtype='<u8', count=count // 8, offset=pos + 15)
             parts.append(pairs[1::2])
@@ -523,7 +534,10 @@ class _FileScan:
         """Fill schemas, channels and counts from an intact summary; False if unusable.
 
         Used for topic listings so an intact bag is not scanned; any doubt (no footer, CRC
-        mismatch, no statistics, a record that does not parse) answers False.
+        mismatch, no statistics, a record that does not parse) answers False. So does a
+        summary that is intact but incomplete for a listing, which the specification allows:
+        channels whose schemas it does not repeat (they are in the data section only), or
+        statistics without per-channel counts (an empty map means "not available").
         """
         buf = self.buf
         size = len(buf)
@@ -551,7 +565,8 @@ class _FileScan:
                 body = memoryview(buf)[pos + _PREFIX.size : end]
                 if op == fmt.Op.SCHEMA:
                     schema = fmt.parse_schema(body)
-                    schemas[schema.id] = schema
+                    if schema.id != 0:  # id 0 is invalid: ignored, as in the data section
+                        schemas[schema.id] = schema
                 elif op == fmt.Op.CHANNEL:
                     channel = fmt.parse_channel(body)
                     channels[channel.id] = channel
@@ -562,6 +577,11 @@ class _FileScan:
             return False
         if stats is None or not channels:
             return False
+        if any(c.schema_id != 0 and c.schema_id not in schemas for c in channels.values()):
+            return False  # the types are in the data section only: scan for them
+        counts = stats.channel_message_counts
+        if sum(counts.values()) != stats.message_count or not counts.keys() <= channels.keys():
+            return False  # per-channel counts not available (or not of these channels)
         self.schemas.update(schemas)
         self.channels.update(channels)
         self.channel_counts.update(stats.channel_message_counts)
@@ -703,15 +723,40 @@ class BagReader:
         """Iterate decoded messages: (topic, msgtype, log_time_ns, rosbags message object).
 
         Types unknown to the vd typestore are registered from the bag's embedded definitions.
+
+        Raises:
+            BagFormatError: a selected topic is not decodable by vd: its message encoding is
+                not 'cdr', it has no schema, or its schema encoding is not 'ros2msg'
+                (:meth:`raw_messages` gives its bytes).
         """
         decode_as: dict[str, str] = {}
         selection = self.raw_messages(topics, start_ns=start_ns, stop_ns=stop_ns, ordered=ordered)
         for msg in selection:
             name = decode_as.get(msg.topic)
             if name is None:
+                self._check_decodable(msg.topic)
                 self._register(msg.msgtype)
                 name = decode_as[msg.topic] = self.decoding_type(msg.topic)
             yield msg.topic, msg.msgtype, msg.log_time_ns, deserialize(msg.data, name)
+
+    def _check_decodable(self, topic: str) -> None:
+        """Raise BagFormatError if vd cannot decode the topic's messages (see messages())."""
+        info = self.topics.get(topic)
+        if info is None:
+            return
+        where = f'{self.path}: topic {topic!r}'
+        if info.message_encoding != 'cdr':
+            raise BagFormatError(
+                f'{where}: message encoding {info.message_encoding!r} is not supported (vd '
+                "decodes 'cdr' only; raw_messages() gives the bytes)"
+            )
+        if not info.msgtype:
+            raise BagFormatError(f'{where}: no schema, so its CDR messages cannot be decoded')
+        if info.schema_encoding != 'ros2msg':
+            raise BagFormatError(
+                f'{where}: schema encoding {info.schema_encoding!r} is not supported (vd '
+                "reads 'ros2msg' definitions only; raw_messages() gives the bytes)"
+            )
 
     def decoding_type(self, topic: str) -> str:
         """The type to decode a topic's messages with (`typestore.decoding_type`): its type,
@@ -837,6 +882,8 @@ class BagReader:
                     count + (old.message_count if old else 0),
                     schema.data.decode(errors='replace') if schema else '',
                     channel.metadata.get('offered_qos_profiles', ''),
+                    channel.message_encoding,
+                    schema.encoding if schema else '',
                 )
         return infos
 
