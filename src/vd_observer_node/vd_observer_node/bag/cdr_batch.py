@@ -5,7 +5,9 @@ Messages such as ``vd_msgs/msg/WheelAngles`` or ``geometry_msgs/msg/TwistStamped
 only by the length of ``header.frame_id``, so all messages with the same total length and
 frame-id length share one numpy structured dtype: a batch decodes with one ``frombuffer``
 per group and encodes with one ``tobytes``. This is what makes offline replay run at
-hundreds of thousands of messages per second; rosbags' per-message decoding is ~50x slower.
+hundreds of thousands of messages per second: rosbags' per-message ``deserialize_cdr`` is
+20-130x slower (35-50x for most types) and its ``serialize_cdr`` 11-35x slower
+(``scripts/bench_bag_codec.py``, figures in docs/bags.md).
 
 Layout (little-endian CDR, XCDR1 as produced by rmw): 4-byte encapsulation header, then each
 primitive aligned to min(its size, 8) relative to the end of the encapsulation header.
