@@ -134,7 +134,11 @@ _CHUNK_HEAD = struct.Struct('<QQQI')
 
 
 def encode_chunk(
-    start_ns: int, end_ns: int, uncompressed: bytes, compression: str, compressed: bytes
+    start_ns: int,
+    end_ns: int,
+    uncompressed: bytes | memoryview,
+    compression: str,
+    compressed: bytes,
 ) -> bytes:
     """Chunk record holding (compressed) message records; CRC is over the uncompressed data."""
     body = (

@@ -18,7 +18,7 @@ import mmap
 import os
 import struct
 import zlib
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -35,6 +35,7 @@ from vd_observer_node.bag.errors import (
     BagUsageError,
 )
 from vd_observer_node.bag.metadata import read_metadata_file_paths
+from vd_observer_node.bag.packed import PackedMessages
 from vd_observer_node.bag.typestore import decoding_type, deserialize, register_definition
 
 __all__ = [
@@ -97,11 +98,14 @@ class TopicArrays:
 
     ``decode_as`` is the type to decode ``datas`` with (`typestore.decoding_type`):
     ``msgtype`` unless the bag embeds an older definition of it ('' means ``msgtype``).
+    The reader gives ``datas`` as a :class:`~vd_observer_node.bag.packed.PackedMessages`
+    (a sequence of bytes kept in one buffer, which the batch coders and the writer use
+    without a Python object per message); any sequence of bytes will do.
     """
 
     msgtype: str
     log_time_ns: np.ndarray
-    datas: list[bytes]
+    datas: Sequence[bytes]
     decode_as: str = ''
 
     @property
@@ -145,7 +149,7 @@ class _Batch:
     channel: np.ndarray
     log: np.ndarray
     publish: np.ndarray
-    datas: list[bytes]
+    datas: PackedMessages
 
     def tuples(self) -> Iterator[tuple[int, int, int, bytes]]:
         return zip(
@@ -291,7 +295,7 @@ class _FileScan:
                             # via uint64: a damaged time must not raise OverflowError
                             np.array([log_ns], dtype=np.uint64).astype(np.int64),
                             np.array([pub_ns], dtype=np.uint64).astype(np.int64),
-                            [bytes(buf[body_at + 22 : end])],
+                            PackedMessages.from_list([bytes(buf[body_at + 22 : end])]),
                         )
             elif op == fmt.Op.SCHEMA:
                 self._schema(self._parse(pos, body_at, fmt.parse_schema, body))
@@ -428,9 +432,8 @@ class _FileScan:
         chosen = np.flatnonzero(mask)
         if chosen.size != at.size:
             at, sizes = at[chosen], sizes[chosen]
-        datas = [
-            data[p + 31 : p + 9 + n] for p, n in zip(at.tolist(), sizes.tolist(), strict=True)
-        ]
+        # the messages stay in the chunk's bytes: offsets, no object per message
+        datas = PackedMessages(data, at + 31, sizes - 22)
         return _Batch(
             channel[chosen], log[chosen], heads['publish'][chosen, 0].astype(np.int64), datas
         )
@@ -801,7 +804,7 @@ class BagReader:
             raise BagUsageError(f'block_messages must be >= 1, got {block_messages}')
         selected = None if topics is None else set(topics)
         times: dict[str, list[np.ndarray]] = {}
-        datas: dict[str, list[bytes]] = {}
+        datas: dict[str, list[PackedMessages]] = {}
         types: dict[str, str] = {}
         held = 0
         infos = self.topics  # before the scan: a first pass must not add its damage twice
@@ -817,11 +820,15 @@ class BagReader:
                         types.setdefault(topic, msgtype)
                     if len(channels) == 1:
                         times[topic].append(batch.log)
-                        datas[topic].extend(batch.datas)
+                        part = batch.datas
                     else:
                         members = np.flatnonzero(batch.channel == channel_id)
                         times[topic].append(batch.log[members])
-                        datas[topic].extend([batch.datas[k] for k in members.tolist()])
+                        part = batch.datas.take(members)
+                    if 2 * int(part.lengths.sum()) < len(part.data):
+                        # hold only the selected bytes, not the whole chunk (bounded memory)
+                        part = part.compact()
+                    datas[topic].append(part)
                 held += len(batch.datas)
                 if block_messages is not None and held >= block_messages:
                     yield self._block(times, datas, types, infos)
@@ -833,7 +840,7 @@ class BagReader:
     @staticmethod
     def _block(
         times: dict[str, list[np.ndarray]],
-        datas: dict[str, list[bytes]],
+        datas: dict[str, list[PackedMessages]],
         types: dict[str, str],
         infos: dict[str, TopicInfo],
     ) -> dict[str, TopicArrays]:
@@ -841,7 +848,7 @@ class BagReader:
             t: TopicArrays(
                 types[t],
                 np.concatenate(times[t]).astype(np.int64),
-                datas[t],
+                PackedMessages.concat(datas[t]),
                 decoding_type(types[t], infos[t].definition if t in infos else ''),
             )
             for t in times
