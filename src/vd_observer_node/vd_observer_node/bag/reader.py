@@ -35,7 +35,7 @@ from vd_observer_node.bag.errors import (
     BagUsageError,
 )
 from vd_observer_node.bag.metadata import read_metadata_file_paths
-from vd_observer_node.bag.packed import PackedMessages
+from vd_observer_node.bag.packed import PackedMessages, windows
 from vd_observer_node.bag.typestore import decoding_type, deserialize, register_definition
 
 __all__ = [
@@ -408,9 +408,9 @@ class _FileScan:
         if sizes.size and int(sizes.min()) < 22:
             self._damage(payload_at, 'message record too short')
             return None
-        heads = np.ascontiguousarray(raw[at[:, None] + np.arange(9, 31)]).view(_MESSAGE_FIELDS)
-        channel = heads['channel'][:, 0]
-        log = heads['log'][:, 0].astype(np.int64)
+        heads = windows(raw, _MESSAGE_FIELDS.itemsize)[at + 9].view(_MESSAGE_FIELDS)
+        channel = heads['channel']
+        log = heads['log'].astype(np.int64)
         ids, counts = np.unique(channel, return_counts=True)
         keep = []
         for channel_id, count in zip(ids.tolist(), counts.tolist(), strict=True):
@@ -435,7 +435,7 @@ class _FileScan:
         # the messages stay in the chunk's bytes: offsets, no object per message
         datas = PackedMessages(data, at + 31, sizes - 22)
         return _Batch(
-            channel[chosen], log[chosen], heads['publish'][chosen, 0].astype(np.int64), datas
+            channel[chosen], log[chosen], heads['publish'][chosen].astype(np.int64), datas
         )
 
     def _indexed_offsets(self, pos: int) -> np.ndarray | None:
@@ -614,7 +614,7 @@ def _tile(raw: np.ndarray, hint: np.ndarray | None) -> tuple[np.ndarray, np.ndar
     at = hint.astype(np.int64)
     if not (raw[at] == fmt.Op.MESSAGE).all():
         return None
-    lengths = np.ascontiguousarray(raw[at[:, None] + np.arange(1, 9)]).view('<u8')[:, 0]
+    lengths = windows(raw, 8)[at + 1].view('<u8')
     if int(lengths.max()) > size:
         return None
     sizes = lengths.astype(np.int64)
@@ -813,6 +813,9 @@ class BagReader:
             select = _ChannelSelector(scan, selected)
             for batch in scan.batches(select, None, None):
                 channels = np.unique(batch.channel).tolist()
+                # A chunk mostly selected stays as it is until the block is joined; of one
+                # mostly not, only the selected bytes are kept (bounded memory).
+                sparse = 2 * int(batch.datas.lengths.sum()) < len(batch.datas.data)
                 for channel_id in channels:
                     topic, msgtype = select.names[channel_id]
                     if topic not in times:
@@ -825,10 +828,7 @@ class BagReader:
                         members = np.flatnonzero(batch.channel == channel_id)
                         times[topic].append(batch.log[members])
                         part = batch.datas.take(members)
-                    if 2 * int(part.lengths.sum()) < len(part.data):
-                        # hold only the selected bytes, not the whole chunk (bounded memory)
-                        part = part.compact()
-                    datas[topic].append(part)
+                    datas[topic].append(part.compact() if sparse else part)
                 held += len(batch.datas)
                 if block_messages is not None and held >= block_messages:
                     yield self._block(times, datas, types, infos)
