@@ -192,12 +192,13 @@ class PackedParts(Sequence[bytes]):
         row: shape (N,) int64, its index within that part.
     """
 
-    __slots__ = ('part', 'parts', 'row')
+    __slots__ = ('_groups', 'part', 'parts', 'row')
 
     def __init__(self, parts: Sequence[PackedMessages], part: np.ndarray, row: np.ndarray) -> None:
         self.parts = tuple(parts)
         self.part = np.asarray(part, dtype=np.int64)
         self.row = np.asarray(row, dtype=np.int64)
+        self._groups: list[tuple[int, np.ndarray]] | None = None
 
     @classmethod
     def join(cls, parts: Sequence[PackedMessages]) -> PackedParts:
@@ -215,15 +216,15 @@ class PackedParts(Sequence[bytes]):
             out[members] = self.parts[j].lengths[self.row[members]]
         return out
 
-    def _members(self) -> Iterator[tuple[int, np.ndarray]]:
+    def _members(self) -> list[tuple[int, np.ndarray]]:
         """(part, positions of its messages) for each part that has messages here."""
-        if not self.part.size:
-            return
-        order = np.argsort(self.part, kind='stable')
-        sorted_part = self.part[order]
-        bounds = np.flatnonzero(np.diff(sorted_part)) + 1
-        for members in np.split(order, bounds):
-            yield int(self.part[members[0]]), members
+        if self._groups is None:
+            self._groups = []
+            if self.part.size:
+                order = np.argsort(self.part, kind='stable')
+                bounds = np.flatnonzero(np.diff(self.part[order])) + 1
+                self._groups = [(int(self.part[m[0]]), m) for m in np.split(order, bounds)]
+        return self._groups
 
     def take(self, index: np.ndarray | slice) -> PackedParts:
         """The messages at ``index`` (no bytes copied)."""
