@@ -165,9 +165,15 @@ class PackedMessages(Sequence[bytes]):
         return self.data[start : start + int(self.lengths[index])]
 
     def __iter__(self) -> Iterator[bytes]:
+        return iter(self.to_list())
+
+    def to_list(self) -> list[bytes]:
+        """The messages as a list of bytes objects (one object per message)."""
         data = self.data
-        for start, length in zip(self.starts.tolist(), self.lengths.tolist(), strict=True):
-            yield data[start : start + length]
+        return [
+            data[start : start + length]
+            for start, length in zip(self.starts.tolist(), self.lengths.tolist(), strict=True)
+        ]
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Sequence) or isinstance(other, (str, bytes)):
