@@ -34,8 +34,9 @@ wheel sensor's stamps with the newest body speed and torque sample not later tha
 (sample and hold, as a live system sees them; a wheel stamp is dropped while an input is
 missing or older than ``max_age`` [s], default 0.5); ``exact`` runs it only on the stamps
 that every input has, and holds a headerless input (Float64MultiArray, stamped on receipt)
-at its latest value: it is the default where an input is headerless. On a lossless stream of vd's own sensors, stamped together, the two
-give the same estimates; when messages are lost, ``exact`` loses every stamp that misses
+at its latest value: it is the default where an input is headerless. On a lossless stream
+of vd's own sensors, stamped together, the two give the same estimates; when messages are
+lost, ``exact`` loses every stamp that misses
 any input (30 % random loss per topic: half the wheel stamps estimated, slope RMS 1.47x the
 lossless one), ``latest`` estimates them all (1.16x; scripts/eval_loss.py).
 
