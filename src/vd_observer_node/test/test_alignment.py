@@ -164,3 +164,21 @@ def test_latest_aligner_gives_the_offline_sets(
     assert live == expected[: len(live)]
     done = min(int(s[-1]) for s in stamps[1:])
     assert len(live) == sum(1 for t in offline.stamp_ns.tolist() if t <= done)
+
+
+@pytest.mark.parametrize('first', ['wheel', 'speed'])
+def test_latest_aligner_matches_a_looped_stream_from_its_first_stamp(first: str) -> None:
+    # a bag played in a loop: every topic jumps back to the start, in either order. The
+    # first stamps of each new loop are matched as on the first loop (a speed that jumped
+    # first was dropped as stale, and the restart then lost the first stamp of the loop).
+    aligner = LatestAligner(('wheel', 'speed'), max_age_ns=20, max_jump_back_ns=30)
+    loop = [100, 110, 120, 130, 140, 150]
+    matched: list[int] = []
+    for _ in range(3):
+        for t in loop:
+            order = ['wheel', 'speed'] if first == 'wheel' else ['speed', 'wheel']
+            for topic in order:
+                matched += [stamp for stamp, _ in aligner.push(topic, t, f'{topic}{t}')]
+    assert matched == loop * 3
+    assert aligner.jump_back_count == 2
+    assert aligner.stale_count == 0 and aligner.dropped_count == 0

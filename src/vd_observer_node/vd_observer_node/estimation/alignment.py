@@ -140,8 +140,14 @@ class LatestAligner:
     after it, so the held samples are final and the sets are those of `align_latest` on the
     same data (each topic's stamps arriving in order). The wait is at most one period of the
     slowest other topic. A message not newer than its topic's last one is stale (dropped and
-    counted); pending driving messages beyond ``capacity`` are dropped oldest first; a
-    driving stamp older than the last one by more than ``max_jump_back_ns`` restarts.
+    counted); pending driving messages beyond ``capacity`` are dropped oldest first.
+
+    A stamp older than its topic's last one by more than ``max_jump_back_ns`` (a looped bag,
+    a restarted source) starts a new time line for that topic: for the driving topic a
+    restart, for another topic its history afresh. The topics jump in any order: one that
+    jumped before the driving topic keeps what it brought on the new line, one that has not
+    jumped yet is emptied at the restart and waited for, so the first driving stamps of the
+    new line are matched as on the first.
     """
 
     def __init__(
@@ -192,9 +198,21 @@ class LatestAligner:
         if count:
             self.jump_back_count += 1
             self.dropped_count += len(self._pending)
+            self._line[self._topics[0]] += 1
+            line = self._line[self._topics[0]]
+            for topic in self._topics[1:]:
+                if self._line[topic] < line:  # not on the new line yet: wait for it afresh
+                    self._history[topic].clear()
+                    self._last[topic] = None
+                    self._line[topic] = line
+            self._last[self._topics[0]] = None
+            self._pending.clear()
+            return
         self._pending: deque[tuple[int, Any]] = deque()
         self._history: dict[str, deque[tuple[int, Any]]] = {t: deque() for t in self._topics[1:]}
         self._last: dict[str, int | None] = dict.fromkeys(self._topics)
+        #: per topic, how many time lines it has started (see the class docstring)
+        self._line: dict[str, int] = dict.fromkeys(self._topics, 0)
 
     def push(self, topic: str, stamp_ns: int, message: Any) -> list[tuple[int, dict[str, Any]]]:
         """Add one message; return the sets it completes, oldest first: (driving stamp [ns],
@@ -207,13 +225,14 @@ class LatestAligner:
             raise ConfigurationError(f'unknown topic {topic!r}; expected one of {self._topics}')
         last = self._last[topic]
         if last is not None and stamp_ns <= last:
-            jump = last - stamp_ns
-            if topic != self._topics[0] or (
-                self._max_jump_back_ns is None or jump <= self._max_jump_back_ns
-            ):
+            if self._max_jump_back_ns is None or last - stamp_ns <= self._max_jump_back_ns:
                 self.stale_count += 1
                 return []
-            self._restart()
+            if topic == self._topics[0]:
+                self._restart()
+            else:  # this input's new time line; the driving topic restarts when it jumps
+                self._line[topic] += 1
+                self._history[topic].clear()
         self._last[topic] = stamp_ns
         if topic == self._topics[0]:
             self._pending.append((stamp_ns, message))
