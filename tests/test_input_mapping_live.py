@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import yaml
 from rosproc import RosProcess, RosProcessGroup
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
     ESTIMATES_TORQUE_OFFSET,
@@ -25,6 +25,7 @@ from vd_sim_node.topics import (
 )
 
 NS = 1_000_000_000
+ROOT = Path(__file__).resolve().parents[1]
 SCRIPTS = Path(__file__).resolve().parent / 'ros_scripts'
 #: the mapping of publish_std_inputs.py's topics, in the mapping file's form
 MAPPING = {
@@ -354,6 +355,7 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     alignment): the live pipeline's slope estimates equal the replay's, stamp for stamp."""
     import dataclasses
 
+    from vd_common.vehicle.params import default_vehicle_file, load_vehicle
     from vd_observer_node.bag import BagReader
     from vd_observer_node.bag.cdr_batch import decode_batch
     from vd_observer_node.inputs.mapping import mapping_from_dict
@@ -363,11 +365,10 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
         write_standard_bag,
     )
     from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
-    from vd_sim_node.vehicle.params import default_vehicle_file, load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
 
-    scenarios = default_vehicle_file().parent / 'scenarios'
+    scenarios = ROOT / 'src' / 'vd_sim_node' / 'config' / 'scenarios'
     scenario = load_scenario(scenarios / 'paper_table1.yaml')
     sim = simulate(
         load_vehicle(default_vehicle_file()), dataclasses.replace(scenario, duration=4.0)
@@ -420,17 +421,19 @@ def test_pipeline_node_on_the_engine_and_no_torque_paths_computes_what_the_repla
     the same, every slope invalid, torque_source 2."""
     import dataclasses
 
+    from vd_common.vehicle.params import default_vehicle_file, load_vehicle
     from vd_observer_node.bag import BagReader
     from vd_observer_node.bag.cdr_batch import decode_batch
     from vd_observer_node.estimation.drivetrain import TORQUE_SOURCES
     from vd_observer_node.inputs.mapping import mapping_from_dict
     from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
     from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
-    from vd_sim_node.vehicle.params import default_vehicle_file, load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
 
-    scenario = load_scenario(default_vehicle_file().parent / 'scenarios' / 'paper_table1.yaml')
+    scenario = load_scenario(
+        ROOT / 'src' / 'vd_sim_node' / 'config' / 'scenarios' / 'paper_table1.yaml'
+    )
     # launch at 8 s, the upshift at 11.5 s
     sim = simulate(
         load_vehicle(default_vehicle_file()),

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PYTHON_PACKAGES = ['vd_sim_node', 'vd_observer_node']
+PYTHON_PACKAGES = ['vd_common', 'vd_sim_node', 'vd_observer_node']
 ALL_PACKAGES = ['vd_msgs', *PYTHON_PACKAGES]
 
 
@@ -45,10 +45,10 @@ def setup_py_kwargs(pkg: str) -> dict[str, object]:
 
 
 def console_scripts(pkg: str) -> dict[str, str]:
-    entry_points = setup_py_kwargs(pkg)['entry_points']
+    entry_points = setup_py_kwargs(pkg).get('entry_points', {})  # vd_common has none
     assert isinstance(entry_points, dict)
     scripts = {}
-    for line in entry_points['console_scripts']:
+    for line in entry_points.get('console_scripts', []):
         name, target = (s.strip() for s in line.split('='))
         scripts[name] = target
     return scripts
@@ -70,6 +70,26 @@ def test_package_xml_and_setup_py_agree_on_name_and_version(pkg: str) -> None:
     assert kwargs['name'] == root.findtext('name') == pkg
     assert kwargs['version'] == root.findtext('version')
     assert root.findtext('export/build_type') == 'ament_python'
+
+
+def run_dependencies(pkg: str) -> set[str]:
+    """What `pkg` needs installed to run (and to build): package.xml's non-test dependencies."""
+    root = ET.parse(ROOT / 'src' / pkg / 'package.xml').getroot()
+    tags = ('depend', 'exec_depend', 'build_depend', 'build_export_depend', 'buildtool_depend')
+    return {str(e.text).strip() for tag in tags for e in root.findall(tag)}
+
+
+@pytest.mark.parametrize('pkg', ['vd_sim_node', 'vd_observer_node'])
+def test_the_simulator_and_the_estimator_depend_on_vd_common(pkg: str) -> None:
+    """Declared in package.xml (colcon builds vd_common first) and in setup.py."""
+    assert 'vd_common' in run_dependencies(pkg)
+    install_requires = setup_py_kwargs(pkg)['install_requires']
+    assert isinstance(install_requires, list) and 'vd_common' in install_requires
+
+
+def test_vd_common_depends_on_no_other_vd_package() -> None:
+    assert not {d for d in run_dependencies('vd_common') if d.startswith('vd_')}
+    assert 'vd_common' not in run_dependencies('vd_msgs')
 
 
 @pytest.mark.parametrize('pkg', PYTHON_PACKAGES)

@@ -16,7 +16,7 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
-    install_requires=['setuptools'],
+    install_requires=['setuptools', 'vd_common'],
     # `vd fleet --engine dask` / `--scheduler`: the fleet replay on a Dask cluster (the local
     # process pool needs nothing more). The dev set-up installs it (requirements/python.in).
     extras_require={'fleet': ['distributed']},

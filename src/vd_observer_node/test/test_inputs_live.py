@@ -288,10 +288,10 @@ def _user_bag_with_truth(
     path: Path, seconds: float, rate: float, gap: tuple[float, float]
 ) -> None:
     """USER_MAPPING's topics and vd's wheel-state truth; the torque topic silent in `gap` [s]."""
+    from vd_common.topics import TRUTH_WHEEL_STATES
     from vd_observer_node.bag import BagWriter
     from vd_observer_node.bag.cdr_batch import encode_batch
     from vd_observer_node.testing.synthetic_bags import synthetic_drive
-    from vd_sim_node.topics import TRUTH_WHEEL_STATES
 
     drive = synthetic_drive(seconds, rate)
     t0 = int(drive.stamp_ns[0])
@@ -322,10 +322,10 @@ def _user_bag_with_truth(
 def test_the_replay_summary_reports_a_topic_that_stopped_and_the_estimates_stay_finite(
     tmp_path: Path,
 ) -> None:
+    from vd_common.topics import ESTIMATES_SLOPE, ESTIMATES_TIRE_FORCES
     from vd_observer_node.bag import BagReader
     from vd_observer_node.bag.cdr_batch import decode_batch
     from vd_observer_node.tools.replay import replay_bag
-    from vd_sim_node.topics import ESTIMATES_SLOPE, ESTIMATES_TIRE_FORCES
 
     bag = tmp_path / 'user'
     _user_bag_with_truth(bag, 4.0, 100.0, gap=(1.0, 1.8))

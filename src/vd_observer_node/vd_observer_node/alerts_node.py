@@ -24,21 +24,21 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
-from vd_sim_node.ros_common import (
+from vd_common.ros_common import (
     DIAGNOSTICS_QOS,
     STREAM_QOS,
     declare_parameters,
     node_status,
     run_node,
 )
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_ALERTS,
     ESTIMATES_FRICTION,
     ESTIMATES_FRICTION_POTENTIAL,
     ESTIMATES_TIRE_FORCES,
     OBSERVER_WHEEL_STATES,
 )
-from vd_sim_node.vehicle.params import default_vehicle_file
+from vd_common.vehicle.params import default_vehicle_file
 
 from vd_msgs.msg import (
     Alerts,

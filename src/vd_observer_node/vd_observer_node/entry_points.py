@@ -1,8 +1,8 @@
-"""Console-script entry points of the nodes (see `vd_sim_node.entry.guarded_main`)."""
+"""Console-script entry points of the nodes (see `vd_common.entry.guarded_main`)."""
 
 from __future__ import annotations
 
-from vd_sim_node.entry import guarded_main
+from vd_common.entry import guarded_main
 
 __all__ = [
     'alerts_node',

@@ -22,14 +22,14 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, TwistStamped
 from rclpy.node import Node
-from vd_sim_node.ros_common import (
+from vd_common.ros_common import (
     DIAGNOSTICS_QOS,
     STREAM_QOS,
     declare_parameters,
     node_status,
     run_node,
 )
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_FRICTION,
     ESTIMATES_MASS,
     ESTIMATES_RESISTANCES,
@@ -40,7 +40,7 @@ from vd_sim_node.topics import (
     OBSERVER_BODY_VELOCITY,
     OBSERVER_WHEEL_STATES,
 )
-from vd_sim_node.vehicle.params import default_vehicle_file
+from vd_common.vehicle.params import default_vehicle_file
 
 from vd_msgs.msg import (
     Friction,

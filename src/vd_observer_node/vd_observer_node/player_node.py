@@ -23,7 +23,7 @@ from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
-from vd_sim_node.ros_common import (
+from vd_common.ros_common import (
     CLOCK_QOS,
     STREAM_QOS,
     NodeFinished,
@@ -35,7 +35,7 @@ from vd_sim_node.ros_common import (
     ros_message_class,
     run_node,
 )
-from vd_sim_node.topics import SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES, SENSORS_WHEEL_TORQUES
+from vd_common.topics import SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES, SENSORS_WHEEL_TORQUES
 
 from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.errors import ReplayInputError
