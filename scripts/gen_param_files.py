@@ -22,12 +22,12 @@ for _package in ('vd_common', 'vd_sim_node', 'vd_observer_node'):
 #: (package, node = executable, the module declaring its PARAMS)
 NODES = [
     ('vd_sim_node', 'sim_node', 'vd_sim_node.sim_node'),
-    ('vd_observer_node', 'observer_node', 'vd_observer_node.observer_node'),
-    ('vd_observer_node', 'estimator_node', 'vd_observer_node.estimator_node'),
-    ('vd_observer_node', 'alerts_node', 'vd_observer_node.alerts_node'),
-    ('vd_observer_node', 'pipeline_node', 'vd_observer_node.pipeline_node'),
-    ('vd_observer_node', 'recorder_node', 'vd_observer_node.recorder_node'),
-    ('vd_observer_node', 'player_node', 'vd_observer_node.player_node'),
+    ('vd_observer_node', 'observer_node', 'vd_observer_node.nodes.observer_node'),
+    ('vd_observer_node', 'estimator_node', 'vd_observer_node.nodes.estimator_node'),
+    ('vd_observer_node', 'alerts_node', 'vd_observer_node.nodes.alerts_node'),
+    ('vd_observer_node', 'pipeline_node', 'vd_observer_node.nodes.pipeline_node'),
+    ('vd_observer_node', 'recorder_node', 'vd_observer_node.nodes.recorder_node'),
+    ('vd_observer_node', 'player_node', 'vd_observer_node.nodes.player_node'),
 ]
 
 

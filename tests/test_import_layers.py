@@ -48,7 +48,7 @@ COMMON_LAYERS: dict[str, set[str]] = {
     'ros_common': {'errors', 'params_file', 'entry'},
 }
 #: modules at a package's top level that belong to its nodes
-_NODE_PLUMBING = {'entry', 'raw_io', 'node_params', 'entry_points'}
+_NODE_PLUMBING = {'entry'}
 #: which packages each package may import
 PACKAGES = {
     'vd_common': set(),

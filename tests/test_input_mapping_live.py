@@ -266,8 +266,7 @@ def test_the_player_plays_a_users_bag_to_the_nodes_given_the_same_mapping(
 
 def test_every_mapping_setting_is_a_declared_parameter_of_the_nodes() -> None:
     from vd_observer_node.inputs.mapping import INPUT_KEYS, INPUTS
-
-    from vd_observer_node import (
+    from vd_observer_node.nodes import (
         alerts_node,
         estimator_node,
         observer_node,
@@ -283,9 +282,9 @@ def test_every_mapping_setting_is_a_declared_parameter_of_the_nodes() -> None:
 
 
 def test_the_separate_nodes_hold_what_derives_from_a_headerless_input() -> None:
-    from vd_observer_node.alerts_node import held_inputs as alerts_held
-    from vd_observer_node.estimator_node import held_inputs as estimator_held
     from vd_observer_node.inputs.mapping import default_mapping, mapping_from_dict
+    from vd_observer_node.nodes.alerts_node import held_inputs as alerts_held
+    from vd_observer_node.nodes.estimator_node import held_inputs as estimator_held
 
     assert estimator_held(default_mapping()) == []
     assert alerts_held(default_mapping()) == []
@@ -303,7 +302,7 @@ def test_the_separate_nodes_hold_what_derives_from_a_headerless_input() -> None:
 
 def test_a_mapping_file_and_mapping_parameters_together_are_refused(tmp_path: Path) -> None:
     from vd_observer_node.inputs.errors import MappingError
-    from vd_observer_node.node_params import take_input_mapping
+    from vd_observer_node.nodes.node_params import take_input_mapping
 
     values = {'input_mapping': str(tmp_path / 'car.yaml'), 'inputs.body_speed.topic': '/odom'}
     with pytest.raises(MappingError, match=r'inputs\.body_speed\.topic are both'):

@@ -27,7 +27,7 @@ from vd_observer_node.inputs.mapping import (
     mapping_from_dict,
     mapping_from_params,
 )
-from vd_observer_node.raw_io import InputMatcher, InputWatch, mapped_input, matched_inputs
+from vd_observer_node.nodes.raw_io import InputMatcher, InputWatch, mapped_input, matched_inputs
 from vd_observer_node.testing.standard_bags import float64_array, header, odometry
 
 NS = 1_000_000_000
@@ -382,7 +382,7 @@ def test_vd_report_takes_a_mapping_replays_a_bag_without_estimates_and_summarise
 
 def test_separate_estimating_nodes_refuse_a_torque_path_they_cannot_run(tmp_path: Path) -> None:
     import yaml
-    from vd_observer_node.node_params import take_input_mapping
+    from vd_observer_node.nodes.node_params import take_input_mapping
 
     path = tmp_path / 'car.yaml'
     path.write_text(yaml.safe_dump({'torque_source': 'engine'}), encoding='utf-8')

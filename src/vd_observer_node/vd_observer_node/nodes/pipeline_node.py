@@ -82,14 +82,14 @@ from vd_observer_node.estimation.faults import ERROR
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.mapping import ENGINE_INPUT
-from vd_observer_node.node_params import (
+from vd_observer_node.nodes.node_params import (
     INPUT_PARAMS,
     PIPELINE_PARAMS,
     input_message_class,
     take_input_mapping,
     undeclared_inputs,
 )
-from vd_observer_node.raw_io import (
+from vd_observer_node.nodes.raw_io import (
     Encoders,
     InputWatch,
     input_matcher,

@@ -52,7 +52,7 @@ from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.decode import has_header
 from vd_observer_node.inputs.mapping import InputMapping
-from vd_observer_node.node_params import (
+from vd_observer_node.nodes.node_params import (
     ALERTS_PARAMS,
     INPUT_PARAMS,
     KERNEL,
@@ -60,7 +60,7 @@ from vd_observer_node.node_params import (
     take_input_mapping,
     undeclared_inputs,
 )
-from vd_observer_node.raw_io import (
+from vd_observer_node.nodes.raw_io import (
     Encoders,
     InputWatch,
     aligned_input,

@@ -47,7 +47,7 @@ from vd_observer_node.estimation.observer import ObserverConfig, SpeedObserver, 
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
-from vd_observer_node.node_params import (
+from vd_observer_node.nodes.node_params import (
     INPUT_PARAMS,
     KERNEL,
     OBSERVER_PARAMS,
@@ -56,7 +56,7 @@ from vd_observer_node.node_params import (
     take_input_mapping,
     undeclared_inputs,
 )
-from vd_observer_node.raw_io import Encoders, InputWatch, merge_status
+from vd_observer_node.nodes.raw_io import Encoders, InputWatch, merge_status
 
 __all__ = ['ObserverNode', 'main']
 

@@ -41,7 +41,7 @@ from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.errors import ReplayInputError
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import InputMapping
-from vd_observer_node.node_params import INPUT_PARAMS, take_input_mapping, undeclared_inputs
+from vd_observer_node.nodes.node_params import INPUT_PARAMS, take_input_mapping, undeclared_inputs
 
 __all__ = ['SENSOR_TOPICS', 'PlayerNode', 'main']
 

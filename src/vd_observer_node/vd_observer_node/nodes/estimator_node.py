@@ -56,7 +56,7 @@ from vd_observer_node.estimation.faults import merge_reports, summarise
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.inputs.decode import has_header
 from vd_observer_node.inputs.mapping import InputMapping
-from vd_observer_node.node_params import (
+from vd_observer_node.nodes.node_params import (
     ESTIMATOR_PARAMS,
     INPUT_PARAMS,
     KERNEL,
@@ -64,7 +64,7 @@ from vd_observer_node.node_params import (
     take_input_mapping,
     undeclared_inputs,
 )
-from vd_observer_node.raw_io import (
+from vd_observer_node.nodes.raw_io import (
     Encoders,
     InputWatch,
     aligned_input,
