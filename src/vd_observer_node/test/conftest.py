@@ -1,7 +1,7 @@
 """Make the vd_observer_node and vd_common sources importable before colcon installs them.
 
 vd_sim_node too: the tests use the simulator as their oracle (a test dependency only; the
-package itself never imports it).
+package itself never imports it, tests/test_standalone_estimator.py checks that).
 """
 
 import sys
