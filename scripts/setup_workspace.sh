@@ -129,4 +129,13 @@ EOF
 if [ ! -f env.sh ] || [ "$(cat env.sh)" != "$env_text" ]; then
   printf '%s\n' "$env_text" > env.sh
 fi
+# --- 5. the compiled kernels, into numba's disk cache of the new build ---------------------
+# so that the first `vd replay` or node start loads machine code instead of compiling (~30 s)
+kernels_stamp="$root/install/.vd-kernels-$src_hash"
+if [ ! -f "$kernels_stamp" ]; then
+  log "compiling the kernels"
+  (set +u && . ./env.sh && python -m vd_observer_node.kernel) >&2
+  rm -f "$root"/install/.vd-kernels-*
+  touch "$kernels_stamp"
+fi
 log "ready ($mode): . ./env.sh"

@@ -114,11 +114,21 @@ class RosProcessGroup:
         self.procs.append(proc)
         return proc
 
-    def node(self, name: str, package: str, executable: str, **params: object) -> RosProcess:
-        """Start a node as `ros2 run` would, with `-p key:=value` for each parameter."""
+    def node(
+        self,
+        name: str,
+        package: str,
+        executable: str,
+        env: dict[str, str] | None = None,
+        **params: object,
+    ) -> RosProcess:
+        """Start a node as `ros2 run` would, with `-p key:=value` for each parameter.
+
+        `env` adds to (or overrides) the group's environment for this process.
+        """
         from vd_observer_node.testing.launcher import NodeSpec
 
-        return self.start(name, NodeSpec(package, executable, name, params).argv())
+        return self.start(name, NodeSpec(package, executable, name, params).argv(), **(env or {}))
 
     def python(self, name: str, script: Path | str, *args: str, **env: str) -> RosProcess:
         return self.start(name, [sys.executable, str(script), *args], **env)

@@ -12,6 +12,11 @@ QoS choices (see the README's topic contract):
   1 kHz, because a lost wheel-angle sample is a corrupted derivative.
 * ``/clock``: RELIABLE, depth 1, like ``ros2 bag play``.
 * ``/diagnostics``: RELIABLE, depth 10 (the diagnostic_aggregator default).
+
+A publish the middleware refuses (Fast DDS: ``RCLError: cannot publish data``, seen under
+overload on a 2-core machine) never ends a node: every publisher is made through
+`PublishRefusals`, which counts the refusal per topic, logs the first one of each topic and
+puts a WARN on the node's ``/diagnostics`` (docs/faults.md).
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from typing import Any
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -48,9 +54,11 @@ __all__ = [
     'STREAM_QOS',
     'TEARDOWN_BACKSTOP_GRACE_S',
     'TEARDOWN_TIMEOUT_S',
+    'GuardedPublisher',
     'InvalidParameterError',
     'NodeFinished',
     'ParamSpec',
+    'PublishRefusals',
     'StopSignals',
     'SubscriberGate',
     'TeardownWatchdog',
@@ -58,6 +66,7 @@ __all__ = [
     'declare_parameters',
     'deliver_pending',
     'diagnostic_array',
+    'finish',
     'node_status',
     'ns_to_time',
     'ros_message_class',
@@ -113,7 +122,115 @@ def ros_message_class(type_name: str) -> Any:
 
 
 class NodeFinished(Exception):  # noqa: N818 (a signal, not an error)
-    """Raised from a callback when the node's work is done: `run_node` exits with code 0."""
+    """Raised while a node is built when it has nothing to do: `run_node` exits with code 0.
+
+    From a callback, call `finish` instead: rclpy's EventsExecutor logs every exception that
+    leaves a callback as ``[FATAL] Exception in 'timers' callback`` with its traceback, which
+    read like a crash at the normal end of every scenario.
+    """
+
+
+#: the attribute `finish` sets on a node; `run_node` ends its spin loop when it is true
+_FINISHED = '_vd_finished'
+
+
+def finish(node: Node) -> None:
+    """Ask `run_node` to end `node` with exit code 0 once the running callback returns."""
+    setattr(node, _FINISHED, True)
+
+
+def _finished(node: Any) -> bool:
+    return bool(getattr(node, _FINISHED, False))
+
+
+class GuardedPublisher:
+    """A publisher whose refused publishes are counted by its `PublishRefusals`, not raised.
+
+    Everything but `publish` is the wrapped rclpy publisher's (``topic_name``,
+    ``get_subscription_count``, ``wait_for_all_acked`` ...).
+    """
+
+    __slots__ = ('_publisher', '_refusals', 'topic_name')
+
+    def __init__(self, publisher: Any, refusals: PublishRefusals) -> None:
+        self._publisher = publisher
+        self._refusals = refusals
+        self.topic_name: str = publisher.topic_name
+
+    def publish(self, msg: Any) -> bool:
+        """Publish `msg` (a message or its CDR bytes); False if the middleware refused it."""
+        try:
+            self._publisher.publish(msg)
+        except RCLError as exc:
+            self._refusals.note(self.topic_name, exc)
+            return False
+        return True
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._publisher, name)
+
+
+class PublishRefusals:
+    """Makes a node's publishers and counts the publishes the middleware refused, per topic.
+
+    A refused publish is a lost message, not a reason to stop: the node goes on with the next
+    sample. The first refusal of each topic is logged (WARN) with the middleware's words; the
+    counts go to ``/diagnostics`` through `status`.
+    """
+
+    def __init__(self, node: Node) -> None:
+        """Publishers made by `publisher` are `node`'s; refusals are logged by its logger."""
+        self._node = node
+        #: refused publishes per topic, since the node started
+        self.counts: dict[str, int] = {}
+        self._reported = 0
+
+    @property
+    def total(self) -> int:
+        """Refused publishes on all topics since the node started."""
+        return sum(self.counts.values())
+
+    def publisher(self, msg_type: Any, topic: str, qos: QoSProfile) -> GuardedPublisher:
+        """``node.create_publisher(msg_type, topic, qos)``, guarded."""
+        return self.guard(self._node.create_publisher(msg_type, topic, qos))
+
+    def guard(self, publisher: Any) -> GuardedPublisher:
+        """Wrap an rclpy publisher of the node."""
+        return GuardedPublisher(publisher, self)
+
+    def note(self, topic: str, exc: BaseException) -> None:
+        """Count one refused publish on `topic`; log the first of the topic."""
+        n = self.counts.get(topic, 0) + 1
+        self.counts[topic] = n
+        if n == 1:
+            first_line = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            self._node.get_logger().warning(
+                f'publish refused on {topic} ({first_line}): counted on /diagnostics, going on'
+            )
+
+    def status(self, level: int, message: str) -> tuple[int, str, dict[str, object]]:
+        """A node's diagnostic level and message with the refusals since the last call added.
+
+        Args:
+            level: the node's level so far, 0 (OK), 1 (WARN), 2 (ERROR).
+            message: its message so far ('ok' when level is 0).
+
+        Returns:
+            (level, message, values): WARN at least when publishes were refused since the
+            previous call, the message naming how many and where; values holds the total
+            ``refused_publishes`` and the count per topic.
+        """
+        total = self.total
+        values: dict[str, object] = {'refused_publishes': total}
+        values.update({f'refused_publishes[{topic}]': n for topic, n in self.counts.items()})
+        new = total - self._reported
+        self._reported = total
+        if new:
+            topics = ', '.join(sorted(self.counts))
+            note = f'{new} publishes refused by the middleware ({topics})'
+            message = note if level == 0 else f'{message}; {note}'
+            level = max(level, 1)
+        return level, message, values
 
 
 class InvalidParameterError(Exception):
@@ -477,7 +594,8 @@ def run_node(factory: Any, args: list[str] | None = None) -> int:
     ``VD_ROS_EXECUTOR=single_threaded`` selects the other. Both spin with ``spin_once`` in a
     loop that checks `StopSignals`, so SIGINT and SIGTERM at any moment end the node with
     exit code 0, one log line and its outputs closed (``close()`` of the node, e.g. the
-    recorder's bag); a callback raising `NodeFinished` ends it with 0 too.
+    recorder's bag); a callback calling `finish` (or the factory raising `NodeFinished`) ends
+    it with 0 too.
 
     A refused parameter or a bad configuration file ends the process with ONE line on stderr
     naming the problem (exit code 2), not a traceback, printed and flushed before the
@@ -492,8 +610,6 @@ def run_node(factory: Any, args: list[str] | None = None) -> int:
     if kind not in EXECUTORS:
         print(f'error: VD_ROS_EXECUTOR={kind!r}; use one of {EXECUTORS}', file=sys.stderr)
         return 2
-    from rclpy._rclpy_pybind11 import RCLError
-
     problem = params_file_problem(sys.argv if args is None else args)
     if problem is not None:
         print(f'error: {problem}', file=sys.stderr, flush=True)
@@ -515,7 +631,7 @@ def run_node(factory: Any, args: list[str] | None = None) -> int:
             gc.freeze()
             executor = _executor(kind)
             executor.add_node(node)
-            while not signals.stop:
+            while not signals.stop and not _finished(node):
                 executor.spin_once(timeout_sec=_SPIN_TIMEOUT_S)
             # A node that records (drain_on_stop_s > 0) first takes what the middleware has
             # already delivered to it, so a stop does not drop the messages just received.

@@ -43,3 +43,27 @@ def test_an_unwritable_cache_is_left_alone(tmp_path: Path) -> None:
     (folder / '__pycache__').rmdir()
     (folder / '__pycache__').write_text('not a folder', encoding='utf-8')
     assert not clear_stale_cache(folder)
+
+
+def test_a_changed_constant_outside_the_kernels_drops_the_cache(tmp_path: Path) -> None:
+    # the compiled estimator bakes in constants of estimation/drivetrain.py: the cache is keyed
+    # on the whole package, not only on the kernels' folder
+    package = tmp_path / 'pkg'
+    kernels = _folder(package)
+    (package / 'estimation').mkdir()
+    constants = package / 'estimation' / 'drivetrain.py'
+    constants.write_text('EFFICIENCY = 0.9\n', encoding='utf-8')
+    assert clear_stale_cache(kernels, package)
+    files = _cache_files(kernels)
+    assert not clear_stale_cache(kernels, package)
+    constants.write_text('EFFICIENCY = 0.95\n', encoding='utf-8')
+    assert clear_stale_cache(kernels, package)
+    assert not any(path.exists() for path in files)
+
+
+def test_the_installed_kernels_are_keyed_on_their_whole_package() -> None:
+    from vd_observer_node.kernel import _jit
+
+    assert _jit.KERNELS.parent == _jit.PACKAGE
+    stamp = _jit.KERNELS / '__pycache__' / STAMP_NAME  # written at import: a writable tree
+    assert stamp.read_text(encoding='ascii') == sources_digest(_jit.PACKAGE)

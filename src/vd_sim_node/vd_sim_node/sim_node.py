@@ -23,9 +23,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, TwistStamped
-from rclpy._rclpy_pybind11 import RCLError
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
@@ -35,12 +34,13 @@ from vd_common.ros_common import (
     CLOCK_QOS,
     DIAGNOSTICS_QOS,
     STREAM_QOS,
-    NodeFinished,
     ParamSpec,
+    PublishRefusals,
     SubscriberGate,
     declare_parameters,
     deliver_pending,
     diagnostic_array,
+    finish,
     ns_to_time,
     run_node,
 )
@@ -219,9 +219,10 @@ class SimNode(Node):
         self._next_progress = 0.0
 
         self.streams: list[Any] = []
+        self.refusals = PublishRefusals(self)
 
         def pub(kind: Any, topic: str) -> Any:
-            self.streams.append(self.create_publisher(kind, topic, STREAM_QOS))
+            self.streams.append(self.refusals.publisher(kind, topic, STREAM_QOS))
             return self.streams[-1]
 
         self.p_angles = pub(WheelAngles, SENSORS_WHEEL_ANGLES)
@@ -236,18 +237,17 @@ class SimNode(Node):
             self.t_resist = pub(Resistances, TRUTH_RESISTANCES)
             self.t_slope = pub(Slope, TRUTH_SLOPE)
             self.t_potential = pub(FrictionPotential, TRUTH_FRICTION_POTENTIAL)
-        self.p_clock = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS)
-        self.p_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.p_clock = self.refusals.publisher(ClockMsg, '/clock', CLOCK_QOS)
+        self.p_diag = self.refusals.publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
 
         self.published = 0
-        self.publish_failures = 0
         self.wall_start: float | None = None
         self.first_sample_at = time.monotonic() + v['start_delay']
         self.wait_for_subscribers = v['wait_for_subscribers']
         self.min_sensor_subscribers = v['min_sensor_subscribers']
         self.gate: SubscriberGate | None = None
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(_BATCH_PERIOD, self.publish_batch, clock=steady)
+        self.batch_timer = self.create_timer(_BATCH_PERIOD, self.publish_batch, clock=steady)
         self.create_timer(1.0, self.publish_diagnostics, clock=steady)
         self.get_logger().info(
             f'scenario {self.scenario.name!r} ({self.scenario.duration:g} s) at '
@@ -278,13 +278,7 @@ class SimNode(Node):
         last: SampleFrame | None = None
         while not self.sim.done and self.sim.t <= target and time.monotonic() < deadline:
             last = self.sim.step()
-            try:
-                self.publish_frame(last)
-            except RCLError as exc:
-                # the middleware refused a publish (overload): count it, keep simulating
-                self.publish_failures += 1
-                if self.publish_failures == 1:
-                    self.get_logger().warning(f'publish failed at t={last.t:.3f} s: {exc}')
+            self.publish_frame(last)  # a refused publish is counted by self.refusals
         if last is not None:
             self.p_clock.publish(ClockMsg(clock=self._stamp(last.t)))
             self._log_progress(last)
@@ -294,7 +288,8 @@ class SimNode(Node):
                 f'{self.sim.t:.3f} s simulated in {time.monotonic() - self.wall_start:.1f} s'
             )
             deliver_pending(self)
-            raise NodeFinished()
+            self.batch_timer.cancel()
+            finish(self)
 
     def _stamp(self, t: float) -> Any:
         return ns_to_time(round(t * 1e9))
@@ -361,16 +356,15 @@ class SimNode(Node):
         problems = []
         if lagging:
             problems.append(f'behind real-time factor {self.rtf:g} (achieved {achieved:.2f})')
-        if self.publish_failures:
-            problems.append(f'{self.publish_failures} samples failed to publish')
-        level = DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
-        message = '; '.join(problems) or 'ok'
+        level, message, refused = self.refusals.status(
+            1 if problems else 0, '; '.join(problems) or 'ok'
+        )
         values = {
             'sim_time_s': f'{self.sim.t:.3f}',
             'samples_published': self.published,
             'achieved_real_time_factor': f'{achieved:.2f}',
             'requested_real_time_factor': self.rtf,
-            'publish_failures': self.publish_failures,
+            **refused,
         }
         self.p_diag.publish(
             diagnostic_array(

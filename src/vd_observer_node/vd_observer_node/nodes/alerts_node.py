@@ -27,6 +27,7 @@ from rclpy.node import Node
 from vd_common.ros_common import (
     DIAGNOSTICS_QOS,
     STREAM_QOS,
+    PublishRefusals,
     declare_parameters,
     node_status,
     run_node,
@@ -108,6 +109,7 @@ class AlertsNode(Node):
 
     def __init__(self) -> None:
         super().__init__('alerts_node')
+        self.refusals = PublishRefusals(self)  # a refused publish is counted, not fatal
         values = declare_parameters(self, PARAMS)
         mapping = take_input_mapping(values, undeclared_inputs(self), estimates=True)
         sensors = {key: getattr(mapping, name) for key, name in _SENSORS.items()}
@@ -148,11 +150,11 @@ class AlertsNode(Node):
             mapping, TOPICS, capacity, max_gap_ns, max_gap_ns, held=held_inputs(mapping)
         )
         self.watch = InputWatch([spec.topic for spec in sensors.values()], max_gap_ns)
-        self.pub_alerts = self.create_publisher(Alerts, ESTIMATES_ALERTS, STREAM_QOS)
-        self.pub_potential = self.create_publisher(
+        self.pub_alerts = self.refusals.publisher(Alerts, ESTIMATES_ALERTS, STREAM_QOS)
+        self.pub_potential = self.refusals.publisher(
             FrictionPotential, ESTIMATES_FRICTION_POTENTIAL, STREAM_QOS
         )
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.pub_diag = self.refusals.publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self.encoders = Encoders()
         self.counts = {'estimates': 0, 'alerts_raised': 0, 'undecodable': 0, 'unfit': 0}
         clock = self.get_clock()
@@ -235,6 +237,8 @@ class AlertsNode(Node):
             level, message, self.watch, time.monotonic_ns()
         )
         values.update(watch_values)
+        level, message, refused = self.refusals.status(level, message)
+        values.update(refused)
         self.pub_diag.publish(
             node_status(self, 'vd: alerts', 'alerts_node', level, message, values)
         )

@@ -25,6 +25,7 @@ from rclpy.node import Node
 from vd_common.ros_common import (
     DIAGNOSTICS_QOS,
     STREAM_QOS,
+    PublishRefusals,
     declare_parameters,
     node_status,
     run_node,
@@ -106,6 +107,7 @@ class EstimatorNode(Node):
 
     def __init__(self) -> None:
         super().__init__('estimator_node')
+        self.refusals = PublishRefusals(self)  # a refused publish is counted, not fatal
         values = declare_parameters(self, PARAMS)
         mapping = take_input_mapping(values, undeclared_inputs(self), estimates=True)
         self.kernel = values.pop('kernel')
@@ -133,23 +135,23 @@ class EstimatorNode(Node):
         )
         self.watch = InputWatch([spec.topic for spec in sensors.values()], max_gap_ns)
         self._align_reported: dict[str, int] = {}
-        self.pub_forces = self.create_publisher(TireForces, ESTIMATES_TIRE_FORCES, STREAM_QOS)
-        self.pub_friction = self.create_publisher(Friction, ESTIMATES_FRICTION, STREAM_QOS)
-        self.pub_resist = self.create_publisher(Resistances, ESTIMATES_RESISTANCES, STREAM_QOS)
-        self.pub_slope = self.create_publisher(Slope, ESTIMATES_SLOPE, STREAM_QOS)
+        self.pub_forces = self.refusals.publisher(TireForces, ESTIMATES_TIRE_FORCES, STREAM_QOS)
+        self.pub_friction = self.refusals.publisher(Friction, ESTIMATES_FRICTION, STREAM_QOS)
+        self.pub_resist = self.refusals.publisher(Resistances, ESTIMATES_RESISTANCES, STREAM_QOS)
+        self.pub_slope = self.refusals.publisher(Slope, ESTIMATES_SLOPE, STREAM_QOS)
         # The online mass and radius only when adapted: with the file's constants they would
         # add two 1 kHz streams to a graph that is at its limit on two cores.
         self.pub_mass = (
-            self.create_publisher(MassEstimate, ESTIMATES_MASS, STREAM_QOS)
+            self.refusals.publisher(MassEstimate, ESTIMATES_MASS, STREAM_QOS)
             if config.mass_adaptation
             else None
         )
         self.pub_radius = (
-            self.create_publisher(RollingRadiusEstimate, ESTIMATES_ROLLING_RADIUS, STREAM_QOS)
+            self.refusals.publisher(RollingRadiusEstimate, ESTIMATES_ROLLING_RADIUS, STREAM_QOS)
             if config.radius_adaptation
             else None
         )
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.pub_diag = self.refusals.publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._codec = Encoders()
         self.counts = {
             'estimates': 0,
@@ -258,6 +260,8 @@ class EstimatorNode(Node):
             report.level, report.message, self.watch, time.monotonic_ns()
         )
         values.update(watch_values)
+        level, message, refused = self.refusals.status(level, message)
+        values.update(refused)
         self.pub_diag.publish(
             node_status(self, 'vd: estimator', 'estimator_node', level, message, values)
         )

@@ -29,6 +29,7 @@ from rclpy.node import Node
 from vd_common.ros_common import (
     DIAGNOSTICS_QOS,
     STREAM_QOS,
+    PublishRefusals,
     declare_parameters,
     node_status,
     run_node,
@@ -71,6 +72,7 @@ class ObserverNode(Node):
 
     def __init__(self) -> None:
         super().__init__('observer_node')
+        self.refusals = PublishRefusals(self)  # a refused publish is counted, not fatal
         values = declare_parameters(self, PARAMS)
         mapping = take_input_mapping(values, undeclared_inputs(self))
         angles_spec, speed_spec = mapping.wheels, mapping.body_speed
@@ -94,10 +96,10 @@ class ObserverNode(Node):
             differentiator = CompiledDifferentiator  # type: ignore[assignment]  # a drop-in
         self.wheels = WheelObserver(self.config, differentiator=differentiator)
         self.speed = SpeedObserver(self.config, differentiator=differentiator)
-        self.pub_states = self.create_publisher(WheelStates, OBSERVER_WHEEL_STATES, STREAM_QOS)
-        self.pub_accel = self.create_publisher(AccelStamped, OBSERVER_BODY_ACCEL, STREAM_QOS)
-        self.pub_speed = self.create_publisher(TwistStamped, OBSERVER_BODY_VELOCITY, STREAM_QOS)
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.pub_states = self.refusals.publisher(WheelStates, OBSERVER_WHEEL_STATES, STREAM_QOS)
+        self.pub_accel = self.refusals.publisher(AccelStamped, OBSERVER_BODY_ACCEL, STREAM_QOS)
+        self.pub_speed = self.refusals.publisher(TwistStamped, OBSERVER_BODY_VELOCITY, STREAM_QOS)
+        self.pub_diag = self.refusals.publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         # SI values with the mapping's signs, one message at a time (struct for vd's types)
         self._angles_in = InputDecoder(angles_spec, radius)
         self._speed_in = InputDecoder(speed_spec)
@@ -200,6 +202,8 @@ class ObserverNode(Node):
             **report.counts,
             **watch_values,
         }
+        level, message, refused = self.refusals.status(level, message)
+        values.update(refused)
         self.pub_diag.publish(
             node_status(self, 'vd: observer', 'observer_node', level, message, values)
         )

@@ -41,6 +41,7 @@ from vd_common.ros_common import (
     DIAGNOSTICS_QOS,
     STATE_QOS,
     STREAM_QOS,
+    PublishRefusals,
     declare_parameters,
     node_status,
     run_node,
@@ -182,6 +183,7 @@ class PipelineNode(Node):
 
     def __init__(self) -> None:
         super().__init__('pipeline_node')
+        self.refusals = PublishRefusals(self)  # a refused publish is counted, not fatal
         values = declare_parameters(self, PARAMS)
         mapping = take_input_mapping(
             values, undeclared_inputs(self), estimates=True, torque_paths=True
@@ -216,12 +218,12 @@ class PipelineNode(Node):
             and settings.estimator.torque_offset_adaptation,
         }
         self.pubs = {
-            key: self.create_publisher(cls, topic, STATE_QOS if key == 'offset' else STREAM_QOS)
+            key: self.refusals.publisher(cls, topic, STATE_QOS if key == 'offset' else STREAM_QOS)
             for key, cls, topic, _ in _OUTPUTS
             if adapted.get(key, True)
         }
         self._offset_last: tuple[int, bool] | None = None  # (episodes, converged) published
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.pub_diag = self.refusals.publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self._types = {key: msgtype for key, _, _, msgtype in _OUTPUTS if key != 'alerts'}
         self.encoders = Encoders()
         self.counts = {
@@ -373,6 +375,8 @@ class PipelineNode(Node):
             **report.counts,
             **watch_values,
         }
+        level, message, refused = self.refusals.status(level, message)
+        values.update(refused)
         self.pub_diag.publish(
             node_status(self, 'vd: pipeline', 'pipeline_node', level, message, values)
         )

@@ -18,19 +18,22 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from rclpy._rclpy_pybind11 import RCLError
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from vd_common.ros_common import (
     CLOCK_QOS,
+    DIAGNOSTICS_QOS,
     STREAM_QOS,
-    NodeFinished,
     ParamSpec,
+    PublishRefusals,
     SubscriberGate,
     declare_parameters,
     deliver_pending,
+    finish,
+    node_status,
     ns_to_time,
     ros_message_class,
     run_node,
@@ -134,16 +137,20 @@ class PlayerNode(Node):
         self.messages = list(reader.raw_messages(wanted, ordered=True))
         if not self.messages:
             raise ReplayInputError(f'{v["bag"]}: the selected topics hold no message')
+        self.refusals = PublishRefusals(self)
         self.publishers_by_topic = {
-            t: self.create_publisher(ros_message_class(available[t].msgtype), t, STREAM_QOS)
+            t: self.refusals.publisher(ros_message_class(available[t].msgtype), t, STREAM_QOS)
             for t in wanted
         }
-        self.p_clock = self.create_publisher(ClockMsg, '/clock', CLOCK_QOS) if v['clock'] else None
+        self.p_clock = (
+            self.refusals.publisher(ClockMsg, '/clock', CLOCK_QOS) if v['clock'] else None
+        )
+        self.p_diag = self.refusals.publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self.rate = v['rate']
         self.loop = v['loop']
         self.index = 0
         self.loops = 0
-        self.publish_failures = 0
+        self.played = 0
         self.t0_bag = self.messages[0].log_time_ns
         self.t0_wall: float | None = None
         self.start_at = time.monotonic() + v['start_delay']
@@ -153,7 +160,8 @@ class PlayerNode(Node):
             min_subscribers=v['min_subscribers'],
         )
         steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(_PERIOD, self.play, clock=steady)
+        self.play_timer = self.create_timer(_PERIOD, self.play, clock=steady)
+        self.create_timer(1.0, self.publish_diagnostics, clock=steady)
         span = (self.messages[-1].log_time_ns - self.t0_bag) * 1e-9
         self.get_logger().info(
             f'playing {len(self.messages)} messages ({span:.1f} s) of {len(wanted)} topics '
@@ -174,23 +182,27 @@ class PlayerNode(Node):
         last: Any = None
         while self.index < len(self.messages) and self.messages[self.index].log_time_ns <= due_ns:
             last = self.messages[self.index]
-            try:
-                self.publishers_by_topic[last.topic].publish(last.data)
-            except RCLError as exc:  # the middleware refused (overload): count, play on
-                self.publish_failures += 1
-                if self.publish_failures == 1:
-                    self.get_logger().warning(f'publish failed on {last.topic}: {exc}')
+            # a refused publish (overload) is counted by self.refusals: play on
+            self.publishers_by_topic[last.topic].publish(last.data)
             self.index += 1
+            self.played += 1
         if last is not None and self.p_clock is not None:
             self.p_clock.publish(ClockMsg(clock=ns_to_time(last.log_time_ns)))
         if self.index >= len(self.messages):
             if not self.loop:
                 self.get_logger().info(f'played {len(self.messages)} messages')
                 deliver_pending(self)
-                raise NodeFinished()
+                self.play_timer.cancel()
+                finish(self)
+                return
             self.loops += 1
             self.index = 0
             self.t0_wall = None
+
+    def publish_diagnostics(self) -> None:
+        level, message, refused = self.refusals.status(0, 'ok')
+        values = {'messages_played': self.played, 'loops': self.loops, **refused}
+        self.p_diag.publish(node_status(self, 'vd: player', 'player_node', level, message, values))
 
 
 def main(args: list[str] | None = None) -> int:

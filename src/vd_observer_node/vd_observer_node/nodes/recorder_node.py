@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -29,6 +29,7 @@ from vd_common.ros_common import (
     DIAGNOSTICS_QOS,
     STREAM_QOS,
     ParamSpec,
+    PublishRefusals,
     declare_parameters,
     node_status,
     ros_message_class,
@@ -39,6 +40,7 @@ from vd_common.topics import CONTRACT, NAMESPACE
 from vd_observer_node.bag import BagWriter
 from vd_observer_node.bag.errors import BagError, UnknownMessageTypeError
 from vd_observer_node.bag.metadata import format_qos_profiles
+from vd_observer_node.estimation.faults import ERROR, OK
 
 __all__ = ['RecorderNode', 'main']
 
@@ -81,6 +83,7 @@ class RecorderNode(Node):
 
     def __init__(self) -> None:
         super().__init__('recorder_node')
+        self.refusals = PublishRefusals(self)  # a refused publish is counted, not fatal
         #: [s] run_node spins this long after a stop signal, so what was delivered is written
         self.drain_on_stop_s = 0.3
         v = declare_parameters(self, PARAMS)
@@ -101,7 +104,7 @@ class RecorderNode(Node):
         self.create_timer(v['discovery_period'], self.discover, clock=steady)
         self.create_timer(0.1, self.flush, clock=steady)
         self.create_timer(1.0, self.publish_diagnostics, clock=steady)
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self.pub_diag = self.refusals.publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self.get_logger().info(f'recording to {self.writer.path}')
         if v['contract_topics']:
             for topic, type_name in CONTRACT.items():
@@ -182,7 +185,7 @@ class RecorderNode(Node):
             self.get_logger().error(f'cannot flush the bag: {exc}')
 
     def publish_diagnostics(self) -> None:
-        level = DiagnosticStatus.OK if self.write_errors == 0 else DiagnosticStatus.ERROR
+        level = OK if self.write_errors == 0 else ERROR
         message = 'ok' if self.write_errors == 0 else f'{self.write_errors} write errors'
         values = {
             'bag': str(self.writer.path),
@@ -190,6 +193,8 @@ class RecorderNode(Node):
             'messages': self.writer.message_count,
             'write_errors': self.write_errors,
         }
+        level, message, refused = self.refusals.status(level, message)
+        values.update(refused)
         self.pub_diag.publish(
             node_status(self, 'vd: recorder', 'recorder_node', level, message, values)
         )
