@@ -152,3 +152,17 @@ def test_parameter_files_match_the_declared_parameters() -> None:
         text=True,
     )
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_test_modules_have_unique_names() -> None:
+    """pytest imports test files by their basename (no __init__.py in the test folders): two
+    files of one name in different folders stop the whole collection ('import file mismatch')."""
+    folders = [ROOT / 'tests', *(ROOT / 'src' / pkg / 'test' for pkg in PYTHON_PACKAGES)]
+    seen: dict[str, Path] = {}
+    clashes = []
+    for folder in folders:
+        for path in sorted(folder.glob('test_*.py')):
+            if path.name in seen:
+                clashes.append(f'{path.relative_to(ROOT)} and {seen[path.name].relative_to(ROOT)}')
+            seen[path.name] = path
+    assert clashes == []
