@@ -5,11 +5,18 @@ Starts recorder_node, observer_node, estimator_node, alerts_node and sim_node as
 processes over the real middleware (the same graph as `launch/demo.launch.py` for a system
 ROS 2), shows the simulation's progress, stops every process cleanly with SIGINT, keeps the
 bag and runs `vd report` on it. Run inside the workspace environment (`make demo` sources env.sh).
+
+By default the simulator runs in lockstep with the estimator, the alerts node and the recorder
+(it waits for their progress, at most 0.5 s of sample time ahead, the real-time factor a cap):
+nothing is lost on a slow machine, so the figures are the same on every machine and every run.
+``--real-time`` paces it by the wall clock alone, as a car does: a machine that cannot keep up
+then loses messages, and the diagnostics and the report say so.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import shutil
 import sys
@@ -17,6 +24,7 @@ import time
 from pathlib import Path
 
 from tqdm import tqdm
+from vd_common.topics import ESTIMATES_ALERTS, ESTIMATES_SLOPE, STATUS_RECORDER_PROGRESS
 from vd_observer_node.testing.launcher import GraphLauncher, NodeSpec
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -29,6 +37,19 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--rate-hz', type=float, default=1000.0, help='sensor rate [Hz]')
     parser.add_argument(
         '--real-time-factor', type=float, default=1.0, help='simulated s per wall s'
+    )
+    parser.add_argument(
+        '--real-time',
+        action='store_true',
+        help='pace the simulator by the wall clock alone (no lockstep: a slow machine loses data)',
+    )
+    parser.add_argument(
+        '--lockstep-topics',
+        default=f'{ESTIMATES_SLOPE},{ESTIMATES_ALERTS},{STATUS_RECORDER_PROGRESS}',
+        help='comma-separated topics the simulator waits for in lockstep',
+    )
+    parser.add_argument(
+        '--lockstep-window', type=float, default=0.5, help='lockstep window [s of sample time]'
     )
     parser.add_argument('--out', type=Path, default=ROOT / 'out' / 'demo', help='output folder')
     parser.add_argument('--encoder-counts', type=int, default=-1, help='-1: scenario setting')
@@ -43,11 +64,30 @@ def main(argv: list[str] | None = None) -> int:
     if args.out.exists():
         shutil.rmtree(args.out)
     args.out.mkdir(parents=True)
+    pacing = 'real time' if args.real_time else 'lockstep with estimator, alerts and recorder'
     print(
-        f'demo: scenario {args.scenario} at {args.rate_hz:g} Hz, real-time factor '
+        f'demo: scenario {args.scenario} at {args.rate_hz:g} Hz, {pacing}, real-time factor '
         f'{args.real_time_factor:g}; logs and bag in {args.out}',
         flush=True,
     )
+    lockstep = (
+        {}
+        if args.real_time
+        else {
+            'lockstep_topics': args.lockstep_topics,
+            'lockstep_window': args.lockstep_window,
+        }
+    )
+    if lockstep and 'FASTDDS_DEFAULT_PROFILES_FILE' not in os.environ:
+        # a heartbeat every 50 ms: a message lost in a pause of the stream is repaired then,
+        # not after Fast DDS's default 3 s (config/fastdds_lockstep.xml says why)
+        from ament_index_python.packages import get_package_share_directory
+
+        share = Path(get_package_share_directory('vd_observer_node'))
+        os.environ['FASTDDS_DEFAULT_PROFILES_FILE'] = str(
+            share / 'config' / 'fastdds_lockstep.xml'
+        )
+    started = time.monotonic()
     with GraphLauncher(args.out / 'logs') as graph:
         graph.start_all(
             [
@@ -74,6 +114,7 @@ def main(argv: list[str] | None = None) -> int:
                     'encoder_counts_per_rev': args.encoder_counts,
                     'speed_noise_std': args.speed_noise,
                     'progress_period': 1.0,
+                    **lockstep,
                 },
             )
         )
@@ -99,8 +140,11 @@ def main(argv: list[str] | None = None) -> int:
         if sim.popen.returncode != 0:
             print(f'demo: the simulator failed:\n{sim.log_tail()}')
             return 1
-        time.sleep(2.0)  # the last samples through observer and estimator to the recorder
+        # in lockstep the simulator ended once its consumers had the last sample; in real time
+        # give the last samples time to go through observer and estimator to the recorder
+        time.sleep(0.5 if lockstep else 2.0)
         codes = graph.stop_all()
+    print(f'demo: graph ran {time.monotonic() - started:.0f} s', flush=True)
     if any(codes.values()):
         print(f'demo: exit codes {codes}; logs in {args.out / "logs"}')
     from vd_observer_node.tools.cli import main as vd

@@ -33,9 +33,10 @@ OBSERVER_LAYERS: dict[str, set[str]] = {
 #: sits on it, the node (sim_node and its entry point) on top.
 SIM_LAYERS: dict[str, set[str]] = {
     'errors': set(),
+    'lockstep': set(),
     'bondgraph': set(),
     'vehicle': {'errors', 'bondgraph'},
-    'nodes': {'errors', 'bondgraph', 'vehicle'},
+    'nodes': {'errors', 'lockstep', 'bondgraph', 'vehicle'},
 }
 #: vd_common's rooms: the base of the other two, it imports neither of them.
 COMMON_LAYERS: dict[str, set[str]] = {

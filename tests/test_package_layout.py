@@ -154,6 +154,58 @@ def test_parameter_files_match_the_declared_parameters() -> None:
     assert result.returncode == 0, result.stdout + result.stderr
 
 
+#: third-party modules the ROS-free bag core imports: pip name (requirements/python.in) and
+#: rosdep key (package.xml; None: no rosdep key exists, pip only)
+BAG_CORE_IMPORTS = {
+    'numpy': ('numpy', 'python3-numpy'),
+    'yaml': ('pyyaml', 'python3-yaml'),
+    'zstandard': ('zstandard', 'python3-zstandard'),
+    'lz4': ('lz4', 'python3-lz4'),
+    'rosbags': ('rosbags', None),
+}
+
+
+def test_bag_core_imports_are_declared_dependencies() -> None:
+    """Every third-party module vd_observer_node.bag imports is declared, not inherited.
+
+    zstandard and lz4 once arrived only through `mcap`; the bag core's codec imports them
+    itself, so they are listed in requirements/python.in and package.xml in their own right.
+    """
+    bag = ROOT / 'src' / 'vd_observer_node' / 'vd_observer_node' / 'bag'
+    imported: set[str] = set()
+    for path in bag.glob('*.py'):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                imported.update(alias.name.split('.')[0] for alias in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                imported.add(node.module.split('.')[0])
+    third_party = {
+        name
+        for name in imported
+        if name not in sys.stdlib_module_names
+        and name not in ('vd_observer_node', 'vd_common', 'vd_sim_node')
+    }
+    # ament_index_python: optional (a ROS install brings it; the core works without it)
+    third_party.discard('ament_index_python')
+    assert third_party == set(BAG_CORE_IMPORTS), 'update BAG_CORE_IMPORTS and the declarations'
+    requirements = {
+        line.split('#')[0].strip().lower()
+        for line in (ROOT / 'requirements' / 'python.in').read_text().splitlines()
+    }
+    lock = {
+        line.split('==')[0].strip().lower()
+        for line in (ROOT / 'requirements' / 'lock-kilted-py311.txt').read_text().splitlines()
+        if '==' in line
+    }
+    root = ET.parse(ROOT / 'src' / 'vd_observer_node' / 'package.xml').getroot()
+    exec_depends = {e.text for e in root.findall('exec_depend')}
+    for module, (pip_name, rosdep_key) in BAG_CORE_IMPORTS.items():
+        assert pip_name in requirements, f'{module}: {pip_name} not in requirements/python.in'
+        assert pip_name in lock, f'{module}: {pip_name} not pinned in the lock'
+        if rosdep_key is not None:
+            assert rosdep_key in exec_depends, f'{module}: {rosdep_key} not in package.xml'
+
+
 def test_test_modules_have_unique_names() -> None:
     """pytest imports test files by their basename (no __init__.py in the test folders): two
     files of one name in different folders stop the whole collection ('import file mismatch')."""

@@ -8,7 +8,16 @@ from pathlib import Path
 
 import pytest
 import vd_common.topics as topics
-from vd_common.topics import ALERTS, CONTRACT, ESTIMATES, NAMESPACE, OBSERVER, SENSORS, TRUTH
+from vd_common.topics import (
+    ALERTS,
+    CONTRACT,
+    ESTIMATES,
+    NAMESPACE,
+    OBSERVER,
+    SENSORS,
+    STATUS,
+    TRUTH,
+)
 
 ROOT = Path(__file__).resolve().parents[3]
 TOPICS_FILE = ROOT / 'src' / 'vd_common' / 'vd_common' / 'topics.py'
@@ -19,6 +28,7 @@ GROUPS = {
     topics.OBSERVER_NAMESPACE: [OBSERVER],
     topics.ESTIMATES_NAMESPACE: [ESTIMATES, ALERTS],
     topics.TRUTH_NAMESPACE: [TRUTH],
+    topics.STATUS_NAMESPACE: [STATUS],
 }
 
 
@@ -54,7 +64,7 @@ def literal_topic_names(source: str, filename: str = '<source>') -> list[tuple[i
 
 
 def test_every_topic_is_in_one_group_only_and_in_the_group_namespace() -> None:
-    groups = [SENSORS, OBSERVER, ESTIMATES, ALERTS, TRUTH]
+    groups = [SENSORS, OBSERVER, ESTIMATES, ALERTS, TRUTH, STATUS]
     assert sum(len(g) for g in groups) == len(CONTRACT), 'a topic name is in two groups'
     for namespace, members in GROUPS.items():
         assert namespace.startswith(NAMESPACE) and namespace.endswith('/')

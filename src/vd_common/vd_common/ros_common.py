@@ -28,6 +28,7 @@ import gc
 import importlib
 import os
 import re
+import struct
 import sys
 import threading
 import time
@@ -67,6 +68,7 @@ __all__ = [
     'deliver_pending',
     'diagnostic_array',
     'finish',
+    'header_stamp_ns',
     'node_status',
     'ns_to_time',
     'ros_message_class',
@@ -107,6 +109,18 @@ def ns_to_time(ns: int) -> Time:
 def time_to_ns(stamp: Time) -> int:
     """Convert a builtin_interfaces/Time to integer nanoseconds."""
     return int(stamp.sec) * _NS + int(stamp.nanosec)
+
+
+def header_stamp_ns(cdr: bytes) -> int | None:
+    """``header.stamp`` [ns] of a serialized message that begins with a std_msgs/Header.
+
+    Reads the 4-byte encapsulation (CDR little or big endian) and the stamp's sec and nanosec
+    after it, without decoding the message; None where `cdr` is too short or not plain CDR.
+    """
+    if len(cdr) < 12 or cdr[0] != 0 or cdr[1] not in (0, 1):
+        return None
+    sec, nanosec = struct.unpack_from('<iI' if cdr[1] == 1 else '>iI', cdr, 4)
+    return int(sec) * _NS + int(nanosec)
 
 
 def ros_message_class(type_name: str) -> Any:

@@ -32,11 +32,15 @@ __all__ = [
     'OBSERVER_BODY_VELOCITY',
     'OBSERVER_NAMESPACE',
     'OBSERVER_WHEEL_STATES',
+    'ON_CHANGE',
     'SENSORS',
     'SENSORS_BODY_VELOCITY',
     'SENSORS_NAMESPACE',
     'SENSORS_WHEEL_ANGLES',
     'SENSORS_WHEEL_TORQUES',
+    'STATUS',
+    'STATUS_NAMESPACE',
+    'STATUS_RECORDER_PROGRESS',
     'TRUTH',
     'TRUTH_BODY_ACCEL',
     'TRUTH_BODY_VELOCITY',
@@ -56,6 +60,8 @@ SENSORS_NAMESPACE: Final = '/vd/sensors/'
 OBSERVER_NAMESPACE: Final = '/vd/observer/'
 ESTIMATES_NAMESPACE: Final = '/vd/estimates/'
 TRUTH_NAMESPACE: Final = '/vd/truth/'
+#: The nodes' own progress, for a simulator in lockstep (not recorded).
+STATUS_NAMESPACE: Final = '/vd/status/'
 
 # The simulator's measurements (or a bag's), the inputs of the observer and estimator.
 SENSORS_WHEEL_ANGLES: Final = '/vd/sensors/wheel_angles'
@@ -119,4 +125,12 @@ TRUTH: Final = {
     TRUTH_SLOPE: 'vd_msgs/msg/Slope',
     TRUTH_FRICTION_POTENTIAL: 'vd_msgs/msg/FrictionPotential',
 }
-CONTRACT: Final = {**SENSORS, **OBSERVER, **ESTIMATES, **ALERTS, **TRUTH}
+# The recorder's progress: the newest stamp up to which every per-sample topic it records has
+# been written (std_msgs/Header: stamp, frame_id ''), for sim_node's lockstep mode.
+STATUS_RECORDER_PROGRESS: Final = '/vd/status/recorder_progress'
+STATUS: Final = {
+    STATUS_RECORDER_PROGRESS: 'std_msgs/msg/Header',
+}
+CONTRACT: Final = {**SENSORS, **OBSERVER, **ESTIMATES, **ALERTS, **TRUTH, **STATUS}
+#: Topics published only where their value changes, not once per sample.
+ON_CHANGE: Final = frozenset({ESTIMATES_TORQUE_OFFSET})

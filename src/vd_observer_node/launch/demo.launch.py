@@ -4,15 +4,27 @@
         real_time_factor:=1.0 bag:=vd_demo
 
 The same graph as `make demo` (scripts/demo.py), which does not need ros2 launch. The launch
-ends when the simulator finishes the scenario; the recorder then closes the bag.
+ends when the simulator finishes the scenario; the recorder then closes the bag. The simulator
+runs in lockstep with the estimator, the alerts node and the recorder (nothing is lost on a
+slow machine); ``lockstep_topics:=''`` paces it by the wall clock alone.
 """
 
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, EmitEvent, RegisterEventHandler, TimerAction
+from launch.actions import (
+    DeclareLaunchArgument,
+    EmitEvent,
+    RegisterEventHandler,
+    SetEnvironmentVariable,
+    TimerAction,
+)
 from launch.event_handlers import OnProcessExit
 from launch.events import Shutdown
-from launch.substitutions import LaunchConfiguration
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
+from launch_ros.substitutions import FindPackageShare
+from vd_common.topics import ESTIMATES_ALERTS, ESTIMATES_SLOPE, STATUS_RECORDER_PROGRESS
+
+LOCKSTEP_TOPICS = f'{ESTIMATES_SLOPE},{ESTIMATES_ALERTS},{STATUS_RECORDER_PROGRESS}'
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -20,10 +32,18 @@ def generate_launch_description() -> LaunchDescription:
     rate_hz = LaunchConfiguration('rate_hz')
     rtf = LaunchConfiguration('real_time_factor')
     bag = LaunchConfiguration('bag')
+    lockstep = LaunchConfiguration('lockstep_topics')
     sim = Node(
         package='vd_sim_node',
         executable='sim_node',
-        parameters=[{'scenario_file': scenario, 'rate_hz': rate_hz, 'real_time_factor': rtf}],
+        parameters=[
+            {
+                'scenario_file': scenario,
+                'rate_hz': rate_hz,
+                'real_time_factor': rtf,
+                'lockstep_topics': lockstep,
+            }
+        ],
         output='screen',
     )
     return LaunchDescription(
@@ -32,6 +52,15 @@ def generate_launch_description() -> LaunchDescription:
             DeclareLaunchArgument('rate_hz', default_value='100.0'),
             DeclareLaunchArgument('real_time_factor', default_value='1.0'),
             DeclareLaunchArgument('bag', default_value='vd_demo'),
+            DeclareLaunchArgument('lockstep_topics', default_value=LOCKSTEP_TOPICS),
+            # a 50 ms heartbeat: lost messages are repaired within a lockstep pause
+            # (config/fastdds_lockstep.xml says why)
+            SetEnvironmentVariable(
+                'FASTDDS_DEFAULT_PROFILES_FILE',
+                PathJoinSubstitution(
+                    [FindPackageShare('vd_observer_node'), 'config', 'fastdds_lockstep.xml']
+                ),
+            ),
             Node(
                 package='vd_observer_node',
                 executable='recorder_node',

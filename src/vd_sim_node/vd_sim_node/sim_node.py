@@ -12,7 +12,12 @@ Publishes (stamps = simulation time of the sample, starting at 0):
 
 Pacing runs on the steady wall clock (the node ignores ``use_sim_time``: it *is* the clock):
 ``real_time_factor`` 1.0 follows the wall clock, 5.0 runs five times faster, 0 runs as fast as
-the machine can. The node exits by itself (code 0) at the end of the scenario.
+the machine can. In lockstep (``lockstep_topics``, :mod:`vd_sim_node.lockstep`) it also
+waits for its consumers: it runs at most ``lockstep_window`` of sample time ahead of the
+newest header stamp on each of those topics, so that nothing is lost on a slow machine
+and the estimates do not depend on it; the real-time factor is then a cap. The node exits by
+itself (code 0) at the end of the scenario, in lockstep once its consumers have taken the last
+sample.
 All physics is in :mod:`vd_sim_node.vehicle`; this file only maps parameters and messages.
 """
 
@@ -41,7 +46,9 @@ from vd_common.ros_common import (
     deliver_pending,
     diagnostic_array,
     finish,
+    header_stamp_ns,
     ns_to_time,
+    ros_message_class,
     run_node,
 )
 from vd_common.topics import (
@@ -72,6 +79,7 @@ from vd_msgs.msg import (
     WheelTorques,
 )
 from vd_sim_node.errors import ScenarioError
+from vd_sim_node.lockstep import Lockstep
 from vd_sim_node.vehicle.scenario import Scenario, load_scenario
 from vd_sim_node.vehicle.simulation import SampleFrame, Simulator
 
@@ -138,6 +146,28 @@ PARAMS = [
         'simulator; the truth topics need one',
         low=1,
         high=100,
+    ),
+    ParamSpec(
+        'lockstep_topics',
+        '',
+        'comma-separated topics whose header stamps pace the simulator, one per consumer, e.g. '
+        "the estimator's slope and the recorder's progress ('' = real-time mode, no waiting)",
+    ),
+    ParamSpec(
+        'lockstep_window',
+        0.5,
+        'lockstep: how far the simulator may run ahead of its slowest consumer [s of sample '
+        "time]; keep it below the consumers' queues (1000 messages: 1 s at 1 kHz)",
+        low=1e-6,
+        high=60.0,
+    ),
+    ParamSpec(
+        'lockstep_timeout',
+        10.0,
+        'lockstep: wall time without progress after which a consumer is given up (it died or '
+        'never started) and the simulator goes on without it [s]',
+        low=0.1,
+        high=3600.0,
     ),
     ParamSpec(
         'progress_period',
@@ -240,7 +270,11 @@ class SimNode(Node):
         self.p_clock = self.refusals.publisher(ClockMsg, '/clock', CLOCK_QOS)
         self.p_diag = self.refusals.publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
 
+        self.lockstep = self._lockstep(v)
+
         self.published = 0
+        self.last_stamp_ns = 0
+        self.held = False  # the last batch waited for a lockstep consumer
         self.wall_start: float | None = None
         self.first_sample_at = time.monotonic() + v['start_delay']
         self.wait_for_subscribers = v['wait_for_subscribers']
@@ -249,10 +283,63 @@ class SimNode(Node):
         steady = Clock(clock_type=ClockType.STEADY_TIME)
         self.batch_timer = self.create_timer(_BATCH_PERIOD, self.publish_batch, clock=steady)
         self.create_timer(1.0, self.publish_diagnostics, clock=steady)
+        pacing = (
+            f'lockstep on {", ".join(self.lockstep.topics)} '
+            f'(window {v["lockstep_window"]:g} s), real-time factor cap {self.rtf:g}'
+            if self.lockstep
+            else f'real-time factor {self.rtf:g}'
+        )
         self.get_logger().info(
             f'scenario {self.scenario.name!r} ({self.scenario.duration:g} s) at '
-            f'{self.sim.rate_hz:g} Hz, real-time factor {self.rtf:g}; vehicle {vehicle_path}'
+            f'{self.sim.rate_hz:g} Hz, {pacing}; vehicle {vehicle_path}'
         )
+
+    def _lockstep(self, v: dict[str, Any]) -> Lockstep | None:
+        """The lockstep pacing of the `lockstep_*` parameters, subscribed; None: real time."""
+        topics = [t.strip() for t in v['lockstep_topics'].split(',') if t.strip()]
+        if not topics:
+            return None
+        lockstep = Lockstep(topics, round(v['lockstep_window'] * 1e9), v['lockstep_timeout'])
+        self._given_up: set[str] = set()
+        self._unsubscribed = list(topics)
+        self._next_discovery = 0.0
+        return lockstep
+
+    def _subscribe_lockstep(self) -> None:
+        """Subscribe to the lockstep topics whose publishers have appeared, with their type.
+
+        Any message type that begins with a std_msgs/Header will do: the bytes are taken and
+        only the stamp is read. A topic that never appears is given up after the timeout.
+        """
+        types = dict(self.get_topic_names_and_types())
+        for topic in [t for t in self._unsubscribed if types.get(t)]:
+            self._unsubscribed.remove(topic)
+            kind = ros_message_class(types[topic][0])
+            self.create_subscription(
+                kind, topic, self._progress_callback(topic), STREAM_QOS, raw=True
+            )
+
+    def _progress_callback(self, topic: str) -> Any:
+        def on_progress(data: bytes) -> None:
+            stamp = header_stamp_ns(data)
+            if stamp is not None and self.lockstep is not None:
+                self.lockstep.seen(topic, stamp, time.monotonic())
+
+        return on_progress
+
+    def _lockstep_allows(self, now: float) -> bool:
+        assert self.lockstep is not None
+        if self._unsubscribed and now >= self._next_discovery:
+            self._next_discovery = now + 0.5  # a graph query costs ms: not once per sample
+            self._subscribe_lockstep()
+        allowed = self.lockstep.allows(round(self.sim.t * 1e9), now)
+        for topic in set(self.lockstep.given_up) - self._given_up:
+            self._given_up.add(topic)
+            self.get_logger().warning(
+                f'lockstep: no progress on {topic} for {self.lockstep.timeout_s:g} s; '
+                'going on without it'
+            )
+        return allowed
 
     # -- publishing --------------------------------------------------------------------------
 
@@ -273,16 +360,20 @@ class SimNode(Node):
                 missing = ', '.join(self.gate.missing)
                 self.get_logger().info(f'starting without subscribers on {missing}')
             self.wall_start = now
-        target = (now - self.wall_start) * self.rtf if self.rtf > 0 else float('inf')
+        target = self._target(now)
         deadline = now + _BATCH_BUDGET
         last: SampleFrame | None = None
         while not self.sim.done and self.sim.t <= target and time.monotonic() < deadline:
+            if self.lockstep is not None and not self._lockstep_allows(now):
+                self.held = True
+                break
             last = self.sim.step()
             self.publish_frame(last)  # a refused publish is counted by self.refusals
         if last is not None:
+            self.last_stamp_ns = round(last.t * 1e9)
             self.p_clock.publish(ClockMsg(clock=self._stamp(last.t)))
             self._log_progress(last)
-        if self.sim.done:
+        if self.sim.done and self._consumers_done(now):
             self.get_logger().info(
                 f'scenario finished: {self.published} samples, '
                 f'{self.sim.t:.3f} s simulated in {time.monotonic() - self.wall_start:.1f} s'
@@ -290,6 +381,32 @@ class SimNode(Node):
             deliver_pending(self)
             self.batch_timer.cancel()
             finish(self)
+
+    def _target(self, now: float) -> float:
+        """Sample time [s] up to which this batch may publish: the real-time factor's pace.
+
+        Real time follows the wall clock from the start, catching up after a late batch. In
+        lockstep the pace restarts after each wait for the consumers, so the wait's backlog is
+        not sent at once: 0.5 s of samples on 11 topics in one burst overflowed the recorder's
+        transport queue, each overflow was repaired only at the next heartbeat, and the graph
+        ran at 0.2x real time with idle cores.
+        """
+        rtf = float(self.rtf)
+        if rtf <= 0:
+            return float('inf')
+        assert self.wall_start is not None
+        if self.held:
+            self.held = False
+            self.wall_start = now - self.sim.t / rtf
+        return (now - self.wall_start) * rtf
+
+    def _consumers_done(self, now: float) -> bool:
+        """In lockstep: every consumer took the last sample (or was given up)."""
+        if self.lockstep is None:
+            return True
+        done = self.lockstep.caught_up(self.last_stamp_ns, now)
+        self._lockstep_allows(now)  # log consumers given up meanwhile
+        return done
 
     def _stamp(self, t: float) -> Any:
         return ns_to_time(round(t * 1e9))
@@ -352,18 +469,33 @@ class SimNode(Node):
     def publish_diagnostics(self) -> None:
         elapsed = time.monotonic() - (self.wall_start or time.monotonic())
         achieved = self.sim.t / elapsed if elapsed > 0 else 0.0
-        lagging = self.rtf > 0 and elapsed > 2.0 and achieved < 0.9 * self.rtf
+        # in lockstep, running behind the real-time factor is the point, not a fault
+        lagging = (
+            self.lockstep is None and self.rtf > 0 and elapsed > 2.0 and achieved < 0.9 * self.rtf
+        )
         problems = []
         if lagging:
             problems.append(f'behind real-time factor {self.rtf:g} (achieved {achieved:.2f})')
+        lockstep: dict[str, object] = {}
+        notes = []
+        if self.lockstep is not None:
+            stamp_ns = round(self.sim.t * 1e9)
+            if self.lockstep.given_up:
+                problems.append(f'lockstep gave up on {", ".join(self.lockstep.given_up)}')
+            waiting = self.lockstep.waiting_for(stamp_ns)
+            if waiting and not self.sim.done:
+                notes.append(f'lockstep: waiting for {", ".join(waiting)}')
+            for topic, lag in self.lockstep.lag_ns(stamp_ns).items():
+                lockstep[f'lockstep_lag_s[{topic}]'] = '-' if lag is None else f'{lag * 1e-9:.3f}'
         level, message, refused = self.refusals.status(
-            1 if problems else 0, '; '.join(problems) or 'ok'
+            1 if problems else 0, '; '.join(problems + notes) or 'ok'
         )
         values = {
             'sim_time_s': f'{self.sim.t:.3f}',
             'samples_published': self.published,
             'achieved_real_time_factor': f'{achieved:.2f}',
             'requested_real_time_factor': self.rtf,
+            **lockstep,
             **refused,
         }
         self.p_diag.publish(

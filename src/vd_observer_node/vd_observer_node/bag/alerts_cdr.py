@@ -6,14 +6,21 @@ Encoding serves offline replay and the report's development bags; decoding serve
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from vd_observer_node.bag.cdr_batch import BatchFields
 from vd_observer_node.bag.errors import BagFormatError
+from vd_observer_node.bag.packed import PackedMessages
 
-__all__ = ['ALERTS_TYPE', 'ALERT_CHANNELS', 'decode_alerts', 'encode_alerts']
+__all__ = [
+    'ALERTS_TYPE',
+    'ALERT_CHANNELS',
+    'decode_alerts',
+    'encode_alerts',
+    'encode_alerts_packed',
+]
 
 ALERTS_TYPE = 'vd_msgs/msg/Alerts'
 #: Records per message: 3 kinds x 4 wheels, kind-major (KIND_* code, then FL, FR, RL, RR).
@@ -41,6 +48,14 @@ def encode_alerts(
     Returns:
         N serialized messages (CDR little endian, with the 4-byte encapsulation header).
     """
+    return list(encode_alerts_packed(stamp_ns, frame_id, values))
+
+
+def encode_alerts_packed(
+    stamp_ns: np.ndarray, frame_id: str, values: Mapping[str, np.ndarray]
+) -> PackedMessages:
+    """:func:`encode_alerts` (same arguments) without a bytes object per message: the N
+    messages in one buffer, which `BagWriter.write_interleaved` copies with numpy."""
     stamps = np.asarray(stamp_ns, dtype=np.int64)
     n = stamps.shape[0]
     level = np.asarray(values['level']).reshape(n, ALERT_CHANNELS)
@@ -71,8 +86,7 @@ def encode_alerts(
             n, ALERT_CHANNELS, 4
         )
     out[:, count_at + 4 :] = records.reshape(n, -1)
-    buf = out.tobytes()  # one copy, then slices: cheaper than a tobytes() per row
-    return [buf[i : i + size] for i in range(0, n * size, size)]
+    return PackedMessages.fixed(out.tobytes(), size)
 
 
 def _u32(buf: np.ndarray, offsets: np.ndarray) -> np.ndarray:
@@ -89,7 +103,7 @@ def _time_ns(buf: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     return out
 
 
-def decode_alerts(datas: list[bytes]) -> BatchFields:
+def decode_alerts(datas: Sequence[bytes]) -> BatchFields:
     """Batch-decode vd_msgs/msg/Alerts (a sequence of Alert records: no fixed layout).
 
     Each message is a header, a uint32 count and ``count`` 20-byte Alert records (their
@@ -97,7 +111,7 @@ def decode_alerts(datas: list[bytes]) -> BatchFields:
     the active alerts) are OK with zero stamps.
 
     Args:
-        datas: little-endian CDR bytes of N messages.
+        datas: little-endian CDR bytes of N messages (a list or a PackedMessages).
 
     Returns:
         ``values``: 'level' (N, 3, 4) uint8, 'onset_ns' and 'detected_ns' (N, 3, 4) int64
@@ -115,12 +129,12 @@ def decode_alerts(datas: list[bytes]) -> BatchFields:
     values: dict[str, np.ndarray] = {'level': level, 'onset_ns': onset, 'detected_ns': detected}
     if n == 0:
         return BatchFields(stamp, frames, values)
-    lengths = np.fromiter(map(len, datas), dtype=np.int64, count=n)
+    packed = PackedMessages.from_list(datas).compact()
+    lengths = packed.lengths
     if int(lengths.min()) < 24:
         raise BagFormatError(f'{ALERTS_TYPE}: message shorter than a header and a count')
-    buf = np.frombuffer(b''.join(datas), dtype=np.uint8)
-    starts = np.zeros(n, dtype=np.int64)
-    np.cumsum(lengths[:-1], out=starts[1:])
+    buf = packed.array
+    starts = packed.starts
     if not (np.all(buf[starts] == 0) and np.all(buf[starts + 1] == 1)):
         raise BagFormatError(f'{ALERTS_TYPE}: only little-endian CDR is supported')
     stamp = _time_ns(buf, starts + 4)

@@ -5,7 +5,9 @@ Messages such as ``vd_msgs/msg/WheelAngles`` or ``geometry_msgs/msg/TwistStamped
 only by the length of ``header.frame_id``, so all messages with the same total length and
 frame-id length share one numpy structured dtype: a batch decodes with one ``frombuffer``
 per group and encodes with one ``tobytes``. This is what makes offline replay run at
-hundreds of thousands of messages per second; rosbags' per-message decoding is ~50x slower.
+hundreds of thousands of messages per second: rosbags' per-message ``deserialize_cdr`` is
+20-130x slower (35-50x for most types) and its ``serialize_cdr`` 11-35x slower
+(``scripts/bench_bag_codec.py``, figures in docs/bags.md).
 
 Layout (little-endian CDR, XCDR1 as produced by rmw): 4-byte encapsulation header, then each
 primitive aligned to min(its size, 8) relative to the end of the encapsulation header.
@@ -14,15 +16,24 @@ primitive aligned to min(its size, 8) relative to the end of the encapsulation h
 from __future__ import annotations
 
 import functools
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from vd_observer_node.bag.errors import BagFormatError, BagUsageError, UnknownMessageTypeError
+from vd_observer_node.bag.packed import PackedMessages
 from vd_observer_node.bag.typestore import vd_typestore
 
-__all__ = ['BatchFields', 'decode_batch', 'encode_batch', 'flat_fields', 'upgrade_batch']
+__all__ = [
+    'BatchFields',
+    'decode_batch',
+    'encode_batch',
+    'encode_packed',
+    'flat_fields',
+    'upgrade_batch',
+]
 
 _HEADER_TYPE = 'std_msgs/msg/Header'
 _PRIMITIVES = {
@@ -134,12 +145,14 @@ def _layout(msgtype: str, frame_len: int, itemsize: int) -> np.dtype[Any]:
     )
 
 
-def decode_batch(msgtype: str, datas: list[bytes]) -> BatchFields:
+def decode_batch(msgtype: str, datas: Sequence[bytes]) -> BatchFields:
     """Decode N CDR messages of one header-stamped fixed-layout type at once.
 
     Args:
         msgtype: e.g. 'vd_msgs/msg/WheelAngles'.
-        datas: CDR bytes of each message (little endian).
+        datas: CDR bytes of each message (little endian): a list, or a
+            :class:`~vd_observer_node.bag.packed.PackedMessages` as the reader gives them
+            (then without a Python object per message).
 
     Raises:
         BagFormatError: a message is too short, big endian, or inconsistent with the type.
@@ -152,12 +165,12 @@ def decode_batch(msgtype: str, datas: list[bytes]) -> BatchFields:
     frames = np.zeros(n, dtype='S1')
     if n == 0:
         return BatchFields(stamp, frames, values)
-    lengths = np.fromiter(map(len, datas), dtype=np.int64, count=n)
+    packed = PackedMessages.from_list(datas).compact()
+    lengths = packed.lengths
     if int(lengths.min()) < 16:
         raise BagFormatError(f'{msgtype}: message shorter than a CDR header')
-    joined = np.frombuffer(b''.join(datas), dtype=np.uint8)
-    starts = np.zeros(n, dtype=np.int64)
-    np.cumsum(lengths[:-1], out=starts[1:])
+    joined = packed.array
+    starts = packed.starts
     if not (np.all(joined[starts] == 0) and np.all(joined[starts + 1] == 1)):
         raise BagFormatError(f'{msgtype}: only little-endian CDR is supported')
     frame_len = np.ascontiguousarray(joined[starts[:, None] + np.arange(12, 16)]).view('<u4')[:, 0]
@@ -204,6 +217,21 @@ def encode_batch(
         BagUsageError: a field is missing or has the wrong shape, or a stamp does not fit
             builtin_interfaces/Time (int32 seconds).
     """
+    return list(encode_packed(msgtype, stamp_ns, frame_id, values))
+
+
+def encode_packed(
+    msgtype: str,
+    stamp_ns: np.ndarray,
+    frame_id: str,
+    values: dict[str, np.ndarray],
+) -> PackedMessages:
+    """:func:`encode_batch` without a bytes object per message: the N messages in one buffer
+    (what `BagWriter.write_interleaved` copies into chunks with numpy).
+
+    Raises:
+        BagUsageError: as :func:`encode_batch`.
+    """
     fields = flat_fields(msgtype)
     stamp = np.asarray(stamp_ns, dtype=np.int64)
     n = stamp.shape[0]
@@ -227,12 +255,10 @@ def encode_batch(
         if array.shape != expected:
             raise BagUsageError(f'{msgtype}.{f.name}: shape {array.shape}, expected {expected}')
         rows[f.name] = array
-    buf = rows.tobytes()
-    size = dtype.itemsize
-    return [buf[i : i + size] for i in range(0, n * size, size)]
+    return PackedMessages.fixed(rows.tobytes(), dtype.itemsize)
 
 
-def upgrade_batch(msgtype: str, decode_as: str, datas: list[bytes]) -> list[bytes]:
+def upgrade_batch(msgtype: str, decode_as: str, datas: Sequence[bytes]) -> Sequence[bytes]:
     """Re-encode messages written with an older definition of ``msgtype`` in today's layout.
 
     Fields the old definition lacks (e.g. ``torque_source``, added to TireForces, Friction
@@ -248,7 +274,7 @@ def upgrade_batch(msgtype: str, decode_as: str, datas: list[bytes]) -> list[byte
         UnknownMessageTypeError: either layout is not fixed.
     """
     if decode_as == msgtype or not datas:
-        return list(datas)
+        return datas
     old = decode_batch(decode_as, datas)
     n = len(datas)
     values: dict[str, np.ndarray] = {}

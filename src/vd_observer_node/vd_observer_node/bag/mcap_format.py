@@ -7,7 +7,9 @@ instead of whatever exception a generic parser raises (struct.error, UnicodeDeco
 zstd errors ...). The ``mcap`` package is used in the tests as an independent check.
 
 Layouts follow the MCAP specification (https://mcap.dev/spec): little endian, strings are a
-uint32 byte length + UTF-8, maps a uint32 byte length + key/value pairs.
+uint32 byte length + UTF-8, maps a uint32 byte length + key/value pairs. As the specification
+asks of readers, the parsers read the fields they know and ignore any bytes after them (fields
+a later version of the format may add); the reader skips records of unknown opcodes.
 """
 
 from __future__ import annotations
@@ -132,7 +134,11 @@ _CHUNK_HEAD = struct.Struct('<QQQI')
 
 
 def encode_chunk(
-    start_ns: int, end_ns: int, uncompressed: bytes, compression: str, compressed: bytes
+    start_ns: int,
+    end_ns: int,
+    uncompressed: bytes | memoryview,
+    compression: str,
+    compressed: bytes,
 ) -> bytes:
     """Chunk record holding (compressed) message records; CRC is over the uncompressed data."""
     body = (
@@ -383,7 +389,7 @@ def parse_channel(body: bytes | memoryview) -> ChannelRecord:
 
 
 def parse_chunk(body: memoryview) -> ChunkRecord:
-    """Parse a chunk record body without decompressing it."""
+    """Parse a chunk record body without decompressing it (unknown trailing fields ignored)."""
     cur = Cursor(body)
     start = cur.u64('chunk start time')
     end = cur.u64('chunk end time')
@@ -393,8 +399,9 @@ def parse_chunk(body: memoryview) -> ChunkRecord:
     length = cur.u64('chunk records length')
     offset = cur.pos
     payload = cur.view(length, 'chunk records')
-    if not cur.at_end():
-        raise MalformedRecordError(cur.pos, 'bytes after the chunk records')
+    # Bytes after the records are fields of a later version of the format: ignored, as the
+    # specification requires of readers ("Records may be extended by adding new fields at
+    # the end of existing fields. Readers should ignore any unknown fields.").
     return ChunkRecord(start, end, size, crc, compression, payload, offset)
 
 

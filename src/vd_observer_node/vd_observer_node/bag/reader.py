@@ -18,7 +18,7 @@ import mmap
 import os
 import struct
 import zlib
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -35,6 +35,7 @@ from vd_observer_node.bag.errors import (
     BagUsageError,
 )
 from vd_observer_node.bag.metadata import read_metadata_file_paths
+from vd_observer_node.bag.packed import PackedMessages, windows
 from vd_observer_node.bag.typestore import decoding_type, deserialize, register_definition
 
 __all__ = [
@@ -47,7 +48,10 @@ __all__ = [
 
 _PREFIX = fmt.RECORD_PREFIX
 _MAX_CHUNK = 1 << 31  # [B] refuse to inflate a chunk claiming more (damaged size field)
-_KNOWN_OPS = frozenset(int(op) for op in fmt.Op)
+#: the only opcode that is never valid: records of 0x01-0x7F (official, later versions of the
+#: format) and 0x80-0xFF (application extensions) that we do not know are skipped, as the
+#: specification asks; a 0x00 is damage (a zero-filled tail after a crash, typically)
+_INVALID_OP = 0x00
 #: [B] read pages are given back to the OS in steps of this size (bounded resident memory)
 _RELEASE_STEP = 32 << 20
 
@@ -72,13 +76,20 @@ class RawMessage(NamedTuple):
 
 @dataclass(frozen=True)
 class TopicInfo:
-    """A topic of a bag: type, embedded definition, rosbag2 QoS metadata, message count."""
+    """A topic of a bag: type, embedded definition, rosbag2 QoS metadata, message count.
+
+    ``msgtype`` and ``definition`` are the name and data (as text) of the channel's schema,
+    '' for a channel without one; ``message_encoding`` and ``schema_encoding`` are those of
+    the channel and its schema (rosbag2: 'cdr' and 'ros2msg'; '' where not given).
+    """
 
     name: str
     msgtype: str
     message_count: int
     definition: str
     qos_profiles_yaml: str
+    message_encoding: str = ''
+    schema_encoding: str = ''
 
 
 @dataclass(frozen=True)
@@ -87,11 +98,14 @@ class TopicArrays:
 
     ``decode_as`` is the type to decode ``datas`` with (`typestore.decoding_type`):
     ``msgtype`` unless the bag embeds an older definition of it ('' means ``msgtype``).
+    The reader gives ``datas`` as a :class:`~vd_observer_node.bag.packed.PackedMessages`
+    (a sequence of bytes kept in one buffer, which the batch coders and the writer use
+    without a Python object per message); any sequence of bytes will do.
     """
 
     msgtype: str
     log_time_ns: np.ndarray
-    datas: list[bytes]
+    datas: Sequence[bytes]
     decode_as: str = ''
 
     @property
@@ -135,7 +149,7 @@ class _Batch:
     channel: np.ndarray
     log: np.ndarray
     publish: np.ndarray
-    datas: list[bytes]
+    datas: PackedMessages
 
     def tuples(self) -> Iterator[tuple[int, int, int, bytes]]:
         return zip(
@@ -254,7 +268,7 @@ class _FileScan:
             op, length = _PREFIX.unpack_from(buf, pos)
             body_at = pos + _PREFIX.size
             end = body_at + length
-            if op not in _KNOWN_OPS and op < 0x80:
+            if op == _INVALID_OP:
                 self._damage(pos, f'invalid record opcode 0x{op:02x}')
                 return
             if end > size:
@@ -281,7 +295,7 @@ class _FileScan:
                             # via uint64: a damaged time must not raise OverflowError
                             np.array([log_ns], dtype=np.uint64).astype(np.int64),
                             np.array([pub_ns], dtype=np.uint64).astype(np.int64),
-                            [bytes(buf[body_at + 22 : end])],
+                            PackedMessages.from_list([bytes(buf[body_at + 22 : end])]),
                         )
             elif op == fmt.Op.SCHEMA:
                 self._schema(self._parse(pos, body_at, fmt.parse_schema, body))
@@ -394,9 +408,9 @@ class _FileScan:
         if sizes.size and int(sizes.min()) < 22:
             self._damage(payload_at, 'message record too short')
             return None
-        heads = np.ascontiguousarray(raw[at[:, None] + np.arange(9, 31)]).view(_MESSAGE_FIELDS)
-        channel = heads['channel'][:, 0]
-        log = heads['log'][:, 0].astype(np.int64)
+        heads = windows(raw, _MESSAGE_FIELDS.itemsize)[at + 9].view(_MESSAGE_FIELDS)
+        channel = heads['channel']
+        log = heads['log'].astype(np.int64)
         ids, counts = np.unique(channel, return_counts=True)
         keep = []
         for channel_id, count in zip(ids.tolist(), counts.tolist(), strict=True):
@@ -418,11 +432,10 @@ class _FileScan:
         chosen = np.flatnonzero(mask)
         if chosen.size != at.size:
             at, sizes = at[chosen], sizes[chosen]
-        datas = [
-            data[p + 31 : p + 9 + n] for p, n in zip(at.tolist(), sizes.tolist(), strict=True)
-        ]
+        # the messages stay in the chunk's bytes: offsets, no object per message
+        datas = PackedMessages(data, at + 31, sizes - 22)
         return _Batch(
-            channel[chosen], log[chosen], heads['publish'][chosen, 0].astype(np.int64), datas
+            channel[chosen], log[chosen], heads['publish'][chosen].astype(np.int64), datas
         )
 
     def _indexed_offsets(self, pos: int) -> np.ndarray | None:
@@ -437,7 +450,8 @@ class _FileScan:
             length = _PREFIX.unpack_from(buf, pos)[1]
             count = struct.unpack_from('<I', buf, pos + 11)[0]
             end = pos + 9 + length
-            if end > size or length != 6 + count or count % 16:
+            # length > 6 + count: fields of a later format version after the entries
+            if end > size or length < 6 + count or count % 16:
                 return None
             pairs = np.frombuffer(buf, dtype='<u8', count=count // 8, offset=pos + 15)
             parts.append(pairs[1::2])
@@ -523,7 +537,10 @@ class _FileScan:
         """Fill schemas, channels and counts from an intact summary; False if unusable.
 
         Used for topic listings so an intact bag is not scanned; any doubt (no footer, CRC
-        mismatch, no statistics, a record that does not parse) answers False.
+        mismatch, no statistics, a record that does not parse) answers False. So does a
+        summary that is intact but incomplete for a listing, which the specification allows:
+        channels whose schemas it does not repeat (they are in the data section only), or
+        statistics without per-channel counts (an empty map means "not available").
         """
         buf = self.buf
         size = len(buf)
@@ -551,7 +568,8 @@ class _FileScan:
                 body = memoryview(buf)[pos + _PREFIX.size : end]
                 if op == fmt.Op.SCHEMA:
                     schema = fmt.parse_schema(body)
-                    schemas[schema.id] = schema
+                    if schema.id != 0:  # id 0 is invalid: ignored, as in the data section
+                        schemas[schema.id] = schema
                 elif op == fmt.Op.CHANNEL:
                     channel = fmt.parse_channel(body)
                     channels[channel.id] = channel
@@ -562,6 +580,11 @@ class _FileScan:
             return False
         if stats is None or not channels:
             return False
+        if any(c.schema_id != 0 and c.schema_id not in schemas for c in channels.values()):
+            return False  # the types are in the data section only: scan for them
+        counts = stats.channel_message_counts
+        if sum(counts.values()) != stats.message_count or not counts.keys() <= channels.keys():
+            return False  # per-channel counts not available (or not of these channels)
         self.schemas.update(schemas)
         self.channels.update(channels)
         self.channel_counts.update(stats.channel_message_counts)
@@ -591,7 +614,7 @@ def _tile(raw: np.ndarray, hint: np.ndarray | None) -> tuple[np.ndarray, np.ndar
     at = hint.astype(np.int64)
     if not (raw[at] == fmt.Op.MESSAGE).all():
         return None
-    lengths = np.ascontiguousarray(raw[at[:, None] + np.arange(1, 9)]).view('<u8')[:, 0]
+    lengths = windows(raw, 8)[at + 1].view('<u8')
     if int(lengths.max()) > size:
         return None
     sizes = lengths.astype(np.int64)
@@ -703,15 +726,40 @@ class BagReader:
         """Iterate decoded messages: (topic, msgtype, log_time_ns, rosbags message object).
 
         Types unknown to the vd typestore are registered from the bag's embedded definitions.
+
+        Raises:
+            BagFormatError: a selected topic is not decodable by vd: its message encoding is
+                not 'cdr', it has no schema, or its schema encoding is not 'ros2msg'
+                (:meth:`raw_messages` gives its bytes).
         """
         decode_as: dict[str, str] = {}
         selection = self.raw_messages(topics, start_ns=start_ns, stop_ns=stop_ns, ordered=ordered)
         for msg in selection:
             name = decode_as.get(msg.topic)
             if name is None:
+                self._check_decodable(msg.topic)
                 self._register(msg.msgtype)
                 name = decode_as[msg.topic] = self.decoding_type(msg.topic)
             yield msg.topic, msg.msgtype, msg.log_time_ns, deserialize(msg.data, name)
+
+    def _check_decodable(self, topic: str) -> None:
+        """Raise BagFormatError if vd cannot decode the topic's messages (see messages())."""
+        info = self.topics.get(topic)
+        if info is None:
+            return
+        where = f'{self.path}: topic {topic!r}'
+        if info.message_encoding != 'cdr':
+            raise BagFormatError(
+                f'{where}: message encoding {info.message_encoding!r} is not supported (vd '
+                "decodes 'cdr' only; raw_messages() gives the bytes)"
+            )
+        if not info.msgtype:
+            raise BagFormatError(f'{where}: no schema, so its CDR messages cannot be decoded')
+        if info.schema_encoding != 'ros2msg':
+            raise BagFormatError(
+                f'{where}: schema encoding {info.schema_encoding!r} is not supported (vd '
+                "reads 'ros2msg' definitions only; raw_messages() gives the bytes)"
+            )
 
     def decoding_type(self, topic: str) -> str:
         """The type to decode a topic's messages with (`typestore.decoding_type`): its type,
@@ -756,7 +804,7 @@ class BagReader:
             raise BagUsageError(f'block_messages must be >= 1, got {block_messages}')
         selected = None if topics is None else set(topics)
         times: dict[str, list[np.ndarray]] = {}
-        datas: dict[str, list[bytes]] = {}
+        datas: dict[str, list[PackedMessages]] = {}
         types: dict[str, str] = {}
         held = 0
         infos = self.topics  # before the scan: a first pass must not add its damage twice
@@ -765,6 +813,9 @@ class BagReader:
             select = _ChannelSelector(scan, selected)
             for batch in scan.batches(select, None, None):
                 channels = np.unique(batch.channel).tolist()
+                # A chunk mostly selected stays as it is until the block is joined; of one
+                # mostly not, only the selected bytes are kept (bounded memory).
+                sparse = 2 * int(batch.datas.lengths.sum()) < len(batch.datas.data)
                 for channel_id in channels:
                     topic, msgtype = select.names[channel_id]
                     if topic not in times:
@@ -772,11 +823,12 @@ class BagReader:
                         types.setdefault(topic, msgtype)
                     if len(channels) == 1:
                         times[topic].append(batch.log)
-                        datas[topic].extend(batch.datas)
+                        part = batch.datas
                     else:
                         members = np.flatnonzero(batch.channel == channel_id)
                         times[topic].append(batch.log[members])
-                        datas[topic].extend([batch.datas[k] for k in members.tolist()])
+                        part = batch.datas.take(members)
+                    datas[topic].append(part.compact() if sparse else part)
                 held += len(batch.datas)
                 if block_messages is not None and held >= block_messages:
                     yield self._block(times, datas, types, infos)
@@ -788,7 +840,7 @@ class BagReader:
     @staticmethod
     def _block(
         times: dict[str, list[np.ndarray]],
-        datas: dict[str, list[bytes]],
+        datas: dict[str, list[PackedMessages]],
         types: dict[str, str],
         infos: dict[str, TopicInfo],
     ) -> dict[str, TopicArrays]:
@@ -796,7 +848,7 @@ class BagReader:
             t: TopicArrays(
                 types[t],
                 np.concatenate(times[t]).astype(np.int64),
-                datas[t],
+                PackedMessages.concat(datas[t]),
                 decoding_type(types[t], infos[t].definition if t in infos else ''),
             )
             for t in times
@@ -837,6 +889,8 @@ class BagReader:
                     count + (old.message_count if old else 0),
                     schema.data.decode(errors='replace') if schema else '',
                     channel.metadata.get('offered_qos_profiles', ''),
+                    channel.message_encoding,
+                    schema.encoding if schema else '',
                 )
         return infos
 

@@ -41,6 +41,7 @@ from vd_observer_node.bag.metadata import (
     render_metadata,
     write_metadata,
 )
+from vd_observer_node.bag.packed import PackedMessages, PackedParts, windows
 from vd_observer_node.bag.typestore import message_definition, type_hash
 
 __all__ = [
@@ -355,13 +356,13 @@ class BagWriter:
 
     def _emit_chunk(
         self,
-        raw: bytes,
+        raw: bytes | memoryview,
         start_ns: int,
         end_ns: int,
         index: dict[int, list[tuple[int, int]]] | dict[int, bytes],
     ) -> None:
         """Write one chunk of message records and its per-channel message indexes."""
-        compressed = self._compressor.compress(raw) if self._compressor else raw
+        compressed = self._compressor.compress(raw) if self._compressor else bytes(raw)
         chunk_record = fmt.encode_chunk(start_ns, end_ns, raw, self._compression, compressed)
         chunk_offset = self._offset
         index_offsets: dict[int, int] = {}
@@ -437,7 +438,8 @@ class BagWriter:
             members = np.flatnonzero(which == k)
             sequence[members] = entry.count + np.arange(members.size)
             entry.count += members.size
-        lengths = np.fromiter(map(len, datas), dtype=np.int64, count=n)
+        packed = datas if isinstance(datas, PackedParts) else PackedMessages.from_list(datas)
+        lengths = packed.lengths
         ends = np.cumsum(lengths + _MESSAGE_HEAD.size)
         starts = ends - (lengths + _MESSAGE_HEAD.size)
         heads = np.zeros(n, dtype=_MESSAGE_DTYPE)
@@ -447,26 +449,39 @@ class BagWriter:
         heads['sequence'] = sequence & 0xFFFFFFFF
         heads['log'] = log
         heads['publish'] = pub
-        # Interleave 31-byte record heads and message bytes with one join (no per-byte masks).
-        packed = heads.tobytes()
-        step = _MESSAGE_HEAD.size
-        parts: list[bytes] = [b''] * (2 * n)
-        parts[0::2] = [packed[i : i + step] for i in range(0, n * step, step)]
-        parts[1::2] = datas
-        records = b''.join(parts)
+        # Every 31-byte record head, then every message's bytes, copied into place with one
+        # numpy operation each (per distinct message length): no Python object per message.
+        out = np.empty(int(ends[-1]), dtype=np.uint8)
+        head_bytes = np.dtype((np.void, _MESSAGE_HEAD.size))
+        windows(out, _MESSAGE_HEAD.size)[starts] = heads.view(head_bytes)
+        packed.scatter_into(out, starts + _MESSAGE_HEAD.size)
+        records = out.data  # chunks are compressed and CRC'd from it, not copied
         # A new chunk starts at the first message beginning past each chunk_size multiple.
         bucket = starts // self._chunk_size
-        cuts = [0, *(np.flatnonzero(np.diff(bucket)) + 1).tolist(), n]
-        for a, b in itertools.pairwise(cuts):
-            base = int(starts[a])
-            offsets = (starts[a:b] - base).astype(np.uint64)
-            index: dict[int, bytes] = {}
-            for c in np.unique(channel[a:b]).tolist():
-                sel = np.flatnonzero(channel[a:b] == c)
-                pairs = np.stack([log[a:b][sel], offsets[sel]], axis=1).astype('<u8')
-                index[int(c)] = pairs.tobytes()
-            raw = records[base : int(ends[b - 1])]
-            self._emit_chunk(raw, int(log[a:b].min()), int(log[a:b].max()), index)
+        firsts = np.concatenate([[0], np.flatnonzero(np.diff(bucket)) + 1])
+        marks = np.zeros(n, dtype=np.int64)
+        marks[firsts] = 1
+        chunk = np.cumsum(marks) - 1  # the chunk of each message
+        # The message indexes of all chunks at once: (log time, offset in its chunk) pairs
+        # ordered by chunk, channel and position; each (chunk, channel) is one slice.
+        order = np.lexsort((channel, chunk))  # stable: positions stay in order
+        pairs = np.empty((n, 2), dtype='<u8')
+        pairs[:, 0] = log[order]
+        pairs[:, 1] = starts[order] - starts[firsts][chunk[order]]
+        packed_pairs = pairs.tobytes()
+        key = chunk[order] * 65536 + channel[order]
+        groups = np.concatenate([[0], np.flatnonzero(np.diff(key)) + 1, [n]]).tolist()
+        group_chunk = chunk[order][groups[:-1]].tolist()
+        group_channel = channel[order][groups[:-1]].tolist()
+        indexes: list[dict[int, bytes]] = [{} for _ in range(firsts.size)]
+        for g, (a, b) in enumerate(itertools.pairwise(groups)):
+            indexes[group_chunk[g]][group_channel[g]] = packed_pairs[16 * a : 16 * b]
+        low = np.minimum.reduceat(log, firsts).tolist()
+        high = np.maximum.reduceat(log, firsts).tolist()
+        bounds = [*starts[firsts].tolist(), int(ends[-1])]
+        for k in range(firsts.size):
+            raw = records[bounds[k] : bounds[k + 1]]
+            self._emit_chunk(raw, low[k], high[k], indexes[k])
 
     # -- closing -----------------------------------------------------------------------------
 

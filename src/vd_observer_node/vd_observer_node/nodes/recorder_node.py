@@ -6,6 +6,12 @@ are taken serialized (``raw=True``: no decode/encode) and written by
 ``metadata.yaml``). Log time = the recorder clock at reception (the system clock, or
 ``/clock`` with ``use_sim_time``), as ``ros2 bag record`` does.
 
+It also publishes its progress on ``/vd/status/recorder_progress`` (std_msgs/Header, up to
+50 Hz, where it changed): the newest stamp up to which every per-sample vd topic that has a
+publisher has been written (the minimum over those topics of the newest header stamp
+received; the on-change topics and ``/vd/status/*`` do not count). A simulator in lockstep
+waits on it, so that the bag misses nothing however slow the machine.
+
 SIGINT/SIGTERM close the bag completely. After SIGKILL or power loss, ``vd bag repair BAG``
 recovers every chunk already written: at most ``chunk_duration`` seconds are lost (the writer
 writes a chunk when it is that old, and this node checks every 0.1 s).
@@ -24,6 +30,7 @@ from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
+from std_msgs.msg import Header
 from vd_common.ros_common import (
     CLOCK_QOS,
     DIAGNOSTICS_QOS,
@@ -31,11 +38,13 @@ from vd_common.ros_common import (
     ParamSpec,
     PublishRefusals,
     declare_parameters,
+    header_stamp_ns,
     node_status,
+    ns_to_time,
     ros_message_class,
     run_node,
 )
-from vd_common.topics import CONTRACT, NAMESPACE
+from vd_common.topics import CONTRACT, NAMESPACE, ON_CHANGE, STATUS, STATUS_RECORDER_PROGRESS
 
 from vd_observer_node.bag import BagWriter
 from vd_observer_node.bag.errors import BagError, UnknownMessageTypeError
@@ -105,6 +114,13 @@ class RecorderNode(Node):
         self.create_timer(0.1, self.flush, clock=steady)
         self.create_timer(1.0, self.publish_diagnostics, clock=steady)
         self.pub_diag = self.refusals.publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        # progress: newest header stamp per per-sample contract topic, over those with a
+        # publisher; published where the minimum moved
+        self.pub_progress = self.refusals.publisher(Header, STATUS_RECORDER_PROGRESS, STREAM_QOS)
+        self.latest_stamp: dict[str, int | None] = {}
+        self.publishers_seen: dict[str, int] = {}
+        self._progress_sent: int | None = None
+        self.create_timer(0.02, self.publish_progress, clock=steady)
         self.get_logger().info(f'recording to {self.writer.path}')
         if v['contract_topics']:
             for topic, type_name in CONTRACT.items():
@@ -113,6 +129,8 @@ class RecorderNode(Node):
         self.discover()
 
     def wanted(self, topic: str) -> bool:
+        if topic in STATUS:  # the nodes' own progress, not data
+            return False
         if topic in self.extra:
             return bool(self.extra[topic])
         return bool(self.pattern.search(topic))
@@ -154,6 +172,7 @@ class RecorderNode(Node):
 
         def on_matched(info: Any) -> None:
             nonlocal announced
+            self.publishers_seen[topic] = info.current_count
             if not announced and info.current_count > 0:
                 announced = True
                 self.get_logger().info(f'recording {topic} ({type_name})')
@@ -162,6 +181,10 @@ class RecorderNode(Node):
 
     def _make_callback(self, topic: str) -> Any:
         clock = self.get_clock()
+        progress = topic in CONTRACT and topic not in ON_CHANGE
+        if progress:
+            self.latest_stamp[topic] = None
+        latest = self.latest_stamp
 
         def callback(data: bytes) -> None:
             if self.closed:
@@ -172,6 +195,9 @@ class RecorderNode(Node):
                 self.write_errors += 1
                 if self.write_errors == 1:
                     self.get_logger().error(f'cannot write {topic}: {exc}')
+                return
+            if progress:
+                latest[topic] = header_stamp_ns(data)
 
         return callback
 
@@ -184,6 +210,36 @@ class RecorderNode(Node):
             self.write_errors += 1
             self.get_logger().error(f'cannot flush the bag: {exc}')
 
+    def progress_ns(self) -> int | None:
+        """Newest stamp [ns] up to which every per-sample topic with a publisher was written.
+
+        None while one of them has brought nothing yet, or no such topic has a publisher.
+        """
+        stamps = [
+            stamp
+            for topic, stamp in self.latest_stamp.items()
+            if self.publishers_seen.get(topic, 0) > 0
+        ]
+        if not stamps or any(stamp is None for stamp in stamps):
+            return None
+        return min(stamp for stamp in stamps if stamp is not None)
+
+    def progress_held_by(self) -> str:
+        """The per-sample topic with a publisher that is furthest behind ('' if none)."""
+        behind = [
+            (-1 if stamp is None else stamp, topic)
+            for topic, stamp in self.latest_stamp.items()
+            if self.publishers_seen.get(topic, 0) > 0
+        ]
+        return min(behind)[1] if behind else ''
+
+    def publish_progress(self) -> None:
+        progress = self.progress_ns()
+        if progress is None or progress == self._progress_sent:
+            return
+        self._progress_sent = progress
+        self.pub_progress.publish(Header(stamp=ns_to_time(progress)))
+
     def publish_diagnostics(self) -> None:
         level = OK if self.write_errors == 0 else ERROR
         message = 'ok' if self.write_errors == 0 else f'{self.write_errors} write errors'
@@ -192,6 +248,10 @@ class RecorderNode(Node):
             'topics': len(self.subscriptions_by_topic),
             'messages': self.writer.message_count,
             'write_errors': self.write_errors,
+            'progress_s': '-'
+            if self._progress_sent is None
+            else f'{self._progress_sent * 1e-9:.3f}',
+            'progress_held_by': self.progress_held_by(),
         }
         level, message, refused = self.refusals.status(level, message)
         values.update(refused)

@@ -30,7 +30,7 @@ import shutil
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -58,9 +58,10 @@ from vd_common.topics import (
     TRUTH_NAMESPACE,
 )
 
-from vd_observer_node.bag.alerts_cdr import encode_alerts
-from vd_observer_node.bag.cdr_batch import encode_batch, upgrade_batch
+from vd_observer_node.bag.alerts_cdr import encode_alerts_packed
+from vd_observer_node.bag.cdr_batch import encode_packed, upgrade_batch
 from vd_observer_node.bag.errors import BagExistsError, ReplayInputError
+from vd_observer_node.bag.packed import PackedMessages, PackedParts
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.errors import ConfigurationError
@@ -662,7 +663,7 @@ class _MergedWriter:
         self._log: list[np.ndarray] = []
         self._which: list[np.ndarray] = []
         self._seq: list[np.ndarray] = []
-        self._datas: list[bytes] = []
+        self._datas: list[PackedMessages] = []
         self.newest_ns = -1  # [ns] newest log time of an input or truth message added
         self._flushed = -1  # [ns] everything logged before this was written
         self.written = 0
@@ -678,7 +679,7 @@ class _MergedWriter:
             self._counts.append(0)
         return k
 
-    def add(self, topic: str, msgtype: str, log_ns: np.ndarray, datas: list[bytes]) -> None:
+    def add(self, topic: str, msgtype: str, log_ns: np.ndarray, datas: Sequence[bytes]) -> None:
         """Hold messages of one topic (in their order) until they can be written.
 
         Raises:
@@ -692,7 +693,7 @@ class _MergedWriter:
         self._log.append(log)
         self._which.append(np.full(n, k, dtype=np.int64))
         self._seq.append(np.arange(self._counts[k], self._counts[k] + n, dtype=np.int64))
-        self._datas.extend(datas)
+        self._datas.append(PackedMessages.from_list(datas))
         self._counts[k] += n
         if k < self._raw and n:
             self.newest_ns = max(self.newest_ns, int(log.max()))
@@ -709,17 +710,17 @@ class _MergedWriter:
             self._flushed = max(self._flushed, before_ns)
         order = np.flatnonzero(ready)
         order = order[np.lexsort((seq[order], which[order], log[order]))]
-        datas = self._datas
+        # everything held, as it is (one buffer per topic and block); the writer copies the
+        # selected messages from there into its chunks with numpy
+        datas = PackedParts.join(self._datas)
         for start in range(0, len(order), _WRITE_BLOCK):
             sel = order[start : start + _WRITE_BLOCK]
-            self._writer.write_interleaved(
-                self._names, which[sel], [datas[k] for k in sel.tolist()], log[sel]
-            )
+            self._writer.write_interleaved(self._names, which[sel], datas.take(sel), log[sel])
             self._bar.update(int(np.count_nonzero(which[sel] < self._raw)))
         self.written += len(order)
         rest = np.flatnonzero(~ready)
         self._log, self._which, self._seq = [log[rest]], [which[rest]], [seq[rest]]
-        self._datas = [datas[k] for k in rest.tolist()]
+        self._datas = [datas.take(rest).compact()]
 
 
 class _GapStats:
@@ -940,12 +941,12 @@ class _Run:
         observed = result.angle if self.mapping.wheel_input == 'speed' else wheel_angle
         try:
             for topic, values in estimate_topics(result, observed, self.estimator_config).items():
-                datas = encode_batch(ESTIMATE_TOPICS[topic], common, frame_id, values)
+                datas = encode_packed(ESTIMATE_TOPICS[topic], common, frame_id, values)
                 merged.add(topic, ESTIMATE_TOPICS[topic], log_ns, datas)
             changed, values = self.offset_messages(result, common)
             if values:
                 msgtype = ESTIMATE_TOPICS[ESTIMATES_TORQUE_OFFSET]
-                datas = encode_batch(msgtype, common[changed], frame_id, values)
+                datas = encode_packed(msgtype, common[changed], frame_id, values)
                 merged.add(ESTIMATES_TORQUE_OFFSET, msgtype, log_ns[changed], datas)
         finally:
             if worker is not None:
@@ -955,9 +956,9 @@ class _Run:
         for topic, values in situation_values.items():
             msgtype = ALERT_TOPICS[topic]
             if topic == ESTIMATES_ALERTS:
-                datas = encode_alerts(common, frame_id, values)
+                datas = encode_alerts_packed(common, frame_id, values)
             else:
-                datas = encode_batch(msgtype, common, frame_id, values)
+                datas = encode_packed(msgtype, common, frame_id, values)
             merged.add(topic, msgtype, log_ns, datas)
 
     def report(self, written: int, wall: float) -> ReplayReport:

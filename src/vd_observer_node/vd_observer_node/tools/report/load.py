@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -100,7 +101,7 @@ def select_report_topics(reader: BagReader, skipped: dict[str, str]) -> list[str
     return selected
 
 
-def decode_topic(msgtype: str, decoding_type: str, datas: list[bytes]) -> BatchFields:
+def decode_topic(msgtype: str, decoding_type: str, datas: Sequence[bytes]) -> BatchFields:
     """Batch-decode messages of one report topic (alerts have their own variable layout).
 
     Args:

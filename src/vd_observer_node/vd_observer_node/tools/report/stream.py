@@ -37,7 +37,7 @@ from __future__ import annotations
 import itertools
 import math
 import os
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 
@@ -145,7 +145,7 @@ def iter_topic_blocks(
 
 def _pieces(
     arrays: Mapping[str, TopicArrays], block_messages: int
-) -> Iterator[dict[str, list[bytes]]]:
+) -> Iterator[dict[str, Sequence[bytes]]]:
     """One block of the reader cut into pieces of at most ``block_messages`` messages."""
     names = [t for t in arrays if arrays[t].datas]
     total = sum(len(arrays[t].datas) for t in names)
@@ -167,7 +167,7 @@ def _pieces(
 
 
 def _decode(
-    pending: dict[str, list[bytes]], kinds: Mapping[str, tuple[str, str]]
+    pending: dict[str, Sequence[bytes]], kinds: Mapping[str, tuple[str, str]]
 ) -> dict[str, TopicSeries]:
     out = {}
     for topic, datas in pending.items():
