@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +29,7 @@ from vd_observer_node.bag import BagReader, BagWriter, ReplayInputError
 from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.estimation.cascade import run_cascade
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
+from vd_observer_node.inputs.mapping import default_mapping
 from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
 from vd_observer_node.tools.replay import (
     ALERT_TOPICS,
@@ -114,7 +116,8 @@ def test_output_is_in_log_time_order(replayed: tuple[Path, Path, object]) -> Non
     assert times == sorted(times)
 
 
-def test_only_common_stamps_are_estimated(tmp_path: Path) -> None:
+def _lossy_speed_bag(tmp_path: Path) -> Path:
+    """A 1 s 100 Hz drive whose every 10th body-speed message was lost (10 of 100)."""
     write_synthetic_drive_bag(tmp_path / 'full', duration_s=1.0, rate_hz=100.0, with_truth=False)
     reader = BagReader(tmp_path / 'full')
     with BagWriter(tmp_path / 'gaps') as writer:
@@ -122,15 +125,29 @@ def test_only_common_stamps_are_estimated(tmp_path: Path) -> None:
             writer.add_topic(name, info.msgtype)
         dropped = 0
         for m in reader.raw_messages():
-            # Every 10th speed sample lost: those stamps cannot be estimated.
             if m.topic == SENSORS_BODY_VELOCITY and (m.log_time_ns // 10_000_000) % 10 == 3:
                 dropped += 1
                 continue
             writer.write(m.topic, m.data, m.log_time_ns)
-    report = replay_bag(tmp_path / 'gaps', tmp_path / 'out', progress=False)
     assert dropped == 10
+    return tmp_path / 'gaps'
+
+
+def test_a_stamp_that_lost_one_input_is_estimated_with_the_latest_sample(tmp_path: Path) -> None:
+    # the default ('latest' alignment): the lost speed is held from the stamp before
+    report = replay_bag(_lossy_speed_bag(tmp_path), tmp_path / 'out', progress=False)
+    assert report.samples == 100
+    counts = {t: i.message_count for t, i in BagReader(tmp_path / 'out').topics.items()}
+    assert counts[ESTIMATES_SLOPE] == 100
+
+
+def test_with_exact_alignment_only_common_stamps_are_estimated(tmp_path: Path) -> None:
+    exact = dataclasses.replace(default_mapping(), alignment='exact')
+    report = replay_bag(
+        _lossy_speed_bag(tmp_path), tmp_path / 'out', progress=False, mapping=exact
+    )
     assert report.samples == 90
-    assert report.unmatched == 2 * dropped
+    assert report.unmatched == 2 * 10
     counts = {t: i.message_count for t, i in BagReader(tmp_path / 'out').topics.items()}
     assert counts[ESTIMATES_SLOPE] == 90
 

@@ -395,3 +395,24 @@ def test_vd_replay_takes_a_mapping_file(
     err = capsys.readouterr().err
     assert err.count('\n') == 1 and err.startswith('vd: error: ')
     assert "body_speed.type 'x/msg/Y' is not supported" in err
+
+
+def test_the_default_alignment_rides_through_loss_unless_an_input_has_no_header() -> None:
+    from vd_observer_node.inputs.mapping import default_mapping, mapping_from_dict
+
+    assert default_mapping().alignment == 'latest'
+    # a user's topics with header stamps, on their own clocks: 'latest'
+    odometry = {'body_speed': {'topic': '/odom', 'type': 'nav_msgs/msg/Odometry'}}
+    assert mapping_from_dict(odometry).alignment == 'latest'
+    # a headerless input is stamped on receipt and can only be held: 'exact' holds it
+    headerless = {
+        'wheel_torques': {
+            'topic': '/can/torques',
+            'type': 'std_msgs/msg/Float64MultiArray',
+            'indices': [0, 1, 2, 3],
+        }
+    }
+    assert mapping_from_dict(headerless).alignment == 'exact'
+    # what the file says wins
+    assert mapping_from_dict({**headerless, 'alignment': 'latest'}).alignment == 'latest'
+    assert mapping_from_dict({**odometry, 'alignment': 'exact'}).alignment == 'exact'

@@ -257,6 +257,28 @@ def test_estimates_with_foreign_stamps_are_reported_not_crashed(
     assert 'no common stamps' in capsys.readouterr().out
 
 
+def test_a_reference_on_its_own_clock_is_reported_not_crashed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # A real reference (a pose's grade) runs on its own clock: with a slope step in it, the
+    # convergence section had no common stamp to index (IndexError in _convergence).
+    t = np.arange(400) / RATE
+    stamp = np.round(t * 1e9).astype(np.int64)
+    slope = {'angle': np.radians(np.where(t < 2.0, 0.0, 5.0)), 'valid': np.ones(t.size, bool)}
+    bag = tmp_path / 'own_clock'
+    write_topic_arrays_bag(
+        bag,
+        stamp,
+        {TRUTH_SLOPE: slope, ESTIMATES_SLOPE: slope},
+        stamps={TRUTH_SLOPE: stamp + 3_000_000},
+    )
+    out = tmp_path / 'out'
+    assert _vd(['report', str(bag), '--out', str(out), '--no-progress']) == 0
+    data = json.loads((out / 'metrics.json').read_text())
+    assert any('slope convergence skipped' in note for note in data['notes'])
+    assert 'no common stamps' in capsys.readouterr().out
+
+
 def test_static_loads_from_the_vehicle_file(known_bag: Path, tmp_path: Path) -> None:
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 

@@ -321,7 +321,8 @@ def build_comparisons(
             if stamps.size == 0:
                 notes.append(
                     f'{spec.title}: no common stamps between {spec.est_topic} and '
-                    f'{spec.truth_topic} (estimates must carry the measurement stamp)'
+                    f'{spec.truth_topic} (estimates must carry the measurement stamp; a '
+                    'reference on its own clock is not interpolated onto them yet)'
                 )
             estimate = est.values[spec.field][ie].astype(np.float64) * spec.factor
             true = truth.values[spec.field][it].astype(np.float64) * spec.factor
@@ -621,6 +622,11 @@ def _convergence(
 ) -> list[SlopeConvergence]:
     slope = next((c for c in comparisons if c.key == 'slope'), None)
     if slope is None or slope.estimate is None or slope.truth is None or steps.size == 0:
+        return []
+    if slope.t.size == 0:
+        # no common stamps (said in the notes already): a reference on its own clock, which
+        # is not interpolated onto the estimates yet
+        notes.append('slope convergence skipped: no stamp shared by the estimate and the truth')
         return []
     error = slope.estimate - slope.truth
     delays = convergence_times(
