@@ -31,9 +31,9 @@ lint: setup
 format: setup
 	$(RUN) ruff format src tests scripts && ruff check --fix src tests scripts
 
-# mypy --strict on both packages, nodes included: the settings are in pyproject.toml
+# mypy --strict on the Python packages, nodes included: the settings are in pyproject.toml
 typecheck: setup
-	@echo 'mypy --strict (pyproject.toml: both packages)'
+	@echo 'mypy --strict (pyproject.toml: vd_common, vd_sim_node, vd_observer_node)'
 	@$(RUN) mypy
 
 # the peers compared in bench_peers.py (opensmc, commonroad-vehicle-models) are bench-only

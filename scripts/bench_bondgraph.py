@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_sim_node'))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_common'))
 
 from vd_sim_node.bondgraph import (
     BondGraph,

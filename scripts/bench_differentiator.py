@@ -21,6 +21,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
+sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
 from vd_observer_node.estimation.differentiator import DISCRETIZATIONS, LevantDifferentiator  # noqa: E402
 

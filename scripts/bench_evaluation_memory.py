@@ -33,6 +33,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_sim_node'))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_common'))
 
 from vd_observer_node.testing.fleet_bags import write_recording_like_bag
 

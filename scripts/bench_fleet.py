@@ -44,6 +44,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_sim_node'))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_common'))
 
 from vd_observer_node.testing.fleet_bags import write_recording_like_bag
 from vd_observer_node.tools.fleet import FleetSettings, process_bag, run_fleet

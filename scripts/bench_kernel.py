@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from vd_common.vehicle.params import default_vehicle_file, load_vehicle
 from vd_observer_node.chain import ChainSettings, PythonChain
 from vd_observer_node.estimation.cascade import run_cascade
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
@@ -40,7 +41,6 @@ from vd_observer_node.kernel.situation import CompiledSituationMonitor
 from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_observer_node.situation.monitor import SituationMonitor, run_situation
 from vd_observer_node.testing.launcher import NodeSpec
-from vd_sim_node.vehicle.params import default_vehicle_file, load_vehicle
 from vd_sim_node.vehicle.scenario import SensorSettings, load_scenario
 from vd_sim_node.vehicle.simulation import simulate
 

@@ -51,8 +51,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from vd_observer_node.testing.launcher import GraphLauncher, NodeProcess, NodeSpec
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_ALERTS,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
@@ -63,6 +62,7 @@ from vd_sim_node.topics import (
     SENSORS_WHEEL_TORQUES,
     TRUTH_NAMESPACE,
 )
+from vd_observer_node.testing.launcher import GraphLauncher, NodeProcess, NodeSpec
 
 __all__ = ['RunResult', 'main', 'run_graph']
 

@@ -39,9 +39,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
+sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
+from vd_common.vehicle.params import default_vehicle_file, load_vehicle  # noqa: E402
 from vd_observer_node.estimation.differentiator import LevantDifferentiator, euler_step  # noqa: E402
-from vd_sim_node.vehicle.params import load_vehicle  # noqa: E402
 from vd_sim_node.vehicle.scenario import load_scenario  # noqa: E402
 from vd_sim_node.vehicle.simulation import Simulator  # noqa: E402
 
@@ -174,7 +175,7 @@ def bench_differentiators(repeat: int, taus: list[float]) -> None:
 
 def _our_state() -> tuple[Any, float, np.ndarray, np.ndarray]:
     scenario = load_scenario(CONFIG / 'scenarios' / 'paper_table1.yaml')
-    sim = Simulator(load_vehicle(CONFIG / 'clio_rl_1_1.yaml'), scenario, rate_hz=100.0)
+    sim = Simulator(load_vehicle(default_vehicle_file()), scenario, rate_hz=100.0)
     while sim.t < 15.0:  # full throttle on the 5 deg slope, a gear or two up
         sim.step()
     # private members: the benchmark needs the integrator's state and inputs at that time

@@ -24,20 +24,21 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_observer_node'))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_common'))
 
-from vd_observer_node.bag import BagReader, BagWriter
-from vd_observer_node.bag.cdr_batch import decode_batch, encode_batch, flat_fields
-from vd_observer_node.bag.writer import DEFAULT_CHUNK_DURATION_S, DEFAULT_CHUNK_SIZE
-from vd_observer_node.estimation.cascade import CascadeResult
-from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
-from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
-from vd_sim_node.topics import (
+from vd_common.topics import (
     SENSORS_BODY_VELOCITY,
     SENSORS_WHEEL_ANGLES,
     SENSORS_WHEEL_TORQUES,
     TRUTH_BODY_ACCEL,
     TRUTH_WHEEL_STATES,
 )
+from vd_observer_node.bag import BagReader, BagWriter
+from vd_observer_node.bag.cdr_batch import decode_batch, encode_batch, flat_fields
+from vd_observer_node.bag.writer import DEFAULT_CHUNK_DURATION_S, DEFAULT_CHUNK_SIZE
+from vd_observer_node.estimation.cascade import CascadeResult
+from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
+from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
 
 
 def _null_cascade(t: np.ndarray, angle: np.ndarray, *_: object, **__: object) -> CascadeResult:

@@ -22,9 +22,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
+sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
+from vd_common.vehicle.params import default_vehicle_file, load_vehicle  # noqa: E402
 from vd_sim_node.vehicle.model import VehicleModel  # noqa: E402
-from vd_sim_node.vehicle.params import load_vehicle  # noqa: E402
 from vd_sim_node.vehicle.scenario import load_scenario  # noqa: E402
 from vd_sim_node.vehicle.simulation import Simulator  # noqa: E402
 
@@ -44,7 +45,7 @@ def main() -> None:
     scenario = load_scenario(path)
 
     t0 = time.perf_counter()
-    model = VehicleModel(load_vehicle(CONFIG / 'clio_rl_1_1.yaml'))
+    model = VehicleModel(load_vehicle(default_vehicle_file()))
     build = time.perf_counter() - t0
 
     walls, cpus = [], []

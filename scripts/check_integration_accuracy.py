@@ -22,9 +22,10 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
+sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
+from vd_common.vehicle.params import default_vehicle_file, load_vehicle  # noqa: E402
 from vd_sim_node.vehicle.model import VehicleModel  # noqa: E402
-from vd_sim_node.vehicle.params import load_vehicle  # noqa: E402
 from vd_sim_node.vehicle.scenario import load_scenario  # noqa: E402
 from vd_sim_node.vehicle.simulation import simulate  # noqa: E402
 
@@ -34,7 +35,7 @@ CONFIG = ROOT / 'src' / 'vd_sim_node' / 'config'
 def main() -> None:
     """Run default and reference for each scenario and print the errors."""
     names = sys.argv[1:] or sorted(p.stem for p in (CONFIG / 'scenarios').glob('*.yaml'))
-    model = VehicleModel(load_vehicle(CONFIG / 'clio_rl_1_1.yaml'))
+    model = VehicleModel(load_vehicle(default_vehicle_file()))
     for name in names:
         scenario = load_scenario(CONFIG / 'scenarios' / f'{name}.yaml')
         t0 = time.perf_counter()

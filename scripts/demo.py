@@ -24,8 +24,8 @@ import time
 from pathlib import Path
 
 from tqdm import tqdm
+from vd_common.topics import ESTIMATES_ALERTS, ESTIMATES_SLOPE, STATUS_RECORDER_PROGRESS
 from vd_observer_node.testing.launcher import GraphLauncher, NodeSpec
-from vd_sim_node.topics import ESTIMATES_ALERTS, ESTIMATES_SLOPE, STATUS_RECORDER_PROGRESS
 
 ROOT = Path(__file__).resolve().parents[1]
 _PROGRESS = re.compile(r'progress t=([0-9.]+)/([0-9.]+) s')

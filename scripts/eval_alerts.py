@@ -39,7 +39,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
+sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
+from vd_common.vehicle.friction import axle_mean, road_class  # noqa: E402
 from vd_observer_node.estimation.cascade import run_cascade  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
@@ -63,9 +65,8 @@ from vd_observer_node.tools.report.alerts import (  # noqa: E402
     segments_from_road,
     truth_conditions,
 )
-from vd_sim_node.vehicle.friction_truth import axle_mean, road_class  # noqa: E402
 
-VEHICLE_FILE = ROOT / 'src' / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
+VEHICLE_FILE = ROOT / 'src' / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 SCENARIO_DIR = ROOT / 'src' / 'vd_sim_node' / 'config' / 'scenarios'
 #: name: (encoder counts per rev, body-speed noise std [m/s]).
 CASES = {'ideal': (0, 0.0), 'noisy': (96, 0.05)}
@@ -201,7 +202,7 @@ def main() -> None:
     parser.add_argument('--cases', default='ideal,noisy')
     args = parser.parse_args()
 
-    from vd_sim_node.vehicle.params import load_vehicle
+    from vd_common.vehicle.params import load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
 

@@ -33,6 +33,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
+sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade  # noqa: E402
 from vd_observer_node.estimation.drivetrain import Drivetrain  # noqa: E402
@@ -40,7 +41,7 @@ from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_estimator_vehicle  # noqa: E402
 
-VEHICLE_FILE = ROOT / 'src' / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
+VEHICLE_FILE = ROOT / 'src' / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 SCENARIO_FILE = ROOT / 'src' / 'vd_sim_node' / 'config' / 'scenarios' / 'paper_table1.yaml'
 CASES = {
     # name: (encoder counts per rev, body-speed noise std [m/s]); targets below.
@@ -164,7 +165,7 @@ def main() -> None:
     parser.add_argument('--torque-paths', default='measured,engine,none')
     args = parser.parse_args()
 
-    from vd_sim_node.vehicle.params import load_vehicle
+    from vd_common.vehicle.params import load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
 

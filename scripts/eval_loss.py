@@ -32,17 +32,17 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'scripts'))
 
 from eval_estimators import SCENARIO_FILE, VEHICLE_FILE, evaluation_mask  # noqa: E402
+from vd_common.topics import (  # noqa: E402
+    ESTIMATES_SLOPE,
+    SENSORS,
+    SENSORS_WHEEL_ANGLES,
+)
+from vd_common.vehicle.params import load_vehicle  # noqa: E402
 from vd_observer_node.bag import BagReader  # noqa: E402
 from vd_observer_node.bag.cdr_batch import decode_batch  # noqa: E402
 from vd_observer_node.inputs.mapping import default_mapping  # noqa: E402
 from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag  # noqa: E402
 from vd_observer_node.tools.replay import replay_bag  # noqa: E402
-from vd_sim_node.topics import (  # noqa: E402
-    ESTIMATES_SLOPE,
-    SENSORS,
-    SENSORS_WHEEL_ANGLES,
-)
-from vd_sim_node.vehicle.params import load_vehicle  # noqa: E402
 from vd_sim_node.vehicle.scenario import load_scenario  # noqa: E402
 from vd_sim_node.vehicle.simulation import simulate  # noqa: E402
 

@@ -52,9 +52,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'scripts'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
+sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
 # the evaluation window and RMS of the estimator evaluation, so the figures compare
 from eval_estimators import evaluation_mask, rms  # noqa: E402
+from vd_common.vehicle.params import VehicleParams, load_vehicle  # noqa: E402
 from vd_observer_node.estimation.cascade import CascadeResult  # noqa: E402
 from vd_observer_node.estimation.drivetrain import Drivetrain  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
@@ -62,13 +64,12 @@ from vd_observer_node.estimation.mass_grade import MassGradeConfig  # noqa: E402
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
 from vd_observer_node.estimation.vehicle import EstimatorVehicle  # noqa: E402
 from vd_observer_node.kernel.chain import run_cascade_compiled  # noqa: E402
-from vd_sim_node.vehicle.params import VehicleParams, load_vehicle  # noqa: E402
 from vd_sim_node.vehicle.scenario import Scenario, load_scenario  # noqa: E402
 from vd_sim_node.vehicle.simulation import SimResult, simulate  # noqa: E402
 from vd_sim_node.vehicle.variants import loaded, tyre_radius_scale, with_torque_offset  # noqa: E402
 
 CONFIG = ROOT / 'src' / 'vd_sim_node' / 'config'
-VEHICLE_FILE = CONFIG / 'clio_rl_1_1.yaml'
+VEHICLE_FILE = ROOT / 'src' / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 SCENARIOS = [CONFIG / 'scenarios' / 'mass_drive.yaml', CONFIG / 'scenarios' / 'paper_table1.yaml']
 
 #: case -> (true-vehicle builder, engine torque-signal offset [N m]).

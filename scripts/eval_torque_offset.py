@@ -38,14 +38,15 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'scripts'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
+sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
 from eval_estimators import evaluation_mask, rms  # noqa: E402
 from eval_mass_adaptation import SCENARIOS, VEHICLE_FILE, simulate_case  # noqa: E402
 from eval_mass_adaptation import _cascade as mass_cascade  # noqa: E402
+from vd_common.vehicle.params import load_vehicle  # noqa: E402
 from vd_observer_node.estimation.cascade import CascadeResult  # noqa: E402
 from vd_observer_node.estimation.drivetrain import Drivetrain  # noqa: E402
 from vd_observer_node.estimation.vehicle import EstimatorVehicle  # noqa: E402
-from vd_sim_node.vehicle.params import load_vehicle  # noqa: E402
 from vd_sim_node.vehicle.scenario import load_scenario  # noqa: E402
 from vd_sim_node.vehicle.simulation import SimResult  # noqa: E402
 

@@ -33,6 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'scripts'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
+sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
 from eval_estimators import (  # noqa: E402
     SCENARIO_FILE,
@@ -71,7 +72,7 @@ def main() -> None:
     parser.add_argument('--speed-lipschitz-list', default='300,100')
     args = parser.parse_args()
 
-    from vd_sim_node.vehicle.params import load_vehicle
+    from vd_common.vehicle.params import load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
 

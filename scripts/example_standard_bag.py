@@ -35,8 +35,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'scripts'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
+sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
 from eval_estimators import SCENARIO_FILE, VEHICLE_FILE, evaluation_mask, rms  # noqa: E402
+from vd_common.topics import ESTIMATES_SLOPE, ESTIMATES_TIRE_FORCES  # noqa: E402
 from vd_observer_node.bag import BagReader  # noqa: E402
 from vd_observer_node.bag.cdr_batch import decode_batch  # noqa: E402
 from vd_observer_node.inputs.mapping import load_input_mapping  # noqa: E402
@@ -47,7 +49,6 @@ from vd_observer_node.tools.replay import (  # noqa: E402
     load_replay_config,
     replay_bag,
 )
-from vd_sim_node.topics import ESTIMATES_SLOPE, ESTIMATES_TIRE_FORCES  # noqa: E402
 
 CONFIG = ROOT / 'src' / 'vd_observer_node' / 'config'
 MAPPING_FILE = CONFIG / 'input_mapping_abs_example.yaml'
@@ -118,7 +119,7 @@ def main() -> None:
     parser.add_argument('--plot', type=Path, default=None, help='slope plot (PNG)')
     args = parser.parse_args()
 
-    from vd_sim_node.vehicle.params import load_vehicle
+    from vd_common.vehicle.params import load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
 

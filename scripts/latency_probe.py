@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_ALERTS,
     ESTIMATES_FRICTION,
     ESTIMATES_FRICTION_POTENTIAL,

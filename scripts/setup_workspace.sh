@@ -99,6 +99,13 @@ if [ ! -f "$build_stamp" ]; then
   log "building the workspace with colcon ($mode)"
   mkdir -p "$root/log"
   rm -f "$root"/install/.vd-build-*
+  # colcon's (non-symlink) Python install only ever adds files: a module moved or deleted in
+  # src/ would live on in build/ and install/ and still import there. Copy the Python
+  # packages afresh (a few hundred files).
+  for setup_py in src/*/setup.py; do
+    pkg=$(basename "$(dirname "$setup_py")")
+    rm -rf "$root/build/$pkg/build" "$root/install/$pkg/lib/python"*/site-packages/"$pkg"
+  done
   "$venv/bin/python" -m colcon --log-base "$root/log" build \
     --base-paths "$root/src" --build-base "$root/build" --install-base "$root/install" \
     --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$venv/bin/python" \

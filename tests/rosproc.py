@@ -31,7 +31,7 @@ class RosProcess:
     def stacks(self) -> str:
         """The output, after asking the process for its threads' Python stacks if it runs.
 
-        vd's node entry points dump them on SIGUSR1 (vd_sim_node.entry); other processes are
+        vd's node entry points dump them on SIGUSR1 (vd_common.entry); other processes are
         left alone (SIGUSR1 would end them). For failure messages: where a hung node is.
         """
         if self.popen.poll() is None and catches_signal(self.popen.pid, signal.SIGUSR1):

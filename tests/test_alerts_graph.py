@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 from rosproc import RosProcessGroup
 from test_graph import wait_for_last_stamp
+from vd_common.topics import ESTIMATES_ALERTS, ESTIMATES_FRICTION_POTENTIAL, SENSORS_WHEEL_ANGLES
 from vd_observer_node.bag import BagReader
-from vd_sim_node.topics import ESTIMATES_ALERTS, ESTIMATES_FRICTION_POTENTIAL, SENSORS_WHEEL_ANGLES
 
 from vd_msgs.msg import Alert
 

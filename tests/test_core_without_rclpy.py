@@ -1,4 +1,10 @@
-"""The ROS-free core imports in a Python where rclpy cannot be imported at all."""
+"""The ROS-free core imports in a Python where rclpy cannot be imported at all.
+
+Every module of the three Python packages but the ROS side (the nodes, their parameter lists
+and `vd_common.ros_common`): the simulator's and the estimator's cores, and what vd_common
+shares with them (topics, errors, the vehicle-file parser, the tyre, the entry guard, the
+``--params-file`` check).
+"""
 
 from __future__ import annotations
 
@@ -8,12 +14,13 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 NODE_FILE_SUFFIXES = ('_node.py', 'ros_common.py', 'node_params.py')  # ROS side: rclpy allowed
-SOURCE_DIRS = [str(ROOT / 'src' / p) for p in ('vd_sim_node', 'vd_observer_node')]
+PACKAGES = ('vd_common', 'vd_sim_node', 'vd_observer_node')
+SOURCE_DIRS = [str(ROOT / 'src' / p) for p in PACKAGES]
 
 
 def core_modules() -> list[str]:
     mods = []
-    for pkg in ('vd_sim_node', 'vd_observer_node'):
+    for pkg in PACKAGES:
         base = ROOT / 'src' / pkg
         for path in sorted((base / pkg).rglob('*.py')):
             if path.name.endswith(NODE_FILE_SUFFIXES) or '__pycache__' in path.parts:
@@ -25,7 +32,13 @@ def core_modules() -> list[str]:
 
 
 def test_there_is_a_core_to_check() -> None:
-    assert len(core_modules()) >= 2
+    modules = core_modules()
+    assert len(modules) >= 2
+    for shared in ('topics', 'errors', 'params_file', 'entry', 'yaml_reader'):
+        assert f'vd_common.{shared}' in modules
+    for shared in ('params', 'tire', 'friction'):
+        assert f'vd_common.vehicle.{shared}' in modules
+    assert 'vd_common.ros_common' not in modules  # the ROS side
 
 
 def test_core_modules_import_without_rclpy() -> None:

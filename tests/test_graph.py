@@ -19,9 +19,7 @@ from typing import Any
 import numpy as np
 import pytest
 from rosproc import RosProcessGroup, wait_recording
-from vd_observer_node.bag import BagReader
-from vd_observer_node.tools.replay import replay_bag
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_FRICTION,
     ESTIMATES_RESISTANCES,
     ESTIMATES_SLOPE,
@@ -31,6 +29,8 @@ from vd_sim_node.topics import (
     TRUTH_SLOPE,
     TRUTH_TIRE_FORCES,
 )
+from vd_observer_node.bag import BagReader
+from vd_observer_node.tools.replay import replay_bag
 
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
 WAIT_FOR_STAMP = Path(__file__).parent / 'ros_scripts' / 'wait_for_stamp.py'

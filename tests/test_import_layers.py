@@ -14,7 +14,7 @@ import pytest
 
 SRC = Path(__file__).resolve().parents[1] / 'src'
 
-#: vd_observer_node's rooms and what each may import (besides itself and vd_sim_node).
+#: vd_observer_node's rooms and what each may import (besides itself and vd_common).
 OBSERVER_LAYERS: dict[str, set[str]] = {
     'errors': set(),
     'bag': {'errors'},
@@ -29,18 +29,33 @@ OBSERVER_LAYERS: dict[str, set[str]] = {
     # thin nodes: the core and the node plumbing, never the offline tools or test helpers
     'nodes': {'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel'},
 }
-#: vd_sim_node's rooms: the bond-graph core is a leaf, the vehicle model sits on it.
+#: vd_sim_node's rooms (besides vd_common): the bond-graph core is a leaf, the vehicle model
+#: sits on it, the node (sim_node and its entry point) on top.
 SIM_LAYERS: dict[str, set[str]] = {
+    'errors': set(),
+    'lockstep': set(),
+    'bondgraph': set(),
+    'vehicle': {'errors', 'bondgraph'},
+    'nodes': {'errors', 'lockstep', 'bondgraph', 'vehicle'},
+}
+#: vd_common's rooms: the base of the other two, it imports neither of them.
+COMMON_LAYERS: dict[str, set[str]] = {
     'errors': set(),
     'topics': set(),
     'params_file': set(),
     'entry': set(),
-    'lockstep': set(),
-    'bondgraph': set(),
-    'vehicle': {'errors', 'bondgraph'},
-    'nodes': {'errors', 'topics', 'params_file', 'entry', 'lockstep', 'bondgraph', 'vehicle'},
+    'yaml_reader': set(),
+    'vehicle': {'errors', 'yaml_reader'},
+    'ros_common': {'errors', 'params_file', 'entry'},
 }
-_NODE_PLUMBING = {'raw_io', 'node_params', 'entry_points', 'ros_common'}
+#: modules at a package's top level that belong to its nodes
+_NODE_PLUMBING = {'entry'}
+#: which packages each package may import
+PACKAGES = {
+    'vd_common': set(),
+    'vd_sim_node': {'vd_common'},
+    'vd_observer_node': {'vd_common'},
+}
 
 
 def _room(module: str, package: str) -> str | None:
@@ -52,6 +67,8 @@ def _room(module: str, package: str) -> str | None:
     if len(parts) == 1:
         return 'package'
     name = parts[1]
+    if package == 'vd_common':
+        return name
     return 'nodes' if name.endswith('_node') or name in _NODE_PLUMBING else name
 
 
@@ -95,10 +112,43 @@ def test_vd_sim_node_imports_top_down() -> None:
     assert _violations('vd_sim_node', SIM_LAYERS) == []
 
 
-@pytest.mark.parametrize('path', _modules('vd_sim_node'), ids=lambda p: p.name)
-def test_vd_sim_node_never_imports_vd_observer_node(path: Path) -> None:
-    upward = [m for m in _imports(path) if m.split('.')[0] == 'vd_observer_node']
-    assert upward == [], f'{path.name} imports {upward}: vd_observer_node is built on vd_sim_node'
+def test_vd_common_imports_top_down() -> None:
+    assert _violations('vd_common', COMMON_LAYERS) == []
+
+
+@pytest.mark.parametrize(
+    ('package', 'path'),
+    [(package, path) for package in PACKAGES for path in _modules(package)],
+    ids=lambda x: x if isinstance(x, str) else f'{x.parent.name}/{x.name}',
+)
+def test_packages_import_only_the_packages_below_them(package: str, path: Path) -> None:
+    """vd_common imports no vd package; the simulator and the estimator only vd_common.
+
+    Lazy imports inside functions count too: vd_observer_node must run without vd_sim_node
+    installed (tests/test_standalone_estimator.py runs it so).
+    """
+    found = _foreign_imports(package, path)
+    assert found == [], f'{path.name} imports {found}: allowed {sorted(PACKAGES[package])}'
+
+
+def _foreign_imports(package: str, path: Path) -> list[str]:
+    others = set(PACKAGES) - {package} - PACKAGES[package]
+    return [m for m in _imports(path) if m.split('.')[0] in others]
+
+
+def test_the_package_check_sees_a_lazy_import(tmp_path: Path) -> None:
+    module = tmp_path / 'devbag.py'
+    module.write_text(
+        'def truth():\n'
+        '    from vd_sim_node.vehicle.friction_truth import FrictionTruth\n'
+        '    import vd_sim_node\n'
+        '    from vd_common.vehicle import friction\n'
+    )
+    assert _foreign_imports('vd_observer_node', module) == [
+        'vd_sim_node.vehicle.friction_truth',
+        'vd_sim_node',
+    ]
+    assert _foreign_imports('vd_sim_node', module) == []
 
 
 def test_the_layer_check_sees_a_violation(tmp_path: Path) -> None:

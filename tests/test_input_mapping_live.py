@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import yaml
 from rosproc import RosProcess, RosProcessGroup
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
     ESTIMATES_TORQUE_OFFSET,
@@ -25,6 +25,7 @@ from vd_sim_node.topics import (
 )
 
 NS = 1_000_000_000
+ROOT = Path(__file__).resolve().parents[1]
 SCRIPTS = Path(__file__).resolve().parent / 'ros_scripts'
 #: the mapping of publish_std_inputs.py's topics, in the mapping file's form
 MAPPING = {
@@ -265,8 +266,7 @@ def test_the_player_plays_a_users_bag_to_the_nodes_given_the_same_mapping(
 
 def test_every_mapping_setting_is_a_declared_parameter_of_the_nodes() -> None:
     from vd_observer_node.inputs.mapping import INPUT_KEYS, INPUTS
-
-    from vd_observer_node import (
+    from vd_observer_node.nodes import (
         alerts_node,
         estimator_node,
         observer_node,
@@ -282,9 +282,9 @@ def test_every_mapping_setting_is_a_declared_parameter_of_the_nodes() -> None:
 
 
 def test_the_separate_nodes_hold_what_derives_from_a_headerless_input() -> None:
-    from vd_observer_node.alerts_node import held_inputs as alerts_held
-    from vd_observer_node.estimator_node import held_inputs as estimator_held
     from vd_observer_node.inputs.mapping import default_mapping, mapping_from_dict
+    from vd_observer_node.nodes.alerts_node import held_inputs as alerts_held
+    from vd_observer_node.nodes.estimator_node import held_inputs as estimator_held
 
     assert estimator_held(default_mapping()) == []
     assert alerts_held(default_mapping()) == []
@@ -302,7 +302,7 @@ def test_the_separate_nodes_hold_what_derives_from_a_headerless_input() -> None:
 
 def test_a_mapping_file_and_mapping_parameters_together_are_refused(tmp_path: Path) -> None:
     from vd_observer_node.inputs.errors import MappingError
-    from vd_observer_node.node_params import take_input_mapping
+    from vd_observer_node.nodes.node_params import take_input_mapping
 
     values = {'input_mapping': str(tmp_path / 'car.yaml'), 'inputs.body_speed.topic': '/odom'}
     with pytest.raises(MappingError, match=r'inputs\.body_speed\.topic are both'):
@@ -354,6 +354,7 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     alignment): the live pipeline's slope estimates equal the replay's, stamp for stamp."""
     import dataclasses
 
+    from vd_common.vehicle.params import default_vehicle_file, load_vehicle
     from vd_observer_node.bag import BagReader
     from vd_observer_node.bag.cdr_batch import decode_batch
     from vd_observer_node.inputs.mapping import mapping_from_dict
@@ -363,11 +364,10 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
         write_standard_bag,
     )
     from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
-    from vd_sim_node.vehicle.params import default_vehicle_file, load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
 
-    scenarios = default_vehicle_file().parent / 'scenarios'
+    scenarios = ROOT / 'src' / 'vd_sim_node' / 'config' / 'scenarios'
     scenario = load_scenario(scenarios / 'paper_table1.yaml')
     sim = simulate(
         load_vehicle(default_vehicle_file()), dataclasses.replace(scenario, duration=4.0)
@@ -420,17 +420,19 @@ def test_pipeline_node_on_the_engine_and_no_torque_paths_computes_what_the_repla
     the same, every slope invalid, torque_source 2."""
     import dataclasses
 
+    from vd_common.vehicle.params import default_vehicle_file, load_vehicle
     from vd_observer_node.bag import BagReader
     from vd_observer_node.bag.cdr_batch import decode_batch
     from vd_observer_node.estimation.drivetrain import TORQUE_SOURCES
     from vd_observer_node.inputs.mapping import mapping_from_dict
     from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
     from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
-    from vd_sim_node.vehicle.params import default_vehicle_file, load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
 
-    scenario = load_scenario(default_vehicle_file().parent / 'scenarios' / 'paper_table1.yaml')
+    scenario = load_scenario(
+        ROOT / 'src' / 'vd_sim_node' / 'config' / 'scenarios' / 'paper_table1.yaml'
+    )
     # launch at 8 s, the upshift at 11.5 s
     sim = simulate(
         load_vehicle(default_vehicle_file()),

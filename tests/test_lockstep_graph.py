@@ -14,13 +14,13 @@ from pathlib import Path
 import pytest
 from rosproc import RosProcessGroup, wait_recording
 from test_graph import wait_exit
-from vd_observer_node.bag import BagReader
-from vd_sim_node.topics import (
+from vd_common.topics import (
     SENSORS,
     SENSORS_WHEEL_ANGLES,
     STATUS_RECORDER_PROGRESS,
     TRUTH,
 )
+from vd_observer_node.bag import BagReader
 
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
 SLOW = Path(__file__).parent / 'ros_scripts' / 'slow_consumer.py'

@@ -23,15 +23,15 @@ from test_graph import (
     wait_exit,
     wait_for_last_stamp,
 )
-from vd_observer_node.estimation.estimator import EstimatorConfig
-from vd_observer_node.tools.replay import replay_bag
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_MASS,
     ESTIMATES_ROLLING_RADIUS,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
     SENSORS_WHEEL_ANGLES,
 )
+from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.tools.replay import replay_bag
 
 #: excited (0.4 s) and converged (at 1.6 s) within the 4 s launch; the defaults need more
 #: driving

@@ -16,7 +16,7 @@ import yaml
 from rosproc import RosProcess, RosProcessGroup
 
 ROOT = Path(__file__).resolve().parents[1]
-VEHICLE_FILE = ROOT / 'src' / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
+VEHICLE_FILE = ROOT / 'src' / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 
 # One process publishes the crafted sensor stream and records everything the nodes publish.
 FEED_AND_CAPTURE = textwrap.dedent(
@@ -31,9 +31,9 @@ FEED_AND_CAPTURE = textwrap.dedent(
     from vd_msgs.msg import Friction, Slope, TireForces, WheelAngles, WheelStates, WheelTorques
     from vd_observer_node.testing.synthetic import synthetic_trajectory
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
-    from vd_sim_node.ros_common import DIAGNOSTICS_QOS, STREAM_QOS, ns_to_time
-    from vd_sim_node import topics
-    from vd_sim_node.vehicle.params import default_vehicle_file
+    from vd_common.ros_common import DIAGNOSTICS_QOS, STREAM_QOS, ns_to_time
+    from vd_common import topics
+    from vd_common.vehicle.params import default_vehicle_file
 
     T0, DT = 100.0, 0.005
     vehicle = load_estimator_vehicle(default_vehicle_file())

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PYTHON_PACKAGES = ['vd_sim_node', 'vd_observer_node']
+PYTHON_PACKAGES = ['vd_common', 'vd_sim_node', 'vd_observer_node']
 ALL_PACKAGES = ['vd_msgs', *PYTHON_PACKAGES]
 
 
@@ -45,10 +45,10 @@ def setup_py_kwargs(pkg: str) -> dict[str, object]:
 
 
 def console_scripts(pkg: str) -> dict[str, str]:
-    entry_points = setup_py_kwargs(pkg)['entry_points']
+    entry_points = setup_py_kwargs(pkg).get('entry_points', {})  # vd_common has none
     assert isinstance(entry_points, dict)
     scripts = {}
-    for line in entry_points['console_scripts']:
+    for line in entry_points.get('console_scripts', []):
         name, target = (s.strip() for s in line.split('='))
         scripts[name] = target
     return scripts
@@ -70,6 +70,26 @@ def test_package_xml_and_setup_py_agree_on_name_and_version(pkg: str) -> None:
     assert kwargs['name'] == root.findtext('name') == pkg
     assert kwargs['version'] == root.findtext('version')
     assert root.findtext('export/build_type') == 'ament_python'
+
+
+def run_dependencies(pkg: str) -> set[str]:
+    """What `pkg` needs installed to run (and to build): package.xml's non-test dependencies."""
+    root = ET.parse(ROOT / 'src' / pkg / 'package.xml').getroot()
+    tags = ('depend', 'exec_depend', 'build_depend', 'build_export_depend', 'buildtool_depend')
+    return {str(e.text).strip() for tag in tags for e in root.findall(tag)}
+
+
+@pytest.mark.parametrize('pkg', ['vd_sim_node', 'vd_observer_node'])
+def test_the_simulator_and_the_estimator_depend_on_vd_common(pkg: str) -> None:
+    """Declared in package.xml (colcon builds vd_common first) and in setup.py."""
+    assert 'vd_common' in run_dependencies(pkg)
+    install_requires = setup_py_kwargs(pkg)['install_requires']
+    assert isinstance(install_requires, list) and 'vd_common' in install_requires
+
+
+def test_vd_common_depends_on_no_other_vd_package() -> None:
+    assert not {d for d in run_dependencies('vd_common') if d.startswith('vd_')}
+    assert 'vd_common' not in run_dependencies('vd_msgs')
 
 
 @pytest.mark.parametrize('pkg', PYTHON_PACKAGES)
@@ -162,7 +182,8 @@ def test_bag_core_imports_are_declared_dependencies() -> None:
     third_party = {
         name
         for name in imported
-        if name not in sys.stdlib_module_names and name not in ('vd_observer_node', 'vd_sim_node')
+        if name not in sys.stdlib_module_names
+        and name not in ('vd_observer_node', 'vd_common', 'vd_sim_node')
     }
     # ament_index_python: optional (a ROS install brings it; the core works without it)
     third_party.discard('ament_index_python')
@@ -183,3 +204,17 @@ def test_bag_core_imports_are_declared_dependencies() -> None:
         assert pip_name in lock, f'{module}: {pip_name} not pinned in the lock'
         if rosdep_key is not None:
             assert rosdep_key in exec_depends, f'{module}: {rosdep_key} not in package.xml'
+
+
+def test_test_modules_have_unique_names() -> None:
+    """pytest imports test files by their basename (no __init__.py in the test folders): two
+    files of one name in different folders stop the whole collection ('import file mismatch')."""
+    folders = [ROOT / 'tests', *(ROOT / 'src' / pkg / 'test' for pkg in PYTHON_PACKAGES)]
+    seen: dict[str, Path] = {}
+    clashes = []
+    for folder in folders:
+        for path in sorted(folder.glob('test_*.py')):
+            if path.name in seen:
+                clashes.append(f'{path.relative_to(ROOT)} and {seen[path.name].relative_to(ROOT)}')
+            seen[path.name] = path
+    assert clashes == []

@@ -22,8 +22,7 @@ from test_graph import (
     wait_exit,
     wait_for_last_stamp,
 )
-from vd_observer_node.tools.replay import replay_bag
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_ALERTS,
     ESTIMATES_FRICTION,
     ESTIMATES_FRICTION_POTENTIAL,
@@ -33,6 +32,7 @@ from vd_sim_node.topics import (
     OBSERVER_WHEEL_STATES,
     SENSORS_WHEEL_ANGLES,
 )
+from vd_observer_node.tools.replay import replay_bag
 
 OUTPUTS = {
     OBSERVER_WHEEL_STATES: ('omega', 'omega_dot'),

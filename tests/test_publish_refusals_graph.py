@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from rosproc import RosProcessGroup
 from test_graph import wait_exit, wait_for_last_stamp
-from vd_sim_node.topics import ESTIMATES_SLOPE, OBSERVER_BODY_ACCEL
+from vd_common.topics import ESTIMATES_SLOPE, OBSERVER_BODY_ACCEL
 
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
 COLLECT = Path(__file__).parent / 'ros_scripts' / 'collect_outputs.py'

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 from rosproc import RosProcessGroup
 from test_graph import wait_for_last_stamp
+from vd_common.topics import SENSORS_WHEEL_ANGLES, TRUTH_SLOPE
 from vd_observer_node.bag import BagReader
-from vd_sim_node.topics import SENSORS_WHEEL_ANGLES, TRUTH_SLOPE
 
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
 

@@ -12,12 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from vd_observer_node.bag import BagReader
-from vd_observer_node.bag.cdr_batch import decode_batch
-from vd_observer_node.bag.typestore import message_definition
-from vd_observer_node.estimation.drivetrain import TORQUE_MEASURED
-from vd_observer_node.tools.replay import replay_bag
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_FRICTION,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
@@ -25,6 +20,11 @@ from vd_sim_node.topics import (
     TRUTH_SLOPE,
     TRUTH_TIRE_FORCES,
 )
+from vd_observer_node.bag import BagReader
+from vd_observer_node.bag.cdr_batch import decode_batch
+from vd_observer_node.bag.typestore import message_definition
+from vd_observer_node.estimation.drivetrain import TORQUE_MEASURED
+from vd_observer_node.tools.replay import replay_bag
 
 BAG = Path(__file__).resolve().parents[1] / 'bags' / 'paper_table1_100hz'
 NS = 1_000_000_000

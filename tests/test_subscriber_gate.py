@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import pytest
-from vd_sim_node.ros_common import SubscriberGate
+from vd_common.ros_common import SubscriberGate
 
 
 @dataclass

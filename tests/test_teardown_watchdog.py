@@ -11,7 +11,7 @@ import pytest
 
 _HANGS = """
 import time
-from vd_sim_node.ros_common import TeardownWatchdog
+from vd_common.ros_common import TeardownWatchdog
 print('outputs closed', flush=True)
 with TeardownWatchdog({timeout}):
     time.sleep({sleep})  # stands for an executor shutdown that does not return
@@ -53,7 +53,7 @@ def test_a_teardown_in_time_is_left_alone() -> None:
 _REFUSED_THEN_HANGS = """
 import time
 import rclpy.node
-from vd_sim_node import ros_common
+from vd_common import ros_common
 
 class MiddlewareTeardown:
     def __del__(self):  # runs when the half-built node is released
@@ -93,7 +93,7 @@ def test_a_refused_node_whose_teardown_hangs_exits_with_code_2(ros_env: dict[str
 # waiting; the backstop (faulthandler, a C thread) ends the process, code 1, with the stacks.
 _HANGS_HOLDING_THE_GIL = """
 import ctypes
-from vd_sim_node import ros_common
+from vd_common import ros_common
 print('outputs closed', flush=True)
 ros_common.TEARDOWN_BACKSTOP_GRACE_S = 0.5
 with ros_common.TeardownWatchdog(0.5):

@@ -16,7 +16,7 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
-    install_requires=['setuptools'],
+    install_requires=['setuptools', 'vd_common'],
     # `vd fleet --engine dask` / `--scheduler`: the fleet replay on a Dask cluster (the local
     # process pool needs nothing more). The dev set-up installs it (requirements/python.in).
     extras_require={'fleet': ['distributed']},
@@ -29,12 +29,12 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'observer_node = vd_observer_node.entry_points:observer_node',
-            'estimator_node = vd_observer_node.entry_points:estimator_node',
-            'alerts_node = vd_observer_node.entry_points:alerts_node',
-            'recorder_node = vd_observer_node.entry_points:recorder_node',
-            'player_node = vd_observer_node.entry_points:player_node',
-            'pipeline_node = vd_observer_node.entry_points:pipeline_node',
+            'observer_node = vd_observer_node.nodes.entry_points:observer_node',
+            'estimator_node = vd_observer_node.nodes.entry_points:estimator_node',
+            'alerts_node = vd_observer_node.nodes.entry_points:alerts_node',
+            'recorder_node = vd_observer_node.nodes.entry_points:recorder_node',
+            'player_node = vd_observer_node.nodes.entry_points:player_node',
+            'pipeline_node = vd_observer_node.nodes.entry_points:pipeline_node',
             'vd = vd_observer_node.tools.cli:main',
         ],
     },

@@ -17,7 +17,7 @@ setup(
         ('share/' + package_name + '/config/scenarios', glob('config/scenarios/*.yaml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
     ],
-    install_requires=['setuptools'],
+    install_requires=['setuptools', 'vd_common'],
     zip_safe=True,
     maintainer='vd maintainers',
     maintainer_email='maintainers@vd-project.org',

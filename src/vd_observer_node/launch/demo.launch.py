@@ -22,7 +22,7 @@ from launch.events import Shutdown
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
-from vd_sim_node.topics import ESTIMATES_ALERTS, ESTIMATES_SLOPE, STATUS_RECORDER_PROGRESS
+from vd_common.topics import ESTIMATES_ALERTS, ESTIMATES_SLOPE, STATUS_RECORDER_PROGRESS
 
 LOCKSTEP_TOPICS = f'{ESTIMATES_SLOPE},{ESTIMATES_ALERTS},{STATUS_RECORDER_PROGRESS}'
 

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from vd_common.vehicle.params import load_vehicle
 from vd_observer_node.chain import ChainSettings, PythonChain
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
@@ -23,7 +24,6 @@ from vd_observer_node.estimation.faults import FaultReport
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_observer_node.tools.replay import load_replay_config
-from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.scenario import (
     PiecewiseConstant,
     Scenario,
@@ -36,7 +36,7 @@ from vd_sim_node.vehicle.simulation import SimResult, simulate
 FloatArray = NDArray[np.float64]
 
 CONFIG = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config'
-VEHICLE_FILE = CONFIG / 'clio_rl_1_1.yaml'
+VEHICLE_FILE = CONFIG.parents[1] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 #: the simulator's vehicle and the estimators' view of it
 PARAMS = load_vehicle(VEHICLE_FILE)
 VEHICLE = load_estimator_vehicle(VEHICLE_FILE)

@@ -19,9 +19,9 @@ from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 
 simulation = pytest.importorskip('vd_sim_node.vehicle.simulation')
 scenario_module = pytest.importorskip('vd_sim_node.vehicle.scenario')
-params_module = pytest.importorskip('vd_sim_node.vehicle.params')
+params_module = pytest.importorskip('vd_common.vehicle.params')
 
-VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
+VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 VEHICLE = load_estimator_vehicle(VEHICLE_FILE)
 
 

@@ -206,17 +206,17 @@ def scenario_run(name: str, duration: float | None = None, noisy: bool = False) 
     Ideal sensors with the ideal-sensor tuning of scripts/eval_estimators.py, or (noisy) a
     96 counts/rev encoder and 0.05 m/s speed noise with the default observer settings.
     """
+    from vd_common.vehicle.params import load_vehicle
     from vd_observer_node.estimation.cascade import run_cascade
     from vd_observer_node.estimation.estimator import EstimatorConfig
     from vd_observer_node.estimation.observer import ObserverConfig
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
     from vd_observer_node.situation.friction_potential import TyreCurves
     from vd_observer_node.situation.monitor import SituationConfig, SituationMonitor, run_situation
-    from vd_sim_node.vehicle.params import load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
 
-    vehicle_file = SIM_CONFIG / 'clio_rl_1_1.yaml'
+    vehicle_file = SIM_CONFIG.parents[1] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
     scenario = load_scenario(SIM_CONFIG / 'scenarios' / f'{name}.yaml')
     if duration is not None:
         scenario = dataclasses.replace(scenario, duration=duration)
@@ -250,7 +250,7 @@ def scenario_run(name: str, duration: float | None = None, noisy: bool = False) 
     series = run_situation(monitor, sim.wheel_angle, sim.body_speed, sim.wheel_torque, est)
     level, mu_max = series.level, series.mu_max
     # truth: the Magic Formula peak scales with road_mu in both mu and slip (stiffness fixed)
-    from vd_sim_node.vehicle.tire import magic_formula_fx
+    from vd_common.vehicle.tire import magic_formula_fx
 
     grid = np.linspace(0.0, 0.6, 6001)
     fz0 = float(np.mean(sim.fz[0]))

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from vd_common.topics import SENSORS_WHEEL_ANGLES
 from vd_observer_node.bag import (
     BagDiskFullError,
     BagExistsError,
@@ -23,7 +24,6 @@ from vd_observer_node.bag import (
 )
 from vd_observer_node.bag.cdr_batch import encode_batch
 from vd_observer_node.bag.repair import repair_bag
-from vd_sim_node.topics import SENSORS_WHEEL_ANGLES
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 TOPIC = SENSORS_WHEEL_ANGLES

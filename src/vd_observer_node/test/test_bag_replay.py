@@ -7,19 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from vd_observer_node.bag import BagReader, BagWriter, ReplayInputError
-from vd_observer_node.bag.cdr_batch import decode_batch
-from vd_observer_node.estimation.cascade import run_cascade
-from vd_observer_node.estimation.vehicle import load_estimator_vehicle
-from vd_observer_node.inputs.mapping import default_mapping
-from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
-from vd_observer_node.tools.replay import (
-    ALERT_TOPICS,
-    ESTIMATE_TOPICS,
-    SENSOR_TOPICS,
-    replay_bag,
-)
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_ALERTS,
     ESTIMATES_FRICTION,
     ESTIMATES_FRICTION_POTENTIAL,
@@ -36,7 +24,19 @@ from vd_sim_node.topics import (
     SENSORS_WHEEL_ANGLES,
     SENSORS_WHEEL_TORQUES,
 )
-from vd_sim_node.vehicle.params import default_vehicle_file
+from vd_common.vehicle.params import default_vehicle_file
+from vd_observer_node.bag import BagReader, BagWriter, ReplayInputError
+from vd_observer_node.bag.cdr_batch import decode_batch
+from vd_observer_node.estimation.cascade import run_cascade
+from vd_observer_node.estimation.vehicle import load_estimator_vehicle
+from vd_observer_node.inputs.mapping import default_mapping
+from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
+from vd_observer_node.tools.replay import (
+    ALERT_TOPICS,
+    ESTIMATE_TOPICS,
+    SENSOR_TOPICS,
+    replay_bag,
+)
 
 #: What a replay writes with the default settings: the online mass and radius topics only
 #: where adapted (off by default), as the nodes publish them; the engine-torque offset only
@@ -205,14 +205,14 @@ def launch(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, object
     """launch_low_mu at 200 Hz written as a recording, and its replay with the Python kernel
     (compared bit for bit with the reference objects below; the compiled replay is compared
     with this one in `test_compiled_replay_equals_the_python_replay`)."""
+    from vd_common.vehicle.params import load_vehicle
     from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
-    from vd_sim_node.vehicle.params import load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
 
     folder = tmp_path_factory.mktemp('launch')
     sim = simulate(
-        load_vehicle(CONFIG / 'clio_rl_1_1.yaml'),
+        load_vehicle(default_vehicle_file()),
         load_scenario(CONFIG / 'scenarios' / 'launch_low_mu.yaml'),
         rate_hz=SIM_RATE,
     )
@@ -255,9 +255,9 @@ def test_compiled_replay_equals_the_python_replay(
 
 def _expected_situation(in_bag: Path, vehicle_file: Path) -> list[object]:
     """SituationMonitor fed per stamp, independently of replay's batch code."""
+    from vd_common.vehicle.params import load_vehicle
     from vd_observer_node.situation.friction_potential import TyreCurves
     from vd_observer_node.situation.monitor import SituationMonitor
-    from vd_sim_node.vehicle.params import load_vehicle
 
     raw = BagReader(in_bag).topic_arrays(SENSOR_TOPICS)
     angles = decode_batch('vd_msgs/msg/WheelAngles', raw[SENSORS_WHEEL_ANGLES].datas)

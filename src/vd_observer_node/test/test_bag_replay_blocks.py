@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 import pytest
+from vd_common.topics import ESTIMATES_TORQUE_OFFSET, TRUTH_NAMESPACE
+from vd_common.vehicle.params import default_vehicle_file, load_vehicle
 from vd_observer_node.bag import BagReader, BagWriter
 from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.estimation.observer import ObserverConfig
@@ -27,10 +29,11 @@ from vd_observer_node.testing.standard_bags import (
     write_standard_bag,
 )
 from vd_observer_node.tools.replay import ReplayReport, replay_bag
-from vd_sim_node.topics import ESTIMATES_TORQUE_OFFSET, TRUTH_NAMESPACE
-from vd_sim_node.vehicle.params import default_vehicle_file, load_vehicle
 from vd_sim_node.vehicle.scenario import load_scenario
 from vd_sim_node.vehicle.simulation import simulate
+
+#: the simulator's scenarios (the tests' oracle; vd_common holds only the vehicle file)
+SCENARIOS = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'scenarios'
 
 CHUNK = 4096  # [B] input chunks of a few dozen messages: a block ends at a chunk's end
 TINY = 5  # messages per block: each block is one chunk
@@ -39,7 +42,7 @@ _TIMES = ('wall_time_s', 'cascade_time_s', 'situation_time_s')
 
 def _simulate(duration_s: float, rate_hz: float) -> Any:
     """The paper scenario (launch at 8 s, an upshift later) with ideal sensors."""
-    scenario = load_scenario(default_vehicle_file().parent / 'scenarios' / 'paper_table1.yaml')
+    scenario = load_scenario(SCENARIOS / 'paper_table1.yaml')
     scenario = dataclasses.replace(
         scenario,
         duration=duration_s,

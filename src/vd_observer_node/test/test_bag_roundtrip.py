@@ -15,6 +15,13 @@ import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.rosbag2 import Reader as RosbagsReader
+from vd_common.topics import (
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    SENSORS_WHEEL_ANGLES,
+    TRUTH_NAMESPACE,
+    TRUTH_SLOPE,
+)
 from vd_observer_node.bag import BagReader, BagWriter
 from vd_observer_node.bag.typestore import (
     VD_MSG_TYPES,
@@ -23,13 +30,6 @@ from vd_observer_node.bag.typestore import (
     message_definition,
     serialize,
     vd_typestore,
-)
-from vd_sim_node.topics import (
-    ESTIMATES_SLOPE,
-    ESTIMATES_TIRE_FORCES,
-    SENSORS_WHEEL_ANGLES,
-    TRUTH_NAMESPACE,
-    TRUTH_SLOPE,
 )
 
 STANDARD_TYPES = (

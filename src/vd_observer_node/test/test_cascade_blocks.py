@@ -16,18 +16,18 @@ from typing import Any
 
 import numpy as np
 import pytest
+from vd_common.vehicle.params import load_vehicle
 from vd_observer_node.estimation.cascade import CascadeResult, CascadeState, run_cascade
 from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.kernel.chain import run_cascade_compiled
-from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.scenario import load_scenario
 from vd_sim_node.vehicle.simulation import simulate
 
 CONFIG = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config'
-VEHICLE_FILE = CONFIG / 'clio_rl_1_1.yaml'
+VEHICLE_FILE = CONFIG.parents[1] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 VEHICLE = load_estimator_vehicle(VEHICLE_FILE)
 DRIVETRAIN = Drivetrain.from_params(load_vehicle(VEHICLE_FILE))
 RATE_HZ = 200.0

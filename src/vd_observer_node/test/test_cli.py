@@ -5,10 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from vd_common.topics import ESTIMATES_TIRE_FORCES, SENSORS_WHEEL_ANGLES
 from vd_observer_node.bag import BagReader
 from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
 from vd_observer_node.tools.cli import main
-from vd_sim_node.topics import ESTIMATES_TIRE_FORCES, SENSORS_WHEEL_ANGLES
 
 
 @pytest.fixture

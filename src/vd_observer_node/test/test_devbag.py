@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from vd_common.topics import ESTIMATES_MASS, ESTIMATES_ROLLING_RADIUS, ESTIMATES_TORQUE_OFFSET
+from vd_common.vehicle.params import default_vehicle_file
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.testing.devbag import cascade_topics
 from vd_observer_node.tools.replay import ESTIMATE_TOPICS
-from vd_sim_node.topics import ESTIMATES_MASS, ESTIMATES_ROLLING_RADIUS, ESTIMATES_TORQUE_OFFSET
-from vd_sim_node.vehicle.params import default_vehicle_file
 
 ONLINE = (ESTIMATES_MASS, ESTIMATES_ROLLING_RADIUS)
 #: written by vd replay where it changes, on the engine path only: never a cascade topic

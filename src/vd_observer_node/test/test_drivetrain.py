@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from vd_common.vehicle.params import load_vehicle
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.drivetrain import (
@@ -33,12 +34,11 @@ from vd_observer_node.estimation.estimator import Estimator
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.kernel.chain import run_cascade_compiled
 from vd_observer_node.kernel.estimation import CompiledEstimator
-from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.scenario import load_scenario
 from vd_sim_node.vehicle.simulation import SimResult, simulate
 
 CONFIG = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config'
-PARAMS = load_vehicle(CONFIG / 'clio_rl_1_1.yaml')
+PARAMS = load_vehicle(CONFIG.parents[1] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml')
 VEHICLE = EstimatorVehicle.from_params(PARAMS)
 DRIVETRAIN = Drivetrain.from_params(PARAMS)
 RTOL = 1e-9

@@ -10,10 +10,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from vd_observer_node.bag import BagError, BagReader
-from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
-from vd_observer_node.tools.replay import replay_bag
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_FRICTION,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
@@ -21,6 +18,9 @@ from vd_sim_node.topics import (
     SENSORS_WHEEL_ANGLES,
     SENSORS_WHEEL_TORQUES,
 )
+from vd_observer_node.bag import BagError, BagReader
+from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
+from vd_observer_node.tools.replay import replay_bag
 
 ESTIMATES = (ESTIMATES_TIRE_FORCES, ESTIMATES_FRICTION, ESTIMATES_SLOPE)
 

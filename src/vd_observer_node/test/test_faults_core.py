@@ -24,7 +24,7 @@ from vd_observer_node.estimation.observer import ObserverConfig, SpeedObserver, 
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.testing.synthetic import SyntheticTrajectory, synthetic_trajectory
 
-VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
+VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 VEHICLE = load_estimator_vehicle(VEHICLE_FILE)
 DT = 1e-3
 NO_FILTER = EstimatorConfig(slope_filter_tau=0.0, force_filter_tau=0.0)

@@ -15,7 +15,7 @@ from vd_observer_node.estimation.observer import Observer, ObserverConfig
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.testing.synthetic import synthetic_trajectory
 
-VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
+VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 VEHICLE = load_estimator_vehicle(VEHICLE_FILE)
 
 

@@ -11,6 +11,12 @@ from typing import Any
 
 import numpy as np
 import pytest
+from vd_common.topics import (
+    SENSORS_BODY_VELOCITY,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+    TRUTH_TIRE_FORCES,
+)
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.testing.devbag import write_topic_arrays_bag
 from vd_observer_node.testing.fleet_bags import TestFleet, write_test_fleet
@@ -30,12 +36,6 @@ from vd_observer_node.tools.fleet import (
 from vd_observer_node.tools.fleet.process import bag_id
 from vd_observer_node.tools.fleet.report import fleet_csv, fleet_markdown, sort_worst_first
 from vd_observer_node.tools.replay import replay_bag
-from vd_sim_node.topics import (
-    SENSORS_BODY_VELOCITY,
-    SENSORS_WHEEL_ANGLES,
-    SENSORS_WHEEL_TORQUES,
-    TRUTH_TIRE_FORCES,
-)
 
 #: The Python reference kernel: no numba compilation in a test's first bag.
 PY = FleetSettings(kernel='python')

@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from vd_common.vehicle.params import load_vehicle
+from vd_common.vehicle.tire import magic_formula_fx
 from vd_observer_node.errors import InputShapeError, ObserverError
 from vd_observer_node.situation.friction_potential import (
     ROAD_DRY,
@@ -30,14 +32,12 @@ from vd_observer_node.situation.friction_potential import (
     initial_fit_state,
     unfloored_slip,
 )
-from vd_sim_node.vehicle.params import load_vehicle
-from vd_sim_node.vehicle.tire import magic_formula_fx
 
 RATE = 1000.0  # [Hz]
 SPEED = 20.0  # [m/s]
 LOAD = 3000.0  # [N]
 STATIC = (LOAD, LOAD)
-VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
+VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 
 
 @cache

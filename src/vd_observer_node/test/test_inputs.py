@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from vd_common.topics import SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES
 from vd_observer_node.bag import BagReader, BagWriter
 from vd_observer_node.bag.errors import ReplayInputError
 from vd_observer_node.bag.reader import TopicArrays
@@ -23,7 +24,6 @@ from vd_observer_node.inputs.mapping import (
 from vd_observer_node.testing.standard_bags import float64_array, joint_state, odometry
 from vd_observer_node.testing.synthetic_bags import synthetic_drive
 from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
-from vd_sim_node.topics import SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES
 
 NS = 1_000_000_000
 FLOAT64 = 'std_msgs/msg/Float64MultiArray'

@@ -27,7 +27,7 @@ from vd_observer_node.inputs.mapping import (
     mapping_from_dict,
     mapping_from_params,
 )
-from vd_observer_node.raw_io import InputMatcher, InputWatch, mapped_input, matched_inputs
+from vd_observer_node.nodes.raw_io import InputMatcher, InputWatch, mapped_input, matched_inputs
 from vd_observer_node.testing.standard_bags import float64_array, header, odometry
 
 NS = 1_000_000_000
@@ -288,10 +288,10 @@ def _user_bag_with_truth(
     path: Path, seconds: float, rate: float, gap: tuple[float, float]
 ) -> None:
     """USER_MAPPING's topics and vd's wheel-state truth; the torque topic silent in `gap` [s]."""
+    from vd_common.topics import TRUTH_WHEEL_STATES
     from vd_observer_node.bag import BagWriter
     from vd_observer_node.bag.cdr_batch import encode_batch
     from vd_observer_node.testing.synthetic_bags import synthetic_drive
-    from vd_sim_node.topics import TRUTH_WHEEL_STATES
 
     drive = synthetic_drive(seconds, rate)
     t0 = int(drive.stamp_ns[0])
@@ -322,10 +322,10 @@ def _user_bag_with_truth(
 def test_the_replay_summary_reports_a_topic_that_stopped_and_the_estimates_stay_finite(
     tmp_path: Path,
 ) -> None:
+    from vd_common.topics import ESTIMATES_SLOPE, ESTIMATES_TIRE_FORCES
     from vd_observer_node.bag import BagReader
     from vd_observer_node.bag.cdr_batch import decode_batch
     from vd_observer_node.tools.replay import replay_bag
-    from vd_sim_node.topics import ESTIMATES_SLOPE, ESTIMATES_TIRE_FORCES
 
     bag = tmp_path / 'user'
     _user_bag_with_truth(bag, 4.0, 100.0, gap=(1.0, 1.8))
@@ -382,7 +382,7 @@ def test_vd_report_takes_a_mapping_replays_a_bag_without_estimates_and_summarise
 
 def test_separate_estimating_nodes_refuse_a_torque_path_they_cannot_run(tmp_path: Path) -> None:
     import yaml
-    from vd_observer_node.node_params import take_input_mapping
+    from vd_observer_node.nodes.node_params import take_input_mapping
 
     path = tmp_path / 'car.yaml'
     path.write_text(yaml.safe_dump({'torque_source': 'engine'}), encoding='utf-8')

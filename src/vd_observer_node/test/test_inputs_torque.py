@@ -10,6 +10,14 @@ from typing import Any
 
 import numpy as np
 import pytest
+from vd_common.topics import (
+    ESTIMATES_FRICTION,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    SENSORS_WHEEL_ANGLES,
+    SENSORS_WHEEL_TORQUES,
+)
+from vd_common.vehicle.params import default_vehicle_file, load_vehicle
 from vd_observer_node.bag import BagReader, BagWriter
 from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.bag.errors import ReplayInputError
@@ -23,16 +31,11 @@ from vd_observer_node.inputs.mapping import default_mapping, mapping_from_dict
 from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
 from vd_observer_node.tools.cli import main
 from vd_observer_node.tools.replay import replay_bag
-from vd_sim_node.topics import (
-    ESTIMATES_FRICTION,
-    ESTIMATES_SLOPE,
-    ESTIMATES_TIRE_FORCES,
-    SENSORS_WHEEL_ANGLES,
-    SENSORS_WHEEL_TORQUES,
-)
-from vd_sim_node.vehicle.params import default_vehicle_file, load_vehicle
 from vd_sim_node.vehicle.scenario import load_scenario
 from vd_sim_node.vehicle.simulation import SimResult, simulate
+
+#: the simulator's scenarios (the tests' oracle; vd_common holds only the vehicle file)
+SCENARIOS = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'scenarios'
 
 ENGINE_TOPIC = '/can/engine'
 #: the engine on CAN: gear, torque in kN m, engine speed in rpm
@@ -162,7 +165,7 @@ _SIM: list[SimResult] = []
 def sim_run() -> SimResult:
     """12 s of the paper scenario at 100 Hz, ideal sensors: launch at 8 s, first gear."""
     if not _SIM:
-        scenario = load_scenario(default_vehicle_file().parent / 'scenarios' / 'paper_table1.yaml')
+        scenario = load_scenario(SCENARIOS / 'paper_table1.yaml')
         scenario = dataclasses.replace(
             scenario,
             duration=12.0,

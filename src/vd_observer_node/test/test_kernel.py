@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from vd_common.vehicle.params import load_vehicle
 from vd_observer_node.chain import ChainSettings, PythonChain
 from vd_observer_node.errors import InputShapeError
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
@@ -47,12 +48,11 @@ from vd_observer_node.kernel.situation import CompiledSituationMonitor
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.situation.monitor import SituationConfig, SituationMonitor, run_situation
-from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.scenario import SensorSettings, load_scenario
 from vd_sim_node.vehicle.simulation import simulate
 
 CONFIG = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config'
-VEHICLE_FILE = CONFIG / 'clio_rl_1_1.yaml'
+VEHICLE_FILE = CONFIG.parents[1] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 VEHICLE = load_estimator_vehicle(VEHICLE_FILE)
 CURVES = TyreCurves.from_tire(load_vehicle(VEHICLE_FILE).tire)
 SCENARIOS = sorted(p.stem for p in (CONFIG / 'scenarios').glob('*.yaml'))

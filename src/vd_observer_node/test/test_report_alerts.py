@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from vd_common.topics import ESTIMATES_ALERTS, TRUTH_FRICTION, TRUTH_FRICTION_POTENTIAL
 from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.alerts_cdr import decode_alerts
 from vd_observer_node.bag.errors import BagFormatError
@@ -38,7 +39,6 @@ from vd_observer_node.tools.report.alerts import (
 from vd_observer_node.tools.report.cli import add_report_parser
 from vd_observer_node.tools.report.evaluate import evaluate
 from vd_observer_node.tools.report.load import load_bag_series
-from vd_sim_node.topics import ESTIMATES_ALERTS, TRUTH_FRICTION, TRUTH_FRICTION_POTENTIAL
 
 RATE = 100.0  # [Hz]
 CFG = AlertSettings()
@@ -398,13 +398,13 @@ def test_reference_bag_has_alerts_but_no_true_potential() -> None:
 def test_simulated_run_with_a_perfect_late_detector(tmp_path: Path) -> None:
     """launch_low_mu at 200 Hz; alert levels = the true condition 20 ms late: every episode
     is detected within 20 ms, no false alarm, and the truth comes through the bag intact."""
-    from vd_sim_node.vehicle.params import load_vehicle
+    from vd_common.vehicle.params import load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
 
     config = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config'
     sim = simulate(
-        load_vehicle(config / 'clio_rl_1_1.yaml'),
+        load_vehicle(config.parents[1] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'),
         load_scenario(config / 'scenarios' / 'launch_low_mu.yaml'),
         rate_hz=200.0,
     )

@@ -9,11 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from vd_observer_node.testing.devbag import write_topic_arrays_bag
-from vd_observer_node.tools.report.cli import add_report_parser, default_out_dir, run_report
-from vd_observer_node.tools.report.evaluate import evaluate
-from vd_observer_node.tools.report.load import load_bag_series
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_FRICTION,
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
@@ -25,6 +21,10 @@ from vd_sim_node.topics import (
     TRUTH_TIRE_FORCES,
     TRUTH_WHEEL_STATES,
 )
+from vd_observer_node.testing.devbag import write_topic_arrays_bag
+from vd_observer_node.tools.report.cli import add_report_parser, default_out_dir, run_report
+from vd_observer_node.tools.report.evaluate import evaluate
+from vd_observer_node.tools.report.load import load_bag_series
 
 RATE = 100.0  # [Hz]
 DURATION = 20.0  # [s]
@@ -282,7 +282,7 @@ def test_a_reference_on_its_own_clock_is_reported_not_crashed(
 def test_static_loads_from_the_vehicle_file(known_bag: Path, tmp_path: Path) -> None:
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 
-    vehicle_file = Path(__file__).resolve().parents[2] / 'vd_sim_node/config/clio_rl_1_1.yaml'
+    vehicle_file = Path(__file__).resolve().parents[2] / 'vd_common/config/clio_rl_1_1.yaml'
     static = load_estimator_vehicle(vehicle_file).static_wheel_loads
     out = tmp_path / 'out'
     argv = ['report', str(known_bag), '--out', str(out), '--vehicle', str(vehicle_file)]

@@ -20,16 +20,16 @@ from vd_observer_node.tools.report.load import load_bag_series
 from vd_observer_node.tools.report.metrics import error_stats, evaluation_mask
 
 ROOT = Path(__file__).resolve().parents[3]
-VEHICLE = ROOT / 'src' / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
+VEHICLE = ROOT / 'src' / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 SCENARIO = ROOT / 'src' / 'vd_sim_node' / 'config' / 'scenarios' / 'paper_table1.yaml'
 RATE = 500.0  # [Hz] lower than the demo's 1 kHz to keep the cascade short
 
 
 @pytest.fixture(scope='module')
 def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Any, Any, Path]:
+    from vd_common.vehicle.params import load_vehicle
     from vd_observer_node.estimation.cascade import run_cascade
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
-    from vd_sim_node.vehicle.params import load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
 

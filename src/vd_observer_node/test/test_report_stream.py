@@ -17,6 +17,16 @@ from typing import Any
 
 import numpy as np
 import pytest
+from vd_common.topics import (
+    ESTIMATES_ALERTS,
+    ESTIMATES_FRICTION,
+    ESTIMATES_FRICTION_POTENTIAL,
+    ESTIMATES_SLOPE,
+    ESTIMATES_TIRE_FORCES,
+    OBSERVER_WHEEL_STATES,
+    TRUTH_NAMESPACE,
+    TRUTH_WHEEL_STATES,
+)
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.testing.devbag import (
     alerts_topics,
@@ -37,16 +47,6 @@ from vd_observer_node.tools.report.errors import ReportInputError, StampOrderErr
 from vd_observer_node.tools.report.evaluate import AccuracyReport, evaluate
 from vd_observer_node.tools.report.load import load_bag_series
 from vd_observer_node.tools.report.stream import evaluate_bag, iter_topic_blocks
-from vd_sim_node.topics import (
-    ESTIMATES_ALERTS,
-    ESTIMATES_FRICTION,
-    ESTIMATES_FRICTION_POTENTIAL,
-    ESTIMATES_SLOPE,
-    ESTIMATES_TIRE_FORCES,
-    OBSERVER_WHEEL_STATES,
-    TRUTH_NAMESPACE,
-    TRUTH_WHEEL_STATES,
-)
 
 ROOT = Path(__file__).resolve().parents[3]
 CONFIG = ROOT / 'src' / 'vd_sim_node' / 'config'
@@ -122,13 +122,13 @@ def _late_detector(sim: Any, rng: np.random.Generator) -> dict[str, dict[str, np
 
 
 def _simulated_topics(scenario: str, duration: float | None = None) -> tuple[Any, dict]:
+    from vd_common.vehicle.params import load_vehicle
     from vd_observer_node.estimation.cascade import run_cascade
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
-    from vd_sim_node.vehicle.params import load_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
 
-    vehicle = CONFIG / 'clio_rl_1_1.yaml'
+    vehicle = ROOT / 'src' / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
     loaded = load_scenario(CONFIG / 'scenarios' / scenario)
     if duration is not None:
         loaded = dataclasses.replace(loaded, duration=duration)

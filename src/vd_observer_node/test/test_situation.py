@@ -7,15 +7,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from vd_common.vehicle.params import load_vehicle
+from vd_common.vehicle.tire import slip_ratio
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.observer import ObserverConfig, WheelObserver
 from vd_observer_node.situation.alerts import AlertMonitor, slip_velocity
 from vd_observer_node.situation.friction_potential import FrictionPotentialEstimator, TyreCurves
 from vd_observer_node.situation.monitor import SituationConfig, SituationMonitor
-from vd_sim_node.vehicle.params import load_vehicle
-from vd_sim_node.vehicle.tire import slip_ratio
 
-VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
+VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 RADIUS = 0.29  # [m]
 STATIC = np.array([3300.0, 2400.0])  # [N]
 

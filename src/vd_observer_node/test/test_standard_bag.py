@@ -6,6 +6,8 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
+from vd_common.topics import ESTIMATES_SLOPE
+from vd_common.vehicle.params import load_vehicle
 from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.inputs.mapping import load_input_mapping, mapping_from_dict
@@ -17,8 +19,6 @@ from vd_observer_node.testing.standard_bags import (
     write_standard_bag,
 )
 from vd_observer_node.tools.replay import ESTIMATE_TOPICS, load_replay_config, replay_bag
-from vd_sim_node.topics import ESTIMATES_SLOPE
-from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.scenario import load_scenario
 from vd_sim_node.vehicle.simulation import simulate
 
@@ -60,7 +60,9 @@ def test_a_standard_types_bag_replays_with_the_shipped_files_near_vds_own(tmp_pa
         scenario.sensors, encoder_counts_per_rev=96, speed_noise_std=0.05
     )
     short = dataclasses.replace(scenario, duration=30.0, sensors=sensors)
-    sim = simulate(load_vehicle(SIM_CONFIG / 'clio_rl_1_1.yaml'), short)
+    sim = simulate(
+        load_vehicle(SIM_CONFIG.parents[1] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'), short
+    )
     stamp_ns = np.round(sim.t * 1e9).astype(np.int64)
     write_topic_arrays_bag(tmp_path / 'vd', stamp_ns, sim_topics(sim, truth=False))
     write_standard_bag(tmp_path / 'car', sim, CarSensors(seed=5))

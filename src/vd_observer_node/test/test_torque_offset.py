@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from vd_common.vehicle.params import load_vehicle
 from vd_observer_node.chain import ChainSettings, PythonChain
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
@@ -32,12 +33,11 @@ from vd_observer_node.kernel.torque_offset import (
     offset_update,
 )
 from vd_observer_node.situation.friction_potential import TyreCurves
-from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.scenario import SensorSettings, VehicleVariant, load_scenario
 from vd_sim_node.vehicle.simulation import SimResult, simulate
 
 CONFIG = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config'
-PARAMS = load_vehicle(CONFIG / 'clio_rl_1_1.yaml')
+PARAMS = load_vehicle(CONFIG.parents[1] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml')
 VEHICLE = EstimatorVehicle.from_params(PARAMS)
 DRIVETRAIN = Drivetrain.from_params(PARAMS)
 J_E = DRIVETRAIN.engine_inertia

@@ -8,15 +8,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from vd_common.vehicle.params import load_vehicle
 from vd_observer_node.errors import VehicleParameterError
 from vd_observer_node.estimation.vehicle import (
     EstimatorVehicle,
     load_estimator_vehicle,
     load_vehicle_params,
 )
-from vd_sim_node.vehicle.params import load_vehicle
 
-VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config' / 'clio_rl_1_1.yaml'
+VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 
 
 def test_loads_the_shared_clio_file() -> None:

@@ -11,8 +11,11 @@ One folder per job, imported top-down (nothing imports upwards):
 - `bag/`: rosbag2 MCAP files and CDR encoding (a leaf: it imports none of the above).
 - `tools/`: offline replay, the report and the `vd` command line.
 - `testing/`: synthetic drives and bags, the development bag, the graph launcher.
-- `*_node.py` (with `raw_io`, `node_params`, `entry_points`): the thin ROS 2 nodes, the only
+- `nodes/`: the thin ROS 2 nodes (with `raw_io`, `node_params`, `entry_points`), the only
   modules that import rclpy.
+
+What the simulator shares (topic names, the vehicle file and its parser, the tyre model, the
+node plumbing) comes from vd_common; this package never imports the simulator.
 """
 
 __all__: list[str] = []

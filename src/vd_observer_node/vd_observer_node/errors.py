@@ -1,6 +1,6 @@
 """Exception types of the observer / estimator core."""
 
-from vd_sim_node.errors import VdError
+from vd_common.errors import VdError
 
 __all__ = [
     'ConfigurationError',

@@ -1,8 +1,10 @@
-"""Make ``vd_sim_node`` importable from the source tree before the package is installed."""
+"""Make vd_sim_node and vd_common importable from the source before colcon installs them."""
 
 import sys
 from pathlib import Path
 
-_PACKAGE_ROOT = str(Path(__file__).resolve().parents[1])
-if _PACKAGE_ROOT not in sys.path:
-    sys.path.insert(0, _PACKAGE_ROOT)
+_SRC = Path(__file__).resolve().parents[2]
+for _package in ('vd_sim_node', 'vd_common'):
+    _path = str(_SRC / _package)
+    if _path not in sys.path:
+        sys.path.insert(0, _path)

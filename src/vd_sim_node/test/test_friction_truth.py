@@ -1,37 +1,25 @@
-"""True friction potential: the tabulated MF peak against a brute-force search of the curve."""
+"""True friction potential: the tabulated MF peak against a brute-force search of the curve.
+
+The table itself, its road classes and axle means are tested with vd_common (test_friction.py).
+"""
 
 from __future__ import annotations
 
 import dataclasses
-import math
 from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
-from vd_sim_node.errors import ParameterError
-from vd_sim_node.vehicle.friction_truth import (
-    ROAD_CLASS_BOUNDS,
-    ROAD_DRY,
-    ROAD_ICE,
-    ROAD_SNOW,
-    ROAD_UNKNOWN,
-    ROAD_WET,
-    axle_mean,
-    friction_table,
-    road_class,
-    road_class_of,
-    true_friction_potential,
-    vehicle_road_class,
-)
-from vd_sim_node.vehicle.params import TireParams, load_vehicle
+from vd_common.vehicle.friction import friction_table
+from vd_common.vehicle.params import TireParams, load_vehicle
+from vd_common.vehicle.tire import magic_formula_fx
+from vd_sim_node.vehicle.friction_truth import true_friction_potential
 from vd_sim_node.vehicle.scenario import load_scenario
 from vd_sim_node.vehicle.simulation import Simulator, simulate
-from vd_sim_node.vehicle.tire import magic_formula_fx
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'clio_rl_1_1.yaml'
-TP = load_vehicle(CONFIG).tire
+CONFIG = Path(__file__).resolve().parents[1] / 'config'
+VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
+TP = load_vehicle(VEHICLE_FILE).tire
 TABLE = friction_table(TP)
 FINE = np.linspace(0.0, 1.0, 100_001)  # [-] slip grid of the brute-force search, step 1e-5
 # [-] per unit road_mu: the table's slip step 1e-4 plus the linear interpolation of the
@@ -113,39 +101,12 @@ def test_zero_road_gives_zero_potential_and_axles_are_wheel_means() -> None:
         rtol=0,
         atol=1e-15,
     )
-    means = axle_mean(np.arange(8.0).reshape(2, 4))
-    np.testing.assert_array_equal(means, [[0.5, 2.5], [4.5, 6.5]])
-
-
-def test_road_class_bounds() -> None:
-    assert ROAD_CLASS_BOUNDS == (0.2, 0.45, 0.75)
-    values = [0.0, 0.199, 0.2, 0.449, 0.45, 0.749, 0.75, 1.2, math.nan]
-    expect = [ROAD_ICE, ROAD_ICE, ROAD_SNOW, ROAD_SNOW, ROAD_WET, ROAD_WET, ROAD_DRY, ROAD_DRY]
-    np.testing.assert_array_equal(road_class(values), [*expect, ROAD_UNKNOWN])
-    assert [road_class_of(v) for v in values] == [*expect, ROAD_UNKNOWN]
-    np.testing.assert_array_equal(vehicle_road_class([[1.0, 0.3], [0.5, 0.9]]), [2, 3])
-
-
-@given(st.lists(st.floats(0.0, 3.0), min_size=2, max_size=20))
-def test_road_class_is_monotone_in_mu_max(values: list[float]) -> None:
-    ordered = np.sort(np.asarray(values))
-    codes = road_class(ordered)
-    assert np.all(np.diff(codes) >= 0)
-    assert codes.min() >= ROAD_ICE and codes.max() <= ROAD_DRY
-    assert [road_class_of(v) for v in ordered.tolist()] == codes.tolist()
-
-
-def test_invalid_grid_is_rejected() -> None:
-    with pytest.raises(ParameterError, match='friction table grid'):
-        friction_table(TP, load_min=0.0)
-    with pytest.raises(ParameterError, match='friction table grid'):
-        friction_table(TP, loads=1)
 
 
 def test_simulator_reports_the_potential_and_the_tyre_never_exceeds_it() -> None:
     """launch_low_mu at 200 Hz: spin-up on the mu 0.25 patch, then dry road again."""
-    scenario = load_scenario(CONFIG.parent / 'scenarios' / 'launch_low_mu.yaml')
-    vehicle = load_vehicle(CONFIG)
+    scenario = load_scenario(CONFIG / 'scenarios' / 'launch_low_mu.yaml')
+    vehicle = load_vehicle(VEHICLE_FILE)
     sim = simulate(vehicle, scenario, rate_hz=200.0)
     expect = true_friction_potential(TABLE, sim.fz, sim.fx, sim.road_mu)
     np.testing.assert_array_equal(sim.peak_mu, expect.mu_max)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import struct
 
 import pytest
+from vd_common.ros_common import header_stamp_ns
 from vd_sim_node.lockstep import Lockstep, LockstepError
-from vd_sim_node.ros_common import header_stamp_ns
 
 MS = 1_000_000
 

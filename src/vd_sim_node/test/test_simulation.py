@@ -9,15 +9,15 @@ from typing import Any
 
 import numpy as np
 import pytest
+from vd_common.vehicle.params import load_vehicle
+from vd_common.vehicle.tire import magic_formula_fx
 from vd_sim_node.errors import SimulationError
 from vd_sim_node.vehicle.model import VehicleModel
-from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.scenario import Scenario, load_scenario, parse_scenario
 from vd_sim_node.vehicle.simulation import SimResult, Simulator, simulate
-from vd_sim_node.vehicle.tire import magic_formula_fx
 
 ROOT = Path(__file__).resolve().parents[1]
-VP = load_vehicle(ROOT / 'config' / 'clio_rl_1_1.yaml')
+VP = load_vehicle(ROOT.parent / 'vd_common' / 'config' / 'clio_rl_1_1.yaml')
 PAPER = load_scenario(ROOT / 'config' / 'scenarios' / 'paper_table1.yaml')
 BRAKING = load_scenario(ROOT / 'config' / 'scenarios' / 'braking_low_mu.yaml')
 G = VP.environment.gravity

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from vd_common.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.model import WHEELS, Geometry, VehicleModel
-from vd_sim_node.vehicle.params import load_vehicle
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'clio_rl_1_1.yaml'
+CONFIG = Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 VP = load_vehicle(CONFIG)
 
 

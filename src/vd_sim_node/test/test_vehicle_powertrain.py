@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from vd_common.vehicle.params import load_vehicle
 from vd_sim_node.vehicle import laws
-from vd_sim_node.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.powertrain import (
     ClutchMode,
     DrivelineState,
@@ -24,7 +24,7 @@ from vd_sim_node.vehicle.powertrain import (
 )
 from vd_sim_node.vehicle.resistances import aero_drag, rolling_resistance
 
-CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'clio_rl_1_1.yaml'
+CONFIG = Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 VP = load_vehicle(CONFIG)
 EP, CP, GP = VP.engine, VP.clutch, VP.gearbox
 RPM = math.pi / 30.0

@@ -12,9 +12,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from vd_sim_node.errors import ParameterError, ScenarioError, SimulationError
+from vd_common.errors import ParameterError
+from vd_common.vehicle.params import VehicleParams, load_vehicle
+from vd_sim_node.errors import ScenarioError, SimulationError
 from vd_sim_node.vehicle.model import Geometry, VehicleModel
-from vd_sim_node.vehicle.params import VehicleParams, load_vehicle
 from vd_sim_node.vehicle.scenario import VehicleVariant, parse_scenario
 from vd_sim_node.vehicle.simulation import SimResult, Simulator, simulate
 from vd_sim_node.vehicle.variants import (
@@ -27,7 +28,7 @@ from vd_sim_node.vehicle.variants import (
 )
 
 ROOT = Path(__file__).resolve().parents[1]
-VP = load_vehicle(ROOT / 'config' / 'clio_rl_1_1.yaml')
+VP = load_vehicle(ROOT.parent / 'vd_common' / 'config' / 'clio_rl_1_1.yaml')
 G = VP.environment.gravity
 
 

@@ -35,20 +35,7 @@ from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from std_msgs.msg import Header
-
-from vd_msgs.msg import (
-    Friction,
-    FrictionPotential,
-    Resistances,
-    Slope,
-    TireForces,
-    WheelAngles,
-    WheelStates,
-    WheelTorques,
-)
-from vd_sim_node.errors import ScenarioError
-from vd_sim_node.lockstep import Lockstep
-from vd_sim_node.ros_common import (
+from vd_common.ros_common import (
     CLOCK_QOS,
     DIAGNOSTICS_QOS,
     STREAM_QOS,
@@ -64,7 +51,7 @@ from vd_sim_node.ros_common import (
     ros_message_class,
     run_node,
 )
-from vd_sim_node.topics import (
+from vd_common.topics import (
     SENSORS_BODY_VELOCITY,
     SENSORS_WHEEL_ANGLES,
     SENSORS_WHEEL_TORQUES,
@@ -78,15 +65,32 @@ from vd_sim_node.topics import (
     TRUTH_TIRE_FORCES,
     TRUTH_WHEEL_STATES,
 )
-from vd_sim_node.vehicle.friction_truth import road_class_of
-from vd_sim_node.vehicle.params import load_vehicle
+from vd_common.vehicle.friction import road_class_of
+from vd_common.vehicle.params import default_vehicle_file, load_vehicle
+
+from vd_msgs.msg import (
+    Friction,
+    FrictionPotential,
+    Resistances,
+    Slope,
+    TireForces,
+    WheelAngles,
+    WheelStates,
+    WheelTorques,
+)
+from vd_sim_node.errors import ScenarioError
+from vd_sim_node.lockstep import Lockstep
 from vd_sim_node.vehicle.scenario import Scenario, load_scenario
 from vd_sim_node.vehicle.simulation import SampleFrame, Simulator
 
 __all__ = ['SimNode', 'main', 'resolve_config_file']
 
 PARAMS = [
-    ParamSpec('vehicle_file', '', "vehicle parameter YAML ('' = the installed Clio RL 1.1)"),
+    ParamSpec(
+        'vehicle_file',
+        '',
+        "vehicle parameter YAML: a path or an installed name ('' = the installed Clio RL 1.1)",
+    ),
     ParamSpec(
         'scenario_file',
         'paper_table1',
@@ -178,8 +182,17 @@ _BATCH_PERIOD = 0.01  # [s] wall time between publishing batches
 _BATCH_BUDGET = 0.05  # [s] wall time one batch may take before yielding to the executor
 
 
-def resolve_config_file(value: str, kind: str, default: str) -> Path:
+def resolve_config_file(
+    value: str, kind: str, default: str, packages: tuple[str, ...] = ('vd_sim_node',)
+) -> Path:
     """A parameter file from a path or an installed name (``config/<kind>/<name>.yaml``).
+
+    Args:
+        value: a path, or the name of an installed file ('' = `default`).
+        kind: the sub-folder of ``config/`` ('scenarios'; '' for ``config/`` itself).
+        default: the name used when `value` is empty.
+        packages: whose ``share/<package>/config`` to search, in this order (the vehicle
+            files: vd_sim_node's, then vd_common's, which holds the default Clio file).
 
     Raises:
         ScenarioError: no such file.
@@ -190,11 +203,12 @@ def resolve_config_file(value: str, kind: str, default: str) -> Path:
     path = Path(name).expanduser()
     if path.is_file():
         return path
-    share = Path(get_package_share_directory('vd_sim_node')) / 'config'
-    candidates = [share / kind / f'{name}.yaml', share / kind / name, share / name]
-    for candidate in candidates:
-        if candidate.is_file():
-            return candidate
+    shares = [Path(get_package_share_directory(package)) / 'config' for package in packages]
+    for share in shares:
+        for candidate in (share / kind / f'{name}.yaml', share / kind / name, share / name):
+            if candidate.is_file():
+                return candidate
+    share = shares[0]
     installed = sorted(p.stem for p in (share / kind).glob('*.yaml')) if kind else []
     hint = f'; installed: {", ".join(installed)}' if installed else ''
     raise ScenarioError(f'{kind or "config"} file {name!r} not found{hint}')
@@ -218,7 +232,13 @@ class SimNode(Node):
     def __init__(self) -> None:
         super().__init__('sim_node')
         v = declare_parameters(self, PARAMS)
-        vehicle_path = resolve_config_file(v['vehicle_file'], '', 'clio_rl_1_1.yaml')
+        # '' = the shipped Clio file (vd_common's); a name is looked up as before the file
+        # moved to vd_common, in vd_sim_node's config/ first
+        vehicle_path = (
+            resolve_config_file(v['vehicle_file'], '', '', packages=('vd_sim_node', 'vd_common'))
+            if v['vehicle_file']
+            else default_vehicle_file()
+        )
         scenario_path = resolve_config_file(v['scenario_file'], 'scenarios', 'paper_table1')
         self.scenario = _with_sensor_overrides(load_scenario(scenario_path), v)
         self.sim = Simulator(load_vehicle(vehicle_path), self.scenario)
@@ -489,7 +509,8 @@ def _potential_message(header: Header, f: SampleFrame) -> FrictionPotential:
     """The true friction potential of one sample: axle means of the wheels' MF peaks.
 
     Plain floats rather than numpy calls: this runs per sample (about 9 us instead of 75).
-    Same values as ``friction_truth.axle_mean`` / ``road_class`` / ``vehicle_road_class``.
+    Same values as ``vd_common.vehicle.friction`` ``axle_mean`` / ``road_class`` /
+    ``vehicle_road_class``.
     """
     mu = f.peak_mu.tolist()
     slip = f.peak_slip.tolist()

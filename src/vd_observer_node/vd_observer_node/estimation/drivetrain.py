@@ -37,7 +37,7 @@ from typing import Final, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from vd_sim_node.vehicle.params import VehicleParams
+from vd_common.vehicle.params import VehicleParams
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.torque_offset import (

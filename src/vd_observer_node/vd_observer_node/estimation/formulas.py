@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from vd_sim_node.vehicle.tire import slip_ratio as tire_slip_ratio
+from vd_common.vehicle.tire import slip_ratio as tire_slip_ratio
 
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 

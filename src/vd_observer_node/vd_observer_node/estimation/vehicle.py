@@ -1,9 +1,9 @@
 """The estimators' view of the vehicle parameter file shared with the simulator.
 
-The file (`vd_sim_node/config/clio_rl_1_1.yaml`) has one parser,
-:mod:`vd_sim_node.vehicle.params`: it reads, range-checks and names every key, for the
+The file (`vd_common/config/clio_rl_1_1.yaml`) has one parser,
+:mod:`vd_common.vehicle.params`: it reads, range-checks and names every key, for the
 simulator and for the estimators alike. :class:`EstimatorVehicle` is the subset the
-estimators need, taken from its typed :class:`~vd_sim_node.vehicle.params.VehicleParams`
+estimators need, taken from its typed :class:`~vd_common.vehicle.params.VehicleParams`
 by :meth:`EstimatorVehicle.from_params`; there is no second key table here.
 """
 
@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from vd_sim_node.errors import ParameterError
-from vd_sim_node.vehicle.params import VehicleParams, default_vehicle_file, load_vehicle
+from vd_common.errors import ParameterError
+from vd_common.vehicle.params import VehicleParams, default_vehicle_file, load_vehicle
 
 from vd_observer_node.errors import VehicleParameterError
 
@@ -101,7 +101,7 @@ class EstimatorVehicle:
         estimators and the simulator see the same numbers bit for bit.
 
         Args:
-            params: parameters from :func:`vd_sim_node.vehicle.params.load_vehicle` or
+            params: parameters from :func:`vd_common.vehicle.params.load_vehicle` or
                 ``parse_vehicle``.
 
         Returns:
@@ -160,7 +160,7 @@ def load_vehicle_params(path: str | os.PathLike[str] | None = None) -> VehiclePa
 
     Args:
         path: YAML file; None: the shipped Clio file
-            (:func:`vd_sim_node.vehicle.params.default_vehicle_file`).
+            (:func:`vd_common.vehicle.params.default_vehicle_file`).
 
     Returns:
         The simulator's validated parameters.
@@ -180,7 +180,7 @@ def load_estimator_vehicle(path: str | os.PathLike[str]) -> EstimatorVehicle:
     """Read the vehicle parameter file (the simulator's YAML) for the estimators.
 
     Args:
-        path: YAML file, e.g. vd_sim_node/config/clio_rl_1_1.yaml.
+        path: YAML file, e.g. vd_common/config/clio_rl_1_1.yaml.
 
     Returns:
         The estimator vehicle.

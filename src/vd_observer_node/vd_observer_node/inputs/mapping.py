@@ -81,7 +81,7 @@ from pathlib import Path
 from typing import Any, Final
 
 import yaml
-from vd_sim_node.topics import (
+from vd_common.topics import (
     SENSORS,
     SENSORS_BODY_VELOCITY,
     SENSORS_WHEEL_ANGLES,

@@ -838,7 +838,7 @@ def _estimate(
             lift = True
         est[E_MU + i] = mu
         est[E_MU_VALID + i] = 1.0 if valid else 0.0
-        # vd_sim_node.vehicle.tire.slip_ratio on the slip velocity, as the reference calls it
+        # vd_common.vehicle.tire.slip_ratio on the slip velocity, as the reference calls it
         sv = x[i] * radius - v
         den = max(max(abs(sv + v), abs(v)), prm[_SLIP_EPS])
         est[E_SLIP + i] = sv / den

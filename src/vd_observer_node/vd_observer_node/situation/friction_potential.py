@@ -4,7 +4,7 @@ Model (the similarity method, Pacejka, *Tire and Vehicle Dynamics*, 3rd ed., sec
 another road the tyre's mu-slip curve is the dry curve scaled by the road's friction scale
 ``r`` in both axes, ``mu(s; r) = r * mu1(s / r)``: the peak scales with ``r`` while the slope
 at zero slip (the carcass stiffness) does not. ``mu1`` is the vehicle's own Magic Formula at
-the sample's load (the vehicle file the simulator uses; ``vd_sim_node.vehicle.tire``). The
+the sample's load (the vehicle file the simulator uses; ``vd_common.vehicle.tire``). The
 one unknown ``r`` is found on a fixed grid of road scales by exponentially forgotten least
 squares per axle; ``mu_max = r * peak1(load)`` and ``slip_peak = r * slip1(load)``.
 
@@ -41,7 +41,7 @@ from typing import Any, Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from vd_sim_node.vehicle.friction_truth import (
+from vd_common.vehicle.friction import (
     ROAD_CLASS_BOUNDS,
     ROAD_DRY,
     ROAD_ICE,
@@ -52,8 +52,8 @@ from vd_sim_node.vehicle.friction_truth import (
     friction_table,
     unit_peak,
 )
-from vd_sim_node.vehicle.params import TireParams
-from vd_sim_node.vehicle.tire import magic_formula_fx
+from vd_common.vehicle.params import TireParams
+from vd_common.vehicle.tire import magic_formula_fx
 
 from vd_observer_node.errors import InputShapeError, ObserverError
 
@@ -222,7 +222,7 @@ class FrictionPotentialConfig:
 
 
 def unfloored_slip(slip_velocity: ArrayLike, speed: float) -> tuple[FloatArray, FloatArray]:
-    """Slip ratio without the floor of `vd_sim_node.vehicle.tire.slip_ratio`, and its denominator.
+    """Slip ratio without the floor of `vd_common.vehicle.tire.slip_ratio`, and its denominator.
 
     The fit gates samples on the denominator itself (``min_slip_speed``) and weights them by
     the slip noise it implies, so it needs the true denominator, not a floored one.
@@ -293,7 +293,7 @@ class TyreCurves:
         return mu, slope
 
     def peak(self, load: FloatArray, driving: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
-        """Peak mu and its slip at road scale 1 (`friction_truth.unit_peak` of the table).
+        """Peak mu and its slip at road scale 1 (`vd_common.vehicle.friction.unit_peak`).
 
         Args:
             load: [N], any shape.

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from vd_sim_node.vehicle.tire import slip_ratio
+from vd_common.vehicle.tire import slip_ratio
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.cascade import CascadeResult

@@ -3,7 +3,8 @@
 :func:`write_topic_arrays_bag` writes any header-stamped fixed-layout topics from numpy
 arrays (batch-encoded, interleaved in stamp order, log time = header stamp, as a live
 recording of a simulation would be). :func:`sim_topics` and :func:`cascade_topics` map a
-simulator run (``vd_sim_node...SimResult``) and a cascade result to the vd topics.
+simulator run (the simulator's ``SimResult``, duck-typed) and a cascade result to the vd
+topics. Nothing here imports the simulator: its runs are arguments.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_ALERTS,
     ESTIMATES_FRICTION_POTENTIAL,
     SENSORS_BODY_VELOCITY,
@@ -28,6 +29,7 @@ from vd_sim_node.topics import (
     TRUTH_TIRE_FORCES,
     TRUTH_WHEEL_STATES,
 )
+from vd_common.vehicle import friction
 
 from vd_observer_node.bag.alerts_cdr import ALERTS_TYPE as _ALERTS_TYPE
 from vd_observer_node.bag.alerts_cdr import encode_alerts
@@ -121,7 +123,7 @@ def sim_topics(sim: Any, *, truth: bool = True) -> dict[str, dict[str, np.ndarra
     """Sensor (and truth) topic values of a simulator run, as the simulator node publishes them.
 
     Args:
-        sim: a ``vd_sim_node.vehicle.simulation.SimResult`` (duck-typed: only its arrays).
+        sim: a simulator run's ``SimResult`` (duck-typed: only its arrays).
         truth: include the ``/vd/truth/*`` topics.
     """
     topics: dict[str, dict[str, np.ndarray]] = {
@@ -163,15 +165,13 @@ def true_potential_values(peak_mu: np.ndarray, peak_slip: np.ndarray) -> dict[st
         peak_mu: shape (N, 4), [-] true MF peak μ per wheel (``SimResult.peak_mu``).
         peak_slip: shape (N, 4), [-] slip at the peak (``SimResult.peak_slip``).
     """
-    from vd_sim_node.vehicle.friction_truth import axle_mean, road_class, vehicle_road_class
-
-    mu_max = axle_mean(peak_mu)
+    mu_max = friction.axle_mean(peak_mu)
     return {
         'mu_max': mu_max,
-        'slip_peak': axle_mean(peak_slip),
+        'slip_peak': friction.axle_mean(peak_slip),
         'confidence': np.ones_like(mu_max),
-        'road_class': road_class(mu_max).astype(np.uint8),
-        'vehicle_road_class': vehicle_road_class(mu_max).astype(np.uint8),
+        'road_class': friction.road_class(mu_max).astype(np.uint8),
+        'vehicle_road_class': friction.vehicle_road_class(mu_max).astype(np.uint8),
     }
 
 

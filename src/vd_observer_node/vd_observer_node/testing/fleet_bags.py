@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ALERTS,
     ESTIMATES,
     ESTIMATES_ALERTS,

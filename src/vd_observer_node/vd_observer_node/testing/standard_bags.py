@@ -187,8 +187,8 @@ def write_standard_bag(path: str | os.PathLike[str], sim: Any, sensors: CarSenso
 
     Args:
         path: new bag folder.
-        sim: a ``vd_sim_node.vehicle.simulation.SimResult`` (1 kHz ideal sensors are best:
-            its true angle, speed and torque are sampled here).
+        sim: a simulator run's ``SimResult`` (duck-typed: only its arrays; 1 kHz ideal
+            sensors are best: its true angle, speed and torque are sampled here).
         sensors: rates, phases and noise.
     """
     rng = np.random.default_rng(sensors.seed)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 
 import numpy as np
-from vd_sim_node.topics import (
+from vd_common.topics import (
     SENSORS_BODY_VELOCITY,
     SENSORS_WHEEL_ANGLES,
     SENSORS_WHEEL_TORQUES,

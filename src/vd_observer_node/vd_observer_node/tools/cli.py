@@ -18,7 +18,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from vd_sim_node.topics import SENSORS_NAMESPACE
+from vd_common.topics import SENSORS_NAMESPACE
 
 from vd_observer_node.errors import ObserverError
 from vd_observer_node.tools.fleet.cli import add_fleet_parser

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 import yaml
 from tqdm import tqdm
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ALERTS,
     ESTIMATES,
     ESTIMATES_ALERTS,
@@ -435,7 +435,7 @@ def replay_bag(
             ``run_cascade`` later, so the replay can match the live nodes' parameters).
         vehicle_file: vehicle YAML of the estimator vehicle (unless ``vehicle`` is given) and
             of the tyre curves of the friction potential; default the Clio file
-            (:func:`vd_sim_node.vehicle.params.default_vehicle_file`). Pass the file
+            (:func:`vd_common.vehicle.params.default_vehicle_file`). Pass the file
             ``vehicle`` was read from, or the tyre of the default file is used with it.
         situation: also compute and write the friction potential and the alerts
             (:data:`ALERT_TOPICS`) with :class:`SituationMonitor`, as the alerts node does.

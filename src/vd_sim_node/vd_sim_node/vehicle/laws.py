@@ -13,13 +13,15 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from vd_sim_node.vehicle.params import (
+from vd_common.vehicle.params import (
     AeroParams,
     ClutchParams,
     EngineParams,
     RollingResistanceParams,
     TireParams,
 )
+from vd_common.vehicle.tire import tire_force_from_slip_velocity
+
 from vd_sim_node.vehicle.powertrain import (
     brake_torque,
     clutch_torque,
@@ -27,7 +29,6 @@ from vd_sim_node.vehicle.powertrain import (
     engine_drag_torque,
 )
 from vd_sim_node.vehicle.resistances import aero_drag, rolling_resistance
-from vd_sim_node.vehicle.tire import tire_force_from_slip_velocity
 
 __all__ = [
     'make_aero_law',

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from vd_common.vehicle.params import VehicleParams
 
 from vd_sim_node.bondgraph import BondGraph, CompiledModel, compile_model
 from vd_sim_node.vehicle.laws import (
@@ -50,7 +51,6 @@ from vd_sim_node.vehicle.laws import (
     make_rolling_law,
     make_tire_law,
 )
-from vd_sim_node.vehicle.params import VehicleParams
 
 __all__ = ['INPUTS', 'WHEELS', 'Geometry', 'VehicleModel', 'build_vehicle_graph']
 

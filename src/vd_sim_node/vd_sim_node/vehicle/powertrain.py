@@ -16,8 +16,7 @@ from enum import IntEnum
 
 import numpy as np
 from numpy.typing import NDArray
-
-from vd_sim_node.vehicle.params import (
+from vd_common.vehicle.params import (
     ClutchParams,
     EngineParams,
     GearboxParams,

@@ -6,8 +6,7 @@ import math
 
 import numpy as np
 from numpy.typing import NDArray
-
-from vd_sim_node.vehicle.params import AeroParams, RollingResistanceParams
+from vd_common.vehicle.params import AeroParams, RollingResistanceParams
 
 __all__ = ['aero_drag', 'rolling_resistance']
 

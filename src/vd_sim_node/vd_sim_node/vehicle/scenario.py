@@ -44,9 +44,9 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+from vd_common.yaml_reader import MappingReader, load_yaml_mapping
 
 from vd_sim_node.errors import ScenarioError
-from vd_sim_node.vehicle._yaml_reader import MappingReader, load_yaml_mapping
 
 __all__ = [
     'PiecewiseConstant',

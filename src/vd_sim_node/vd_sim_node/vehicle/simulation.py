@@ -26,11 +26,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy.integrate import odeint
+from vd_common.vehicle.friction import friction_table
+from vd_common.vehicle.params import VehicleParams
 
 from vd_sim_node.errors import SimulationError
-from vd_sim_node.vehicle.friction_truth import friction_table, true_friction_potential
+from vd_sim_node.vehicle.friction_truth import true_friction_potential
 from vd_sim_node.vehicle.model import WHEELS, VehicleModel
-from vd_sim_node.vehicle.params import VehicleParams
 from vd_sim_node.vehicle.powertrain import (
     ClutchMode,
     DrivelineState,

@@ -8,7 +8,7 @@ measure what a wrong parameter costs and what an adaptation recovers (issue 16).
 * :func:`loaded` adds (or removes) a point mass at a given position: total mass, whole and
   sprung CG position and height, and the sprung pitch inertia (parallel-axis theorem) change
   together, so the bond graph's static loads, load transfer and pitch stay consistent (the
-  model derives all of them from :class:`~vd_sim_node.vehicle.params.ChassisParams`).
+  model derives all of them from :class:`~vd_common.vehicle.params.ChassisParams`).
 * :func:`tyre_radius_scale` scales the effective rolling radius R_eff (worn tyre, low
   pressure: about -3 % ... +1 %).
 * :func:`with_torque_offset` adds an offset to the simulated torque SIGNALS of a finished
@@ -31,9 +31,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
+from vd_common.errors import ParameterError
+from vd_common.vehicle.params import VehicleParams
 
-from vd_sim_node.errors import ParameterError
-from vd_sim_node.vehicle.params import VehicleParams
 from vd_sim_node.vehicle.scenario import VehicleVariant
 
 if TYPE_CHECKING:  # the simulator imports this module: no import cycle at run time

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from vd_sim_node.topics import ESTIMATES_ALERTS, OBSERVER_BODY_VELOCITY, SENSORS_BODY_VELOCITY
+from vd_common.topics import ESTIMATES_ALERTS, OBSERVER_BODY_VELOCITY, SENSORS_BODY_VELOCITY
 
 from vd_observer_node.tools.report.alerts import ALERT_KINDS, activation_indices
 from vd_observer_node.tools.report.errors import ReportInputError, StampOrderError

@@ -34,7 +34,7 @@ from typing import Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from vd_sim_node.topics import TRUTH_FRICTION
+from vd_common.topics import TRUTH_FRICTION
 
 from vd_observer_node.tools.report.load import BagSeries
 from vd_observer_node.tools.report.topics import (

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_NAMESPACE,
     OBSERVER_NAMESPACE,
     TRUTH_FRICTION_POTENTIAL,

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_FRICTION,
     ESTIMATES_NAMESPACE,
     ESTIMATES_RESISTANCES,

@@ -43,7 +43,7 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_FRICTION,
     ESTIMATES_TIRE_FORCES,
     OBSERVER_BODY_VELOCITY,

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ALERTS,
     ESTIMATES,
     ESTIMATES_ALERTS,

@@ -1,8 +1,8 @@
 """ROS 2 plumbing shared by every vd node: QoS, stamps, declared parameters, diagnostics.
 
-vd_sim_node is the base package of the stack (the vehicle file lives here too), so the node
-helpers of vd_observer_node import this module rather than repeating it. Nothing here
-computes anything physical: that stays in the ROS-free core.
+vd_common is the base package of the stack: the simulator's node and the estimator's nodes
+import this module rather than repeating it. Nothing here computes anything physical: that
+stays in the ROS-free cores.
 
 QoS choices (see the README's topic contract):
 
@@ -44,8 +44,8 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from vd_sim_node.errors import VdError
-from vd_sim_node.params_file import params_file_problem
+from vd_common.errors import VdError
+from vd_common.params_file import params_file_problem
 
 __all__ = [
     'CLOCK_QOS',
@@ -510,7 +510,7 @@ class StopSignals:
         """Install the handlers (replacing any earlier ones, e.g. `entry.guarded_main`'s)."""
         import signal
 
-        from vd_sim_node import entry
+        from vd_common import entry
 
         # a signal the entry point's guard noted before these handlers took over
         self.received: int | None = entry.received[0] if entry.received else None

@@ -37,7 +37,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import AccelStamped, TwistStamped
 from rclpy.node import Node
-from vd_sim_node.ros_common import (
+from vd_common.ros_common import (
     DIAGNOSTICS_QOS,
     STATE_QOS,
     STREAM_QOS,
@@ -46,7 +46,7 @@ from vd_sim_node.ros_common import (
     node_status,
     run_node,
 )
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_ALERTS,
     ESTIMATES_FRICTION,
     ESTIMATES_FRICTION_POTENTIAL,
@@ -60,7 +60,7 @@ from vd_sim_node.topics import (
     OBSERVER_BODY_VELOCITY,
     OBSERVER_WHEEL_STATES,
 )
-from vd_sim_node.vehicle.params import default_vehicle_file
+from vd_common.vehicle.params import default_vehicle_file
 
 from vd_msgs.msg import (
     Alerts,
@@ -83,14 +83,14 @@ from vd_observer_node.estimation.faults import ERROR
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.mapping import ENGINE_INPUT
-from vd_observer_node.node_params import (
+from vd_observer_node.nodes.node_params import (
     INPUT_PARAMS,
     PIPELINE_PARAMS,
     input_message_class,
     take_input_mapping,
     undeclared_inputs,
 )
-from vd_observer_node.raw_io import (
+from vd_observer_node.nodes.raw_io import (
     Encoders,
     InputWatch,
     input_matcher,

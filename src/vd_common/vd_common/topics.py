@@ -2,7 +2,7 @@
 
 One table, used by the nodes that publish, subscribe or record these topics and by the tools,
 tests and scripts that read them, so a name is written once: here. Code elsewhere uses the
-constants below, never a literal ``/vd/...`` string (src/vd_sim_node/test/test_topics.py
+constants below, never a literal ``/vd/...`` string (src/vd_common/test/test_topics.py
 fails on one). A constant is named after its topic: the part after ``/vd/`` in upper case,
 ``/`` written ``_`` (``/vd/truth/slope`` is ``TRUTH_SLOPE``). Types are ROS 2 type names
 ('pkg/msg/Type'). See the README's topic contract.

@@ -7,8 +7,8 @@ import re
 from pathlib import Path
 
 import pytest
-import vd_sim_node.topics as topics
-from vd_sim_node.topics import (
+import vd_common.topics as topics
+from vd_common.topics import (
     ALERTS,
     CONTRACT,
     ESTIMATES,
@@ -20,7 +20,7 @@ from vd_sim_node.topics import (
 )
 
 ROOT = Path(__file__).resolve().parents[3]
-TOPICS_FILE = ROOT / 'src' / 'vd_sim_node' / 'vd_sim_node' / 'topics.py'
+TOPICS_FILE = ROOT / 'src' / 'vd_common' / 'vd_common' / 'topics.py'
 #: Folders whose Python files must name topics by the constants of topics.py.
 SCANNED = ('src', 'tests', 'scripts')
 GROUPS = {
@@ -118,6 +118,6 @@ def test_no_topic_name_is_written_outside_topics_py() -> None:
         for path in files
         for line, text in literal_topic_names(path.read_text(encoding='utf-8'), str(path))
     ]
-    assert not offenders, 'topic names written as literals (use vd_sim_node.topics):\n' + (
+    assert not offenders, 'topic names written as literals (use vd_common.topics):\n' + (
         '\n'.join(offenders)
     )

@@ -23,7 +23,7 @@ from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
-from vd_sim_node.ros_common import (
+from vd_common.ros_common import (
     CLOCK_QOS,
     DIAGNOSTICS_QOS,
     STREAM_QOS,
@@ -38,13 +38,13 @@ from vd_sim_node.ros_common import (
     ros_message_class,
     run_node,
 )
-from vd_sim_node.topics import SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES, SENSORS_WHEEL_TORQUES
+from vd_common.topics import SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES, SENSORS_WHEEL_TORQUES
 
 from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.errors import ReplayInputError
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import InputMapping
-from vd_observer_node.node_params import INPUT_PARAMS, take_input_mapping, undeclared_inputs
+from vd_observer_node.nodes.node_params import INPUT_PARAMS, take_input_mapping, undeclared_inputs
 
 __all__ = ['SENSOR_TOPICS', 'PlayerNode', 'main']
 

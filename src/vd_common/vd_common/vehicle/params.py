@@ -6,7 +6,7 @@ is, and the estimators of vd_observer_node take their subset from it
 one place.
 
 All values are SI (angles in rad, engine speeds in rad/s). The loader refuses a missing or
-out-of-range value with one :class:`~vd_sim_node.errors.ParameterError` that names the
+out-of-range value with one :class:`~vd_common.errors.ParameterError` that names the
 parameter by its dotted YAML path, e.g. ``chassis.mass must be > 0 kg, got -3``;
 :func:`load_vehicle` puts the file in front: ``vehicle file x.yaml: chassis.mass must be ...``.
 """
@@ -16,8 +16,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from vd_sim_node.errors import ParameterError
-from vd_sim_node.vehicle._yaml_reader import MappingReader, load_yaml_mapping
+from vd_common.errors import ParameterError
+from vd_common.yaml_reader import MappingReader, load_yaml_mapping
 
 __all__ = [
     'AeroParams',
@@ -37,7 +37,7 @@ __all__ = [
     'parse_vehicle',
 ]
 
-# The shipped parameter file, in ``config/`` of the vd_sim_node package.
+# The shipped parameter file, in ``config/`` of this package (vd_common).
 _CLIO_FILE = 'clio_rl_1_1.yaml'
 
 
@@ -382,7 +382,7 @@ def load_vehicle(path: str | Path) -> VehicleParams:
     """Load and validate a vehicle parameter file.
 
     Args:
-        path: YAML file, e.g. ``src/vd_sim_node/config/clio_rl_1_1.yaml``.
+        path: YAML file, e.g. ``src/vd_common/config/clio_rl_1_1.yaml``.
 
     Returns:
         The validated parameters.
@@ -401,9 +401,9 @@ def load_vehicle(path: str | Path) -> VehicleParams:
 
 
 def default_vehicle_file() -> Path:
-    """The shipped Clio RL 1.1 parameter file.
+    """The shipped Clio RL 1.1 parameter file, the default of the simulator and estimator.
 
-    The installed copy (``share/vd_sim_node/config``, found through the ament index) comes
+    The installed copy (``share/vd_common/config``, found through the ament index) comes
     first, so an installed node reads the file installed with it; without a ROS environment
     (tests, tools run from the source tree) the copy in this package's source tree is used.
 
@@ -416,15 +416,15 @@ def default_vehicle_file() -> Path:
     try:
         from ament_index_python.packages import get_package_share_directory
 
-        installed = Path(get_package_share_directory('vd_sim_node')) / 'config' / _CLIO_FILE
+        installed = Path(get_package_share_directory('vd_common')) / 'config' / _CLIO_FILE
         if installed.is_file():
             return installed
     except (ImportError, LookupError, ValueError, OSError):
         pass  # not installed / no ROS environment: use the source tree
-    # vd_sim_node/vehicle/params.py -> parents[2] is the package source root holding config/.
+    # vd_common/vehicle/params.py -> parents[2] is the package source root holding config/.
     source = Path(__file__).resolve().parents[2] / 'config' / _CLIO_FILE
     if source.is_file():
         return source
     raise ParameterError(
-        f'vehicle file {_CLIO_FILE} not found (vd_sim_node not installed, no {source})'
+        f'vehicle file {_CLIO_FILE} not found (vd_common not installed, no {source})'
     )

@@ -18,8 +18,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, Final
 
-from vd_sim_node.ros_common import ParamSpec, dataclass_param_specs, ros_message_class
-from vd_sim_node.topics import OBSERVER_BODY_VELOCITY, SENSORS_BODY_VELOCITY, SENSORS_NAMESPACE
+from vd_common.ros_common import ParamSpec, dataclass_param_specs, ros_message_class
+from vd_common.topics import OBSERVER_BODY_VELOCITY, SENSORS_BODY_VELOCITY, SENSORS_NAMESPACE
 
 from vd_observer_node.chain import ESTIMATOR_SPEEDS, KERNELS
 from vd_observer_node.estimation.differentiator import (

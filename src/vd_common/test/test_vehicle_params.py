@@ -10,9 +10,9 @@ import pytest
 import yaml
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from vd_sim_node.errors import ParameterError
-from vd_sim_node.vehicle import params as params_module
-from vd_sim_node.vehicle.params import default_vehicle_file, load_vehicle, parse_vehicle
+from vd_common.errors import ParameterError
+from vd_common.vehicle import params as params_module
+from vd_common.vehicle.params import default_vehicle_file, load_vehicle, parse_vehicle
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'clio_rl_1_1.yaml'
 RAW: dict[str, Any] = yaml.safe_load(CONFIG.read_text())

@@ -26,7 +26,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, TwistStamped
 from rclpy.node import Node
-from vd_sim_node.ros_common import (
+from vd_common.ros_common import (
     DIAGNOSTICS_QOS,
     STREAM_QOS,
     PublishRefusals,
@@ -34,7 +34,7 @@ from vd_sim_node.ros_common import (
     node_status,
     run_node,
 )
-from vd_sim_node.topics import (
+from vd_common.topics import (
     OBSERVER_BODY_ACCEL,
     OBSERVER_BODY_VELOCITY,
     OBSERVER_WHEEL_STATES,
@@ -48,7 +48,7 @@ from vd_observer_node.estimation.observer import ObserverConfig, SpeedObserver, 
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
-from vd_observer_node.node_params import (
+from vd_observer_node.nodes.node_params import (
     INPUT_PARAMS,
     KERNEL,
     OBSERVER_PARAMS,
@@ -57,7 +57,7 @@ from vd_observer_node.node_params import (
     take_input_mapping,
     undeclared_inputs,
 )
-from vd_observer_node.raw_io import Encoders, InputWatch, merge_status
+from vd_observer_node.nodes.raw_io import Encoders, InputWatch, merge_status
 
 __all__ = ['ObserverNode', 'main']
 

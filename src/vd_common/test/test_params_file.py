@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from vd_sim_node.params_file import params_file_problem
+from vd_common.params_file import params_file_problem
 
 
 def test_params_file_problems_are_one_line(tmp_path: Path) -> None:

@@ -34,7 +34,7 @@ from typing import overload
 import numpy as np
 from numpy.typing import NDArray
 
-from vd_sim_node.vehicle.params import TireParams
+from vd_common.vehicle.params import TireParams
 
 __all__ = ['magic_formula_fx', 'slip_ratio', 'tire_force_from_slip_velocity']
 

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
-from vd_sim_node.ros_common import (
+from vd_common.ros_common import (
     DIAGNOSTICS_QOS,
     STREAM_QOS,
     PublishRefusals,
@@ -32,14 +32,14 @@ from vd_sim_node.ros_common import (
     node_status,
     run_node,
 )
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_ALERTS,
     ESTIMATES_FRICTION,
     ESTIMATES_FRICTION_POTENTIAL,
     ESTIMATES_TIRE_FORCES,
     OBSERVER_WHEEL_STATES,
 )
-from vd_sim_node.vehicle.params import default_vehicle_file
+from vd_common.vehicle.params import default_vehicle_file
 
 from vd_msgs.msg import (
     Alerts,
@@ -53,7 +53,7 @@ from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.decode import has_header
 from vd_observer_node.inputs.mapping import InputMapping
-from vd_observer_node.node_params import (
+from vd_observer_node.nodes.node_params import (
     ALERTS_PARAMS,
     INPUT_PARAMS,
     KERNEL,
@@ -61,7 +61,7 @@ from vd_observer_node.node_params import (
     take_input_mapping,
     undeclared_inputs,
 )
-from vd_observer_node.raw_io import (
+from vd_observer_node.nodes.raw_io import (
     Encoders,
     InputWatch,
     aligned_input,

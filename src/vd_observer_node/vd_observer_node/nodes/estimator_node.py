@@ -22,7 +22,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, TwistStamped
 from rclpy.node import Node
-from vd_sim_node.ros_common import (
+from vd_common.ros_common import (
     DIAGNOSTICS_QOS,
     STREAM_QOS,
     PublishRefusals,
@@ -30,7 +30,7 @@ from vd_sim_node.ros_common import (
     node_status,
     run_node,
 )
-from vd_sim_node.topics import (
+from vd_common.topics import (
     ESTIMATES_FRICTION,
     ESTIMATES_MASS,
     ESTIMATES_RESISTANCES,
@@ -41,7 +41,7 @@ from vd_sim_node.topics import (
     OBSERVER_BODY_VELOCITY,
     OBSERVER_WHEEL_STATES,
 )
-from vd_sim_node.vehicle.params import default_vehicle_file
+from vd_common.vehicle.params import default_vehicle_file
 
 from vd_msgs.msg import (
     Friction,
@@ -57,7 +57,7 @@ from vd_observer_node.estimation.faults import merge_reports, summarise
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.inputs.decode import has_header
 from vd_observer_node.inputs.mapping import InputMapping
-from vd_observer_node.node_params import (
+from vd_observer_node.nodes.node_params import (
     ESTIMATOR_PARAMS,
     INPUT_PARAMS,
     KERNEL,
@@ -65,7 +65,7 @@ from vd_observer_node.node_params import (
     take_input_mapping,
     undeclared_inputs,
 )
-from vd_observer_node.raw_io import (
+from vd_observer_node.nodes.raw_io import (
     Encoders,
     InputWatch,
     aligned_input,

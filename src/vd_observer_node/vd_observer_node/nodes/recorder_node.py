@@ -31,7 +31,7 @@ from rclpy.clock_type import ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from std_msgs.msg import Header
-from vd_sim_node.ros_common import (
+from vd_common.ros_common import (
     CLOCK_QOS,
     DIAGNOSTICS_QOS,
     STREAM_QOS,
@@ -44,7 +44,7 @@ from vd_sim_node.ros_common import (
     ros_message_class,
     run_node,
 )
-from vd_sim_node.topics import CONTRACT, NAMESPACE, ON_CHANGE, STATUS, STATUS_RECORDER_PROGRESS
+from vd_common.topics import CONTRACT, NAMESPACE, ON_CHANGE, STATUS, STATUS_RECORDER_PROGRESS
 
 from vd_observer_node.bag import BagWriter
 from vd_observer_node.bag.errors import BagError, UnknownMessageTypeError
