@@ -406,11 +406,19 @@ def node_status(
     node: Node,
     name: str,
     hardware_id: str,
-    level: bytes | int,
+    level: int,
     message: str,
     values: Mapping[str, object],
+    refusals: PublishRefusals | None = None,
 ) -> DiagnosticArray:
-    """`diagnostic_array` stamped with the node's clock now (the nodes' periodic status)."""
+    """`diagnostic_array` stamped with the node's clock now (the nodes' periodic status).
+
+    With `refusals`, the publishes refused since the previous status are added to the level,
+    message and values (`PublishRefusals.status`).
+    """
+    if refusals is not None:
+        level, message, refused = refusals.status(level, message)
+        values = {**values, **refused}
     return diagnostic_array(
         node.get_clock().now().to_msg(), name, hardware_id, level, message, values
     )

@@ -237,10 +237,8 @@ class AlertsNode(Node):
             level, message, self.watch, time.monotonic_ns()
         )
         values.update(watch_values)
-        level, message, refused = self.refusals.status(level, message)
-        values.update(refused)
         self.pub_diag.publish(
-            node_status(self, 'vd: alerts', 'alerts_node', level, message, values)
+            node_status(self, 'vd: alerts', 'alerts_node', level, message, values, self.refusals)
         )
 
 

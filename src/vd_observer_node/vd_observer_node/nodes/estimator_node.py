@@ -260,10 +260,10 @@ class EstimatorNode(Node):
             report.level, report.message, self.watch, time.monotonic_ns()
         )
         values.update(watch_values)
-        level, message, refused = self.refusals.status(level, message)
-        values.update(refused)
         self.pub_diag.publish(
-            node_status(self, 'vd: estimator', 'estimator_node', level, message, values)
+            node_status(
+                self, 'vd: estimator', 'estimator_node', level, message, values, self.refusals
+            )
         )
 
 

@@ -202,10 +202,10 @@ class ObserverNode(Node):
             **report.counts,
             **watch_values,
         }
-        level, message, refused = self.refusals.status(level, message)
-        values.update(refused)
         self.pub_diag.publish(
-            node_status(self, 'vd: observer', 'observer_node', level, message, values)
+            node_status(
+                self, 'vd: observer', 'observer_node', level, message, values, self.refusals
+            )
         )
 
 

@@ -375,10 +375,10 @@ class PipelineNode(Node):
             **report.counts,
             **watch_values,
         }
-        level, message, refused = self.refusals.status(level, message)
-        values.update(refused)
         self.pub_diag.publish(
-            node_status(self, 'vd: pipeline', 'pipeline_node', level, message, values)
+            node_status(
+                self, 'vd: pipeline', 'pipeline_node', level, message, values, self.refusals
+            )
         )
 
 

@@ -200,9 +200,10 @@ class PlayerNode(Node):
             self.t0_wall = None
 
     def publish_diagnostics(self) -> None:
-        level, message, refused = self.refusals.status(0, 'ok')
-        values = {'messages_played': self.played, 'loops': self.loops, **refused}
-        self.p_diag.publish(node_status(self, 'vd: player', 'player_node', level, message, values))
+        values = {'messages_played': self.played, 'loops': self.loops}
+        self.p_diag.publish(
+            node_status(self, 'vd: player', 'player_node', 0, 'ok', values, self.refusals)
+        )
 
 
 def main(args: list[str] | None = None) -> int:

@@ -253,10 +253,10 @@ class RecorderNode(Node):
             else f'{self._progress_sent * 1e-9:.3f}',
             'progress_held_by': self.progress_held_by(),
         }
-        level, message, refused = self.refusals.status(level, message)
-        values.update(refused)
         self.pub_diag.publish(
-            node_status(self, 'vd: recorder', 'recorder_node', level, message, values)
+            node_status(
+                self, 'vd: recorder', 'recorder_node', level, message, values, self.refusals
+            )
         )
 
     def close(self) -> None:
