@@ -1,69 +1,75 @@
-"""The kernels' disk cache is dropped when any kernel source changes (numba alone keys a
+"""The package's numba cache is dropped when any of its sources changes (numba alone keys a
 function's cache on its own file, so a caller would keep a changed callee's old code)."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 from vd_observer_node.kernel._jit import STAMP_NAME, clear_stale_cache, sources_digest
 
 
-def _folder(tmp_path: Path) -> Path:
-    folder = tmp_path / 'kernel'
-    (folder / '__pycache__').mkdir(parents=True)
-    (folder / 'chain.py').write_text('def step(): return callee()\n', encoding='utf-8')
-    (folder / 'estimation.py').write_text('def callee(): return 1\n', encoding='utf-8')
-    return folder
+def _package(tmp_path: Path) -> Path:
+    package = tmp_path / 'pkg'
+    for sub in ('kernel', 'estimation'):
+        (package / sub / '__pycache__').mkdir(parents=True)
+    (package / 'kernel' / 'chain.py').write_text('def step(): return callee()\n', 'utf-8')
+    (package / 'estimation' / 'drivetrain.py').write_text('EFFICIENCY = 0.9\n', 'utf-8')
+    return package
 
 
-def _cache_files(folder: Path) -> list[Path]:
-    files = [folder / '__pycache__' / f'chain.step-1.py311.{ext}' for ext in ('nbi', '1.nbc')]
+def _cache_files(package: Path) -> list[Path]:
+    files = [
+        package / sub / '__pycache__' / f'm.step-1.py311.{ext}'
+        for sub in ('kernel', 'estimation')
+        for ext in ('nbi', '1.nbc')
+    ]
     for path in files:
         path.write_bytes(b'compiled')
     return files
 
 
-def test_a_changed_callee_drops_the_cache_and_an_unchanged_one_keeps_it(tmp_path: Path) -> None:
-    folder = _folder(tmp_path)
-    assert clear_stale_cache(folder)  # no stamp yet: whatever is there is of unknown sources
-    files = _cache_files(folder)
-    assert not clear_stale_cache(folder)
+def test_a_changed_source_anywhere_drops_every_cache_and_no_change_keeps_it(
+    tmp_path: Path,
+) -> None:
+    package = _package(tmp_path)
+    assert clear_stale_cache(package)  # no stamp yet: whatever is there is of unknown sources
+    files = _cache_files(package)
+    assert not clear_stale_cache(package)
     assert all(path.exists() for path in files)
-    before = sources_digest(folder)
-    (folder / 'estimation.py').write_text('def callee(): return 2\n', encoding='utf-8')
-    assert sources_digest(folder) != before
-    assert clear_stale_cache(folder)
+    before = sources_digest(package)
+    # a constant outside the file that compiles it: numba's own check would miss it
+    (package / 'estimation' / 'drivetrain.py').write_text('EFFICIENCY = 0.95\n', 'utf-8')
+    assert sources_digest(package) != before
+    assert clear_stale_cache(package)
     assert not any(path.exists() for path in files)
-    stamp = folder / '__pycache__' / STAMP_NAME
-    assert stamp.read_text(encoding='ascii') == sources_digest(folder)
+    stamp = package / '__pycache__' / STAMP_NAME
+    assert stamp.read_text(encoding='ascii') == sources_digest(package)
 
 
 def test_an_unwritable_cache_is_left_alone(tmp_path: Path) -> None:
-    folder = _folder(tmp_path)
-    (folder / '__pycache__').rmdir()
-    (folder / '__pycache__').write_text('not a folder', encoding='utf-8')
-    assert not clear_stale_cache(folder)
+    package = _package(tmp_path)
+    (package / '__pycache__').write_text('not a folder', encoding='utf-8')
+    assert not clear_stale_cache(package)
 
 
-def test_a_changed_constant_outside_the_kernels_drops_the_cache(tmp_path: Path) -> None:
-    # the compiled estimator bakes in constants of estimation/drivetrain.py: the cache is keyed
-    # on the whole package, not only on the kernels' folder
-    package = tmp_path / 'pkg'
-    kernels = _folder(package)
-    (package / 'estimation').mkdir()
-    constants = package / 'estimation' / 'drivetrain.py'
-    constants.write_text('EFFICIENCY = 0.9\n', encoding='utf-8')
-    assert clear_stale_cache(kernels, package)
-    files = _cache_files(kernels)
-    assert not clear_stale_cache(kernels, package)
-    constants.write_text('EFFICIENCY = 0.95\n', encoding='utf-8')
-    assert clear_stale_cache(kernels, package)
-    assert not any(path.exists() for path in files)
-
-
-def test_the_installed_kernels_are_keyed_on_their_whole_package() -> None:
+def test_the_installed_package_is_keyed_on_all_its_sources() -> None:
     from vd_observer_node.kernel import _jit
 
-    assert _jit.KERNELS.parent == _jit.PACKAGE
-    stamp = _jit.KERNELS / '__pycache__' / STAMP_NAME  # written at import: a writable tree
+    stamp = _jit.PACKAGE / '__pycache__' / STAMP_NAME  # written at import: a writable tree
     assert stamp.read_text(encoding='ascii') == sources_digest(_jit.PACKAGE)
+
+
+def test_vd_jit_0_runs_the_same_source_uncompiled() -> None:
+    code = (
+        'from vd_observer_node.kernel import _jit\n'
+        'f = _jit.jit(lambda x: x + 1)\n'
+        'print(_jit.JIT_ENABLED, type(f).__name__, f(1))\n'
+    )
+    env = dict(os.environ, VD_JIT='0')
+    out = subprocess.run(
+        [sys.executable, '-c', code], env=env, capture_output=True, text=True, check=True
+    )
+    assert out.stdout.split() == ['False', 'function', '2']

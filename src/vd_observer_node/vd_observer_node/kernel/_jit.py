@@ -4,22 +4,23 @@ numba keys a function's on-disk cache on the file that defines it, not on the fu
 calls nor on the module constants it bakes in: a kernel of ``chain.py`` that calls a changed
 function of ``estimation.py``, or reads a changed constant of ``estimation/drivetrain.py``,
 would load stale machine code (the replay then silently runs the old estimator).
-`clear_stale_cache` removes the kernels' cache when anything compiled into it may have
-changed, once per import: it keys the cache on every source file of the package (kernels,
-the reference modules whose constants they read), and the numba, numpy and Python versions.
+`clear_stale_cache` removes the package's numba cache when anything compiled into it may have
+changed, once per import: it keys the cache on every source file of the package (the step
+functions, their callees, the constants they read), and the numba, numpy and Python versions.
 ``python -m vd_observer_node.kernel`` (run by ``make setup``) then builds the cache anew.
 """
 
 from __future__ import annotations
 
 import hashlib
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar, cast
 
 import numba
 
-__all__ = ['KERNELS', 'PACKAGE', 'clear_stale_cache', 'jit', 'sources_digest']
+__all__ = ['JIT_ENABLED', 'PACKAGE', 'clear_stale_cache', 'jit', 'sources_digest']
 
 F = TypeVar('F', bound=Callable[..., Any])
 
@@ -43,23 +44,25 @@ def sources_digest(folder: Path) -> str:
     return digest.hexdigest()
 
 
-def clear_stale_cache(kernels: Path, sources: Path | None = None) -> bool:
-    """Delete numba's cache files in ``kernels/__pycache__`` unless they were built from the
-    sources below `sources` (default: `kernels`) as they are now; returns whether it did.
+def clear_stale_cache(package: Path) -> bool:
+    """Delete numba's cache files in every ``__pycache__`` below `package` unless they were
+    built from the sources below `package` as they are now; returns whether it did.
 
-    Best effort: a folder that cannot be written (a read-only install) is left alone, as
-    numba then caches elsewhere or not at all.
+    The compiled functions live in several modules of the package (each concept's module holds
+    its own step functions), and a caller bakes in its callees and their module constants: the
+    cache is one, keyed on every source. Best effort: a tree that cannot be written (a
+    read-only install) is left alone, as numba then caches elsewhere or not at all.
     """
-    cache = kernels / '__pycache__'
+    cache = package / '__pycache__'
     stamp = cache / STAMP_NAME
-    digest = sources_digest(sources or kernels)
+    digest = sources_digest(package)
     try:
         if stamp.read_text(encoding='ascii') == digest:
             return False
     except OSError:
         pass
     try:
-        for path in cache.glob('*.nb[ic]'):
+        for path in package.rglob('__pycache__/*.nb[ic]'):
             path.unlink(missing_ok=True)
         cache.mkdir(exist_ok=True)
         stamp.write_text(digest, encoding='ascii')
@@ -68,10 +71,13 @@ def clear_stale_cache(kernels: Path, sources: Path | None = None) -> bool:
     return True
 
 
-#: the kernels' folder, and the package whose sources are compiled into them
-KERNELS = Path(__file__).resolve().parent
-PACKAGE = KERNELS.parent
-clear_stale_cache(KERNELS, PACKAGE)
+#: the package whose sources are compiled (its compiled functions, their callees, constants)
+PACKAGE = Path(__file__).resolve().parent.parent
+#: ``VD_JIT=0`` runs every compiled function as the plain Python it is written in (debugging,
+#: coverage, a traceback with line numbers); anything else, or unset, compiles.
+JIT_ENABLED = os.environ.get('VD_JIT', '1') != '0'
+if JIT_ENABLED:
+    clear_stale_cache(PACKAGE)
 
 
 def jit(fn: F) -> F:
@@ -80,4 +86,6 @@ def jit(fn: F) -> F:
     No fastmath: it would change NaN handling and the last bits the equality tests against
     the Python reference rely on. nogil: offline tools may run kernels in threads.
     """
+    if not JIT_ENABLED:
+        return fn
     return cast(F, numba.njit(cache=True, nogil=True)(fn))
