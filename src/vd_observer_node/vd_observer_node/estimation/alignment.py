@@ -91,6 +91,10 @@ class StampAligner:
             'time_jump_back': self.jump_back_count,
         }
 
+    def queued(self) -> dict[str, int]:
+        """Messages waiting for their stamp to complete, per topic."""
+        return {name: len(buffer) for name, buffer in self._buffers.items()}
+
     def push(self, topic: str, stamp_ns: int, message: Any) -> dict[str, Any] | None:
         """Add one message; return {topic: message} for its stamp if now complete, else None.
 
@@ -213,6 +217,14 @@ class LatestAligner:
         self._last: dict[str, int | None] = dict.fromkeys(self._topics)
         #: per topic, how many time lines it has started (see the class docstring)
         self._line: dict[str, int] = dict.fromkeys(self._topics, 0)
+
+    def queued(self) -> dict[str, int]:
+        """Driving messages waiting for the other inputs, and each other input's kept samples
+        (the newest not-later one for each waiting driving message), per topic."""
+        return {
+            self._topics[0]: len(self._pending),
+            **{topic: len(history) for topic, history in self._history.items()},
+        }
 
     def push(self, topic: str, stamp_ns: int, message: Any) -> list[tuple[int, dict[str, Any]]]:
         """Add one message; return the sets it completes, oldest first: (driving stamp [ns],

@@ -68,6 +68,7 @@ from vd_observer_node.nodes.raw_io import (
     input_matcher,
     mapped_input,
     merge_status,
+    queued_by_topic,
 )
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
@@ -150,6 +151,9 @@ class AlertsNode(Node):
             mapping, TOPICS, capacity, max_gap_ns, max_gap_ns, held=held_inputs(mapping)
         )
         self.watch = InputWatch([spec.topic for spec in sensors.values()], max_gap_ns)
+        # the matcher's queue per input topic, reported against its capacity
+        self._queue_topics = {key: spec.topic for key, spec in sensors.items()}
+        self._capacity = capacity
         self.pub_alerts = self.refusals.publisher(Alerts, ESTIMATES_ALERTS, STREAM_QOS)
         self.pub_potential = self.refusals.publisher(
             FrictionPotential, ESTIMATES_FRICTION_POTENTIAL, STREAM_QOS
@@ -234,7 +238,12 @@ class AlertsNode(Node):
             **self.aligner.counts(),
         }
         level, message, watch_values = merge_status(
-            level, message, self.watch, time.monotonic_ns()
+            level,
+            message,
+            self.watch,
+            time.monotonic_ns(),
+            queued_by_topic(self.aligner, self._queue_topics),
+            self._capacity,
         )
         values.update(watch_values)
         self.pub_diag.publish(

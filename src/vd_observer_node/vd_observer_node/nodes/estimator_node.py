@@ -73,6 +73,7 @@ from vd_observer_node.nodes.raw_io import (
     mapped_input,
     mass_values,
     merge_status,
+    queued_by_topic,
     radius_values,
 )
 
@@ -134,6 +135,9 @@ class EstimatorNode(Node):
             mapping, TOPICS, capacity, max_gap_ns, max_gap_ns, held=held_inputs(mapping)
         )
         self.watch = InputWatch([spec.topic for spec in sensors.values()], max_gap_ns)
+        # the matcher's queue per input topic, reported against its capacity
+        self._queue_topics = {key: spec.topic for key, spec in sensors.items()}
+        self._capacity = capacity
         self._align_reported: dict[str, int] = {}
         self.pub_forces = self.refusals.publisher(TireForces, ESTIMATES_TIRE_FORCES, STREAM_QOS)
         self.pub_friction = self.refusals.publisher(Friction, ESTIMATES_FRICTION, STREAM_QOS)
@@ -257,7 +261,12 @@ class EstimatorNode(Node):
             **report.counts,
         }
         level, message, watch_values = merge_status(
-            report.level, report.message, self.watch, time.monotonic_ns()
+            report.level,
+            report.message,
+            self.watch,
+            time.monotonic_ns(),
+            queued_by_topic(self.aligner, self._queue_topics),
+            self._capacity,
         )
         values.update(watch_values)
         self.pub_diag.publish(

@@ -137,7 +137,11 @@ class ObserverNode(Node):
         """One mapped input message, or None when dropped (counted, never raised)."""
         self.watch.seen(decoder.spec.topic, time.monotonic_ns())
         try:
-            return decoder.decode(data, self.get_clock().now().nanoseconds if stamp_now else 0)
+            now = self.get_clock().now().nanoseconds
+            decoded = decoder.decode(data, now if stamp_now else 0)
+            if not stamp_now:
+                self.watch.stamped(decoder.spec.topic, decoded[0], now - decoded[0])
+            return decoded
         except BagFormatError:
             self.counts['undecodable'] += 1
         except MappingError as exc:

@@ -98,6 +98,7 @@ from vd_observer_node.nodes.raw_io import (
     mass_values,
     merge_status,
     offset_values,
+    queued_by_topic,
     radius_values,
 )
 from vd_observer_node.situation.alerts import AlertConfig
@@ -208,6 +209,9 @@ class PipelineNode(Node):
             mapping, names, capacity, max_jump_back_ns=max_gap_ns, max_age_ns=max_gap_ns
         )
         self.watch = InputWatch([spec.topic for spec in specs], max_gap_ns)
+        # the matcher's queue per input topic, reported against its capacity
+        self._queue_topics = {spec.name: spec.topic for spec in specs}
+        self._capacity = capacity
         # The online mass and radius only when adapted: with the file's constants they would
         # add two 1 kHz streams to a graph that is at its limit on two cores.
         # The engine-torque offset only where learnt, and only where it changes (STATE_QOS).
@@ -365,7 +369,12 @@ class PipelineNode(Node):
             level = max(level, ERROR)
             message += f'; {self.counts["withheld_non_finite"]} non-finite outputs withheld'
         level, message, watch_values = merge_status(
-            level, message, self.watch, time.monotonic_ns()
+            level,
+            message,
+            self.watch,
+            time.monotonic_ns(),
+            queued_by_topic(self.aligner, self._queue_topics),
+            self._capacity,
         )
         values = {
             'kernel': self.kernel,

@@ -15,7 +15,7 @@ to each matched set. `InputWatch` notes every input's arrivals and reports a top
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from vd_observer_node.bag.cdr_message import AlertsCodec, MessageCodec
@@ -30,6 +30,7 @@ from vd_observer_node.estimation.faults import ERROR, OK, WARN
 from vd_observer_node.estimation.torque_offset import OFFSET_MESSAGE_FIELDS, TorqueOffset
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
+from vd_observer_node.inputs.health import HealthLimits, StreamHealth, health_notes
 from vd_observer_node.inputs.mapping import InputMapping, InputSpec
 
 __all__ = [
@@ -44,6 +45,7 @@ __all__ = [
     'matched_inputs',
     'merge_status',
     'offset_values',
+    'queued_by_topic',
     'radius_values',
 ]
 
@@ -207,6 +209,10 @@ class InputMatcher:
         """The aligner's totals and the sets withheld for a missing or old held input."""
         return {**self.aligner.counts(), 'withheld_held_input_old': self.withheld_stale}
 
+    def queued(self) -> dict[str, int]:
+        """Messages waiting per matched input (a held input's latest value is not counted)."""
+        return self.aligner.queued()
+
 
 class LatestMatcher:
     """The mapping's 'latest' alignment live (`LatestAligner`): each wheel stamp with the
@@ -236,6 +242,10 @@ class LatestMatcher:
     def counts(self) -> dict[str, int]:
         """The aligner's totals."""
         return self.aligner.counts()
+
+    def queued(self) -> dict[str, int]:
+        """Messages waiting per input (`LatestAligner.queued`)."""
+        return self.aligner.queued()
 
 
 def input_matcher(
@@ -267,34 +277,53 @@ def input_matcher(
 
 
 class InputWatch:
-    """Arrivals of each mapped input topic, to report one that stopped or does not fit.
+    """Arrivals of each mapped input topic: one that stopped or does not fit, and how well
+    each stamped one arrives (`health.StreamHealth`: share of expected stamps, lag).
 
     Attributes:
         timeout_ns: [ns] an input whose last message is older than this has stopped.
+        limits: when an input's window is reported (WARN).
     """
 
-    def __init__(self, topics: Sequence[str], timeout_ns: int) -> None:
+    def __init__(
+        self, topics: Sequence[str], timeout_ns: int, limits: HealthLimits | None = None
+    ) -> None:
         """Watch `topics` (none seen yet)."""
         self.timeout_ns = timeout_ns
+        self.limits = limits or HealthLimits()
         self.messages = dict.fromkeys(topics, 0)
         self._last: dict[str, int] = {}
         self._problem: dict[str, str] = {}
+        self._health: dict[str, StreamHealth] = {}
 
     def seen(self, topic: str, now_ns: int) -> None:
         """Note a message of `topic` received at `now_ns` (monotonic clock)."""
         self.messages[topic] += 1
         self._last[topic] = now_ns
 
+    def stamped(self, topic: str, stamp_ns: int, lag_ns: int) -> None:
+        """Note the header stamp [ns] of a decoded message of `topic` and its lag [ns] (the
+        node clock at arrival minus the stamp). Inputs stamped on receipt are not noted."""
+        health = self._health.get(topic)
+        if health is None:
+            health = self._health[topic] = StreamHealth()
+        health.add(stamp_ns, lag_ns)
+
     def unfit(self, topic: str, problem: str) -> None:
         """Note a message of `topic` the mapping cannot read (the last problem is reported)."""
         self._problem[topic] = problem
 
-    def status(self, now_ns: int) -> tuple[int, str, dict[str, object]]:
-        """Level (OK, WARN or ERROR), message and per-topic values at `now_ns`.
+    def status(
+        self, now_ns: int, queues: dict[str, int] | None = None, capacity: int | None = None
+    ) -> tuple[int, str, dict[str, object]]:
+        """Level (OK, WARN or ERROR), message and per-topic values at `now_ns`; closes the
+        stamped inputs' health window.
 
         WARN names each topic silent for longer than `timeout_ns` (or never heard from while
-        another input arrives) and how long; ERROR the last mapping problem of a topic.
-        Back to OK when every topic arrives again.
+        another input arrives) and how long, and each stamped topic that lost more than
+        `limits` allow, lags or fills the matcher (`queues`: messages waiting per topic, of
+        `capacity`); ERROR the last mapping problem of a topic. Back to OK when every topic
+        arrives again.
         """
         notes: list[str] = []
         level = OK
@@ -312,6 +341,13 @@ class InputWatch:
             if now_ns - last > self.timeout_ns:
                 notes.append(f'{topic} stopped: no message for {age:.1f} s')
                 level = max(level, WARN)
+        for topic, health in self._health.items():
+            queue = queues.get(topic) if queues is not None else None
+            warned, numbers = health_notes(topic, health.window(), self.limits, queue, capacity)
+            values.update(numbers)
+            if warned:
+                notes.extend(warned)
+                level = max(level, WARN)
         for topic, problem in self._problem.items():
             notes.append(f'{topic}: {problem}')
             level = ERROR
@@ -320,14 +356,29 @@ class InputWatch:
 
 
 def merge_status(
-    level: int, message: str, watch: InputWatch, now_ns: int
+    level: int,
+    message: str,
+    watch: InputWatch,
+    now_ns: int,
+    queues: dict[str, int] | None = None,
+    capacity: int | None = None,
 ) -> tuple[int, str, dict[str, object]]:
-    """A node's diagnostic level and message with `watch`'s status added, and its values."""
-    watch_level, note, values = watch.status(now_ns)
+    """A node's diagnostic level and message with `watch`'s status added, and its values
+    (`queues`, `capacity`: see `InputWatch.status`)."""
+    watch_level, note, values = watch.status(now_ns, queues, capacity)
     if note:
         message = note if level == OK else f'{message}; {note}'
         level = max(level, watch_level)
     return level, message, values
+
+
+def queued_by_topic(
+    matcher: InputMatcher | LatestMatcher, topics: Mapping[str, str]
+) -> dict[str, int]:
+    """The matcher's waiting messages per input, keyed by the inputs' topics (`topics`:
+    input name -> topic; inputs not in the matcher are left out)."""
+    queued = matcher.queued()
+    return {topics[name]: n for name, n in queued.items() if name in topics}
 
 
 def mapped_input(
@@ -372,6 +423,8 @@ def mapped_input(
             counts['unfit'] = counts.get('unfit', 0) + 1
             watch.unfit(topic, str(exc))
             return
+        if not headerless:
+            watch.stamped(topic, stamp_ns, clock_ns() - stamp_ns)
         if held:
             matcher.hold(name, now, (frame, values))
             return
