@@ -72,6 +72,36 @@ def test_signal_closes_a_complete_bag(procs: RosProcessGroup, tmp_path: Path, si
 
 
 @pytest.mark.ros
+def test_the_recorder_says_which_stamps_it_missed(procs: RosProcessGroup, tmp_path: Path) -> None:
+    # every third wheel-angle publish of the simulator is refused: 133 of its 401 stamps
+    from test_publish_refusals_graph import refusing
+
+    bag = tmp_path / 'bag'
+    rec = procs.node('recorder', 'vd_observer_node', 'recorder_node', output=str(bag))
+    rec.wait_for('recording to', timeout=60)
+    sim = procs.node(
+        'sim',
+        'vd_sim_node',
+        'sim_node',
+        scenario_file=str(SCENARIO),
+        rate_hz=100.0,
+        real_time_factor=1.0,
+        start_delay=1.5,
+        env=refusing(SENSORS_WHEEL_ANGLES),
+    )
+    waiter = wait_for_last_stamp(
+        procs, 'waiter', 4_000_000_000, {TRUTH_SLOPE: 'vd_msgs.msg/Slope'}
+    )
+    sim.wait_for('scenario finished', timeout=60)
+    assert waiter.popen.wait(180) == 0, waiter.output()
+    time.sleep(0.5)  # the recorder writes what is delivered
+    assert rec.stop(signal.SIGINT) == 0, rec.output()
+    assert count(bag, SENSORS_WHEEL_ANGLES) == 401 - 133
+    closing = [line for line in rec.output().splitlines() if 'bag closed' in line]
+    assert closing and closing[-1].endswith(f'missed stamps: {SENSORS_WHEEL_ANGLES} 133)'), closing
+
+
+@pytest.mark.ros
 def test_sigkill_loses_at_most_the_open_chunk_and_repair_recovers_the_rest(
     procs: RosProcessGroup, tmp_path: Path
 ) -> None:

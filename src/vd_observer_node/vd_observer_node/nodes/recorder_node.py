@@ -12,6 +12,13 @@ publisher has been written (the minimum over those topics of the newest header s
 received; the on-change topics and ``/vd/status/*`` do not count). A simulator in lockstep
 waits on it, so that the bag misses nothing however slow the machine.
 
+What it missed: the stamps of each per-sample topic (those of the progress) are counted
+against the stamps expected between them (`inputs.health.StreamHealth`: a lost message is a
+gap of two periods). A topic that lost more than 5 % of its stamps in a second turns the
+status WARN, naming it; the values hold each topic's stamps lost since the start, and the
+closing line says which topics lost how many. (The publishers' sequence numbers would count
+exactly, but rclpy's EventsExecutor does not pass the message info that holds them.)
+
 SIGINT/SIGTERM close the bag completely. After SIGKILL or power loss, ``vd bag repair BAG``
 recovers every chunk already written: at most ``chunk_duration`` seconds are lost (the writer
 writes a chunk when it is that old, and this node checks every 0.1 s).
@@ -49,7 +56,8 @@ from vd_common.topics import CONTRACT, NAMESPACE, ON_CHANGE, STATUS, STATUS_RECO
 from vd_observer_node.bag import BagWriter
 from vd_observer_node.bag.errors import BagError, UnknownMessageTypeError
 from vd_observer_node.bag.metadata import format_qos_profiles
-from vd_observer_node.estimation.faults import ERROR, OK
+from vd_observer_node.estimation.faults import ERROR, OK, WARN
+from vd_observer_node.inputs.health import HealthLimits, StreamHealth, health_notes
 
 __all__ = ['RecorderNode', 'main']
 
@@ -118,6 +126,9 @@ class RecorderNode(Node):
         # publisher; published where the minimum moved
         self.pub_progress = self.refusals.publisher(Header, STATUS_RECORDER_PROGRESS, STREAM_QOS)
         self.latest_stamp: dict[str, int | None] = {}
+        #: stamps received per per-sample topic, to tell the stamps it missed
+        self.health: dict[str, StreamHealth] = {}
+        self.limits = HealthLimits()
         self.publishers_seen: dict[str, int] = {}
         self._progress_sent: int | None = None
         self.create_timer(0.02, self.publish_progress, clock=steady)
@@ -184,7 +195,9 @@ class RecorderNode(Node):
         progress = topic in CONTRACT and topic not in ON_CHANGE
         if progress:
             self.latest_stamp[topic] = None
+            self.health[topic] = StreamHealth()
         latest = self.latest_stamp
+        health = self.health.get(topic)
 
         def callback(data: bytes) -> None:
             if self.closed:
@@ -197,7 +210,9 @@ class RecorderNode(Node):
                     self.get_logger().error(f'cannot write {topic}: {exc}')
                 return
             if progress:
-                latest[topic] = header_stamp_ns(data)
+                stamp = latest[topic] = header_stamp_ns(data)
+                if health is not None and stamp is not None:
+                    health.add(stamp)
 
         return callback
 
@@ -240,9 +255,25 @@ class RecorderNode(Node):
         self._progress_sent = progress
         self.pub_progress.publish(Header(stamp=ns_to_time(progress)))
 
+    def missed(self) -> dict[str, int]:
+        """Stamps missed so far per per-sample topic (only those that missed any)."""
+        return {
+            topic: health.expected_total - health.received_total
+            for topic, health in self.health.items()
+            if health.expected_total > health.received_total
+        }
+
     def publish_diagnostics(self) -> None:
         level = OK if self.write_errors == 0 else ERROR
-        message = 'ok' if self.write_errors == 0 else f'{self.write_errors} write errors'
+        notes = [] if self.write_errors == 0 else [f'{self.write_errors} write errors']
+        lost: dict[str, object] = {}
+        for topic, health in self.health.items():
+            warned, numbers = health_notes(topic, health.window(), self.limits)
+            lost[f'{topic} lost_total'] = numbers[f'{topic} lost_total']
+            if warned:
+                notes.extend(warned)
+                level = max(level, WARN)
+        message = '; '.join(notes) or 'ok'
         values = {
             'bag': str(self.writer.path),
             'topics': len(self.subscriptions_by_topic),
@@ -252,6 +283,7 @@ class RecorderNode(Node):
             if self._progress_sent is None
             else f'{self._progress_sent * 1e-9:.3f}',
             'progress_held_by': self.progress_held_by(),
+            **lost,
         }
         self.pub_diag.publish(
             node_status(
@@ -267,8 +299,14 @@ class RecorderNode(Node):
         # stderr, not the ROS logger: on SIGINT the rclpy context is already shut down here
         try:
             self.writer.close()
+            missed = self.missed()
+            said = (
+                '; missed stamps: ' + ', '.join(f'{t} {n}' for t, n in missed.items())
+                if missed
+                else ''
+            )
             print(
-                f'bag closed: {self.writer.path} ({self.writer.message_count} messages)',
+                f'bag closed: {self.writer.path} ({self.writer.message_count} messages{said})',
                 file=sys.stderr,
                 flush=True,
             )
