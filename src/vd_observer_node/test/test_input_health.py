@@ -88,3 +88,23 @@ def test_notes_warn_on_loss_lag_and_a_full_queue_only() -> None:
     _feed(lagging, np.arange(0, 100) * MS, lag_ns=5_000 * MS)
     notes, values = health_notes('/in', lagging.window(), HealthLimits())
     assert notes == [] and values['/in lag_s'] == pytest.approx(5.0)  # reported, no WARN
+
+
+def test_the_recording_summary_states_the_stamps_lost_of_inputs_with_a_header() -> None:
+    from test_inputs import USER_MAPPING
+    from vd_observer_node.inputs.decode import InputSeries, input_stats
+    from vd_observer_node.inputs.mapping import mapping_from_dict
+
+    mapping = mapping_from_dict(USER_MAPPING)
+    rng = np.random.default_rng(11)
+    stamps = np.arange(0, 2000) * 10 * MS  # 100 Hz, 20 s
+    kept = stamps[np.concatenate(([True], rng.random(stamps.size - 1) >= 0.3))]
+    series = InputSeries(kept, np.zeros((kept.size, 4)), np.full(kept.size, b''))
+    stats = input_stats(mapping.wheels, series, 0.5)  # JointState: header stamps
+    last = int(kept[-1] // (10 * MS))
+    assert (stats.expected, stats.lost) == (last, last + 1 - kept.size)
+    assert f'{stats.lost} of {stats.expected} expected stamps lost (' in stats.text()
+    torques = next(spec for spec in mapping.specs if spec.name == 'wheel_torques')
+    headerless = input_stats(torques, series, 0.5)  # Float64MultiArray: log times
+    assert (headerless.expected, headerless.lost) == (None, None)
+    assert 'lost' not in headerless.text()

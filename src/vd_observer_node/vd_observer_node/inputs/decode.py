@@ -26,6 +26,7 @@ from vd_observer_node.bag.cdr_message import MessageCodec
 from vd_observer_node.bag.reader import TopicArrays
 from vd_observer_node.bag.typestore import deserialize
 from vd_observer_node.inputs.errors import MappingError
+from vd_observer_node.inputs.health import StreamHealth
 from vd_observer_node.inputs.mapping import (
     ENGINE_INPUT,
     FLOAT64_ARRAY,
@@ -343,6 +344,10 @@ class InputStats:
         longest_gap_s: [s] longest interval between consecutive stamps (0 with < 2 messages).
         long_gaps: intervals longer than `max_gap_s`: there the observers restart.
         max_gap_s: [s] the observers' ``max_gap`` the gaps were counted against.
+        expected: stamps expected between the first and the last at the input's nominal
+            period (`health.StreamHealth`); None for an input without header, whose losses
+            its log times cannot tell.
+        lost: of those, the ones that are not in the recording (None without header).
     """
 
     name: str
@@ -351,20 +356,35 @@ class InputStats:
     longest_gap_s: float
     long_gaps: int
     max_gap_s: float
+    expected: int | None = None
+    lost: int | None = None
 
     def text(self) -> str:
         """One line, e.g. 'wheel_torques (/can/wheel_torques): 900 messages, longest gap
         0.010 s, 0 gaps > 0.5 s'."""
-        return (
+        line = (
             f'{self.name} ({self.topic}): {self.messages} messages, longest gap '
             f'{self.longest_gap_s:.3f} s, {self.long_gaps} gaps > {self.max_gap_s:g} s'
         )
+        if self.lost and self.expected:
+            line += (
+                f', {self.lost} of {self.expected} expected stamps lost '
+                f'({100.0 * self.lost / self.expected:.1f} %)'
+            )
+        return line
 
 
 def input_stats(spec: InputSpec, series: InputSeries, max_gap_s: float) -> InputStats:
-    """Messages, longest gap and gaps longer than `max_gap_s` [s] of one decoded input."""
+    """Messages, longest gap, gaps longer than `max_gap_s` [s] and stamps lost of one decoded
+    input."""
     stamps = np.sort(series.stamp_ns)
     gaps = np.diff(stamps)
+    expected = lost = None
+    if has_header(spec):
+        health = StreamHealth()
+        health.add_many(stamps)
+        window = health.window()
+        expected, lost = window.expected, window.expected - window.received
     return InputStats(
         name=spec.name,
         topic=spec.topic,
@@ -372,4 +392,6 @@ def input_stats(spec: InputSpec, series: InputSeries, max_gap_s: float) -> Input
         longest_gap_s=float(gaps.max()) * 1e-9 if gaps.size else 0.0,
         long_gaps=int(np.count_nonzero(gaps > round(max_gap_s * 1e9))),
         max_gap_s=max_gap_s,
+        expected=expected,
+        lost=lost,
     )

@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 __all__ = ['HealthLimits', 'StreamHealth', 'WindowHealth', 'health_notes']
 
@@ -81,6 +82,10 @@ class StreamHealth:
         self._stamps.append(stamp_ns)
         if lag_ns is not None:
             self._lags.append(lag_ns)
+
+    def add_many(self, stamps_ns: NDArray[np.int64]) -> None:
+        """Note the messages of a block of a recording (stamps [ns], in arrival order; no lag)."""
+        self._stamps.extend(np.asarray(stamps_ns, dtype=np.int64).tolist())
 
     def window(self) -> WindowHealth:
         """Close the window: its figures; the next window starts empty."""

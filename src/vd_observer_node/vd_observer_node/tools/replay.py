@@ -91,7 +91,9 @@ from vd_observer_node.inputs.decode import (
     InputStats,
     decode_engine,
     decode_input,
+    has_header,
 )
+from vd_observer_node.inputs.health import StreamHealth
 from vd_observer_node.inputs.mapping import (
     ENGINE_INPUT,
     InputMapping,
@@ -734,6 +736,8 @@ class _GapStats:
         self._messages = 0
         self._longest = 0
         self._long = 0
+        #: stamps expected and lost, for an input with header (`input_stats`)
+        self._health = StreamHealth() if has_header(spec) else None
 
     def add(self, stamp_ns: np.ndarray) -> None:
         """Count one block's stamps [ns] (shape (N,), int64)."""
@@ -748,9 +752,15 @@ class _GapStats:
             self._long += int(np.count_nonzero(gaps > self._limit))
         self._messages += len(stamp_ns)
         self._last = int(stamps[-1])
+        if self._health is not None:
+            self._health.add_many(stamps)
 
     def stats(self) -> InputStats:
-        """The figures so far (`input_stats`)."""
+        """The figures so far (`input_stats`; call once, at the end: it closes the count)."""
+        expected = lost = None
+        if self._health is not None:
+            window = self._health.window()
+            expected, lost = window.expected, window.expected - window.received
         return InputStats(
             name=self._spec.name,
             topic=self._spec.topic,
@@ -758,6 +768,8 @@ class _GapStats:
             longest_gap_s=self._longest * 1e-9,
             long_gaps=self._long,
             max_gap_s=self._max_gap_s,
+            expected=expected,
+            lost=lost,
         )
 
 
