@@ -333,7 +333,7 @@ class SituationMonitor:
         """`monitor_step` on this monitor's records (``copy``: on copies of them, which stay
         untouched); contiguous float64 (bool) arrays of shape (4,). Returns its flags."""
         f, a = self.friction, self.monitor
-        records = (self.state, f.state, f.cost, f.potential, a.state)
+        records: tuple[Any, ...] = (self.state, f.state, f.cost, f.potential, a.state)
         if copy:
             records = tuple(r.copy() for r in records)
         s, fs, cost, pot, al = records
