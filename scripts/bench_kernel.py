@@ -33,11 +33,11 @@ from vd_observer_node.estimation.cascade import run_cascade
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.kernel.chain import (
     CompiledChain,
+    compiled_monitor,
     run_cascade_compiled,
     run_situation_compiled,
     warm_up,
 )
-from vd_observer_node.kernel.situation import CompiledSituationMonitor
 from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_observer_node.situation.monitor import SituationMonitor, run_situation
 from vd_observer_node.testing.launcher import NodeSpec
@@ -71,7 +71,7 @@ def blocks(name: str, vehicle: object, curves: TyreCurves) -> None:
     py = ((mid - start) / n * 1e6, (end - mid) / n * 1e6)
     runs = []
     for _ in range(5):
-        monitor = CompiledSituationMonitor(curves, loads, radius)
+        monitor = compiled_monitor(curves, loads, radius)
         start = time.process_time()
         compiled = run_cascade_compiled(t, angle, speed, torque, vehicle)
         mid = time.process_time()

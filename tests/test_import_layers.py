@@ -19,7 +19,8 @@ OBSERVER_LAYERS: dict[str, set[str]] = {
     'errors': set(),
     'bag': {'errors'},
     'estimation': {'errors'},
-    'situation': {'errors', 'estimation'},
+    # kernel: only kernel._jit, the decorator that compiles the step functions
+    'situation': {'errors', 'estimation', 'kernel'},
     'inputs': {'errors', 'bag', 'estimation'},
     # the per-stamp chain picks its compiled twin, which implements the chain's interface
     'chain': {'errors', 'estimation', 'situation', 'kernel'},

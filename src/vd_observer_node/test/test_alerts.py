@@ -6,7 +6,7 @@ import dataclasses
 import math
 from functools import cache
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pytest
@@ -15,22 +15,32 @@ from hypothesis import strategies as st
 from vd_observer_node.errors import InputShapeError, ObserverError
 from vd_observer_node.situation.alerts import (
     ALERT_KINDS,
+    ALERT_STATE,
     LEVEL_CRITICAL,
     LEVEL_OK,
     LEVEL_WARNING,
     AlertConfig,
     AlertConfigError,
     AlertMonitor,
-    ChannelState,
     LevelThresholds,
     alert_metrics,
+    alert_params,
+    alerts_reset,
     classify_level,
     slip_velocity,
     step_channel,
 )
+from vd_observer_node.situation.records import new_record
 
 SIM_CONFIG = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config'
-TH = LevelThresholds(warning_on=0.12, warning_off=0.08, critical_on=0.25, critical_off=0.18)
+#: the thresholds as the step functions read them (a row of ALERT_PARAMS.thresholds)
+TH = alert_params(
+    AlertConfig(
+        traction=LevelThresholds(
+            warning_on=0.12, warning_off=0.08, critical_on=0.25, critical_off=0.18
+        )
+    )
+).thresholds[0]
 DELAY_GOAL = 0.1  # [s]
 
 
@@ -74,14 +84,27 @@ def test_classify_level_is_monotone_and_sticky(a: float, b: float, level: int) -
         assert classify_level(a, lower, TH) <= classify_level(a, level, TH)
 
 
+class Channel(NamedTuple):
+    """One channel's reported level and onset after a stamp."""
+
+    level: int
+    onset: float
+
+    @property
+    def active(self) -> bool:
+        return self.level > LEVEL_OK
+
+
 def run_channel(
     targets: list[int], dt: float, raise_hold: float, release_hold: float
-) -> list[ChannelState]:
-    state = ChannelState()
+) -> list[Channel]:
+    """step_channel on channel (0, 0) of an ALERT_STATE record, one target per stamp."""
+    state = new_record(ALERT_STATE)
+    alerts_reset(state)
     out = []
     for k, target in enumerate(targets):
-        state = step_channel(state, k * dt, target, raise_hold, release_hold)
-        out.append(state)
+        step_channel(state, 0, 0, k * dt, target, raise_hold, release_hold)
+        out.append(Channel(int(state.level[0, 0]), float(state.onset[0, 0])))
     return out
 
 
@@ -138,34 +161,44 @@ def test_metrics_gates() -> None:
     valid = np.array([True, True, True, False])
     mmax = np.array([0.25, 0.25, 0.0, 0.5])
     far_peak = np.full(4, 2.0)  # no wheel past its peak slip
-    m = alert_metrics(slip, sv, torque, mu, valid, mmax, far_peak, cfg)
+    p = alert_params(cfg)
+
+    def metrics(torque: np.ndarray, slip_peak: np.ndarray) -> np.ndarray:
+        out = np.empty((3, 4))
+        alert_metrics(p, slip, sv, torque, mu, valid, mmax, slip_peak, out)
+        return out
+
+    m = metrics(torque, far_peak)
     # traction: FL gated by slip velocity, RL by the braking force
     np.testing.assert_allclose(m[0], [0.0, 0.0, 0.0, -0.5])
     np.testing.assert_allclose(m[1], [0.0, 0.5, 0.0, 0.0])
     # utilisation: RL has no mu_max, RR has no valid mu
     np.testing.assert_allclose(m[2], [0.8, 0.8, 0.0, 0.0])
     # torque gates: an undriven wheel cannot spin, an unbraked one cannot lock
-    idle = alert_metrics(slip, sv, np.zeros(4), mu, valid, mmax, far_peak, cfg)
+    idle = metrics(np.zeros(4), far_peak)
     np.testing.assert_allclose(idle[:2], 0.0)
     # past its peak slip a wheel uses all the friction there is, whatever its mu
-    past = alert_metrics(slip, sv, torque, mu, valid, mmax, np.full(4, 0.2), cfg)
+    past = metrics(torque, np.full(4, 0.2))
     np.testing.assert_allclose(past[2], [0.8, 1.0, 0.0, 0.0])  # FL: slip velocity gate
     with pytest.raises(InputShapeError):
-        alert_metrics(slip[:3], sv, torque, mu, valid, mmax, far_peak, cfg)
+        AlertMonitor(cfg).update(0.0, slip[:3], sv, torque, mu, valid, mmax, far_peak)
 
 
 def test_slip_velocity() -> None:
     np.testing.assert_allclose(
-        slip_velocity([10.0, 0.0, 20.0, -1.0], 2.0, 0.25), [0.5, -2, 3, -2.25]
+        slip_velocity(np.array([10.0, 0.0, 20.0, -1.0]), 2.0, 0.25), [0.5, -2, 3, -2.25]
     )
 
 
-def test_monitor_equals_pure_steps() -> None:
+def test_monitor_equals_the_step_functions() -> None:
+    """The wrapper against alert_metrics, classify_level and step_channel per channel."""
     cfg = AlertConfig()
     monitor = AlertMonitor(cfg)
     rng = np.random.default_rng(4)
-    states = [[ChannelState() for _ in range(4)] for _ in ALERT_KINDS]
-    thresholds = (cfg.traction, cfg.lock, cfg.low_friction)
+    p = alert_params(cfg)
+    state = new_record(ALERT_STATE)
+    alerts_reset(state)
+    metrics = np.empty((3, 4))
     for k in range(2000):
         t = k * 0.001
         phase = math.sin(2 * math.pi * t * 2.0)
@@ -177,17 +210,16 @@ def test_monitor_equals_pure_steps() -> None:
         speak = np.full(4, 0.1)
         torque = 800.0 * np.sign(slip)
         records = monitor.update(t, slip, sv, torque, mu, valid, mmax, speak)
-        metrics = alert_metrics(slip, sv, torque, mu, valid, mmax, speak, cfg)
+        alert_metrics(p, slip, sv, torque, mu, valid, mmax, speak, metrics)
         for kind in range(3):
             for w in range(4):
-                s = states[kind][w]
-                target = classify_level(float(metrics[kind, w]), s.level, thresholds[kind])
-                states[kind][w] = step_channel(s, t, target, cfg.raise_hold, cfg.release_hold)
+                target = classify_level(metrics[kind, w], state.level[kind, w], p.thresholds[kind])
+                step_channel(state, kind, w, t, target, cfg.raise_hold, cfg.release_hold)
                 rec = records[4 * kind + w]
                 assert (rec.kind, rec.wheel) == (ALERT_KINDS[kind], w)
-                assert rec.level == states[kind][w].level
-                assert rec.onset == states[kind][w].onset or (
-                    math.isnan(rec.onset) and math.isnan(states[kind][w].onset)
+                assert rec.level == state.level[kind, w]
+                np.testing.assert_array_equal(  # nan == nan: inactive alerts have no onset
+                    [rec.onset, rec.detected], [state.onset[kind, w], state.detected[kind, w]]
                 )
     assert any(r.active for r in monitor.last)  # the signal did raise alerts
     # a stale stamp changes nothing

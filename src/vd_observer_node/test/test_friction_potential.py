@@ -1,5 +1,6 @@
 """Friction potential: convergence on known curves, no confidence without evidence, noisy slip,
-forgetting, road class, and the wrapper against the pure steps."""
+forgetting, road class, the tyre curve and peaks against vd_common's, and the wrapper against
+the step functions on records."""
 
 from __future__ import annotations
 
@@ -12,9 +13,20 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from vd_common.vehicle.friction import unit_peak
 from vd_common.vehicle.params import load_vehicle
 from vd_common.vehicle.tire import magic_formula_fx
 from vd_observer_node.errors import InputShapeError, ObserverError
+from vd_observer_node.situation.friction_fit import (
+    FIT_STATE,
+    POTENTIAL,
+    classify_road,
+    fit_reset,
+    fit_solution,
+    fit_step,
+    mu_at_scales,
+    unfloored_slip,
+)
 from vd_observer_node.situation.friction_potential import (
     ROAD_DRY,
     ROAD_ICE,
@@ -25,13 +37,9 @@ from vd_observer_node.situation.friction_potential import (
     FrictionPotentialConfig,
     FrictionPotentialEstimator,
     TyreCurves,
-    classify_road,
-    fit_confidence,
-    fit_solution,
-    fit_step,
-    initial_fit_state,
-    unfloored_slip,
+    friction_params,
 )
+from vd_observer_node.situation.records import new_record
 
 RATE = 1000.0  # [Hz]
 SPEED = 20.0  # [m/s]
@@ -103,11 +111,35 @@ def test_config_errors_are_specific() -> None:
 
 
 def test_slip_ratio() -> None:
-    slip, den = unfloored_slip(np.array([10.0, -19.0, 0.0, 1.0]), 20.0)
-    np.testing.assert_allclose(slip, [10.0 / 30.0, -19.0 / 20.0, 0.0, 1.0 / 21.0])
-    np.testing.assert_allclose(den, [30.0, 20.0, 20.0, 21.0])
-    slip, _ = unfloored_slip(np.zeros(4), 0.0)
-    assert np.all(np.isnan(slip))  # standing still: no slip at all, not 0/0
+    pairs = [unfloored_slip(sv, 20.0) for sv in (10.0, -19.0, 0.0, 1.0)]
+    np.testing.assert_allclose([p[0] for p in pairs], [10.0 / 30.0, -19.0 / 20.0, 0.0, 1 / 21])
+    np.testing.assert_allclose([p[1] for p in pairs], [30.0, 20.0, 20.0, 21.0])
+    slip, _ = unfloored_slip(0.0, 0.0)
+    assert math.isnan(slip)  # standing still: no slip at all, not 0/0
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    slip=st.floats(min_value=-1.0, max_value=1.0),
+    load=st.floats(min_value=200.0, max_value=8000.0),
+)
+def test_mu_at_scales_is_the_magic_formula(slip: float, load: float) -> None:
+    """The fit's curve at every road scale is vd_common's Magic Formula (the simulator's)."""
+    scales = np.asarray(FrictionPotentialConfig().road_scales)
+    out = np.empty(scales.size)
+    mu_at_scales(curves().record(), slip, load, scales, out)
+    expected = magic_formula_fx(np.full(scales.size, slip), load, scales, curves().tire) / load
+    np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-15)
+
+
+def test_reset_reports_the_prior_road_at_the_tyre_peak() -> None:
+    """Without data: mu_max and slip_peak are vd_common's unit peak at the static load."""
+    cfg = FrictionPotentialConfig(prior_road_scale=0.8)
+    est = FrictionPotentialEstimator(curves(), (3300.0, 2400.0), cfg)
+    mu, slip = unit_peak(curves().table, np.array([3300.0, 2400.0]), np.ones(2, bool))
+    np.testing.assert_allclose(est.last.mu_max, 0.8 * mu, rtol=1e-12)
+    np.testing.assert_allclose(est.last.slip_peak, 0.8 * slip, rtol=1e-12)
+    np.testing.assert_array_equal(est.last.road_scale, 0.8)
 
 
 def test_no_data_reports_the_prior_with_zero_confidence() -> None:
@@ -194,40 +226,58 @@ def test_forgetting_follows_a_road_change() -> None:
 
 
 def test_ignored_samples_leave_the_fit_unchanged() -> None:
-    cfg = FrictionPotentialConfig()
-    state = initial_fit_state(cfg, STATIC)
+    est = FrictionPotentialEstimator(curves(), STATIC)
     loads = np.full(4, LOAD)
-    state = fit_step(state, 0.0, [2.0] * 4, SPEED, [0.5] * 4, [True] * 4, loads, curves(), cfg)
+
+    def step(t: float, sv: list[float], speed: float, mu: list[float], ok: list[bool]) -> bool:
+        return bool(
+            fit_step(
+                est.params,
+                est.tyre,
+                est.scales,
+                est.state,
+                est.cost,
+                t,
+                np.asarray(sv),
+                speed,
+                np.asarray(mu),
+                np.asarray(ok),
+                loads,
+            )
+        )
+
+    assert step(0.0, [2.0] * 4, SPEED, [0.5] * 4, [True] * 4)
+    cost, count = est.cost.copy(), est.state.count.copy()
     # invalid, opposite signs, non-finite, below the slip noise, walking pace
-    after = fit_step(
-        state,
+    assert step(
         0.001,
         [2.0, 2.0, math.nan, 0.01],
         SPEED,
         [0.6, -0.4, 0.5, 0.01],
         [False, True, True, True],
-        loads,
-        curves(),
-        cfg,
     )
-    np.testing.assert_array_equal(after.cost, state.cost)
-    np.testing.assert_array_equal(after.count, state.count)
-    slow = fit_step(after, 0.002, [0.5] * 4, 1.0, [0.3] * 4, [True] * 4, loads, curves(), cfg)
-    np.testing.assert_array_equal(slow.cost, state.cost)
+    np.testing.assert_array_equal(est.cost, cost)
+    np.testing.assert_array_equal(est.state.count, count)
+    assert step(0.002, [0.5] * 4, 1.0, [0.3] * 4, [True] * 4)
+    np.testing.assert_array_equal(est.cost, cost)
     # a stale stamp is rejected outright
-    assert fit_step(slow, 0.0, [2.0] * 4, SPEED, [0.5] * 4, [True] * 4, loads, curves(), cfg) is (
-        slow
-    )
+    assert not step(0.0, [2.0] * 4, SPEED, [0.5] * 4, [True] * 4)
+    np.testing.assert_array_equal(est.cost, cost)
+    assert est.state.t == 0.002
     with pytest.raises(InputShapeError):
-        fit_step(state, 1.0, [0.1] * 3, SPEED, [0.5] * 4, [True] * 4, loads, curves(), cfg)
+        est.update(1.0, [0.1] * 3, SPEED, [0.5] * 4, [True] * 4, loads)
 
 
-def test_wrapper_equals_pure_steps() -> None:
+def test_wrapper_equals_the_step_functions() -> None:
+    """The estimator against fit_step and fit_solution driven directly on records."""
     cfg = FrictionPotentialConfig()
     rng = np.random.default_rng(1)
     est = FrictionPotentialEstimator(curves(), STATIC, cfg)
-    state = initial_fit_state(cfg, STATIC)
-    classes = np.full(2, ROAD_UNKNOWN)
+    p, tyre, table = friction_params(cfg), curves().record(), curves().peak_table()
+    scales = np.asarray(cfg.road_scales)
+    state, pot = new_record(FIT_STATE), new_record(POTENTIAL)
+    cost = np.zeros((2, scales.size))
+    fit_reset(p, scales, table, np.asarray(STATIC), state, cost, pot)
     for k in range(300):
         t = k / RATE
         slip = rng.uniform(-0.3, 0.3, 4)
@@ -236,16 +286,17 @@ def test_wrapper_equals_pure_steps() -> None:
         valid = rng.uniform(size=4) > 0.1
         loads = rng.uniform(2000.0, 4000.0, 4)
         out = est.update(t, sv, SPEED, mu, valid, loads)
-        state = fit_step(state, t, sv, SPEED, mu, valid, loads, curves(), cfg)
-        ref = fit_solution(state, curves(), cfg, classes)
-        classes = ref.road_class
-        np.testing.assert_array_equal(out.mu_max, ref.mu_max)
-        np.testing.assert_array_equal(out.confidence, ref.confidence)
-        np.testing.assert_array_equal(out.road_class, ref.road_class)
+        assert fit_step(p, tyre, scales, state, cost, t, sv, SPEED, mu, valid, loads)
+        fit_solution(p, scales, table, state, cost, pot)
+        np.testing.assert_array_equal(out.mu_max, pot.mu_max)
+        np.testing.assert_array_equal(out.confidence, pot.confidence)
+        np.testing.assert_array_equal(out.road_class, pot.road_class)
 
 
 def test_road_class_bands_and_hysteresis() -> None:
-    cfg = FrictionPotentialConfig(class_bounds=(0.2, 0.45, 0.75), class_margin=0.03)
+    cfg = friction_params(
+        FrictionPotentialConfig(class_bounds=(0.2, 0.45, 0.75), class_margin=0.03)
+    )
     assert classify_road(0.1, 1.0, ROAD_UNKNOWN, cfg) == ROAD_ICE
     assert classify_road(0.3, 1.0, ROAD_UNKNOWN, cfg) == ROAD_SNOW
     assert classify_road(0.6, 1.0, ROAD_UNKNOWN, cfg) == ROAD_WET
@@ -262,7 +313,7 @@ def test_road_class_bands_and_hysteresis() -> None:
 @given(mu=st.floats(min_value=0.0, max_value=2.0), prev=st.integers(0, 4))
 def test_road_class_moves_at_most_to_the_raw_band(mu: float, prev: int) -> None:
     """The hysteresis only ever keeps the previous class or picks the raw band's class."""
-    cfg = FrictionPotentialConfig()
+    cfg = friction_params(FrictionPotentialConfig())
     raw = classify_road(mu, 1.0, ROAD_UNKNOWN, cfg)
     got = classify_road(mu, 1.0, prev, cfg)
     assert got in (raw, prev)
@@ -280,9 +331,11 @@ def test_confidence_decays_without_fresh_evidence() -> None:
     assert est.last.road_class[0] == ROAD_SNOW
     for k in range(int(4.0 * RATE)):  # 4 s of cruising with nothing usable
         est.update(t + k / RATE, np.zeros(4), SPEED, np.zeros(4), np.zeros(4, bool), np.ones(4))
-    undecayed = fit_confidence(est.state, curves(), replace(cfg, evidence_hold_time=0.0))
+    undecayed = new_record(POTENTIAL)
+    held = friction_params(replace(cfg, evidence_hold_time=0.0))
+    fit_solution(held, est.scales, est.table, est.state, est.cost, undecayed)
     age = est.state.t - est.state.last_sample[0]
     assert age > 4.0
-    assert est.last.confidence[0] == pytest.approx(undecayed[0] * math.exp(-age / 2.0))
+    assert est.last.confidence[0] == pytest.approx(undecayed.confidence[0] * math.exp(-age / 2.0))
     assert est.last.road_class[0] == ROAD_UNKNOWN
     assert est.last.mu_max[0] > 0.75  # most of the way back to the prior dry road (1.03)

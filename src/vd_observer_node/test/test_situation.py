@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -119,3 +120,71 @@ def test_observer_disagreement_gate_keeps_lagging_pairs_out_of_the_fit() -> None
         counts.append(float(monitor.friction.state.count.sum()))
     assert counts[0] > 0.0
     assert counts[1] == 0.0
+
+
+def _cascade_of(rows: list[tuple[float, ...]]) -> tuple[np.ndarray, ...]:
+    """The drive's rows as record arrays, and a CascadeResult-like object of its omega, mu."""
+    t = np.array([r[0] for r in rows])
+    angle = np.array([r[1] for r in rows])
+    speed = np.array([r[2] for r in rows])
+    torque = np.array([r[3] for r in rows])
+    return t, angle, speed, torque
+
+
+def test_run_situation_equals_the_stamp_by_stamp_monitor() -> None:
+    """run_situation, and the compiled block of kernel.chain, against `update` per stamp,
+    across a looped record (the second half starts again at t = 0)."""
+    from types import SimpleNamespace
+
+    from vd_observer_node.kernel.chain import compiled_monitor, run_situation_compiled
+    from vd_observer_node.situation.monitor import run_situation
+
+    curves = TyreCurves.from_tire(load_vehicle(VEHICLE_FILE).tire)
+    rows = drive(600, np.random.default_rng(5))
+    rows = rows + rows  # looped
+    t, angle, speed, torque = _cascade_of(rows)
+    omega = np.array([r[4] for r in rows])
+    mu = np.array([r[5] for r in rows])
+    cascade: Any = SimpleNamespace(
+        t=t, omega=omega, mu=mu, mu_valid=np.ones((t.size, 4), bool), fz=np.full((t.size, 4), 3e3)
+    )
+    config = SituationConfig(max_observer_disagreement=0.5)
+    for make, run in (
+        (SituationMonitor, run_situation),
+        (compiled_monitor, run_situation_compiled),
+    ):
+        stepped = make(curves, STATIC, RADIUS, situation=config)
+        whole = make(curves, STATIC, RADIUS, situation=config)
+        # in two blocks: the state carries across them
+        halves = [slice(0, 900), slice(900, t.size)]
+        parts = [
+            run(
+                whole,
+                angle[h],
+                speed[h],
+                torque[h],
+                SimpleNamespace(**{k: v[h] for k, v in vars(cascade).items()}),
+            )
+            for h in halves
+        ]
+        for k in range(t.size):
+            out = stepped.update(
+                t[k], angle[k], speed[k], torque[k], omega[k], mu[k], [1] * 4, [3e3] * 4
+            )
+            part, i = (parts[0], k) if k < 900 else (parts[1], k - 900)
+            np.testing.assert_array_equal(part.mu_max[i], out.potential.mu_max)
+            np.testing.assert_array_equal(part.confidence[i], out.potential.confidence)
+            np.testing.assert_array_equal(part.road_class[i], out.potential.road_class)
+            assert part.vehicle_road_class[i] == out.potential.vehicle_road_class()
+            assert part.level[i].ravel().tolist() == [a.level for a in out.alerts]
+            np.testing.assert_array_equal(part.onset[i].ravel(), [a.onset for a in out.alerts])
+            np.testing.assert_array_equal(
+                part.detected[i].ravel(), [a.detected for a in out.alerts]
+            )
+        assert parts[1].level.any()
+        # the wrapped parts' results follow the records after a block
+        np.testing.assert_array_equal(  # nan == nan here
+            [(a.level, a.onset, a.detected) for a in whole.monitor.last],
+            [(a.level, a.onset, a.detected) for a in stepped.monitor.last],
+        )
+        np.testing.assert_array_equal(whole.friction.last.mu_max, stepped.friction.last.mu_max)

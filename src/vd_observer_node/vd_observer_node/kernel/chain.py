@@ -67,17 +67,7 @@ from vd_observer_node.kernel.estimation import (
     estimates_from_packed,
     estimator_update,
 )
-from vd_observer_node.kernel.levant import CompiledDifferentiator, diff_update
-from vd_observer_node.kernel.situation import (
-    P_CONFIDENCE,
-    P_MU_MAX,
-    P_ROAD,
-    P_SLIP_PEAK,
-    CompiledSituationMonitor,
-    alerts_from_arrays,
-    monitor_update,
-    potential_from_arrays,
-)
+from vd_observer_node.kernel.levant import CompiledDifferentiator, diff_reset, diff_update
 from vd_observer_node.kernel.torque_offset import (
     OFFSET_CLAMPED_SLOT,
     OFFSET_OUT_SIZE,
@@ -86,10 +76,23 @@ from vd_observer_node.kernel.torque_offset import (
     offset_state,
     offset_update,
 )
+from vd_observer_node.situation.alerts import alerts_reset
+from vd_observer_node.situation.friction_fit import fit_reset, vehicle_road_class
 from vd_observer_node.situation.friction_potential import TyreCurves
-from vd_observer_node.situation.monitor import Situation, SituationSeries
+from vd_observer_node.situation.monitor import (
+    SituationMonitor,
+    SituationSeries,
+    monitor_restarts,
+    monitor_step,
+)
 
-__all__ = ['CompiledChain', 'run_cascade_compiled', 'run_situation_compiled', 'warm_up']
+__all__ = [
+    'CompiledChain',
+    'compiled_monitor',
+    'run_cascade_compiled',
+    'run_situation_compiled',
+    'warm_up',
+]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -342,46 +345,54 @@ def _offset_params(config: EstimatorConfig | None, dprm: FloatArray) -> FloatArr
 def _situation_block(
     fprm: FloatArray, flip: FloatArray, fz_: FloatArray, f_last: FloatArray,
     f_active: BoolArray, f_pend_t: FloatArray, f_pend_f: FloatArray, f_scal: FloatArray,
-    f_counts: NDArray[np.int64], prm_f: FloatArray, tp: FloatArray, scales: FloatArray,
-    table: FloatArray, static_load: FloatArray, cost: FloatArray, count: FloatArray,
-    load: FloatArray, direction: FloatArray, fscal: FloatArray, last_sample: FloatArray,
-    classes: NDArray[np.int64], pot: FloatArray, prm_a: FloatArray, thresholds: FloatArray,
-    ch: FloatArray, detected: FloatArray, ascal: FloatArray, prm_s: FloatArray,
-    mscal: FloatArray, t: FloatArray, angles: FloatArray, speeds: FloatArray,
-    torques: FloatArray, omega: FloatArray, mu: FloatArray, mu_valid: BoolArray,
-    fz: FloatArray, level: NDArray[np.int64], onset: FloatArray, det: FloatArray,
-    mu_max: FloatArray, slip_peak: FloatArray, confidence: FloatArray,
-    road: NDArray[np.int64], vehicle_road: NDArray[np.int64],
+    f_counts: NDArray[np.int64], mp: Any, ms: Any, fp: Any, tyre: Any, scales: FloatArray,
+    table: FloatArray, static_load: FloatArray, fs: Any, cost: FloatArray, pot: Any, ap: Any,
+    al: Any, t: FloatArray, angles: FloatArray, speeds: FloatArray, torques: FloatArray,
+    omega: FloatArray, mu: FloatArray, mu_valid: BoolArray, fz: FloatArray,
+    level: NDArray[np.int64], onset: FloatArray, det: FloatArray, mu_max: FloatArray,
+    slip_peak: FloatArray, confidence: FloatArray, road: NDArray[np.int64],
+    vehicle_road: NDArray[np.int64], slip: FloatArray,
 ) -> None:  # fmt: skip
-    """`monitor_update` over N stamps, writing `SituationSeries`' arrays."""
-    slip = np.empty(4)
+    """`SituationMonitor.advance` over N stamps (the fast differentiator's arrays first, then
+    the monitor's records), writing `SituationSeries`' arrays."""
+    fast = np.empty((3, 4))
+    fast_valid = np.empty(4, dtype=np.bool_)
     for k in range(t.shape[0]):
-        monitor_update(
-            fprm, flip, fz_, f_last, f_active, f_pend_t, f_pend_f, f_scal, f_counts, prm_f, tp,
-            scales, table, static_load, cost, count, load, direction, fscal, last_sample,
-            classes, pot, prm_a, thresholds, ch, detected, ascal, prm_s, mscal, t[k],
-            angles[k], speeds[k], torques[k], omega[k], mu[k], mu_valid[k], fz[k], slip,
+        if monitor_restarts(mp, ms, t[k]):
+            # SituationMonitor.reset
+            diff_reset(fprm, fz_, f_last, f_active, f_pend_t, f_pend_f, f_scal)
+            fit_reset(fp, scales, table, static_load, fs, cost, pot)
+            alerts_reset(al)
+            ms.t = math.nan
+        diff_update(
+            fprm, flip, fz_, f_last, f_active, f_pend_t, f_pend_f, f_scal, f_counts, t[k],
+            angles[k], fast, fast_valid,
         )  # fmt: skip
-        for kind in range(3):
-            for w in range(4):
-                level[k, kind, w] = int(ch[kind, w, 0])
-                onset[k, kind, w] = ch[kind, w, 1]
-                det[k, kind, w] = detected[kind, w]
-        best = -1
-        best_conf = -2.0
-        for a in range(2):
-            mu_max[k, a] = pot[P_MU_MAX + a]
-            slip_peak[k, a] = pot[P_SLIP_PEAK + a]
-            confidence[k, a] = pot[P_CONFIDENCE + a]
-            road[k, a] = int(pot[P_ROAD + a])
-            # vehicle_road_class: the most confident axle with a known class
-            if road[k, a] != 0 and pot[P_CONFIDENCE + a] > best_conf:
-                best, best_conf = a, pot[P_CONFIDENCE + a]
-        vehicle_road[k] = road[k, best] if best >= 0 else 0
+        monitor_step(
+            mp, ms, fp, tyre, scales, table, fs, cost, pot, ap, al, t[k], fast[1], fast_valid,
+            speeds[k], torques[k], omega[k], mu[k], mu_valid[k], fz[k], slip,
+        )  # fmt: skip
+        level[k] = al.level
+        onset[k] = al.onset
+        det[k] = al.detected
+        mu_max[k] = pot.mu_max
+        slip_peak[k] = pot.slip_peak
+        confidence[k] = pot.confidence
+        road[k] = pot.road_class
+        vehicle_road[k] = vehicle_road_class(pot.road_class, pot.confidence)
+
+
+def compiled_monitor(
+    curves: TyreCurves, static_load: ArrayLike, radius: float, **settings: Any
+) -> SituationMonitor:
+    """A `SituationMonitor` whose fast observer is the compiled differentiator (what
+    `run_situation_compiled` needs); `settings` as its keyword arguments."""
+    drop_in: Any = CompiledDifferentiator
+    return SituationMonitor(curves, static_load, radius, differentiator=drop_in, **settings)
 
 
 def run_situation_compiled(
-    monitor: CompiledSituationMonitor,
+    monitor: SituationMonitor,
     wheel_angle: ArrayLike,
     speed: ArrayLike,
     wheel_torque: ArrayLike,
@@ -389,9 +400,16 @@ def run_situation_compiled(
 ) -> SituationSeries:
     """`situation.run_situation` (same arguments and result) in one compiled loop.
 
+    Args:
+        monitor: from `compiled_monitor` (its fast observer a `CompiledDifferentiator`).
+
     Raises:
         InputShapeError: inconsistent shapes.
+        TypeError: the monitor's fast observer is not compiled.
     """
+    fast = monitor.fast
+    if not isinstance(fast, CompiledDifferentiator):
+        raise TypeError('run_situation_compiled needs a monitor from compiled_monitor')
     angles = np.ascontiguousarray(wheel_angle, dtype=np.float64)
     speeds = np.ascontiguousarray(speed, dtype=np.float64)
     torques = np.ascontiguousarray(wheel_torque, dtype=np.float64)
@@ -408,13 +426,17 @@ def run_situation_compiled(
     road = np.zeros((n, 2), dtype=np.int64)
     vehicle_road = np.zeros(n, dtype=np.int64)
     f64 = np.ascontiguousarray
+    fr, al = monitor.friction, monitor.monitor
     block: Any = _situation_block  # its leading arguments come as one tuple
     block(
-        *monitor.args, f64(cascade.t, dtype=np.float64), angles, speeds, torques,
+        *_diff_args(fast), monitor.params, monitor.state, fr.params, fr.tyre, fr.scales,
+        fr.table, fr.static_load, fr.state, fr.cost, fr.potential, al.params, al.state,
+        f64(cascade.t, dtype=np.float64), angles, speeds, torques,
         f64(cascade.omega, dtype=np.float64), f64(cascade.mu, dtype=np.float64),
         f64(cascade.mu_valid, dtype=np.bool_), f64(cascade.fz, dtype=np.float64), level, onset,
-        detected, mu_max, slip_peak, confidence, road, vehicle_road,
+        detected, mu_max, slip_peak, confidence, road, vehicle_road, monitor.slip,
     )  # fmt: skip
+    monitor.refresh()
     return SituationSeries(
         t=cascade.t.copy(),
         level=level,
@@ -441,7 +463,7 @@ class CompiledChain:
         self.estimator = CompiledEstimator(vehicle, settings.estimator, source)
         self._drivetrain = settings.drivetrain if source == TORQUE_ENGINE else None
         self._none = source == TORQUE_NONE
-        self.monitor = CompiledSituationMonitor(
+        self.monitor = compiled_monitor(
             settings.curves,
             vehicle.static_wheel_loads[[0, 2]],
             vehicle.effective_radius,
@@ -515,8 +537,7 @@ class CompiledChain:
             )
             torques = np.where(np.isfinite(derived), derived, 0.0)
         mu_valid = est[E_MU_VALID : E_MU_VALID + 4] != 0.0
-        monitor = self.monitor
-        monitor.update_arrays(
+        situation = self.monitor.update(
             float(t),
             angles,
             float(speed),
@@ -526,19 +547,13 @@ class CompiledChain:
             mu_valid,
             est[E_FZ : E_FZ + 4].copy(),
         )
-        a = monitor.arrays
         return ChainOutput(
             WheelState(
                 wheel[0].copy(), wheel[1].copy(), wheel[2].copy(), self._wheel_valid.copy()
             ),
             SpeedState(float(body[0, 0]), float(body[1, 0]), bool(self._body_valid[0])),
             estimates_from_packed(est),
-            Situation(
-                float(t),
-                potential_from_arrays(a.pot),
-                alerts_from_arrays(a.ch, a.detected),
-                monitor.slip.copy(),
-            ),
+            situation,
             offset,
         )
 
@@ -569,7 +584,7 @@ def warm_up(curves: TyreCurves) -> None:
     t = np.array([0.0, 0.01])
     angles = np.zeros((2, 4))
     cascade = run_cascade_compiled(t, angles, np.ones(2), np.zeros((2, 4)), vehicle)
-    monitor = CompiledSituationMonitor(curves, np.array([3000.0, 2500.0]), 0.3)
+    monitor = compiled_monitor(curves, np.array([3000.0, 2500.0]), 0.3)
     run_situation_compiled(monitor, angles, np.ones(2), np.zeros((2, 4)), cascade)
     monitor.update(0.02, np.zeros(4), 1.0, np.zeros(4), np.zeros(4), np.zeros(4), [0] * 4, [1] * 4)
     settings = ChainSettings(vehicle=vehicle, curves=curves)

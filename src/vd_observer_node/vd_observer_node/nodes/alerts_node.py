@@ -11,8 +11,9 @@ road class) and ``/vd/estimates/alerts`` (vd_msgs/Alerts: traction, lock and low
 alerts per wheel, with hysteresis and onset stamps). Health goes to ``/diagnostics``, with a
 WARN naming a mapped input topic that stopped. All logic
 is in :mod:`vd_observer_node.situation.monitor` (see docs/alerts.md); offline replay runs the same.
-``kernel`` selects its compiled twin (default) or the Python reference; messages travel as
-CDR bytes (:mod:`vd_observer_node.bag.cdr_message`).
+``kernel`` 'compiled' (default) gives its fast wheel observer the compiled differentiator (the
+monitor's own step is compiled either way); messages travel as CDR bytes
+(:mod:`vd_observer_node.bag.cdr_message`).
 """
 
 from __future__ import annotations
@@ -48,6 +49,7 @@ from vd_msgs.msg import (
     TireForces,
     WheelStates,
 )
+from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.faults import OK, WARN
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
@@ -123,13 +125,13 @@ class AlertsNode(Node):
         vehicle = EstimatorVehicle.from_params(params)
         situation_keys = set(SituationConfig.__dataclass_fields__)
         friction_keys = set(FrictionPotentialConfig.__dataclass_fields__)
-        monitor_class: Any = SituationMonitor
+        differentiator: Any = LevantDifferentiator
         if self.kernel == 'compiled':
-            # compiled (or loaded from numba's cache) when built, not at the first sample
-            from vd_observer_node.kernel.situation import CompiledSituationMonitor
+            # the fast observer's compiled drop-in (built, or loaded from numba's cache, now)
+            from vd_observer_node.kernel.levant import CompiledDifferentiator
 
-            monitor_class = CompiledSituationMonitor
-        self.monitor = monitor_class(
+            differentiator = CompiledDifferentiator
+        self.monitor = SituationMonitor(
             TyreCurves.from_tire(params.tire),
             vehicle.static_wheel_loads[[0, 2]],
             vehicle.effective_radius,
@@ -144,6 +146,7 @@ class AlertsNode(Node):
             friction=FrictionPotentialConfig.from_mapping(
                 {k: v for k, v in values.items() if k in friction_keys}
             ),
+            differentiator=differentiator,
         )
         max_gap_ns = round(self.monitor.observer_config.max_gap * 1e9)
         # TOPICS: the wheel sensor's stamps first; they drive, as in the replay

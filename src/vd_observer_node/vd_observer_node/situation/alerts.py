@@ -24,8 +24,10 @@ level must hold ``raise_hold`` seconds to be reported, a lower one ``release_hol
 The onset stamp of an alert is the first stamp of the uninterrupted run of samples that raised
 it from level 0, so the node can report when the situation began, not when it was confirmed.
 
-Pure step functions (`slip_velocity`, `classify_level`, `step_channel`, `alert_metrics`) and a
-stateful wrapper (`AlertMonitor`) that the node calls per estimate.
+Step functions on named records (`ALERT_PARAMS`, `ALERT_STATE`; compiled with
+`vd_observer_node.kernel._jit.jit`): `alert_metrics`, `classify_level`, `step_channel`, all
+channels at once in `alerts_update`; and a stateful wrapper (`AlertMonitor`) that the node
+calls per estimate.
 """
 
 from __future__ import annotations
@@ -38,25 +40,34 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import InputShapeError, ObserverError
+from vd_observer_node.kernel._jit import jit
+from vd_observer_node.situation.records import new_record
 
 __all__ = [
     'ALERT_KINDS',
+    'ALERT_PARAMS',
+    'ALERT_STATE',
     'LEVEL_CRITICAL',
     'LEVEL_OK',
     'LEVEL_WARNING',
+    'THRESHOLD_COLUMNS',
     'Alert',
     'AlertConfig',
     'AlertConfigError',
     'AlertMonitor',
-    'ChannelState',
     'LevelThresholds',
     'alert_metrics',
+    'alert_params',
+    'alert_records',
+    'alerts_reset',
+    'alerts_update',
     'classify_level',
     'slip_velocity',
     'step_channel',
 ]
 
 FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 
 #: Alert kinds; the index is the message code (uint8 kind).
 ALERT_KINDS: Final = ('traction', 'lock', 'low_friction')
@@ -175,7 +186,66 @@ class AlertConfig:
         return cls(**kwargs)
 
 
-def slip_velocity(omega: ArrayLike, speed: float, radius: float) -> FloatArray:
+#: Columns of `ALERT_PARAMS.thresholds` (one row per kind, ALERT_KINDS order).
+THRESHOLD_COLUMNS: Final = ('warning_on', 'warning_off', 'critical_on', 'critical_off')
+
+#: Settings of the detectors: the gates and hold times of `AlertConfig`, and ``thresholds``
+#: (3, 4): per kind (rows, ALERT_KINDS order) the `THRESHOLD_COLUMNS`.
+ALERT_PARAMS: Final = np.dtype(
+    [
+        ('min_slip_velocity', 'f8'),
+        ('min_wheel_torque', 'f8'),
+        ('raise_hold', 'f8'),
+        ('release_hold', 'f8'),
+        ('thresholds', 'f8', (3, 4)),
+    ],
+    align=True,
+)
+#: State of the detectors; the per-channel fields are shape (3, 4): (kind, wheel).
+#:
+#: t: [s] stamp of the last update (nan before the first); level: reported level; onset: [s]
+#: onset stamp of the reported alert (nan while OK); pending_level: level waiting for its hold
+#: time (== level if none); pending_since: [s] first stamp of the pending level (nan if none);
+#: run_start: [s] first stamp of the current uninterrupted run of non-OK targets (nan while
+#: the target is OK), the onset once the alert is confirmed; detected: [s] stamp at which the
+#: reported alert became active (nan while OK).
+ALERT_STATE: Final = np.dtype(
+    [
+        ('t', 'f8'),
+        ('level', 'i8', (3, 4)),
+        ('onset', 'f8', (3, 4)),
+        ('pending_level', 'i8', (3, 4)),
+        ('pending_since', 'f8', (3, 4)),
+        ('run_start', 'f8', (3, 4)),
+        ('detected', 'f8', (3, 4)),
+    ],
+    align=True,
+)
+
+
+def alert_params(config: AlertConfig) -> Any:
+    """The settings as an `ALERT_PARAMS` record (the step functions read it)."""
+    rec = new_record(ALERT_PARAMS)
+    for name in ('min_slip_velocity', 'min_wheel_torque', 'raise_hold', 'release_hold'):
+        setattr(rec, name, getattr(config, name))
+    for k, kind in enumerate(ALERT_KINDS):
+        th = getattr(config, kind)
+        rec.thresholds[k] = [getattr(th, column) for column in THRESHOLD_COLUMNS]
+    return rec
+
+
+@jit
+def _sign(x: float) -> float:
+    """np.sign of a float (0 stays 0, nan stays nan)."""
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return -1.0
+    return x
+
+
+@jit
+def slip_velocity(omega: FloatArray, speed: float, radius: float) -> FloatArray:
     """Slip velocity omega R - v of each wheel.
 
     Args:
@@ -186,92 +256,188 @@ def slip_velocity(omega: ArrayLike, speed: float, radius: float) -> FloatArray:
     Returns:
         shape (4,), [m/s], positive when the wheel spins faster than the road.
     """
-    out: FloatArray = np.asarray(omega, dtype=float) * radius - speed
+    out = np.empty(omega.shape[0])
+    for i in range(omega.shape[0]):
+        out[i] = omega[i] * radius - speed
     return out
 
 
-def classify_level(value: float, level: int, thresholds: LevelThresholds) -> int:
-    """Level of a metric with a hysteresis band (pure).
+@jit
+def classify_level(value: float, level: int, th: FloatArray) -> int:
+    """Level of a metric with a hysteresis band.
 
     Args:
         value: metric (non-finite counts as OK).
         level: level reported so far (LEVEL_OK, LEVEL_WARNING or LEVEL_CRITICAL).
-        thresholds: on/off thresholds.
+        th: shape (4,), the thresholds in `THRESHOLD_COLUMNS` order (a row of
+            `ALERT_PARAMS.thresholds`).
 
     Returns:
         The target level: entering a level needs ``*_on``, leaving it needs ``< *_off``.
     """
     if not math.isfinite(value):
         return LEVEL_OK
-    th = thresholds
-    if value >= th.critical_on or (level == LEVEL_CRITICAL and value >= th.critical_off):
+    if value >= th[2] or (level == LEVEL_CRITICAL and value >= th[3]):
         return LEVEL_CRITICAL
-    if value >= th.warning_on or (level >= LEVEL_WARNING and value >= th.warning_off):
+    if value >= th[0] or (level >= LEVEL_WARNING and value >= th[1]):
         return LEVEL_WARNING
     return LEVEL_OK
 
 
-@dataclass(frozen=True)
-class ChannelState:
-    """Debounce state of one (kind, wheel) channel.
-
-    Attributes:
-        level: reported level.
-        onset: [s] onset stamp of the reported alert (nan while OK).
-        pending_level: level waiting for its hold time (== level if none).
-        pending_since: [s] first stamp of the pending level (nan if none).
-        run_start: [s] first stamp of the current uninterrupted run of non-OK targets
-            (nan while the target is OK): the onset once the alert is confirmed.
-    """
-
-    level: int = LEVEL_OK
-    onset: float = math.nan
-    pending_level: int = LEVEL_OK
-    pending_since: float = math.nan
-    run_start: float = math.nan
-
-    @property
-    def active(self) -> bool:
-        """True while the reported level is WARNING or CRITICAL."""
-        return self.level > LEVEL_OK
-
-
-def step_channel(
-    state: ChannelState, t: float, target: int, raise_hold: float, release_hold: float
-) -> ChannelState:
-    """Debounce one channel in time (pure).
+@jit
+def alert_metrics(
+    p: Any,
+    slip: FloatArray,
+    sv: FloatArray,
+    torque: FloatArray,
+    mu: FloatArray,
+    mu_valid: BoolArray,
+    mu_max: FloatArray,
+    slip_peak: FloatArray,
+    out: FloatArray,
+) -> None:
+    """Metric of every (kind, wheel) channel (the module docstring defines them).
 
     Args:
-        state: state before stamp t.
+        p: `ALERT_PARAMS` record (gates min_slip_velocity, min_wheel_torque).
+        slip: shape (4,), [-] slip ratio, positive driving.
+        sv: shape (4,), [m/s] omega R - v.
+        torque: shape (4,), [N m] drive minus brake torque.
+        mu: shape (4,), [-] utilised friction.
+        mu_valid: shape (4,), bool.
+        mu_max: shape (4,), [-] available friction of each wheel's axle.
+        slip_peak: shape (4,), [-] slip magnitude at mu_max.
+        out: shape (3, 4), written: rows traction, lock, low_friction; 0 where a gate is
+            closed, nan for non-finite inputs (treated as OK by `classify_level`).
+    """
+    gate, min_torque = p.min_slip_velocity, p.min_wheel_torque
+    for w in range(4):
+        s, v, tq, m, ok = slip[w], sv[w], torque[w], mu[w], mu_valid[w]
+        driving = ((not ok) or m >= 0.0) and tq > min_torque
+        braking = ((not ok) or m <= 0.0) and tq < -min_torque
+        out[0, w] = s if v > gate and driving else 0.0
+        out[1, w] = -s if v < -gate and braking else 0.0
+        # mu_max <= 0 or nan never divides: the utilisation stays 0 there
+        out[2, w] = abs(m) / mu_max[w] if ok and mu_max[w] > 0.0 else 0.0
+        # past its peak slip a tyre uses all the friction there is, though its mu has dropped
+        if ok and abs(v) > gate and abs(s) >= slip_peak[w] and _sign(s) == _sign(m):
+            out[2, w] = max(out[2, w], 1.0)
+        if not (math.isfinite(s) and math.isfinite(v) and math.isfinite(tq)):
+            out[0, w] = math.nan
+            out[1, w] = math.nan
+        if not (math.isfinite(m) and math.isfinite(mu_max[w])):
+            out[2, w] = math.nan
+
+
+@jit
+def step_channel(
+    s: Any, k: int, w: int, t: float, target: int, raise_hold: float, release_hold: float
+) -> bool:
+    """Debounce channel (k, w) of `s` in time, in place.
+
+    A higher target must persist ``raise_hold`` [s], a lower one ``release_hold`` [s], to be
+    reported. The onset of an alert is the first stamp of the uninterrupted run of non-OK
+    targets that raised it from OK; escalation keeps it.
+
+    Args:
+        s: `ALERT_STATE` record.
+        k, w: kind (ALERT_KINDS index) and wheel.
         t: stamp [s].
         target: level wanted by the metric at t (from `classify_level`).
-        raise_hold: [s] a higher target must persist this long to be reported.
-        release_hold: [s] a lower target must persist this long to be reported.
+        raise_hold: [s].
+        release_hold: [s].
 
     Returns:
-        The state after stamp t.
+        Whether the reported level changed.
     """
-    run_start = state.run_start
+    level = s.level[k, w]
+    run_start = s.run_start[k, w]
     if target == LEVEL_OK:
         run_start = math.nan
     elif math.isnan(run_start):
         run_start = t
-    if target == state.level:
-        return ChannelState(state.level, state.onset, target, math.nan, run_start)
-    if target != state.pending_level or math.isnan(state.pending_since):
-        pending_since = t
-    else:
-        pending_since = state.pending_since
-    hold = raise_hold if target > state.level else release_hold
-    if t - pending_since >= hold:
-        if target == LEVEL_OK:
-            onset = math.nan
-        elif state.level == LEVEL_OK:
-            onset = run_start
-        else:
-            onset = state.onset
-        return ChannelState(target, onset, target, math.nan, run_start)
-    return ChannelState(state.level, state.onset, target, pending_since, run_start)
+    s.run_start[k, w] = run_start
+    if target == level:
+        s.pending_level[k, w] = target
+        s.pending_since[k, w] = math.nan
+        return False
+    since = s.pending_since[k, w]
+    if target != s.pending_level[k, w] or math.isnan(since):
+        since = t
+    s.pending_level[k, w] = target
+    hold = raise_hold if target > level else release_hold
+    if t - since < hold:
+        s.pending_since[k, w] = since
+        return False
+    if target == LEVEL_OK:
+        s.onset[k, w] = math.nan
+        s.detected[k, w] = math.nan
+    elif level == LEVEL_OK:
+        s.onset[k, w] = run_start
+        s.detected[k, w] = t
+    s.level[k, w] = target
+    s.pending_since[k, w] = math.nan
+    return True
+
+
+@jit
+def alerts_reset(s: Any) -> None:
+    """All channels of `s` back to OK, no stamp seen."""
+    s.t = math.nan
+    s.level[:, :] = LEVEL_OK
+    s.onset[:, :] = math.nan
+    s.pending_level[:, :] = LEVEL_OK
+    s.pending_since[:, :] = math.nan
+    s.run_start[:, :] = math.nan
+    s.detected[:, :] = math.nan
+
+
+@jit
+def alerts_update(
+    p: Any,
+    s: Any,
+    t: float,
+    slip: FloatArray,
+    sv: FloatArray,
+    torque: FloatArray,
+    mu: FloatArray,
+    mu_valid: BoolArray,
+    mu_max: FloatArray,
+    slip_peak: FloatArray,
+) -> bool:
+    """Advance all channels to stamp t: `alert_metrics`, `classify_level`, `step_channel`.
+
+    Args:
+        p: `ALERT_PARAMS` record.
+        s: `ALERT_STATE` record, advanced in place; a non-finite or non-increasing stamp
+            leaves it unchanged.
+        t: stamp [s].
+        slip, sv, torque, mu, mu_valid, mu_max, slip_peak: shape (4,) each, as
+            `alert_metrics`.
+
+    Returns:
+        Whether a reported level changed.
+    """
+    if not math.isfinite(t) or (math.isfinite(s.t) and t <= s.t):
+        return False
+    s.t = t
+    metrics = np.empty((3, 4))
+    alert_metrics(p, slip, sv, torque, mu, mu_valid, mu_max, slip_peak, metrics)
+    changed = False
+    for k in range(3):
+        for w in range(4):
+            level = s.level[k, w]
+            target = classify_level(metrics[k, w], level, p.thresholds[k])
+            if (
+                target == LEVEL_OK
+                and level == LEVEL_OK
+                and s.pending_level[k, w] == LEVEL_OK
+                and math.isnan(s.run_start[k, w])
+            ):
+                continue  # the common quiet case: step_channel would leave it unchanged
+            if step_channel(s, k, w, t, target, p.raise_hold, p.release_hold):
+                changed = True
+    return changed
 
 
 @dataclass(frozen=True)
@@ -301,68 +467,38 @@ class Alert:
         return ALERT_KINDS.index(self.kind)
 
 
-def _wheels(name: str, value: ArrayLike, dtype: type = float) -> NDArray[Any]:
-    array: NDArray[Any] = np.asarray(value, dtype=dtype)
+def _wheels(name: str, value: ArrayLike, dtype: type = np.float64) -> NDArray[Any]:
+    array: NDArray[Any] = np.ascontiguousarray(value, dtype=dtype)
     if array.shape != (4,):
         raise InputShapeError(f'{name} must have shape (4,), got {array.shape}')
     return array
 
 
-def alert_metrics(
-    slip: ArrayLike,
-    slip_vel: ArrayLike,
-    wheel_torque: ArrayLike,
-    mu: ArrayLike,
-    mu_valid: ArrayLike,
-    mu_max: ArrayLike,
-    slip_peak: ArrayLike,
-    config: AlertConfig,
-) -> FloatArray:
-    """Metric of every (kind, wheel) channel (pure).
-
-    Args:
-        slip: shape (4,), [-] slip ratio, positive driving.
-        slip_vel: shape (4,), [m/s] omega R - v.
-        wheel_torque: shape (4,), [N m] drive minus brake torque.
-        mu: shape (4,), [-] utilised friction.
-        mu_valid: shape (4,), bool.
-        mu_max: shape (4,), [-] available friction of each wheel's axle.
-        slip_peak: shape (4,), [-] slip magnitude at mu_max.
-        config: gates (min_slip_velocity, min_wheel_torque).
-
-    Returns:
-        shape (3, 4): rows traction, lock, low_friction; 0 where a gate is closed, nan for
-        non-finite inputs (treated as OK by `classify_level`).
-
-    Raises:
-        InputShapeError: an input is not shape (4,).
-    """
-    s = _wheels('slip', slip)
-    sv = _wheels('slip_velocity', slip_vel)
-    torque = _wheels('wheel_torque', wheel_torque)
-    m = _wheels('mu', mu)
-    ok = _wheels('mu_valid', mu_valid, bool)
-    mmax = _wheels('mu_max', mu_max)
-    speak = _wheels('slip_peak', slip_peak)
-    gate = config.min_slip_velocity
-    driving = (~ok | (m >= 0.0)) & (torque > config.min_wheel_torque)
-    braking = (~ok | (m <= 0.0)) & (torque < -config.min_wheel_torque)
-    out: FloatArray = np.zeros((3, 4))
-    np.copyto(out[0], s, where=(sv > gate) & driving)
-    np.copyto(out[1], -s, where=(sv < -gate) & braking)
-    # mu_max <= 0 or nan never divides: the utilisation stays 0 there.
-    np.divide(np.abs(m), mmax, out=out[2], where=ok & (mmax > 0.0))
-    with np.errstate(invalid='ignore'):
-        past_peak = ok & (np.abs(sv) > gate) & (np.abs(s) >= speak) & (np.sign(s) == np.sign(m))
-    out[2] = np.where(past_peak, np.maximum(out[2], 1.0), out[2])
-    bad = ~(np.isfinite(s) & np.isfinite(sv) & np.isfinite(torque))
-    out[:2, bad] = math.nan
-    out[2, ~(np.isfinite(m) & np.isfinite(mmax))] = math.nan
-    return out
+def alert_records(s: Any) -> tuple[Alert, ...]:
+    """The 12 `Alert` records of an `ALERT_STATE` (kinds in ALERT_KINDS order, wheels 0..3
+    within each kind)."""
+    return tuple(
+        Alert(
+            kind=ALERT_KINDS[k],
+            wheel=w,
+            level=int(s.level[k, w]),
+            active=bool(s.level[k, w] > LEVEL_OK),
+            onset=float(s.onset[k, w]),
+            detected=float(s.detected[k, w]),
+        )
+        for k in range(len(ALERT_KINDS))
+        for w in range(4)
+    )
 
 
 class AlertMonitor:
-    """Stateful detectors of all (kind, wheel) channels; the node calls `update` per estimate."""
+    """Stateful wrapper over `alerts_update`: the node calls `update` per estimate.
+
+    Attributes:
+        params: `ALERT_PARAMS` record of `config`.
+        state: `ALERT_STATE` record.
+        last: the 12 records of the last update.
+    """
 
     def __init__(self, config: AlertConfig | None = None) -> None:
         """Create the monitor.
@@ -371,26 +507,14 @@ class AlertMonitor:
             config: settings; defaults if None.
         """
         self.config = config or AlertConfig()
+        self.params = alert_params(self.config)
+        self.state = new_record(ALERT_STATE)
         self.reset()
 
     def reset(self) -> None:
         """All channels back to OK."""
-        self.channels = [[ChannelState() for _ in range(4)] for _ in ALERT_KINDS]
-        self._detected = np.full((len(ALERT_KINDS), 4), math.nan)
-        self._t = math.nan
-        self._records = [self._record(k, w) for k in range(len(ALERT_KINDS)) for w in range(4)]
-        self.last: tuple[Alert, ...] = tuple(self._records)
-
-    def _record(self, k: int, w: int) -> Alert:
-        channel = self.channels[k][w]
-        return Alert(
-            kind=ALERT_KINDS[k],
-            wheel=w,
-            level=channel.level,
-            active=channel.active,
-            onset=channel.onset,
-            detected=float(self._detected[k, w]),
-        )
+        alerts_reset(self.state)
+        self.last: tuple[Alert, ...] = alert_records(self.state)
 
     def update(
         self,
@@ -418,42 +542,26 @@ class AlertMonitor:
                 (`FrictionPotential.wheel_slip_peak()`).
 
         Returns:
-            12 records, kinds in ALERT_KINDS order, wheels 0..3 within each kind.
+            12 records, kinds in ALERT_KINDS order, wheels 0..3 within each kind; the same
+            tuple as before while no reported level changes.
 
         Raises:
             InputShapeError: an input is not shape (4,).
         """
-        metrics = alert_metrics(
-            slip, slip_vel, wheel_torque, mu, mu_valid, mu_max, slip_peak, self.config
+        changed = alerts_update(
+            self.params,
+            self.state,
+            float(t),
+            _wheels('slip', slip),
+            _wheels('slip_velocity', slip_vel),
+            _wheels('wheel_torque', wheel_torque),
+            _wheels('mu', mu),
+            _wheels('mu_valid', mu_valid, np.bool_),
+            _wheels('mu_max', mu_max),
+            _wheels('slip_peak', slip_peak),
         )
-        if not math.isfinite(t) or (math.isfinite(self._t) and t <= self._t):
-            return self.last
-        self._t = t
-        cfg = self.config
-        thresholds = (cfg.traction, cfg.lock, cfg.low_friction)
-        changed = False
-        for k in range(len(ALERT_KINDS)):
-            for w in range(4):
-                state = self.channels[k][w]
-                target = classify_level(float(metrics[k, w]), state.level, thresholds[k])
-                if (
-                    target == LEVEL_OK
-                    and state.level == LEVEL_OK
-                    and state.pending_level == LEVEL_OK
-                    and math.isnan(state.run_start)
-                ):
-                    continue  # the common quiet case: step_channel would return it unchanged
-                new = step_channel(state, t, target, cfg.raise_hold, cfg.release_hold)
-                self.channels[k][w] = new
-                if new.level != state.level:
-                    if state.level == LEVEL_OK:
-                        self._detected[k, w] = t
-                    elif new.level == LEVEL_OK:
-                        self._detected[k, w] = math.nan
-                    changed = True
-                    self._records[4 * k + w] = self._record(k, w)
         if changed:
-            self.last = tuple(self._records)
+            self.last = alert_records(self.state)
         return self.last
 
     def active(self) -> tuple[Alert, ...]:

@@ -27,16 +27,16 @@ is more than ``confidence_margin`` from the estimate, per sample times ``evidenc
 (0) to ``evidence_high`` (1). Below ``class_min_confidence`` the reported values are shrunk
 towards the prior road; the road class (dry / wet / snow / ice) is UNKNOWN there.
 
-Pure step functions (`fit_step`, `fit_solution`, `fit_confidence`, `classify_road`) and a
-stateful wrapper (`FrictionPotentialEstimator`) the node calls per estimate. Axles: 0 front
-(FL, FR), 1 rear (RL, RR). Time in seconds.
+The per-sample math is in `vd_observer_node.situation.friction_fit` (step functions on named
+records, compiled); here are the settings, the result, and the stateful wrapper
+(`FrictionPotentialEstimator`) the node calls per estimate. Axles: 0 front (FL, FR), 1 rear
+(RL, RR). Time in seconds.
 """
 
 from __future__ import annotations
 
-import bisect
 import math
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 from typing import Any, Final
 
 import numpy as np
@@ -50,12 +50,20 @@ from vd_common.vehicle.friction import (
     ROAD_WET,
     FrictionTable,
     friction_table,
-    unit_peak,
 )
 from vd_common.vehicle.params import TireParams
-from vd_common.vehicle.tire import magic_formula_fx
 
 from vd_observer_node.errors import InputShapeError, ObserverError
+from vd_observer_node.situation.friction_fit import (
+    FIT_STATE,
+    FRICTION_PARAMS,
+    POTENTIAL,
+    TYRE,
+    fit_reset,
+    friction_update,
+    vehicle_road_class,
+)
+from vd_observer_node.situation.records import new_record, record_of
 
 __all__ = [
     'AXLE_OF_WHEEL',
@@ -65,18 +73,12 @@ __all__ = [
     'ROAD_SNOW',
     'ROAD_UNKNOWN',
     'ROAD_WET',
-    'FitState',
     'FrictionConfigError',
     'FrictionPotential',
     'FrictionPotentialConfig',
     'FrictionPotentialEstimator',
     'TyreCurves',
-    'classify_road',
-    'fit_confidence',
-    'fit_solution',
-    'fit_step',
-    'initial_fit_state',
-    'unfloored_slip',
+    'friction_params',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -86,8 +88,6 @@ AXLE_OF_WHEEL: Final = (0, 0, 1, 1)
 #: Name of each road class code.
 ROAD_CLASS_NAMES: Final = ('unknown', 'ice', 'snow', 'wet', 'dry')
 _AXLES: Final = np.asarray(AXLE_OF_WHEEL)
-#: [-] slip step of the numerical slope d mu / d s.
-_SLOPE_STEP: Final = 1e-4
 
 
 class FrictionConfigError(ObserverError):
@@ -221,27 +221,6 @@ class FrictionPotentialConfig:
         return cls(**clean)
 
 
-def unfloored_slip(slip_velocity: ArrayLike, speed: float) -> tuple[FloatArray, FloatArray]:
-    """Slip ratio without the floor of `vd_common.vehicle.tire.slip_ratio`, and its denominator.
-
-    The fit gates samples on the denominator itself (``min_slip_speed``) and weights them by
-    the slip noise it implies, so it needs the true denominator, not a floored one.
-
-    Args:
-        slip_velocity: shape (4,), [m/s] omega R - v.
-        speed: body speed v [m/s].
-
-    Returns:
-        (slip, denominator): shape (4,) each; slip [-] = (omega R - v) / max(|omega R|, |v|),
-        positive driving, nan where the denominator is 0; denominator [m/s].
-    """
-    sv = np.asarray(slip_velocity, dtype=float)
-    den: FloatArray = np.maximum(np.abs(sv + speed), abs(speed))
-    slip: FloatArray = np.full(sv.shape, math.nan)
-    np.divide(sv, den, out=slip, where=den > 0.0)
-    return slip, den
-
-
 @dataclass(frozen=True)
 class TyreCurves:
     """The tyre's mu-slip curves for the similarity model.
@@ -259,91 +238,15 @@ class TyreCurves:
         """Curves of the vehicle file's tyre."""
         return cls(tire, friction_table(tire))
 
-    def mu(self, slip: FloatArray, load: FloatArray, scales: FloatArray) -> FloatArray:
-        """mu(s; r) = Fx(s, Fz, r) / Fz for every sample and road scale.
+    def record(self) -> Any:
+        """The Magic Formula coefficients the fit evaluates, as a `TYRE` record."""
+        return record_of(TYRE, self.tire)
 
-        Args:
-            slip: shape (n,), [-] signed.
-            load: shape (n,), [N] (> 0).
-            scales: shape (M,), [-] road scales.
-
-        Returns:
-            shape (n, M), [-].
-        """
-        z = load[:, None]
-        out: FloatArray = magic_formula_fx(slip[:, None], z, scales[None, :], self.tire) / z
-        return out
-
-    def slope(self, slip: FloatArray, load: FloatArray, scales: FloatArray) -> FloatArray:
-        """d mu / d s at every sample and road scale, shape (n, M) (central difference)."""
-        return self.mu_and_slope(slip, load, scales)[1]
-
-    def mu_and_slope(
-        self, slip: FloatArray, load: FloatArray, scales: FloatArray
-    ) -> tuple[FloatArray, FloatArray]:
-        """`mu` and `slope` from one Magic Formula call (three slips stacked: a third of the
-        per-call overhead, which dominates for the few samples of one stamp)."""
-        h = _SLOPE_STEP
-        n = slip.shape[0]
-        stacked = self.mu(
-            np.concatenate([slip, slip + h, slip - h]), np.concatenate([load, load, load]), scales
-        )
-        mu: FloatArray = stacked[:n]
-        slope: FloatArray = (stacked[n : 2 * n] - stacked[2 * n :]) / (2.0 * h)
-        return mu, slope
-
-    def peak(self, load: FloatArray, driving: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
-        """Peak mu and its slip at road scale 1 (`vd_common.vehicle.friction.unit_peak`).
-
-        Args:
-            load: [N], any shape.
-            driving: same shape; True for the driving side (slip > 0).
-
-        Returns:
-            (peak mu [-], slip at the peak [-]), same shape.
-        """
-        return unit_peak(self.table, load, driving)
-
-
-@dataclass(frozen=True)
-class FitState:
-    """Forgotten statistics per axle (A = 2 axles, M road scales).
-
-    Attributes:
-        cost: shape (A, M), forgotten sum of weighted squared residuals per road scale.
-        count: shape (A,), forgotten number of used samples.
-        load: shape (A,), [N] smoothed wheel load of the used samples.
-        direction: shape (A,), smoothed sign of their force (> 0 driving, < 0 braking).
-        t: stamp of the last step [s] (nan before the first).
-        last_sample: shape (A,), [s] stamp of the axle's last usable sample (nan if none).
-    """
-
-    cost: FloatArray
-    count: FloatArray
-    load: FloatArray
-    direction: FloatArray
-    t: float
-    last_sample: FloatArray
-
-
-def initial_fit_state(config: FrictionPotentialConfig, static_load: ArrayLike) -> FitState:
-    """Empty statistics.
-
-    Args:
-        config: settings (the number of road scales).
-        static_load: shape (2,), [N] wheel load per axle before any sample.
-    """
-    load = np.asarray(static_load, dtype=float)
-    if load.shape != (2,):
-        raise InputShapeError(f'static_load must have shape (2,), got {load.shape}')
-    return FitState(
-        cost=np.zeros((2, len(config.road_scales))),
-        count=np.zeros(2),
-        load=load.copy(),
-        direction=np.ones(2),
-        t=math.nan,
-        last_sample=np.full(2, math.nan),
-    )
+    def peak_table(self) -> FloatArray:
+        """shape (5, L): the peaks at road scale 1 against the load (`friction_fit`)."""
+        tb = self.table
+        table = np.stack([tb.load, tb.mu_drive, tb.slip_drive, tb.mu_brake, tb.slip_brake])
+        return np.ascontiguousarray(table, dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -379,220 +282,46 @@ class FrictionPotential:
 
     def vehicle_road_class(self) -> int:
         """Class of the most confident axle with a known class (UNKNOWN if none)."""
-        known = self.road_class != ROAD_UNKNOWN
-        if not np.any(known):
-            return ROAD_UNKNOWN
-        conf = np.where(known, self.confidence, -1.0)
-        return int(self.road_class[int(np.argmax(conf))])
+        return int(vehicle_road_class(self.road_class, self.confidence))
+
+    @classmethod
+    def from_record(cls, pot: Any) -> FrictionPotential:
+        """The potential held in a `POTENTIAL` record (copied)."""
+        return cls(
+            t=float(pot.t),
+            mu_max=pot.mu_max.copy(),
+            slip_peak=pot.slip_peak.copy(),
+            confidence=pot.confidence.copy(),
+            road_class=pot.road_class.copy(),
+            road_scale=pot.road_scale.copy(),
+        )
 
 
-def _wheels(name: str, value: ArrayLike, dtype: type = float) -> NDArray[Any]:
-    array: NDArray[Any] = np.asarray(value, dtype=dtype)
+def friction_params(config: FrictionPotentialConfig) -> Any:
+    """The scalar settings as a `FRICTION_PARAMS` record (the fit's step functions read it)."""
+    return record_of(FRICTION_PARAMS, config)
+
+
+def _wheels(name: str, value: ArrayLike, dtype: type = np.float64) -> NDArray[Any]:
+    array: NDArray[Any] = np.ascontiguousarray(value, dtype=dtype)
     if array.shape != (4,):
         raise InputShapeError(f'{name} must have shape (4,), got {array.shape}')
     return array
 
 
-def fit_step(
-    state: FitState,
-    t: float,
-    slip_velocity: ArrayLike,
-    speed: float,
-    mu: ArrayLike,
-    mu_valid: ArrayLike,
-    load: ArrayLike,
-    curves: TyreCurves,
-    config: FrictionPotentialConfig,
-) -> FitState:
-    """Add one stamp's wheel samples to the statistics (pure).
-
-    Args:
-        state: statistics before the stamp.
-        t: stamp [s]; a non-finite or non-increasing stamp returns ``state`` unchanged.
-        slip_velocity: shape (4,), [m/s] omega R - v, order FL, FR, RL, RR.
-        speed: [m/s] body speed v.
-        mu: shape (4,), [-] utilised friction Fx/Fz.
-        mu_valid: shape (4,), bool.
-        load: shape (4,), [N] estimated wheel loads Fz.
-        curves: the tyre's curves.
-        config: settings.
-
-    Returns:
-        The updated statistics. Ignored samples: invalid or non-finite values, a load <= 0,
-        a slip denominator below ``min_slip_speed``, |slip| below ``min_slip`` or
-        ``min_slip_sigmas`` slip noise, and a mu of the opposite sign of the slip (a tyre
-        force has the sign of its slip; the opposite is an estimation transient).
-
-    Raises:
-        InputShapeError: an input is not shape (4,).
-    """
-    sv = _wheels('slip_velocity', slip_velocity)
-    m = _wheels('mu', mu)
-    ok = _wheels('mu_valid', mu_valid, bool)
-    fz = _wheels('load', load)
-    if not math.isfinite(t) or (math.isfinite(state.t) and t <= state.t):
-        return state
-    if not math.isfinite(speed):
-        return replace(state, t=t)
-    slip, den = unfloored_slip(sv, speed)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        sigma_s = config.slip_velocity_noise / den
-        use = ok & np.isfinite(slip) & np.isfinite(m) & np.isfinite(fz) & (fz > 0.0)
-        use &= den >= config.min_slip_speed
-        use &= np.abs(slip) >= np.maximum(config.min_slip, config.min_slip_sigmas * sigma_s)
-        use &= np.sign(slip) == np.sign(m)
-    if not use.any():
-        return replace(state, t=t)
-    dt = 0.0 if not math.isfinite(state.t) else t - state.t
-    s = np.clip(slip[use], -config.max_slip, config.max_slip)
-    z = fz[use]
-    scales = np.asarray(config.road_scales, dtype=float)
-    predicted, slope = curves.mu_and_slope(s, z, scales)
-    variance = config.mu_noise_std**2 + (slope * sigma_s[use][:, None]) ** 2
-    weighted = (m[use][:, None] - predicted) ** 2 / variance
-    axle_of = _AXLES[use]
-    cost, count = state.cost.copy(), state.count.copy()
-    axle_load, direction = state.load.copy(), state.direction.copy()
-    last_sample = state.last_sample.copy()
-    lam = math.exp(-dt / config.forgetting_time)
-    blend = 1.0 - math.exp(-dt / config.load_time) if dt > 0.0 else 1.0
-    for axle in (0, 1):
-        rows = axle_of == axle
-        if not rows.any():
-            continue
-        cost[axle] = lam * cost[axle] + weighted[rows].sum(axis=0)
-        count[axle] = lam * count[axle] + float(np.count_nonzero(rows))
-        axle_load[axle] += blend * (float(np.mean(z[rows])) - axle_load[axle])
-        direction[axle] += blend * (float(np.mean(np.sign(s[rows]))) - direction[axle])
-        last_sample[axle] = t
-    return FitState(cost, count, axle_load, direction, t, last_sample)
-
-
-def _fitted(
-    state: FitState, curves: TyreCurves
-) -> tuple[NDArray[np.int64], FloatArray, FloatArray]:
-    """Best scale index, unit peak mu and unit peak slip per axle."""
-    best = np.argmin(state.cost, axis=1).astype(np.int64)
-    unit_mu, unit_slip = curves.peak(state.load, state.direction >= 0.0)
-    return best, unit_mu, unit_slip
-
-
-def fit_confidence(
-    state: FitState, curves: TyreCurves, config: FrictionPotentialConfig
-) -> FloatArray:
-    """Confidence per axle that the fitted peak is within ``confidence_margin`` (pure).
-
-    The least extra weighted cost of a road scale whose peak lies further than the margin
-    from the best one's, per sample times ``evidence_samples``, mapped linearly from
-    ``evidence_low`` (0) to ``evidence_high`` (1), decayed with the time since the axle's last
-    usable sample (``evidence_hold_time``).
-
-    Returns:
-        shape (2,), [0..1]; 0 for an axle without samples.
-    """
-    best, unit_mu, _ = _fitted(state, curves)
-    return _confidence(state, config, best, unit_mu)
-
-
-def _confidence(
-    state: FitState,
-    config: FrictionPotentialConfig,
-    best: NDArray[np.int64],
-    unit_mu: FloatArray,
-) -> FloatArray:
-    """`fit_confidence` for the winners `_fitted` already found."""
-    scales = np.asarray(config.road_scales, dtype=float)
-    peaks = scales[None, :] * unit_mu[:, None]
-    rows = np.arange(2)
-    far = np.abs(peaks - peaks[rows, best][:, None]) > config.confidence_margin
-    rival = np.where(far, state.cost, np.inf).min(axis=1)
-    informed = (state.count > 0.0) & np.isfinite(rival)
-    advantage = np.where(informed, rival - state.cost[rows, best], 0.0)
-    evidence = advantage / np.maximum(state.count, 1.0) * config.evidence_samples
-    span = config.evidence_high - config.evidence_low
-    out: FloatArray = np.clip((evidence - config.evidence_low) / span, 0.0, 1.0)
-    if config.evidence_hold_time > 0.0:
-        age = np.where(np.isfinite(state.last_sample), state.t - state.last_sample, 0.0)
-        out *= np.exp(-np.maximum(age, 0.0) / config.evidence_hold_time)
-    return out
-
-
-def classify_road(
-    mu_max: float, confidence: float, previous: int, config: FrictionPotentialConfig
-) -> int:
-    """Road class from mu_max with hysteresis (pure).
-
-    Args:
-        mu_max: [-] estimated friction potential.
-        confidence: [0..1].
-        previous: class of the previous stamp (ROAD_* code).
-        config: class bounds, margin and minimum confidence.
-
-    Returns:
-        ROAD_UNKNOWN if confidence < class_min_confidence; otherwise the class whose band
-        holds mu_max, keeping ``previous`` while mu_max is within class_margin outside its band.
-    """
-    if not math.isfinite(mu_max) or confidence < config.class_min_confidence:
-        return ROAD_UNKNOWN
-    b = config.class_bounds
-    raw = ROAD_ICE + bisect.bisect_right(b, mu_max)
-    if previous in (ROAD_ICE, ROAD_SNOW, ROAD_WET, ROAD_DRY) and raw != previous:
-        lo = -math.inf if previous == ROAD_ICE else b[previous - ROAD_ICE - 1]
-        hi = math.inf if previous == ROAD_DRY else b[previous - ROAD_ICE]
-        if lo - config.class_margin <= mu_max < hi + config.class_margin:
-            return previous
-    return raw
-
-
-def fit_solution(
-    state: FitState,
-    curves: TyreCurves,
-    config: FrictionPotentialConfig,
-    previous_class: ArrayLike = (ROAD_UNKNOWN, ROAD_UNKNOWN),
-) -> FrictionPotential:
-    """Friction potential from the statistics (pure).
-
-    Args:
-        state: statistics.
-        curves: the tyre's curves.
-        config: settings.
-        previous_class: shape (2,), road class per axle at the previous stamp (hysteresis).
-
-    Returns:
-        The estimate for ``state.t``.
-    """
-    best, unit_mu, unit_slip = _fitted(state, curves)
-    scales = np.asarray(config.road_scales, dtype=float)
-    fitted = np.where(state.count > 0.0, scales[best], config.prior_road_scale)
-    confidence = _confidence(state, config, best, unit_mu)
-    # Unexcited, every scale fits the linear part of the curve: report the prior road there.
-    weight = np.clip(confidence / max(config.class_min_confidence, 1e-9), 0.0, 1.0)
-    scale = (
-        weight * fitted + (1.0 - weight) * config.prior_road_scale
-        if config.shrink_to_prior
-        else fitted
-    )
-    mu_max: FloatArray = scale * unit_mu
-    prev = np.asarray(previous_class, dtype=np.int64)
-    road = np.array(
-        [
-            classify_road(float(mu_max[a]), float(confidence[a]), int(prev[a]), config)
-            for a in (0, 1)
-        ],
-        dtype=np.int64,
-    )
-    return FrictionPotential(
-        t=state.t,
-        mu_max=mu_max,
-        slip_peak=scale * unit_slip,
-        confidence=confidence,
-        road_class=road,
-        road_scale=fitted,
-    )
-
-
 class FrictionPotentialEstimator:
-    """Stateful wrapper: the node calls `update` once per estimate."""
+    """Stateful wrapper over `friction_fit.friction_update`: the node calls `update` per estimate.
+
+    Attributes:
+        params: `FRICTION_PARAMS` record of `config`.
+        tyre: `TYRE` record of the curves.
+        scales: shape (M,), [-] the road scales.
+        table: shape (5, L), the tyre's unit peaks.
+        state: `FIT_STATE` record.
+        cost: shape (2, M), the weighted squared residuals per axle and road scale.
+        potential: `POTENTIAL` record of the last solution.
+        last: the last solution as a `FrictionPotential`.
+    """
 
     def __init__(
         self,
@@ -606,17 +335,33 @@ class FrictionPotentialEstimator:
             curves: the tyre's curves (`TyreCurves.from_tire(vehicle.tire)`).
             static_load: shape (2,), [N] static wheel load per axle (front, rear).
             config: settings; defaults if None.
+
+        Raises:
+            InputShapeError: static_load is not shape (2,).
         """
         self.curves = curves
         self.config = config or FrictionPotentialConfig()
-        self.static_load = np.asarray(static_load, dtype=float)
+        self.static_load = np.ascontiguousarray(static_load, dtype=np.float64)
+        if self.static_load.shape != (2,):
+            raise InputShapeError(
+                f'static_load must have shape (2,), got {self.static_load.shape}'
+            )
+        self.params = friction_params(self.config)
+        self.tyre = curves.record()
+        self.table = curves.peak_table()
+        self.scales = np.asarray(self.config.road_scales, dtype=np.float64)
+        self.state = new_record(FIT_STATE)
+        self.cost = np.zeros((2, self.scales.shape[0]))
+        self.potential = new_record(POTENTIAL)
         self.reset()
 
     def reset(self) -> None:
         """Forget all data (prior road, confidence 0)."""
-        self.state = initial_fit_state(self.config, self.static_load)
-        self._classes = np.full(2, ROAD_UNKNOWN, dtype=np.int64)
-        self.last = fit_solution(self.state, self.curves, self.config, self._classes)
+        fit_reset(
+            self.params, self.scales, self.table, self.static_load, self.state, self.cost,
+            self.potential,
+        )  # fmt: skip
+        self.last = FrictionPotential.from_record(self.potential)
 
     def update(
         self,
@@ -640,13 +385,21 @@ class FrictionPotentialEstimator:
         Raises:
             InputShapeError: an input is not shape (4,).
         """
-        before = self.state
-        self.state = fit_step(
-            self.state, t, slip_velocity, speed, mu, mu_valid, load, self.curves, self.config
+        taken = friction_update(
+            self.params,
+            self.tyre,
+            self.scales,
+            self.table,
+            self.state,
+            self.cost,
+            self.potential,
+            float(t),
+            _wheels('slip_velocity', slip_velocity),
+            float(speed),
+            _wheels('mu', mu),
+            _wheels('mu_valid', mu_valid, np.bool_),
+            _wheels('load', load),
         )
-        if self.state is before:
-            return self.last
-        result = fit_solution(self.state, self.curves, self.config, self._classes)
-        self._classes = result.road_class.copy()
-        self.last = result
-        return result
+        if taken:
+            self.last = FrictionPotential.from_record(self.potential)
+        return self.last

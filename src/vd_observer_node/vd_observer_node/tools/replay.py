@@ -349,8 +349,8 @@ def situation_topics(
         monitor: a fresh (or reset) situation monitor (`runner`'s kind).
         progress: called with the number of stamps done since its last call.
         runner: `run_situation`, or the compiled
-            :func:`vd_observer_node.kernel.chain.run_situation_compiled` with a
-            :class:`~vd_observer_node.kernel.situation.CompiledSituationMonitor`.
+            :func:`vd_observer_node.kernel.chain.run_situation_compiled` with a monitor from
+            :func:`~vd_observer_node.kernel.chain.compiled_monitor`.
         block: stamps per call of `runner` (per progress-bar update).
 
     Returns:
@@ -508,18 +508,18 @@ def replay_bag(
     if source == 'engine' and drivetrain is None:
         drivetrain = Drivetrain.from_params(params)
     curves = TyreCurves.from_tire(params.tire)
-    monitor_class: Any = SituationMonitor
+    make_monitor: Any = SituationMonitor
     if situation and compiled:
-        from vd_observer_node.kernel.chain import warm_up
-        from vd_observer_node.kernel.situation import CompiledSituationMonitor
+        from vd_observer_node.kernel.chain import compiled_monitor, warm_up
 
-        monitor_class = CompiledSituationMonitor
+        # its fast observer compiled too: what run_situation_compiled runs
+        make_monitor = compiled_monitor
         warm_up(curves)
 
     def new_monitor() -> Any:
         if not situation:
             return None
-        return monitor_class(
+        return make_monitor(
             curves,
             estimator_vehicle.static_wheel_loads[[0, 2]],
             estimator_vehicle.effective_radius,
