@@ -30,9 +30,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import InputShapeError
+from vd_observer_node.estimation.differentiator import LevantDifferentiator
+from vd_observer_node.estimation.faults import OBSERVER_FAULTS
+from vd_observer_node.estimation.levant_step import levant_reset, levant_update
 from vd_observer_node.estimation.observer import WHEEL_INPUTS, ObserverConfig
 from vd_observer_node.kernel._jit import jit
-from vd_observer_node.kernel.levant import CompiledDifferentiator, diff_reset, diff_update
 from vd_observer_node.situation.alerts import ALERT_KINDS, Alert, AlertConfig
 from vd_observer_node.situation.friction_potential import (
     ROAD_UNKNOWN,
@@ -471,7 +473,7 @@ class SituationArrays:
                 f'static_load must have shape (2,), got {self.static_load.shape}'
             )
         fast_config = replace(observer, wheel_lipschitz=situation.alert_wheel_lipschitz)
-        self.fast = CompiledDifferentiator(
+        self.fast = LevantDifferentiator(
             fast_config.wheel_lipschitz,
             n_channels=4,
             gains=fast_config.gains,
@@ -515,14 +517,10 @@ class SituationArrays:
 
 @jit
 def monitor_reset(
-    fprm: FloatArray,
+    fprm: np.record,
     flip: FloatArray,
-    fz_: FloatArray,
-    f_last: FloatArray,
-    f_active: BoolArray,
-    f_pend_t: FloatArray,
-    f_pend_f: FloatArray,
-    f_scal: FloatArray,
+    fst_: np.record,
+    fch: np.recarray,
     prm_f: FloatArray,
     scales: FloatArray,
     table: FloatArray,
@@ -540,7 +538,7 @@ def monitor_reset(
     ascal: FloatArray,
 ) -> None:
     """`SituationMonitor.reset`: fast observer, friction fit and alerts back to the start."""
-    diff_reset(fprm, fz_, f_last, f_active, f_pend_t, f_pend_f, f_scal)
+    levant_reset(fprm, fst_, fch)
     _friction_reset(
         prm_f, scales, table, static_load, cost, count, load, direction, fscal, last_sample,
         classes, pot,
@@ -550,15 +548,10 @@ def monitor_reset(
 
 @jit
 def monitor_update(
-    fprm: FloatArray,
+    fprm: np.record,
     flip: FloatArray,
-    fz_: FloatArray,
-    f_last: FloatArray,
-    f_active: BoolArray,
-    f_pend_t: FloatArray,
-    f_pend_f: FloatArray,
-    f_scal: FloatArray,
-    f_counts: NDArray[np.int64],
+    fst_: np.record,
+    fch: np.recarray,
     prm_f: FloatArray,
     tp: FloatArray,
     scales: FloatArray,
@@ -592,16 +585,12 @@ def monitor_update(
     """`SituationMonitor.update` for stamp t; results stay in pot, ch, detected, slip_out."""
     if not math.isnan(mscal[0]) and t < mscal[0] - prm_s[3]:
         monitor_reset(
-            fprm, flip, fz_, f_last, f_active, f_pend_t, f_pend_f, f_scal, prm_f, scales, table,
-            static_load, cost, count, load, direction, fscal, last_sample, classes, pot, ch,
-            detected, ascal,
+            fprm, flip, fst_, fch, prm_f, scales, table, static_load, cost, count, load,
+            direction, fscal, last_sample, classes, pot, ch, detected, ascal,
         )  # fmt: skip
     fast = np.empty((3, 4))
     fast_valid = np.empty(4, dtype=np.bool_)
-    diff_update(
-        fprm, flip, fz_, f_last, f_active, f_pend_t, f_pend_f, f_scal, f_counts, t, wheel_angle,
-        fast, fast_valid,
-    )  # fmt: skip
+    levant_update(fprm, flip, fst_, fch, t, wheel_angle, fast, fast_valid)
     radius, floor, gate = prm_s[0], prm_s[1], prm_s[2]
     v = speed
     sv_fast = np.empty(4)
@@ -633,12 +622,10 @@ def monitor_update(
 
 def monitor_args(a: SituationArrays) -> tuple[object, ...]:
     """The state/parameter arguments of `monitor_update` (everything before ``t``)."""
-    f = a.fast
     return (
-        f.prm, f.lip, f.z, f.f_last, f.active, f.pend_t, f.pend_f, f.scal, f.counts, a.prm_f,
-        a.tp, a.scales, a.table, a.static_load, a.cost, a.count, a.load, a.direction, a.fscal,
-        a.last_sample, a.classes, a.pot, a.prm_a, a.thresholds, a.ch, a.detected, a.ascal,
-        a.prm_s, a.mscal,
+        *a.fast.kernel_args, a.prm_f, a.tp, a.scales, a.table, a.static_load, a.cost, a.count,
+        a.load, a.direction, a.fscal, a.last_sample, a.classes, a.pot, a.prm_a, a.thresholds,
+        a.ch, a.detected, a.ascal, a.prm_s, a.mscal,
     )  # fmt: skip
 
 
@@ -646,9 +633,9 @@ def reset_arrays(a: SituationArrays) -> None:
     """`monitor_reset` on the arrays of `a` (and the monitor's last stamp forgotten)."""
     f = a.fast
     monitor_reset(
-        f.prm, f.lip, f.z, f.f_last, f.active, f.pend_t, f.pend_f, f.scal, a.prm_f, a.scales,
-        a.table, a.static_load, a.cost, a.count, a.load, a.direction, a.fscal, a.last_sample,
-        a.classes, a.pot, a.ch, a.detected, a.ascal,
+        f.params, f.lipschitz, f.record, f.channels, a.prm_f, a.scales, a.table, a.static_load,
+        a.cost, a.count, a.load, a.direction, a.fscal, a.last_sample, a.classes, a.pot, a.ch,
+        a.detected, a.ascal,
     )  # fmt: skip
     a.mscal[0] = math.nan
 
@@ -714,7 +701,9 @@ class CompiledSituationMonitor:
         # compile (or load from numba's cache) now, not at the first sample; then start afresh
         zeros = np.zeros(4)
         self.update_arrays(0.0, zeros, 1.0, zeros, zeros, zeros, np.zeros(4, np.bool_), zeros)
-        self.arrays.fast.counts[:] = 0
+        fast = self.arrays.fast.record
+        for kind in (*OBSERVER_FAULTS, 'rejected'):
+            fast[kind] = 0
         self.reset()
 
     def reset(self) -> None:
