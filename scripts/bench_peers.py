@@ -42,7 +42,12 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
 from vd_common.vehicle.params import default_vehicle_file, load_vehicle  # noqa: E402
-from vd_observer_node.estimation.differentiator import LevantDifferentiator, euler_step  # noqa: E402
+from vd_observer_node.estimation.differentiator import (  # noqa: E402
+    DEFAULT_GAINS,
+    LevantDifferentiator,
+    levant_params,
+)
+from vd_observer_node.estimation.levant_step import euler_step  # noqa: E402
 from vd_sim_node.vehicle.scenario import load_scenario  # noqa: E402
 from vd_sim_node.vehicle.simulation import Simulator  # noqa: E402
 
@@ -90,11 +95,10 @@ def ours_pure_euler(tau: float) -> tuple[np.ndarray, float]:
     t = np.arange(int(DURATION / tau) + 1) * tau
     f = np.sin(t)
     z = np.zeros((len(t), 3))
-    state = np.zeros((3, 1))
+    params = levant_params(DEFAULT_GAINS, 'euler', 'zero', np.inf, 0.0, np.inf)
     start = time.perf_counter()
     for k in range(1, len(t)):
-        state = euler_step(state, f[k - 1], tau, LIPSCHITZ)
-        z[k] = state[:, 0]
+        z[k] = euler_step(params, z[k - 1], f[k - 1], tau, LIPSCHITZ, False)
     per_sample = (time.perf_counter() - start) / (len(t) - 1)
     return _max_errors(t, z), per_sample
 

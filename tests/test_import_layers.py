@@ -17,18 +17,30 @@ SRC = Path(__file__).resolve().parents[1] / 'src'
 #: vd_observer_node's rooms and what each may import (besides itself and vd_common).
 OBSERVER_LAYERS: dict[str, set[str]] = {
     'errors': set(),
+    # numba's decorator with the project's settings (kernel/_jit.py): what every concept's
+    # step functions are compiled with, so the rooms that compute may use it
+    'jit': set(),
     'bag': {'errors'},
-    'estimation': {'errors'},
-    # kernel: only kernel._jit, the decorator that compiles the step functions
-    'situation': {'errors', 'estimation', 'kernel'},
+    'estimation': {'errors', 'jit'},
+    'situation': {'errors', 'jit', 'estimation'},
     'inputs': {'errors', 'bag', 'estimation'},
     # the per-stamp chain picks its compiled twin, which implements the chain's interface
-    'chain': {'errors', 'estimation', 'situation', 'kernel'},
-    'kernel': {'errors', 'estimation', 'situation', 'chain'},
-    'tools': {'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel'},
-    'testing': {'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel', 'tools'},
+    'chain': {'errors', 'jit', 'estimation', 'situation', 'kernel'},
+    'kernel': {'errors', 'jit', 'estimation', 'situation', 'chain'},
+    'tools': {'errors', 'bag', 'inputs', 'jit', 'estimation', 'situation', 'chain', 'kernel'},
+    'testing': {
+        'errors',
+        'bag',
+        'inputs',
+        'jit',
+        'estimation',
+        'situation',
+        'chain',
+        'kernel',
+        'tools',
+    },
     # thin nodes: the core and the node plumbing, never the offline tools or test helpers
-    'nodes': {'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel'},
+    'nodes': {'errors', 'bag', 'inputs', 'jit', 'estimation', 'situation', 'chain', 'kernel'},
 }
 #: vd_sim_node's rooms (besides vd_common): the bond-graph core is a leaf, the vehicle model
 #: sits on it, the node (sim_node and its entry point) on top.
@@ -68,6 +80,8 @@ def _room(module: str, package: str) -> str | None:
     if len(parts) == 1:
         return 'package'
     name = parts[1]
+    if package == 'vd_observer_node' and parts[1:3] == ['kernel', '_jit']:
+        return 'jit'
     if package == 'vd_common':
         return name
     return 'nodes' if name.endswith('_node') or name in _NODE_PLUMBING else name

@@ -8,15 +8,24 @@ import numpy as np
 import pytest
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.differentiator import (
+    DEFAULT_GAINS,
     DISCRETIZATIONS,
     INIT_POLICIES,
     LevantDifferentiator,
+    levant_params,
+)
+from vd_observer_node.estimation.faults import OBSERVER_FAULTS
+from vd_observer_node.estimation.levant_step import (
+    STATE_DTYPE,
     first_order_euler_step,
     first_order_implicit_step,
-    step,
+    levant_reset,
+    levant_step,
+    levant_update,
+    new_channels,
+    new_record,
 )
 from vd_observer_node.estimation.observer import ObserverConfig, WheelObserver
-from vd_observer_node.kernel.levant import CompiledDifferentiator
 
 
 def _run(disc: str, t: np.ndarray, g: np.ndarray, lip: float, init: str = 'first_sample'):
@@ -78,19 +87,23 @@ def test_row_zero_integrates_the_speed() -> None:
     np.testing.assert_allclose(out[:, 0], f - f[0], atol=1e-4)
 
 
+def _params(disc: str) -> np.record:
+    return levant_params(DEFAULT_GAINS, disc, 'first_sample', math.inf, 0.0, math.inf, 1)
+
+
 def test_step_dispatches_the_first_order_steps() -> None:
-    z = np.array([[0.5], [10.0], [1.0]])
-    g0, g1, tau, lip = np.array([10.2]), np.array([10.1]), 0.01, 300.0
-    np.testing.assert_array_equal(
-        step('implicit', z, g0, g1, tau, lip, input_derivative=1),
-        first_order_implicit_step(z, g1, tau, lip),
+    # levant_step gets the sample its scheme corrects with: g0 (start) explicit, g1 (end)
+    z = np.array([0.5, 10.0, 1.0])
+    g0, g1, tau, lip = 10.2, 10.1, 0.01, 300.0
+    implicit = _params('implicit')
+    assert levant_step(implicit, z, g1, tau, lip) == first_order_implicit_step(
+        implicit, z, g1, tau, lip
     )
-    np.testing.assert_array_equal(
-        step('euler', z, g0, g1, tau, lip, input_derivative=1),
-        first_order_euler_step(z, g0, tau, lip),
-    )
-    taylor = step('euler_taylor', z, g0, g1, tau, lip, input_derivative=1)
-    assert taylor[1, 0] == pytest.approx(first_order_euler_step(z, g0, tau, lip)[1, 0] + 5e-5)
+    euler = _params('euler')
+    plain = first_order_euler_step(euler, z, g0, tau, lip, False)
+    assert levant_step(euler, z, g0, tau, lip) == plain
+    taylor = levant_step(_params('euler_taylor'), z, g0, tau, lip)
+    assert taylor[1] == pytest.approx(plain[1] + 5e-5)
 
 
 def test_refuses_an_unknown_input_derivative() -> None:
@@ -119,18 +132,28 @@ def _faulty_speeds(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.mark.parametrize('init', INIT_POLICIES)
 @pytest.mark.parametrize('disc', DISCRETIZATIONS)
-def test_compiled_twin_equals_the_reference(disc: str, init: str) -> None:
+def test_the_update_on_records_is_the_wrapper_and_counts_every_fault(disc: str, init: str) -> None:
+    # levant_update driven on its own records (as the fused kernels do) against the wrapper,
+    # on speeds with one fault of each kind injected
     t, g = _faulty_speeds(np.random.default_rng(7))
-    kw = dict(n_channels=4, discretization=disc, init=init, max_gap=0.5, init_baseline=0.01)
-    reference = LevantDifferentiator(300.0, input_derivative=1, **kw)  # type: ignore[arg-type]
-    compiled = CompiledDifferentiator(300.0, input_derivative=1, **kw)  # type: ignore[arg-type]
+    wrapper = LevantDifferentiator(
+        300.0, n_channels=4, discretization=disc, init=init, max_gap=0.5, init_baseline=0.01,
+        input_derivative=1,
+    )  # fmt: skip
+    p = levant_params(DEFAULT_GAINS, disc, init, 0.5, 0.01, 0.5, 1)
+    lip, s, channels = np.full(4, 300.0), new_record(STATE_DTYPE), new_channels(4)
+    levant_reset(p, s, channels)
+    out, valid = np.zeros((3, 4)), np.zeros(4, dtype=np.bool_)
     for tk, gk in zip(t, g, strict=True):
-        a, b = reference.update(float(tk), gk), compiled.update(float(tk), gk)
-        for x, y in zip(a, b, strict=True):
-            np.testing.assert_allclose(y, x, rtol=1e-12, atol=1e-9)
-    assert reference.faults.counts == compiled.faults.counts
-    assert sum(reference.faults.counts.values()) >= 5
-    assert reference.rejected_count == compiled.rejected_count
+        est = wrapper.update(float(tk), gk)
+        levant_update(p, lip, s, channels, float(tk), gk, out, valid)
+        np.testing.assert_array_equal(np.stack(est[:3]), out)
+        np.testing.assert_array_equal(est.valid, valid)
+    counts = wrapper.faults.counts
+    assert counts == {kind: int(s[kind]) for kind in OBSERVER_FAULTS}
+    injected = ('non_finite_stamp', 'non_finite_value', 'duplicate_stamp', 'gap', 'time_jump_back')
+    assert all(counts[kind] >= 1 for kind in injected)
+    assert wrapper.rejected_count == s.rejected == 2  # the duplicate and the nan stamp
 
 
 @pytest.mark.parametrize('noise', [0.0, 0.01])

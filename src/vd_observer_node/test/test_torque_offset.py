@@ -1,4 +1,4 @@
-"""Engine-torque offset learnt in neutral (issue 16): the estimator, its compiled twin, the
+"""Engine-torque offset learnt in neutral (issue 16): the estimator, its step on records, the
 engine path and the cascade on a simulated car whose torque map is off."""
 
 from __future__ import annotations
@@ -20,18 +20,14 @@ from vd_observer_node.estimation.torque_offset import (
     TorqueOffset,
     TorqueOffsetConfig,
     TorqueOffsetEstimator,
-    TorqueOffsetState,
+    new_offset_estimate,
+    new_offset_state,
+    offset_from_record,
+    offset_params,
     torque_offset_step,
 )
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.kernel.chain import CompiledChain, run_cascade_compiled
-from vd_observer_node.kernel.torque_offset import (
-    OFFSET_OUT_SIZE,
-    offset_from_packed,
-    offset_params,
-    offset_state,
-    offset_update,
-)
 from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_sim_node.vehicle.scenario import SensorSettings, VehicleVariant, load_scenario
 from vd_sim_node.vehicle.simulation import SimResult, simulate
@@ -147,7 +143,7 @@ def test_a_time_jump_restarts_the_learning_but_keeps_the_fault_total() -> None:
     assert held == estimator2.estimate and held.converged
 
 
-def test_step_and_wrapper_agree_and_the_compiled_twin_is_bit_for_bit() -> None:
+def test_step_on_records_and_wrapper_agree() -> None:
     rng = np.random.default_rng(11)
     t, torque, gear, speed = _synthetic(4.0, 8, speed_noise=0.3, dt=0.002, seed=5)
     # time jumps, repeated stamps, non-finite values
@@ -156,15 +152,15 @@ def test_step_and_wrapper_agree_and_the_compiled_twin_is_bit_for_bit() -> None:
     t[6000] = t[5999]
     torque[rng.integers(0, t.size, 20)] = math.nan
     config = TorqueOffsetConfig(min_episodes=2, converged_std=0.5)
-    prm, s, row = offset_params(config), offset_state(), np.zeros(OFFSET_OUT_SIZE)
-    state = TorqueOffsetState()
+    prm, s, row = offset_params(config), new_offset_state(), new_offset_estimate()
     wrapper = TorqueOffsetEstimator(config, J_E)
     for tk, tq, g, w in zip(t, torque, gear, speed, strict=True):
-        ref, state = torque_offset_step(config, J_E, state, float(tk), float(tq), int(g), float(w))
-        assert wrapper.update(float(tk), float(tq), int(g), float(w)) == ref
-        offset_update(prm, J_E, s, float(tk), float(tq), float(g), float(w), row)
-        assert offset_from_packed(row) == ref
-        np.testing.assert_array_equal(s, np.array(state, dtype=float))
+        torque_offset_step(prm, J_E, s, float(tk), float(tq), float(g), float(w), row)
+        assert wrapper.update(float(tk), float(tq), int(g), float(w)) == offset_from_record(row)
+        np.testing.assert_array_equal(
+            np.array(s.tolist(), dtype=float), np.array(wrapper.state.tolist(), dtype=float)
+        )
+    assert wrapper.estimate.episodes >= 2 and wrapper.state.last_t == t[-1]
 
 
 @pytest.mark.parametrize(

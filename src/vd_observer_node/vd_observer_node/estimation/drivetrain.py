@@ -43,7 +43,10 @@ from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.torque_offset import (
     TorqueOffset,
     TorqueOffsetConfig,
-    TorqueOffsetState,
+    new_offset_estimate,
+    new_offset_state,
+    offset_from_record,
+    offset_params,
     torque_offset_step,
 )
 
@@ -308,12 +311,13 @@ class EngineState(NamedTuple):
         last_unsettled: [s] stamp at which the clutch last slipped or the gear changed
             (-inf before any).
         last_gear: the previous sample's gear (`gear_number`), None before the first.
-        offset: the engine-torque offset estimator's state (`torque_offset`).
+        offset: the engine-torque offset estimator's state (`torque_offset.OFFSET_STATE_DTYPE`
+            record; `engine_path_step` steps a copy, so the default is never changed).
     """
 
     last_unsettled: float = -math.inf
     last_gear: int | None = None
-    offset: TorqueOffsetState = TorqueOffsetState()
+    offset: np.record = new_offset_state()
 
 
 def engine_path_step(
@@ -357,15 +361,19 @@ def engine_path_step(
     offset: TorqueOffset | None = None
     offset_state = state.offset
     if offset_config is not None:
-        offset, offset_state = torque_offset_step(
-            offset_config,
+        offset_state = offset_state.copy()  # the step advances its record in place
+        out = new_offset_estimate()
+        torque_offset_step(
+            offset_params(offset_config),
             drivetrain.engine_inertia,
             offset_state,
             t,
             engine_torque,
-            gear_code,
+            float(gear_code),
             engine_speed,
+            out,
         )
+        offset = offset_from_record(out)
         engine_torque -= offset.used
     torque = engine_wheel_torques(engine_torque, gear_code, drivetrain, wheel_omega_dot)
     engaged = clutch_engaged(engine_speed, gear_code, wheel_omega, drivetrain)

@@ -156,18 +156,10 @@ class _DifferentiatorObserver:
         """Which derivative of the estimated signal the samples are (0: itself)."""
         return 0
 
-    def __init__(
-        self,
-        config: ObserverConfig,
-        *,
-        differentiator: type[LevantDifferentiator] = LevantDifferentiator,
-    ) -> None:
-        """Create the observer from its settings.
-
-        ``differentiator``: the reference class, or a drop-in with its constructor and
-        ``update`` (the compiled `vd_observer_node.kernel.levant.CompiledDifferentiator`).
-        """
-        self._diff = differentiator(
+    def __init__(self, config: ObserverConfig) -> None:
+        """Create the observer from its settings."""
+        #: the differentiator (its records are what the fused kernels of `kernel.chain` step)
+        self.differentiator = LevantDifferentiator(
             self._lipschitz(config),
             n_channels=self._channels,
             gains=config.gains,
@@ -181,12 +173,12 @@ class _DifferentiatorObserver:
     @property
     def rejected_count(self) -> int:
         """Samples rejected for a duplicate, slightly older or non-finite stamp."""
-        return self._diff.rejected_count
+        return self.differentiator.rejected_count
 
     @property
     def faults(self) -> FaultCounter:
         """Input faults per kind (see `differentiator.LevantDifferentiator`)."""
-        return self._diff.faults
+        return self.differentiator.faults
 
 
 class WheelObserver(_DifferentiatorObserver):
@@ -217,7 +209,7 @@ class WheelObserver(_DifferentiatorObserver):
         a = np.asarray(angles, dtype=np.float64)
         if a.shape != (4,):
             raise InputShapeError(f'wheel sensors must have shape (4,), got {a.shape}')
-        est = self._diff.update(t, a)
+        est = self.differentiator.update(t, a)
         self.last = WheelState(est.value, est.first, est.second, est.valid)
         return self.last
 
@@ -234,7 +226,7 @@ class SpeedObserver(_DifferentiatorObserver):
 
     def update(self, t: float, speed: float) -> SpeedState:
         """Feed the measured body speed [m/s] at stamp t [s]."""
-        est = self._diff.update(t, speed)
+        est = self.differentiator.update(t, speed)
         self.last = SpeedState(float(est.value[0]), float(est.first[0]), bool(est.valid[0]))
         return self.last
 

@@ -20,8 +20,10 @@ neutral give a mean whose standard deviation is at most ``converged_std``; befor
 signal is taken as it is. The mean is clamped to +-``max_offset``. A gap or a stamp older than
 ``max_gap`` restarts the learning, as it restarts the observers.
 
-`torque_offset_step` is the pure step; `TorqueOffsetEstimator` keeps its state. The compiled
-twin is `vd_observer_node.kernel.torque_offset`, tested equal.
+`torque_offset_step` is the step (compiled with numba, plain Python with ``VD_JIT=0``) on
+numpy records with named fields: the settings (`offset_params`), the state
+(`new_offset_state`) and the estimate it writes (`new_offset_estimate`);
+`TorqueOffsetEstimator` owns the records and calls it.
 """
 
 from __future__ import annotations
@@ -34,15 +36,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vd_observer_node.errors import ConfigurationError
-from vd_observer_node.estimation.faults import RESTART_FAULTS, classify_stamp
+from vd_observer_node.kernel._jit import jit
 
 __all__ = [
+    'OFFSET_ESTIMATE_DTYPE',
     'OFFSET_MESSAGE_FIELDS',
+    'OFFSET_PARAMS_DTYPE',
+    'OFFSET_STATE_DTYPE',
     'TorqueOffset',
     'TorqueOffsetConfig',
     'TorqueOffsetEstimator',
-    'TorqueOffsetState',
+    'new_offset_estimate',
+    'new_offset_state',
     'offset_estimate',
+    'offset_from_record',
+    'offset_params',
     'publish_mask',
     'torque_offset_step',
 ]
@@ -111,38 +119,31 @@ class TorqueOffsetConfig:
         return cls(**data)
 
 
-class TorqueOffsetState(NamedTuple):
-    """The estimator's memory (the compiled twin keeps the same slots in this order).
-
-    Attributes:
-        last_t: [s] last stamp taken (nan before any).
-        t0: [s] start of the current neutral episode (nan: not in one).
-        w0: [rad/s] engine speed at t0.
-        t1: [s] latest stamp of the episode.
-        w1: [rad/s] engine speed at t1.
-        torque1: [N m] engine-torque signal at t1.
-        integral: [N m s] trapezoid integral of the signal from t0 to t1.
-        sum_w: [s] total duration of the episodes used.
-        sum_wb: [N m s] sum of duration * episode offset.
-        sum_wbb: [N^2 m^2 s] sum of duration * episode offset^2.
-        sum_ww: [s^2] sum of duration^2 (for the effective number of episodes).
-        episodes: number of episodes used.
-        clamped: number of stamps at which the estimate was clamped.
-    """
-
-    last_t: float = math.nan
-    t0: float = math.nan
-    w0: float = 0.0
-    t1: float = 0.0
-    w1: float = 0.0
-    torque1: float = 0.0
-    integral: float = 0.0
-    sum_w: float = 0.0
-    sum_wb: float = 0.0
-    sum_wbb: float = 0.0
-    sum_ww: float = 0.0
-    episodes: float = 0.0
-    clamped: float = 0.0
+#: The settings of `TorqueOffsetConfig` as the step reads them (same names and units).
+OFFSET_PARAMS_DTYPE: Final = np.dtype(
+    [('min_episode_time', 'f8'), ('min_episodes', 'i8'), ('min_time', 'f8'),
+     ('converged_std', 'f8'), ('max_offset', 'f8'), ('max_gap', 'f8')],
+    align=True,
+)  # fmt: skip
+#: The estimator's memory (`new_offset_state` gives the start):
+#:
+#: * last_t: [s] last stamp taken (nan before any);
+#: * t0: [s] start of the current neutral episode (nan: not in one); w0: [rad/s] engine
+#:   speed at t0;
+#: * t1: [s] latest stamp of the episode; w1: [rad/s] engine speed and torque1: [N m]
+#:   engine-torque signal at t1;
+#: * integral: [N m s] trapezoid integral of the signal from t0 to t1;
+#: * sum_w: [s] total duration of the episodes used; sum_wb: [N m s] sum of duration *
+#:   episode offset; sum_wbb: [N^2 m^2 s] sum of duration * episode offset^2; sum_ww: [s^2]
+#:   sum of duration^2 (for the effective number of episodes);
+#: * episodes: number of episodes used; clamped: stamps at which the estimate was clamped
+#:   (a fault total, kept through restarts).
+OFFSET_STATE_DTYPE: Final = np.dtype(
+    [('last_t', 'f8'), ('t0', 'f8'), ('w0', 'f8'), ('t1', 'f8'), ('w1', 'f8'),
+     ('torque1', 'f8'), ('integral', 'f8'), ('sum_w', 'f8'), ('sum_wb', 'f8'),
+     ('sum_wbb', 'f8'), ('sum_ww', 'f8'), ('episodes', 'i8'), ('clamped', 'i8')],
+    align=True,
+)  # fmt: skip
 
 
 class TorqueOffset(NamedTuple):
@@ -166,95 +167,162 @@ class TorqueOffset(NamedTuple):
     clamped: bool = False
 
 
-def offset_estimate(config: TorqueOffsetConfig, state: TorqueOffsetState) -> TorqueOffset:
-    """The estimate a state holds (offset clamped to +-``max_offset``)."""
-    if state.episodes < 1.0:
-        return TorqueOffset(0.0, config.max_offset, False, 0.0, 0, False)
-    mean = state.sum_wb / state.sum_w
-    std = config.max_offset
-    if state.episodes >= 2.0:
-        variance = max(state.sum_wbb / state.sum_w - mean * mean, 0.0)
-        n_eff = state.sum_w * state.sum_w / state.sum_ww
-        std = math.sqrt(variance / max(n_eff - 1.0, 1e-9))
-    offset = min(max(mean, -config.max_offset), config.max_offset)
-    converged = (
-        state.episodes >= config.min_episodes
-        and state.sum_w >= config.min_time
-        and std <= config.converged_std
-    )
+#: `TorqueOffset` as the step writes it (same fields, ``std`` as ``offset_std``: a record's
+#: ``std`` is numpy's method).
+OFFSET_ESTIMATE_DTYPE: Final = np.dtype(
+    [('offset', 'f8'), ('offset_std', 'f8'), ('converged', 'b1'), ('used', 'f8'),
+     ('episodes', 'i8'), ('clamped', 'b1')],
+    align=True,
+)  # fmt: skip
+
+
+def _record(dtype: np.dtype[np.void]) -> np.record:
+    record: np.record = np.zeros(1, dtype).view(np.recarray)[0]
+    return record
+
+
+def offset_params(config: TorqueOffsetConfig) -> np.record:
+    """The `OFFSET_PARAMS_DTYPE` record of `config`."""
+    p = _record(OFFSET_PARAMS_DTYPE)
+    for name in OFFSET_PARAMS_DTYPE.names or ():
+        p[name] = getattr(config, name)
+    return p
+
+
+def new_offset_state() -> np.record:
+    """An `OFFSET_STATE_DTYPE` record with nothing learnt (no stamp, no episode)."""
+    s = _record(OFFSET_STATE_DTYPE)
+    s.last_t = math.nan
+    s.t0 = math.nan
+    return s
+
+
+def new_offset_estimate() -> np.record:
+    """A zeroed `OFFSET_ESTIMATE_DTYPE` record for `torque_offset_step` to write into."""
+    return _record(OFFSET_ESTIMATE_DTYPE)
+
+
+def offset_from_record(out: np.record) -> TorqueOffset:
+    """The `TorqueOffset` an `OFFSET_ESTIMATE_DTYPE` record holds."""
     return TorqueOffset(
-        offset, std, converged, offset if converged else 0.0, int(state.episodes), offset != mean
+        float(out.offset),
+        float(out.offset_std),
+        bool(out.converged),
+        float(out.used),
+        int(out.episodes),
+        bool(out.clamped),
     )
 
 
-def _closed(
-    config: TorqueOffsetConfig, inertia: float, state: TorqueOffsetState
-) -> TorqueOffsetState:
-    """The state with its neutral episode ended (used if long enough)."""
-    duration = state.t1 - state.t0
-    ended = state._replace(t0=math.nan)
-    if duration < config.min_episode_time:
-        return ended
-    b = (state.integral - inertia * (state.w1 - state.w0)) / duration
-    return ended._replace(
-        sum_w=state.sum_w + duration,
-        sum_wb=state.sum_wb + duration * b,
-        sum_wbb=state.sum_wbb + duration * b * b,
-        sum_ww=state.sum_ww + duration * duration,
-        episodes=state.episodes + 1.0,
-    )
-
-
-def torque_offset_step(
-    config: TorqueOffsetConfig,
-    inertia: float,
-    state: TorqueOffsetState,
-    t: float,
-    engine_torque: float,
-    gear: int,
-    engine_speed: float,
-) -> tuple[TorqueOffset, TorqueOffsetState]:
-    """One stamp of the offset estimator (pure).
+@jit
+def offset_estimate(p: np.record, s: np.record, out: np.record) -> None:
+    """The estimate state `s` holds, into `out` (offset clamped to +-``max_offset``).
 
     Args:
-        config: settings.
-        inertia: J_e [kg m^2], the engine's (crankshaft, flywheel, clutch disc).
-        state: the state after the previous stamp (`TorqueOffsetState()` at the start).
-        t: stamp [s]; a non-finite one is ignored.
-        engine_torque: engine-torque signal [N m].
-        gear: engaged gear (`drivetrain.gear_number`): 0 is neutral.
-        engine_speed: [rad/s] crankshaft speed (nan if not measured: nothing is learnt).
-
-    Returns:
-        (the estimate after the stamp, the next state).
+        p: `OFFSET_PARAMS_DTYPE` record.
+        s: `OFFSET_STATE_DTYPE` record.
+        out: `OFFSET_ESTIMATE_DTYPE` record, written.
     """
-    last = None if math.isnan(state.last_t) else state.last_t
-    kind, dt = classify_stamp(last, t, config.max_gap)
-    if dt is None:
-        return offset_estimate(config, state), state  # non-finite, repeated, slightly older
-    if kind in RESTART_FAULTS:
+    if s.episodes < 1:
+        out.offset = 0.0
+        out.offset_std = p.max_offset
+        out.converged = False
+        out.used = 0.0
+        out.episodes = 0
+        out.clamped = False
+        return
+    mean = s.sum_wb / s.sum_w
+    std = p.max_offset
+    if s.episodes >= 2:
+        variance = max(s.sum_wbb / s.sum_w - mean * mean, 0.0)
+        n_eff = s.sum_w * s.sum_w / s.sum_ww
+        std = math.sqrt(variance / max(n_eff - 1.0, 1e-9))
+    offset = min(max(mean, -p.max_offset), p.max_offset)
+    converged = s.episodes >= p.min_episodes and s.sum_w >= p.min_time and std <= p.converged_std
+    out.offset = offset
+    out.offset_std = std
+    out.converged = converged
+    out.used = offset if converged else 0.0
+    out.episodes = s.episodes
+    out.clamped = offset != mean
+
+
+@jit
+def _stamp_dt(last: float, t: float, max_gap: float) -> float:
+    """`faults.classify_stamp` for a finite stamp ``t`` after ``last`` (nan: none): the step
+    dt [s] (0.0 at the start), nan to hold (repeated or slightly older), -1.0 to restart."""
+    if math.isnan(last):
+        return 0.0
+    dt = t - last
+    if dt == 0.0 or (dt < 0.0 and -dt <= max_gap):
+        return math.nan
+    if dt < 0.0 or dt > max_gap:
+        return -1.0
+    return dt
+
+
+@jit
+def torque_offset_step(
+    p: np.record,
+    inertia: float,
+    s: np.record,
+    t: float,
+    engine_torque: float,
+    gear: float,
+    engine_speed: float,
+    out: np.record,
+) -> None:
+    """One stamp of the offset estimator: advances `s` in place, writes the estimate to `out`.
+
+    Args:
+        p: `OFFSET_PARAMS_DTYPE` record (`offset_params`).
+        inertia: J_e [kg m^2], the engine's (crankshaft, flywheel, clutch disc).
+        s: `OFFSET_STATE_DTYPE` record, the state after the previous stamp
+            (`new_offset_state` at the start).
+        t: stamp [s]; a non-finite, repeated or slightly older one is ignored (state held).
+        engine_torque: engine-torque signal [N m].
+        gear: engaged gear (`drivetrain.gear_number`, as a float): 0 is neutral.
+        engine_speed: [rad/s] crankshaft speed (nan if not measured: nothing is learnt).
+        out: `OFFSET_ESTIMATE_DTYPE` record, written: the estimate after the stamp.
+    """
+    dt = _stamp_dt(s.last_t, t, p.max_gap) if math.isfinite(t) else math.nan
+    if math.isnan(dt):
+        offset_estimate(p, s, out)
+        return
+    if dt < 0.0:
         # a time jump: start again, as the observers do (the fault total stays)
-        state = TorqueOffsetState(clamped=state.clamped)
-    state = state._replace(last_t=t)
-    neutral = gear == 0 and math.isfinite(engine_torque) and math.isfinite(engine_speed)
-    if not math.isnan(state.t0):
+        s.t0 = math.nan
+        s.w0 = s.t1 = s.w1 = s.torque1 = s.integral = 0.0
+        s.sum_w = s.sum_wb = s.sum_wbb = s.sum_ww = 0.0
+        s.episodes = 0
+    s.last_t = t
+    neutral = gear == 0.0 and math.isfinite(engine_torque) and math.isfinite(engine_speed)
+    if not math.isnan(s.t0):
         if neutral:
-            state = state._replace(
-                integral=state.integral + 0.5 * (state.torque1 + engine_torque) * (t - state.t1),
-                t1=t,
-                w1=engine_speed,
-                torque1=engine_torque,
-            )
-        else:
-            state = _closed(config, inertia, state)
+            s.integral = s.integral + 0.5 * (s.torque1 + engine_torque) * (t - s.t1)
+            s.t1 = t
+            s.w1 = engine_speed
+            s.torque1 = engine_torque
+        else:  # the episode ends: used if long enough
+            duration = s.t1 - s.t0
+            s.t0 = math.nan
+            if duration >= p.min_episode_time:
+                b = (s.integral - inertia * (s.w1 - s.w0)) / duration
+                s.sum_w = s.sum_w + duration
+                s.sum_wb = s.sum_wb + duration * b
+                s.sum_wbb = s.sum_wbb + duration * b * b
+                s.sum_ww = s.sum_ww + duration * duration
+                s.episodes = s.episodes + 1
     elif neutral:
-        state = state._replace(
-            t0=t, w0=engine_speed, t1=t, w1=engine_speed, torque1=engine_torque, integral=0.0
-        )
-    estimate = offset_estimate(config, state)
-    if estimate.clamped:
-        state = state._replace(clamped=state.clamped + 1.0)
-    return estimate, state
+        s.t0 = t
+        s.w0 = engine_speed
+        s.t1 = t
+        s.w1 = engine_speed
+        s.torque1 = engine_torque
+        s.integral = 0.0
+    offset_estimate(p, s, out)
+    if out.clamped:
+        s.clamped = s.clamped + 1
 
 
 def publish_mask(
@@ -292,27 +360,33 @@ def publish_mask(
 
 
 class TorqueOffsetEstimator:
-    """`torque_offset_step` with its state kept.
+    """`torque_offset_step` with its records kept.
 
     Attributes:
         config: settings.
         inertia: J_e [kg m^2].
-        state: the state after the last stamp.
+        params: `OFFSET_PARAMS_DTYPE` record of `config`.
+        state: `OFFSET_STATE_DTYPE` record, the state after the last stamp.
         estimate: the estimate after the last stamp.
     """
 
     def __init__(self, config: TorqueOffsetConfig, inertia: float) -> None:
         """Start with nothing learnt."""
         self.config = config
-        self.inertia = inertia
-        self.state = TorqueOffsetState()
-        self.estimate = offset_estimate(config, self.state)
+        self.inertia = float(inertia)
+        self.params = offset_params(config)
+        self.state = new_offset_state()
+        self._out = new_offset_estimate()
+        offset_estimate(self.params, self.state, self._out)
+        self.estimate = offset_from_record(self._out)
 
     def update(
         self, t: float, engine_torque: float, gear: int, engine_speed: float
     ) -> TorqueOffset:
         """The estimate after stamp t [s] (`torque_offset_step`)."""
-        self.estimate, self.state = torque_offset_step(
-            self.config, self.inertia, self.state, t, engine_torque, gear, engine_speed
-        )
+        torque_offset_step(
+            self.params, self.inertia, self.state, float(t), float(engine_torque), float(gear),
+            float(engine_speed), self._out,
+        )  # fmt: skip
+        self.estimate = offset_from_record(self._out)
         return self.estimate

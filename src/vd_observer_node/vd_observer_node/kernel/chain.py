@@ -24,6 +24,7 @@ from vd_observer_node.estimation.cascade import (
     checked_engine,
     checked_record,
 )
+from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.drivetrain import (
     TORQUE_ENGINE,
     TORQUE_NONE,
@@ -33,11 +34,20 @@ from vd_observer_node.estimation.drivetrain import (
 )
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import ENGINE_FAULTS, FaultCounter, FaultReport
+from vd_observer_node.estimation.levant_step import levant_reset, levant_update
 from vd_observer_node.estimation.observer import (
     WHEEL_INPUTS,
     ObserverConfig,
     SpeedState,
     WheelState,
+)
+from vd_observer_node.estimation.torque_offset import (
+    OFFSET_ESTIMATE_DTYPE,
+    new_offset_estimate,
+    new_offset_state,
+    offset_from_record,
+    offset_params,
+    torque_offset_step,
 )
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.kernel._jit import jit
@@ -67,15 +77,6 @@ from vd_observer_node.kernel.estimation import (
     estimates_from_packed,
     estimator_update,
 )
-from vd_observer_node.kernel.levant import CompiledDifferentiator, diff_reset, diff_update
-from vd_observer_node.kernel.torque_offset import (
-    OFFSET_CLAMPED_SLOT,
-    OFFSET_OUT_SIZE,
-    offset_from_packed,
-    offset_params,
-    offset_state,
-    offset_update,
-)
 from vd_observer_node.situation.alerts import alerts_reset
 from vd_observer_node.situation.friction_fit import fit_reset, vehicle_road_class
 from vd_observer_node.situation.friction_potential import TyreCurves
@@ -98,11 +99,11 @@ FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
 
-def _observers(config: ObserverConfig) -> tuple[CompiledDifferentiator, CompiledDifferentiator]:
+def _observers(config: ObserverConfig) -> tuple[LevantDifferentiator, LevantDifferentiator]:
     """Wheel (4 channels) and speed (1 channel) differentiators of `observer.Observer`."""
 
-    def make(lipschitz: float, n: int, input_derivative: int) -> CompiledDifferentiator:
-        return CompiledDifferentiator(
+    def make(lipschitz: float, n: int, input_derivative: int) -> LevantDifferentiator:
+        return LevantDifferentiator(
             lipschitz,
             n_channels=n,
             gains=config.gains,
@@ -117,8 +118,8 @@ def _observers(config: ObserverConfig) -> tuple[CompiledDifferentiator, Compiled
     return make(config.wheel_lipschitz, 4, wheel_input), make(config.speed_lipschitz, 1, 0)
 
 
-def _diff_args(d: CompiledDifferentiator) -> tuple[Any, ...]:
-    return (d.prm, d.lip, d.z, d.f_last, d.active, d.pend_t, d.pend_f, d.scal, d.counts)
+def _diff_args(d: LevantDifferentiator) -> tuple[Any, ...]:
+    return d.kernel_args
 
 
 def _estimator_args(e: CompiledEstimator) -> tuple[Any, ...]:
@@ -131,15 +132,13 @@ def _estimator_args(e: CompiledEstimator) -> tuple[Any, ...]:
 
 @jit
 def _cascade_step(
-    wprm: FloatArray, wlip: FloatArray, wz: FloatArray, wfl: FloatArray, wact: BoolArray,
-    wpt: FloatArray, wpf: FloatArray, wsc: FloatArray, wcnt: NDArray[np.int64],
-    sprm: FloatArray, slip_: FloatArray, sz: FloatArray, sfl: FloatArray, sact: BoolArray,
-    spt: FloatArray, spf: FloatArray, ssc: FloatArray, scnt: NDArray[np.int64],
+    wprm: np.record, wlip: FloatArray, wst: np.record, wch: np.recarray,
+    sprm: np.record, slip_: FloatArray, sst_: np.record, sch: np.recarray,
     eprm: FloatArray, escal: FloatArray, held: FloatArray, fst: FloatArray, fpr: FloatArray,
     fme: FloatArray, sst: FloatArray, spr: FloatArray, sme: FloatArray, vst: FloatArray,
     vpr: FloatArray, vme: FloatArray, last: FloatArray, ecnt: NDArray[np.int64],
-    measured: bool, dprm: FloatArray, escl: FloatArray, oprm: FloatArray, ost: FloatArray,
-    oout: FloatArray, t: float, angle: FloatArray, speed: float, torque: FloatArray,
+    measured: bool, dprm: FloatArray, escl: FloatArray, offset_on: bool, oprm: np.record,
+    ost: np.record, oout: np.record, t: float, angle: FloatArray, speed: float, torque: FloatArray,
     engine: FloatArray, wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray,
     body_valid: BoolArray, est: FloatArray,
 ) -> bool:  # fmt: skip
@@ -149,22 +148,22 @@ def _cascade_step(
     (engine torque, gear, engine speed) instead of ``torque``; returns whether the torque
     source held (`CascadeResult.torque_valid`). ``escl`` (2,) is the engine path's state:
     the stamp the clutch last slipped or the gear changed (-inf before), the last gear (nan).
-    With ``oprm`` non-empty (`offset_params`) the engine path learns the engine-torque offset
-    (state ``ost``, estimate written to ``oout``) and subtracts it once converged.
+    With ``offset_on`` the engine path learns the engine-torque offset (settings ``oprm``,
+    state ``ost``, estimate written to ``oout``) and subtracts it once converged.
     """
-    diff_update(wprm, wlip, wz, wfl, wact, wpt, wpf, wsc, wcnt, t, angle, wheel, wheel_valid)
+    levant_update(wprm, wlip, wst, wch, t, angle, wheel, wheel_valid)
     sample = np.empty(1)
     sample[0] = speed
-    diff_update(sprm, slip_, sz, sfl, sact, spt, spf, ssc, scnt, t, sample, body, body_valid)
+    levant_update(sprm, slip_, sst_, sch, t, sample, body, body_valid)
     v_est = speed if measured else body[0, 0]
     wheel_torque = torque
     torque_ok = True
     if dprm.shape[0] > 0:
         wheel_torque = np.empty(4)
         engine_torque = engine[0]
-        if oprm.shape[0] > 0:
-            offset_update(oprm, dprm[4], ost, t, engine[0], engine[1], engine[2], oout)
-            engine_torque = engine_torque - oout[3]
+        if offset_on:
+            torque_offset_step(oprm, dprm[4], ost, t, engine[0], engine[1], engine[2], oout)
+            engine_torque = engine_torque - oout.used
         engaged = engine_torques(
             dprm, engine_torque, engine[1], engine[2], wheel[1], wheel[2], wheel_torque
         )
@@ -181,33 +180,30 @@ def _cascade_step(
 
 @jit
 def _cascade_block(
-    wprm: FloatArray, wlip: FloatArray, wz: FloatArray, wfl: FloatArray, wact: BoolArray,
-    wpt: FloatArray, wpf: FloatArray, wsc: FloatArray, wcnt: NDArray[np.int64],
-    sprm: FloatArray, slip_: FloatArray, sz: FloatArray, sfl: FloatArray, sact: BoolArray,
-    spt: FloatArray, spf: FloatArray, ssc: FloatArray, scnt: NDArray[np.int64],
+    wprm: np.record, wlip: FloatArray, wst: np.record, wch: np.recarray,
+    sprm: np.record, slip_: FloatArray, sst_: np.record, sch: np.recarray,
     eprm: FloatArray, escal: FloatArray, held: FloatArray, fst: FloatArray, fpr: FloatArray,
     fme: FloatArray, sst: FloatArray, spr: FloatArray, sme: FloatArray, vst: FloatArray,
     vpr: FloatArray, vme: FloatArray, last: FloatArray, ecnt: NDArray[np.int64],
-    measured: bool, dprm: FloatArray, escl: FloatArray, oprm: FloatArray, ost: FloatArray,
-    t: FloatArray, angles: FloatArray, speeds: FloatArray, torques: FloatArray,
-    engine: FloatArray, wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray,
-    est: FloatArray, torque_valid: BoolArray, offsets: FloatArray,
+    measured: bool, dprm: FloatArray, escl: FloatArray, offset_on: bool, oprm: np.record,
+    ost: np.record, oout: np.record, t: FloatArray, angles: FloatArray, speeds: FloatArray,
+    torques: FloatArray, engine: FloatArray, wheel: FloatArray, wheel_valid: BoolArray,
+    body: FloatArray, est: FloatArray, torque_valid: BoolArray, offsets: np.ndarray,
 ) -> None:  # fmt: skip
     """`_cascade_step` over N stamps; wheel (N, 3, 4), body (N, 3), est (N, EST_SIZE),
-    offsets (N, OFFSET_OUT_SIZE) where the offset is learnt, else (0, OFFSET_OUT_SIZE).
+    offsets (N,) `OFFSET_ESTIMATE_DTYPE` records where the offset is learnt, else (0,).
 
     ``escl`` (2,) and ``ost`` are the engine path's state (`_cascade_step`), carried from
-    block to block.
+    block to block; ``oout`` the estimate record it writes into.
     """
     body1 = np.empty((3, 1))
     body_valid = np.empty(1, dtype=np.bool_)
-    oout = np.zeros(OFFSET_OUT_SIZE)
     for k in range(t.shape[0]):
         torque_valid[k] = _cascade_step(
-            wprm, wlip, wz, wfl, wact, wpt, wpf, wsc, wcnt, sprm, slip_, sz, sfl, sact, spt,
-            spf, ssc, scnt, eprm, escal, held, fst, fpr, fme, sst, spr, sme, vst, vpr, vme,
-            last, ecnt, measured, dprm, escl, oprm, ost, oout, t[k], angles[k], speeds[k],
-            torques[k], engine[k], wheel[k], wheel_valid[k], body1, body_valid, est[k],
+            wprm, wlip, wst, wch, sprm, slip_, sst_, sch, eprm, escal, held, fst, fpr, fme,
+            sst, spr, sme, vst, vpr, vme, last, ecnt, measured, dprm, escl, offset_on, oprm,
+            ost, oout, t[k], angles[k], speeds[k], torques[k], engine[k], wheel[k],
+            wheel_valid[k], body1, body_valid, est[k],
         )  # fmt: skip
         if offsets.shape[0] > 0:
             offsets[k] = oout
@@ -251,7 +247,7 @@ def run_cascade_compiled(
         if drivetrain is not None and source == TORQUE_ENGINE
         else np.zeros(0)
     )
-    oprm = _offset_params(estimator_config, dprm)
+    offset_on, oprm = _offset_params(estimator_config, dprm)
     if state is not None and state.parts is not None:
         wheels, speed, estimator, escl, ost = state.parts
     else:
@@ -260,7 +256,7 @@ def run_cascade_compiled(
         # the engine path's state: the stamp the clutch last slipped or the gear changed
         # (-inf before), the last gear (nan)
         escl = np.array([-np.inf, np.nan])
-        ost = offset_state()
+        ost = new_offset_state()
         if state is not None:
             state.parts = (wheels, speed, estimator, escl, ost)
     wheel = np.zeros((n, 3, 4))
@@ -268,20 +264,21 @@ def run_cascade_compiled(
     body = np.zeros((n, 3))
     est = np.zeros((n, EST_SIZE))
     torque_valid = np.zeros(n, dtype=np.bool_)
-    offsets = np.zeros((n if oprm.shape[0] > 0 else 0, OFFSET_OUT_SIZE))
+    offsets = np.zeros(n if offset_on else 0, OFFSET_ESTIMATE_DTYPE)
     block: Any = _cascade_block  # its leading arguments come as tuples
     block(
         *_diff_args(wheels), *_diff_args(speed), *_estimator_args(estimator),
-        estimator_speed == 'measured', dprm, escl, oprm, ost, stamps, angles, speeds, torques,
-        engine_record, wheel, wheel_valid, body, est, torque_valid, offsets,
+        estimator_speed == 'measured', dprm, escl, offset_on, oprm, ost, new_offset_estimate(),
+        stamps, angles, speeds, torques, engine_record, wheel, wheel_valid, body, est,
+        torque_valid, offsets,
     )  # fmt: skip
     learnt = OffsetRecord(
-        offsets[:, 0].copy(),
-        offsets[:, 1].copy(),
-        offsets[:, 2] != 0.0,
-        offsets[:, 3].copy(),
-        offsets[:, 4].astype(np.int64),
-        offsets[:, 5] != 0.0,
+        offsets['offset'].copy(),
+        offsets['offset_std'].copy(),
+        offsets['converged'].copy(),
+        offsets['used'].copy(),
+        offsets['episodes'].copy(),
+        offsets['clamped'].copy(),
     )
     if source == TORQUE_NONE:
         torque_valid[:] = False
@@ -313,11 +310,7 @@ def run_cascade_compiled(
             )
             for kind, count in counter.counts.items()
         }
-        | (
-            {'engine.torque_offset_clamped': int(ost[OFFSET_CLAMPED_SLOT])}
-            if oprm.shape[0] > 0
-            else {}
-        ),
+        | ({'engine.torque_offset_clamped': int(ost.clamped)} if offset_on else {}),
         mass=est[:, E_MASS].copy(),
         mass_std=est[:, E_MASS_STD].copy(),
         mass_converged=est[:, E_MASS_CONVERGED] != 0.0,
@@ -332,20 +325,18 @@ def run_cascade_compiled(
     )
 
 
-def _offset_params(config: EstimatorConfig | None, dprm: FloatArray) -> FloatArray:
-    """The offset estimator's settings where the engine path (``dprm`` non-empty) learns it,
-    else an empty array."""
+def _offset_params(config: EstimatorConfig | None, dprm: FloatArray) -> tuple[bool, np.record]:
+    """Whether the engine path (``dprm`` non-empty) learns the offset, and the offset
+    estimator's settings record (the defaults' when it does not)."""
     config = config or EstimatorConfig()  # the defaults, as run_cascade takes None
-    if dprm.shape[0] == 0 or not config.torque_offset_adaptation:
-        return np.zeros(0)
-    return offset_params(config.torque_offset)
+    on = dprm.shape[0] > 0 and config.torque_offset_adaptation
+    return on, offset_params(config.torque_offset)
 
 
 @jit
 def _situation_block(
-    fprm: FloatArray, flip: FloatArray, fz_: FloatArray, f_last: FloatArray,
-    f_active: BoolArray, f_pend_t: FloatArray, f_pend_f: FloatArray, f_scal: FloatArray,
-    f_counts: NDArray[np.int64], mp: Any, ms: Any, fp: Any, tyre: Any, scales: FloatArray,
+    fprm: np.record, flip: FloatArray, fst_: np.record, fch: np.recarray, mp: Any, ms: Any,
+    fp: Any, tyre: Any, scales: FloatArray,
     table: FloatArray, static_load: FloatArray, fs: Any, cost: FloatArray, pot: Any, ap: Any,
     al: Any, t: FloatArray, angles: FloatArray, speeds: FloatArray, torques: FloatArray,
     omega: FloatArray, mu: FloatArray, mu_valid: BoolArray, fz: FloatArray,
@@ -360,13 +351,12 @@ def _situation_block(
     for k in range(t.shape[0]):
         if monitor_restarts(mp, ms, t[k]):
             # SituationMonitor.reset
-            diff_reset(fprm, fz_, f_last, f_active, f_pend_t, f_pend_f, f_scal)
+            levant_reset(fprm, fst_, fch)
             fit_reset(fp, scales, table, static_load, fs, cost, pot)
             alerts_reset(al)
             ms.t = math.nan
-        diff_update(
-            fprm, flip, fz_, f_last, f_active, f_pend_t, f_pend_f, f_scal, f_counts, t[k],
-            angles[k], fast, fast_valid,
+        levant_update(
+            fprm, flip, fst_, fch, t[k], angles[k], fast, fast_valid,
         )  # fmt: skip
         monitor_step(
             mp, ms, fp, tyre, scales, table, fs, cost, pot, ap, al, t[k], fast[1], fast_valid,
@@ -385,10 +375,8 @@ def _situation_block(
 def compiled_monitor(
     curves: TyreCurves, static_load: ArrayLike, radius: float, **settings: Any
 ) -> SituationMonitor:
-    """A `SituationMonitor` whose fast observer is the compiled differentiator (what
-    `run_situation_compiled` needs); `settings` as its keyword arguments."""
-    drop_in: Any = CompiledDifferentiator
-    return SituationMonitor(curves, static_load, radius, differentiator=drop_in, **settings)
+    """A `SituationMonitor` (kept for the callers until the chain is one runner)."""
+    return SituationMonitor(curves, static_load, radius, **settings)
 
 
 def run_situation_compiled(
@@ -401,15 +389,13 @@ def run_situation_compiled(
     """`situation.run_situation` (same arguments and result) in one compiled loop.
 
     Args:
-        monitor: from `compiled_monitor` (its fast observer a `CompiledDifferentiator`).
+        monitor: the monitor whose records the block advances.
 
     Raises:
         InputShapeError: inconsistent shapes.
         TypeError: the monitor's fast observer is not compiled.
     """
     fast = monitor.fast
-    if not isinstance(fast, CompiledDifferentiator):
-        raise TypeError('run_situation_compiled needs a monitor from compiled_monitor')
     angles = np.ascontiguousarray(wheel_angle, dtype=np.float64)
     speeds = np.ascontiguousarray(speed, dtype=np.float64)
     torques = np.ascontiguousarray(wheel_torque, dtype=np.float64)
@@ -488,10 +474,10 @@ class CompiledChain:
             self._drivetrain.params_array() if self._drivetrain is not None else np.zeros(0)
         )
         self._escl = np.array([-np.inf, np.nan])
-        self._oprm = _offset_params(settings.estimator, self._dprm)
-        self._ost = offset_state()
-        self._oout = np.zeros(OFFSET_OUT_SIZE)
-        self.engine_faults = FaultCounter(ENGINE_FAULTS) if self._oprm.shape[0] > 0 else None
+        self._offset_on, self._oprm = _offset_params(settings.estimator, self._dprm)
+        self._ost = new_offset_state()
+        self._oout = new_offset_estimate()
+        self.engine_faults = FaultCounter(ENGINE_FAULTS) if self._offset_on else None
         self._no_engine = np.zeros(3)
 
     def update(
@@ -521,11 +507,11 @@ class CompiledChain:
         step: Any = _cascade_step  # its leading arguments come as one tuple
         wheel, body, est = self._wheel, self._body, self._est
         step(
-            *self._args, self._measured, self._dprm, self._escl, self._oprm, self._ost,
-            self._oout, float(t), angles, float(speed), torques, row, wheel, self._wheel_valid,
-            body, self._body_valid, est,
+            *self._args, self._measured, self._dprm, self._escl, self._offset_on, self._oprm,
+            self._ost, self._oout, float(t), angles, float(speed), torques, row, wheel,
+            self._wheel_valid, body, self._body_valid, est,
         )  # fmt: skip
-        offset = offset_from_packed(self._oout) if self._oprm.shape[0] > 0 else None
+        offset = offset_from_record(self._oout) if self._offset_on else None
         if offset is not None and offset.clamped and self.engine_faults is not None:
             self.engine_faults.count('torque_offset_clamped')
         if self._drivetrain is not None:

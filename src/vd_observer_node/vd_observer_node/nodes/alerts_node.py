@@ -49,7 +49,6 @@ from vd_msgs.msg import (
     TireForces,
     WheelStates,
 )
-from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.faults import OK, WARN
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
@@ -125,12 +124,6 @@ class AlertsNode(Node):
         vehicle = EstimatorVehicle.from_params(params)
         situation_keys = set(SituationConfig.__dataclass_fields__)
         friction_keys = set(FrictionPotentialConfig.__dataclass_fields__)
-        differentiator: Any = LevantDifferentiator
-        if self.kernel == 'compiled':
-            # the fast observer's compiled drop-in (built, or loaded from numba's cache, now)
-            from vd_observer_node.kernel.levant import CompiledDifferentiator
-
-            differentiator = CompiledDifferentiator
         self.monitor = SituationMonitor(
             TyreCurves.from_tire(params.tire),
             vehicle.static_wheel_loads[[0, 2]],
@@ -146,7 +139,6 @@ class AlertsNode(Node):
             friction=FrictionPotentialConfig.from_mapping(
                 {k: v for k, v in values.items() if k in friction_keys}
             ),
-            differentiator=differentiator,
         )
         max_gap_ns = round(self.monitor.observer_config.max_gap * 1e9)
         # TOPICS: the wheel sensor's stamps first; they drive, as in the replay

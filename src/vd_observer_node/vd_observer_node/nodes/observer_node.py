@@ -10,8 +10,8 @@ speed ``/vd/observer/body_velocity`` (geometry_msgs/TwistStamped, which the esti
 that the live graph computes exactly what the offline cascade does). Health and fault
 counters go to ``/diagnostics`` once per second, with a WARN naming an input topic that
 stopped. All math is in
-:mod:`vd_observer_node.estimation.observer`; ``kernel`` selects its compiled differentiator
-(default) or the Python reference. Messages travel as CDR bytes: raw subscriptions decoded with
+:mod:`vd_observer_node.estimation.observer`, whose differentiator step is compiled (``kernel``
+is read but both values run it). Messages travel as CDR bytes: raw subscriptions decoded with
 ``struct`` and bytes published (:mod:`vd_observer_node.bag.cdr_message`), never Python message
 objects.
 """
@@ -42,7 +42,6 @@ from vd_common.topics import (
 
 from vd_msgs.msg import WheelStates
 from vd_observer_node.bag.errors import BagFormatError
-from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.faults import ERROR, merge_reports
 from vd_observer_node.estimation.observer import ObserverConfig, SpeedObserver, WheelObserver
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
@@ -87,15 +86,10 @@ class ObserverNode(Node):
         )
         # angles or ABS wheel speeds: the mapping says which
         self.config = ObserverConfig.from_mapping({**values, 'wheel_input': mapping.wheel_input})
-        differentiator = LevantDifferentiator
-        if self.kernel == 'compiled':
-            # numba is imported only then; the kernel is built (or loaded from numba's disk
-            # cache) here, before the first sample
-            from vd_observer_node.kernel.levant import CompiledDifferentiator
-
-            differentiator = CompiledDifferentiator  # type: ignore[assignment]  # a drop-in
-        self.wheels = WheelObserver(self.config, differentiator=differentiator)
-        self.speed = SpeedObserver(self.config, differentiator=differentiator)
+        # one implementation whatever ``kernel`` says: the differentiator's step is compiled
+        # (or loaded from numba's disk cache) here, before the first sample
+        self.wheels = WheelObserver(self.config)
+        self.speed = SpeedObserver(self.config)
         self.pub_states = self.refusals.publisher(WheelStates, OBSERVER_WHEEL_STATES, STREAM_QOS)
         self.pub_accel = self.refusals.publisher(AccelStamped, OBSERVER_BODY_ACCEL, STREAM_QOS)
         self.pub_speed = self.refusals.publisher(TwistStamped, OBSERVER_BODY_VELOCITY, STREAM_QOS)

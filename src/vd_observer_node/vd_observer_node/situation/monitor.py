@@ -261,7 +261,6 @@ class SituationMonitor:
         alerts: AlertConfig | None = None,
         friction: FrictionPotentialConfig | None = None,
         situation: SituationConfig | None = None,
-        differentiator: type[LevantDifferentiator] = LevantDifferentiator,
     ) -> None:
         """Create the monitor.
 
@@ -274,16 +273,13 @@ class SituationMonitor:
             alerts: alert settings.
             friction: friction-potential settings.
             situation: fast-observer settings.
-            differentiator: the fast observer's class, or a drop-in with its constructor and
-                ``update``/``reset`` (the compiled `CompiledDifferentiator`, which
-                `kernel.chain.run_situation_compiled` needs).
         """
         self.config = situation or SituationConfig()
         base = observer or ObserverConfig()
         self.observer_config = replace(base, wheel_lipschitz=self.config.alert_wheel_lipschitz)
         self.radius = float(radius)
         fc = self.observer_config
-        self.fast = differentiator(
+        self.fast = LevantDifferentiator(
             fc.wheel_lipschitz,
             n_channels=4,
             gains=fc.gains,
