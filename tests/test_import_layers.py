@@ -18,16 +18,21 @@ SRC = Path(__file__).resolve().parents[1] / 'src'
 OBSERVER_LAYERS: dict[str, set[str]] = {
     'errors': set(),
     'bag': {'errors'},
-    'estimation': {'errors'},
-    'situation': {'errors', 'estimation'},
+    # kernel/_jit.py (numba's jit with the project's settings): the step functions of
+    # estimation/ and situation/ are compiled with it
+    'jit': set(),
+    'estimation': {'errors', 'jit'},
+    'situation': {'errors', 'estimation', 'jit'},
     'inputs': {'errors', 'bag', 'estimation'},
     # the per-stamp chain picks its compiled twin, which implements the chain's interface
-    'chain': {'errors', 'estimation', 'situation', 'kernel'},
-    'kernel': {'errors', 'estimation', 'situation', 'chain'},
-    'tools': {'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel'},
-    'testing': {'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel', 'tools'},
+    'chain': {'errors', 'estimation', 'situation', 'kernel', 'jit'},
+    'kernel': {'errors', 'estimation', 'situation', 'chain', 'jit'},
+    'tools': {'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel', 'jit'},
+    'testing': {
+        'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel', 'jit', 'tools',
+    },  # fmt: skip
     # thin nodes: the core and the node plumbing, never the offline tools or test helpers
-    'nodes': {'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel'},
+    'nodes': {'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel', 'jit'},
 }
 #: vd_sim_node's rooms (besides vd_common): the bond-graph core is a leaf, the vehicle model
 #: sits on it, the node (sim_node and its entry point) on top.
@@ -69,6 +74,8 @@ def _room(module: str, package: str) -> str | None:
     name = parts[1]
     if package == 'vd_common':
         return name
+    if parts[1:3] == ['kernel', '_jit']:
+        return 'jit'
     return 'nodes' if name.endswith('_node') or name in _NODE_PLUMBING else name
 
 

@@ -33,7 +33,6 @@ from vd_observer_node.estimation.drivetrain import (
 from vd_observer_node.estimation.estimator import Estimator
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.kernel.chain import run_cascade_compiled
-from vd_observer_node.kernel.estimation import CompiledEstimator
 from vd_sim_node.vehicle.scenario import load_scenario
 from vd_sim_node.vehicle.simulation import SimResult, simulate
 
@@ -243,17 +242,16 @@ def test_no_torque_loads_come_from_the_acceleration() -> None:
     assert float(err.max()) < 0.05
 
 
-def test_estimator_classes_refuse_unknown_sources_and_carry_theirs() -> None:
-    for cls in (Estimator, CompiledEstimator):
-        with pytest.raises(ConfigurationError):
-            cls(VEHICLE, None, 7)
-        est = cls(VEHICLE, None, TORQUE_NONE)
-        out = est.update(0.0, np.ones(4), np.zeros(4), 10.0, 0.0, np.full(4, 100.0))
-        assert out.torque_source == TORQUE_NONE and np.all(out.fx == 0.0)
-        measured = cls(VEHICLE).update(0.0, np.ones(4), np.zeros(4), 10.0, 0.0, np.ones(4))
-        assert measured.torque_source == TORQUE_MEASURED
-        held = cls(VEHICLE).update(0.0, np.ones(4), np.zeros(4), 10.0, 0.0, np.ones(4), False)
-        assert not held.mu_valid.any() and not held.slope_valid
+def test_the_estimator_refuses_unknown_sources_and_carries_its_own() -> None:
+    with pytest.raises(ConfigurationError):
+        Estimator(VEHICLE, None, 7)
+    est = Estimator(VEHICLE, None, TORQUE_NONE)
+    out = est.update(0.0, np.ones(4), np.zeros(4), 10.0, 0.0, np.full(4, 100.0))
+    assert out.torque_source == TORQUE_NONE and np.all(out.fx == 0.0)
+    measured = Estimator(VEHICLE).update(0.0, np.ones(4), np.zeros(4), 10.0, 0.0, np.ones(4))
+    assert measured.torque_source == TORQUE_MEASURED
+    held = Estimator(VEHICLE).update(0.0, np.ones(4), np.zeros(4), 10.0, 0.0, np.ones(4), False)
+    assert not held.mu_valid.any() and not held.slope_valid
 
 
 def test_engine_path_needs_its_inputs() -> None:

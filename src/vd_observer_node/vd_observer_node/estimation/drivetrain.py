@@ -46,6 +46,7 @@ from vd_observer_node.estimation.torque_offset import (
     TorqueOffsetState,
     torque_offset_step,
 )
+from vd_observer_node.kernel._jit import jit
 
 __all__ = [
     'DRIVEN_AXLES',
@@ -59,6 +60,7 @@ __all__ = [
     'EngineState',
     'clutch_engaged',
     'engine_path_step',
+    'engine_torques',
     'engine_wheel_torques',
     'engine_wheel_torques_record',
     'gear_number',
@@ -203,7 +205,7 @@ class Drivetrain:
         return math.nan
 
     def params_array(self) -> FloatArray:
-        """The compiled twin's parameters:
+        """The parameters of `engine_torques` (an array: the number of gears varies):
         [n, final, reverse, eta, J_e, max slip, settle time, driven (4), ratios (n)]."""
         return np.array(
             [
@@ -220,13 +222,73 @@ class Drivetrain:
         )
 
 
+@jit
+def engine_torques(
+    dprm: FloatArray,
+    engine_torque: float,
+    gear_value: float,
+    engine_speed: float,
+    omega: FloatArray,
+    omega_dot: FloatArray,
+    out: FloatArray,
+) -> bool:
+    """Wheel torques from the engine torque into ``out`` (4,) [N m]; returns whether the
+    clutch is engaged (the compiled step of `engine_wheel_torques` and `clutch_engaged`).
+
+    Args:
+        dprm: `Drivetrain.params_array`.
+        engine_torque: net engine torque [N m].
+        gear_value: the gear as a float (`gear_number` rules: no gear gives nan torques).
+        engine_speed: [rad/s], nan if not measured (then only the gear is checked).
+        omega: shape (4,), [rad/s] wheel speeds.
+        omega_dot: shape (4,), [rad/s^2] wheel accelerations (the engine-inertia term).
+        out: shape (4,), written.
+    """
+    n_gears = int(dprm[0])
+    ratio = math.nan
+    if math.isfinite(gear_value) and gear_value == round(gear_value) and abs(gear_value) < 2.0**31:
+        gear = int(gear_value)
+        if gear == 0:
+            ratio = 0.0
+        elif gear == -1:
+            ratio = -dprm[2] * dprm[1]
+        elif 1 <= gear <= n_gears:
+            ratio = dprm[11 + gear - 1] * dprm[1]
+    if not math.isfinite(ratio):
+        out[:] = math.nan
+        return False
+    if ratio == 0.0:
+        out[:] = 0.0  # neutral: nothing reaches the wheels, whatever the engine does
+        return True
+    n_driven = dprm[7] + dprm[8] + dprm[9] + dprm[10]
+    carrier_accel = 0.0
+    carrier_speed = 0.0
+    for i in range(4):
+        carrier_accel += dprm[7 + i] * omega_dot[i]
+        carrier_speed += dprm[7 + i] * omega[i]
+    if math.isfinite(engine_torque):
+        clutch = engine_torque - dprm[4] * ratio * (carrier_accel / n_driven)
+        total = ratio * clutch
+        # The engine turns forward in every gear: a positive clutch torque sends power to
+        # the wheels (losses take eta of it), a negative one (engine braking) draws it.
+        eta = dprm[3]
+        total = total * eta if clutch >= 0.0 else total / eta
+        for i in range(4):
+            out[i] = total * dprm[7 + i] / n_driven
+    else:
+        out[:] = math.nan
+    if not math.isfinite(engine_speed):
+        return True
+    return bool(abs(engine_speed - ratio * (carrier_speed / n_driven)) <= dprm[5])
+
+
 def engine_wheel_torques(
     engine_torque: float,
     gear: int,
     drivetrain: Drivetrain,
     wheel_omega_dot: ArrayLike | None = None,
 ) -> FloatArray:
-    """Drive torque per wheel from the engine torque and the engaged gear.
+    """Drive torque per wheel from the engine torque and the engaged gear (`engine_torques`).
 
     Args:
         engine_torque: net engine torque at the crankshaft [N m] (combustion minus drag, as
@@ -245,27 +307,17 @@ def engine_wheel_torques(
     Raises:
         InputShapeError: wheel_omega_dot is not of shape (4,).
     """
-    driven = drivetrain.driven
-    ratio = drivetrain.overall_ratio(int(gear))
-    if ratio == 0.0:
-        return np.zeros(4)  # neutral: nothing reaches the wheels, whatever the engine does
-    if not (math.isfinite(engine_torque) and math.isfinite(ratio)):
-        return np.full(4, math.nan)
-    clutch = float(engine_torque)
+    accel = np.zeros(4)
     if wheel_omega_dot is not None:
-        accel = np.asarray(wheel_omega_dot, dtype=np.float64)
+        accel = np.ascontiguousarray(wheel_omega_dot, dtype=np.float64)
         if accel.shape != (4,):
             raise InputShapeError(f'wheel_omega_dot must have shape (4,), got {accel.shape}')
-        n_driven = float(np.sum(driven))
-        carrier = float(np.sum(driven * accel)) / n_driven
-        clutch -= drivetrain.engine_inertia * ratio * carrier
-    total = ratio * clutch
-    # The engine turns forward in every gear: a positive clutch torque sends power to the
-    # wheels (losses take eta of it), a negative one (engine braking) draws it from them.
-    eta = drivetrain.efficiency
-    total = total * eta if clutch >= 0.0 else total / eta
-    share: FloatArray = total * driven / float(np.sum(driven))
-    return share
+    out = np.empty(4)
+    engine_torques(
+        drivetrain.params_array(), float(engine_torque), float(gear), math.nan, np.zeros(4),
+        accel, out,
+    )  # fmt: skip
+    return out
 
 
 def clutch_engaged(
@@ -288,17 +340,15 @@ def clutch_engaged(
     Raises:
         InputShapeError: wheel_omega is not of shape (4,).
     """
-    omega = np.asarray(wheel_omega, dtype=np.float64)
+    omega = np.ascontiguousarray(wheel_omega, dtype=np.float64)
     if omega.shape != (4,):
         raise InputShapeError(f'wheel_omega must have shape (4,), got {omega.shape}')
-    ratio = drivetrain.overall_ratio(int(gear))
-    if not math.isfinite(ratio):
-        return False
-    if ratio == 0.0 or not math.isfinite(engine_speed):
-        return True
-    driven = drivetrain.driven
-    carrier = float(np.sum(driven * omega)) / float(np.sum(driven))
-    return abs(engine_speed - ratio * carrier) <= drivetrain.max_clutch_slip
+    return bool(
+        engine_torques(
+            drivetrain.params_array(), 0.0, float(gear), float(engine_speed), omega,
+            np.zeros(4), np.empty(4),
+        )  # fmt: skip
+    )
 
 
 class EngineState(NamedTuple):

@@ -28,10 +28,12 @@ from vd_observer_node.estimation.drivetrain import (
     TORQUE_ENGINE,
     TORQUE_NONE,
     Drivetrain,
+    engine_torques,
     engine_wheel_torques,
     gear_number,
 )
-from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig, estimates_from_record
+from vd_observer_node.estimation.estimator_step import ESTIMATES, estimator_update
 from vd_observer_node.estimation.faults import ENGINE_FAULTS, FaultCounter, FaultReport
 from vd_observer_node.estimation.observer import (
     WHEEL_INPUTS,
@@ -41,32 +43,6 @@ from vd_observer_node.estimation.observer import (
 )
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.kernel._jit import jit
-from vd_observer_node.kernel.estimation import (
-    E_AERO,
-    E_FX,
-    E_FZ,
-    E_MASS,
-    E_MASS_CONVERGED,
-    E_MASS_EXCITED,
-    E_MASS_STD,
-    E_MASS_USED,
-    E_MU,
-    E_MU_VALID,
-    E_RADIUS,
-    E_RADIUS_CONVERGED,
-    E_RADIUS_FREE,
-    E_RADIUS_STD,
-    E_RADIUS_USED,
-    E_ROLL,
-    E_SLIP,
-    E_SLOPE,
-    E_SLOPE_VALID,
-    EST_SIZE,
-    CompiledEstimator,
-    engine_torques,
-    estimates_from_packed,
-    estimator_update,
-)
 from vd_observer_node.kernel.levant import CompiledDifferentiator, diff_update
 from vd_observer_node.kernel.situation import (
     P_CONFIDENCE,
@@ -118,12 +94,8 @@ def _diff_args(d: CompiledDifferentiator) -> tuple[Any, ...]:
     return (d.prm, d.lip, d.z, d.f_last, d.active, d.pend_t, d.pend_f, d.scal, d.counts)
 
 
-def _estimator_args(e: CompiledEstimator) -> tuple[Any, ...]:
-    s = e.s
-    return (
-        e.prm, s.scal, s.held, s.f_stages, s.f_prev, s.f_meta, s.s_stages, s.s_prev, s.s_meta,
-        s.v_stages, s.v_prev, s.v_meta, s.last, e.counts,
-    )  # fmt: skip
+def _estimator_args(e: Estimator) -> tuple[Any, ...]:
+    return (e.params, *e.state.args)
 
 
 @jit
@@ -132,13 +104,11 @@ def _cascade_step(
     wpt: FloatArray, wpf: FloatArray, wsc: FloatArray, wcnt: NDArray[np.int64],
     sprm: FloatArray, slip_: FloatArray, sz: FloatArray, sfl: FloatArray, sact: BoolArray,
     spt: FloatArray, spf: FloatArray, ssc: FloatArray, scnt: NDArray[np.int64],
-    eprm: FloatArray, escal: FloatArray, held: FloatArray, fst: FloatArray, fpr: FloatArray,
-    fme: FloatArray, sst: FloatArray, spr: FloatArray, sme: FloatArray, vst: FloatArray,
-    vpr: FloatArray, vme: FloatArray, last: FloatArray, ecnt: NDArray[np.int64],
+    ep: np.record, es: np.record, fst: FloatArray, sst: FloatArray, vst: FloatArray,
     measured: bool, dprm: FloatArray, escl: FloatArray, oprm: FloatArray, ost: FloatArray,
     oout: FloatArray, t: float, angle: FloatArray, speed: float, torque: FloatArray,
     engine: FloatArray, wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray,
-    body_valid: BoolArray, est: FloatArray,
+    body_valid: BoolArray, est: np.record,
 ) -> bool:  # fmt: skip
     """One stamp of `run_cascade`: wheel and speed observers, then the estimator.
 
@@ -170,8 +140,8 @@ def _cascade_step(
         escl[1] = engine[1]
         torque_ok = engaged and t - escl[0] >= dprm[6]
     estimator_update(
-        eprm, escal, held, fst, fpr, fme, sst, spr, sme, vst, vpr, vme, last, ecnt, t,
-        wheel[1], wheel[2], v_est, body[1, 0], wheel_torque, torque_ok, est,
+        ep, es, fst, sst, vst, t, wheel[1], wheel[2], v_est, body[1, 0], wheel_torque,
+        torque_ok, est,
     )  # fmt: skip
     return torque_ok
 
@@ -182,15 +152,13 @@ def _cascade_block(
     wpt: FloatArray, wpf: FloatArray, wsc: FloatArray, wcnt: NDArray[np.int64],
     sprm: FloatArray, slip_: FloatArray, sz: FloatArray, sfl: FloatArray, sact: BoolArray,
     spt: FloatArray, spf: FloatArray, ssc: FloatArray, scnt: NDArray[np.int64],
-    eprm: FloatArray, escal: FloatArray, held: FloatArray, fst: FloatArray, fpr: FloatArray,
-    fme: FloatArray, sst: FloatArray, spr: FloatArray, sme: FloatArray, vst: FloatArray,
-    vpr: FloatArray, vme: FloatArray, last: FloatArray, ecnt: NDArray[np.int64],
+    ep: np.record, es: np.record, fst: FloatArray, sst: FloatArray, vst: FloatArray,
     measured: bool, dprm: FloatArray, escl: FloatArray, oprm: FloatArray, ost: FloatArray,
     t: FloatArray, angles: FloatArray, speeds: FloatArray, torques: FloatArray,
     engine: FloatArray, wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray,
-    est: FloatArray, torque_valid: BoolArray, offsets: FloatArray,
+    est: NDArray[np.void], torque_valid: BoolArray, offsets: FloatArray,
 ) -> None:  # fmt: skip
-    """`_cascade_step` over N stamps; wheel (N, 3, 4), body (N, 3), est (N, EST_SIZE),
+    """`_cascade_step` over N stamps; wheel (N, 3, 4), body (N, 3), est (N,) `ESTIMATES`,
     offsets (N, OFFSET_OUT_SIZE) where the offset is learnt, else (0, OFFSET_OUT_SIZE).
 
     ``escl`` (2,) and ``ost`` are the engine path's state (`_cascade_step`), carried from
@@ -202,8 +170,7 @@ def _cascade_block(
     for k in range(t.shape[0]):
         torque_valid[k] = _cascade_step(
             wprm, wlip, wz, wfl, wact, wpt, wpf, wsc, wcnt, sprm, slip_, sz, sfl, sact, spt,
-            spf, ssc, scnt, eprm, escal, held, fst, fpr, fme, sst, spr, sme, vst, vpr, vme,
-            last, ecnt, measured, dprm, escl, oprm, ost, oout, t[k], angles[k], speeds[k],
+            spf, ssc, scnt, ep, es, fst, sst, vst, measured, dprm, escl, oprm, ost, oout, t[k], angles[k], speeds[k],
             torques[k], engine[k], wheel[k], wheel_valid[k], body1, body_valid, est[k],
         )  # fmt: skip
         if offsets.shape[0] > 0:
@@ -253,7 +220,7 @@ def run_cascade_compiled(
         wheels, speed, estimator, escl, ost = state.parts
     else:
         wheels, speed = _observers(observer_config or ObserverConfig())
-        estimator = CompiledEstimator(vehicle, estimator_config, source)
+        estimator = Estimator(vehicle, estimator_config, source)
         # the engine path's state: the stamp the clutch last slipped or the gear changed
         # (-inf before), the last gear (nan)
         escl = np.array([-np.inf, np.nan])
@@ -263,7 +230,7 @@ def run_cascade_compiled(
     wheel = np.zeros((n, 3, 4))
     wheel_valid = np.zeros((n, 4), dtype=np.bool_)
     body = np.zeros((n, 3))
-    est = np.zeros((n, EST_SIZE))
+    est = np.zeros(n, ESTIMATES)
     torque_valid = np.zeros(n, dtype=np.bool_)
     offsets = np.zeros((n if oprm.shape[0] > 0 else 0, OFFSET_OUT_SIZE))
     block: Any = _cascade_block  # its leading arguments come as tuples
@@ -288,15 +255,15 @@ def run_cascade_compiled(
         omega_dot=wheel[:, 2, :].copy(),
         speed=body[:, 0].copy(),
         accel=body[:, 1].copy(),
-        fx=est[:, E_FX : E_FX + 4].copy(),
-        fz=est[:, E_FZ : E_FZ + 4].copy(),
-        mu=est[:, E_MU : E_MU + 4].copy(),
-        mu_valid=est[:, E_MU_VALID : E_MU_VALID + 4] != 0.0,
-        slip=est[:, E_SLIP : E_SLIP + 4].copy(),
-        rolling=est[:, E_ROLL : E_ROLL + 4].copy(),
-        aero=est[:, E_AERO].copy(),
-        slope=est[:, E_SLOPE].copy(),
-        slope_valid=est[:, E_SLOPE_VALID] != 0.0,
+        fx=est['fx'].copy(),
+        fz=est['fz'].copy(),
+        mu=est['mu'].copy(),
+        mu_valid=est['mu_valid'] != 0,
+        slip=est['slip'].copy(),
+        rolling=est['rolling'].copy(),
+        aero=est['aero'].copy(),
+        slope=est['slope'].copy(),
+        slope_valid=est['slope_valid'].copy(),
         wheel_valid=wheel_valid,
         torque_valid=torque_valid,
         torque_source=source,
@@ -315,16 +282,16 @@ def run_cascade_compiled(
             if oprm.shape[0] > 0
             else {}
         ),
-        mass=est[:, E_MASS].copy(),
-        mass_std=est[:, E_MASS_STD].copy(),
-        mass_converged=est[:, E_MASS_CONVERGED] != 0.0,
-        mass_used=est[:, E_MASS_USED].copy(),
-        mass_excited=est[:, E_MASS_EXCITED] != 0.0,
-        radius=est[:, E_RADIUS].copy(),
-        radius_std=est[:, E_RADIUS_STD].copy(),
-        radius_converged=est[:, E_RADIUS_CONVERGED] != 0.0,
-        radius_used=est[:, E_RADIUS_USED].copy(),
-        radius_free_wheels=est[:, E_RADIUS_FREE].astype(np.int64),
+        mass=est['mass'].copy(),
+        mass_std=est['mass_std'].copy(),
+        mass_converged=est['mass_converged'].copy(),
+        mass_used=est['mass_used'].copy(),
+        mass_excited=est['mass_excited'].copy(),
+        radius=est['radius'].copy(),
+        radius_std=est['radius_std'].copy(),
+        radius_converged=est['radius_converged'].copy(),
+        radius_used=est['radius_used'].copy(),
+        radius_free_wheels=est['radius_free_wheels'].copy(),
         **learnt.fields(),
     )
 
@@ -438,7 +405,7 @@ class CompiledChain:
         vehicle = settings.vehicle
         self.wheels, self.speed = _observers(settings.observer)
         source = settings.source
-        self.estimator = CompiledEstimator(vehicle, settings.estimator, source)
+        self.estimator = Estimator(vehicle, settings.estimator, source)
         self._drivetrain = settings.drivetrain if source == TORQUE_ENGINE else None
         self._none = source == TORQUE_NONE
         self.monitor = CompiledSituationMonitor(
@@ -460,7 +427,7 @@ class CompiledChain:
         self._wheel_valid = np.zeros(4, dtype=np.bool_)
         self._body = np.zeros((3, 1))
         self._body_valid = np.zeros(1, dtype=np.bool_)
-        self._est = np.zeros(EST_SIZE)
+        self._est = np.zeros(1, ESTIMATES).view(np.recarray)[0]
         # the engine path's parameters and state, as run_cascade_compiled gives them
         self._dprm = (
             self._drivetrain.params_array() if self._drivetrain is not None else np.zeros(0)
@@ -514,7 +481,7 @@ class CompiledChain:
                 float(row[0]) - used, gear_number(float(row[1])), self._drivetrain, wheel[2]
             )
             torques = np.where(np.isfinite(derived), derived, 0.0)
-        mu_valid = est[E_MU_VALID : E_MU_VALID + 4] != 0.0
+        mu_valid = est.mu_valid != 0
         monitor = self.monitor
         monitor.update_arrays(
             float(t),
@@ -522,9 +489,9 @@ class CompiledChain:
             float(speed),
             torques,
             wheel[1].copy(),
-            est[E_MU : E_MU + 4].copy(),
+            np.array(est.mu),
             mu_valid,
-            est[E_FZ : E_FZ + 4].copy(),
+            np.array(est.fz),
         )
         a = monitor.arrays
         return ChainOutput(
@@ -532,7 +499,7 @@ class CompiledChain:
                 wheel[0].copy(), wheel[1].copy(), wheel[2].copy(), self._wheel_valid.copy()
             ),
             SpeedState(float(body[0, 0]), float(body[1, 0]), bool(self._body_valid[0])),
-            estimates_from_packed(est),
+            estimates_from_record(est),
             Situation(
                 float(t),
                 potential_from_arrays(a.pot),

@@ -9,8 +9,8 @@ one, joins each match with its latest value: :func:`held_inputs`) and publishes,
 ``/vd/estimates/resistances`` (Resistances) and ``/vd/estimates/slope`` (Slope). Health and
 fault counters go to ``/diagnostics`` once per second, with a WARN naming a mapped input
 topic that stopped. All math is in
-:mod:`vd_observer_node.estimation.estimator`; ``kernel`` selects its compiled twin (default) or the
-Python reference. Messages travel as CDR bytes (:mod:`vd_observer_node.bag.cdr_message`).
+:mod:`vd_observer_node.estimation.estimator` (its compiled step; ``kernel`` no longer changes
+it). Messages travel as CDR bytes (:mod:`vd_observer_node.bag.cdr_message`).
 """
 
 from __future__ import annotations
@@ -121,13 +121,12 @@ class EstimatorNode(Node):
         classes = {key: input_message_class(spec) for key, spec in sensors.items()}
         self.vehicle = load_estimator_vehicle(vehicle_file)
         config = EstimatorConfig.from_mapping(values)
-        if self.kernel == 'compiled':
-            from vd_observer_node.kernel.estimation import CompiledEstimator
-
-            # compiled (or loaded from numba's cache) here, not at the first sample
-            self.estimator: Any = CompiledEstimator(self.vehicle, config)
-        else:
-            self.estimator = Estimator(self.vehicle, config)
+        # both kernels run the one estimator (its step compiled)
+        self.estimator = Estimator(self.vehicle, config)
+        # compile (or load from numba's cache) now, on a scratch estimator, not at the first
+        # sample
+        zeros = np.zeros(4)
+        Estimator(self.vehicle, config).update(0.0, zeros, zeros, 0.0, 0.0, zeros)
         max_gap_ns = round(self.estimator.config.max_gap * 1e9)
         # TOPICS: the wheel sensor's stamps first; they drive, as in the replay
         self.aligner = input_matcher(
