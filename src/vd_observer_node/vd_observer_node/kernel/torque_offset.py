@@ -19,7 +19,7 @@ from vd_observer_node.estimation.torque_offset import (
     TorqueOffsetState,
 )
 from vd_observer_node.kernel._jit import jit
-from vd_observer_node.kernel.estimation import _stamp_dt
+from vd_observer_node.estimation.faults import stamp_dt as _stamp_dt
 
 __all__ = [
     'OFFSET_CLAMPED_SLOT',
