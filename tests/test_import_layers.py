@@ -29,8 +29,16 @@ OBSERVER_LAYERS: dict[str, set[str]] = {
     'kernel': {'errors', 'estimation', 'situation', 'chain', 'jit'},
     'tools': {'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel', 'jit'},
     'testing': {
-        'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel', 'jit', 'tools',
-    },  # fmt: skip
+        'errors',
+        'bag',
+        'inputs',
+        'estimation',
+        'situation',
+        'chain',
+        'kernel',
+        'jit',
+        'tools',
+    },
     # thin nodes: the core and the node plumbing, never the offline tools or test helpers
     'nodes': {'errors', 'bag', 'inputs', 'estimation', 'situation', 'chain', 'kernel', 'jit'},
 }

@@ -343,12 +343,11 @@ def clutch_engaged(
     omega = np.ascontiguousarray(wheel_omega, dtype=np.float64)
     if omega.shape != (4,):
         raise InputShapeError(f'wheel_omega must have shape (4,), got {omega.shape}')
-    return bool(
-        engine_torques(
-            drivetrain.params_array(), 0.0, float(gear), float(engine_speed), omega,
-            np.zeros(4), np.empty(4),
-        )  # fmt: skip
-    )
+    engaged = engine_torques(
+        drivetrain.params_array(), 0.0, float(gear), float(engine_speed), omega, np.zeros(4),
+        np.empty(4),
+    )  # fmt: skip
+    return bool(engaged)
 
 
 class EngineState(NamedTuple):

@@ -249,7 +249,9 @@ def _copy(src: np.record, dst: np.record) -> None:
 
 
 @jit
-def _online_radius(p: np.record, s: np.record, t: float, x: FloatArray, ok: bool, est: np.record) -> None:
+def _online_radius(
+    p: np.record, s: np.record, t: float, x: FloatArray, ok: bool, est: np.record
+) -> None:
     """Advance the online radius (held where not every input was finite and trusted)."""
     if p.radius_on and ok:
         r = s.radius_s

@@ -86,7 +86,9 @@ def lowpass_update(
 
 
 @jit
-def lowpass_derivative(stages: FloatArray, prev: FloatArray, meta: np.record, out: FloatArray) -> None:
+def lowpass_derivative(
+    stages: FloatArray, prev: FloatArray, meta: np.record, out: FloatArray
+) -> None:
     """Rate of change of the output over the last step, (y_k - y_(k-1)) / dt, into ``out``
     (d,); zeros before the second update (or with tau = 0: never updated)."""
     if not (meta.started and meta.has_prev and meta.last_dt > 0.0):

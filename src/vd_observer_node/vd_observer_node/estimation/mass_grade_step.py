@@ -29,8 +29,8 @@ __all__ = [
     'MASS_STATE',
     'forgetting_factor',
     'mass_held',
-    'mass_reset',
     'mass_rescale',
+    'mass_reset',
     'mass_update',
     'rls_update',
 ]
@@ -299,7 +299,7 @@ def mass_update(p: np.record, s: np.record, t: float, sum_fx: float, speed: floa
     # dv/dt is the backward difference of the filtered speed.
     if dt == 0.0 or not s.lp_on:
         s.lp_on = True
-        s.f1, s.f2, s.v1, s.v2 = force, force, speed, speed
+        f1, f2, v1, v2 = force, force, speed, speed
         accel = 0.0
         force_rate = 0.0
     else:
@@ -310,19 +310,20 @@ def mass_update(p: np.record, s: np.record, t: float, sum_fx: float, speed: floa
         v2 = s.v2 + w * (v1 - s.v2)
         accel = (v2 - s.v2) / dt
         force_rate = (f2 - s.f2) / dt
-        s.f1, s.f2, s.v1, s.v2 = f1, f2, v1, v2
-    f_lp, v_lp = s.f2, s.v2
+    s.f1, s.f2, s.v1, s.v2 = f1, f2, v1, v2
+    f_lp, v_lp = f2, v2
     c_r = p.rolling_c0 * (1.0 + p.rolling_c1 * abs(v_lp) / _KMH_REFERENCE)
     y = accel + direction * g * c_r * math.cos(s.slope)
     # The high-pass removes a grade that is constant over grade_tau (same on both sides).
     if dt == 0.0 or math.isnan(s.f_slow):
-        s.f_slow, s.y_slow = f_lp, y
+        f_slow, y_slow = f_lp, y
     else:
         w_slow = -math.expm1(-dt / p.grade_tau)
-        s.f_slow += w_slow * (f_lp - s.f_slow)
-        s.y_slow += w_slow * (y - s.y_slow)
-    f_hp = f_lp - s.f_slow
-    y_hp = y - s.y_slow
+        f_slow = s.f_slow + w_slow * (f_lp - s.f_slow)
+        y_slow = s.y_slow + w_slow * (y - s.y_slow)
+    s.f_slow, s.y_slow = f_slow, y_slow
+    f_hp = f_lp - f_slow
+    y_hp = y - y_slow
     s.running += dt
     excited = (
         dt > 0.0

@@ -222,7 +222,10 @@ def radius_update(
         s.theta[0] = theta[0]
         s.cov[0, 0] = cov[0, 0]
     s.free_time += dt
-    if s.free_time >= p.min_free_time and math.sqrt(s.cov[0, 0]) <= p.converged_std_ratio * s.theta[0]:
+    if (
+        s.free_time >= p.min_free_time
+        and math.sqrt(s.cov[0, 0]) <= p.converged_std_ratio * s.theta[0]
+    ):
         s.converged = True
     _radius_out(p, s, n_free)
     s.has_last = True

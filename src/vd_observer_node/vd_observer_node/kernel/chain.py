@@ -170,8 +170,9 @@ def _cascade_block(
     for k in range(t.shape[0]):
         torque_valid[k] = _cascade_step(
             wprm, wlip, wz, wfl, wact, wpt, wpf, wsc, wcnt, sprm, slip_, sz, sfl, sact, spt,
-            spf, ssc, scnt, ep, es, fst, sst, vst, measured, dprm, escl, oprm, ost, oout, t[k], angles[k], speeds[k],
-            torques[k], engine[k], wheel[k], wheel_valid[k], body1, body_valid, est[k],
+            spf, ssc, scnt, ep, es, fst, sst, vst, measured, dprm, escl, oprm, ost, oout, t[k],
+            angles[k], speeds[k], torques[k], engine[k], wheel[k], wheel_valid[k], body1,
+            body_valid, est[k],
         )  # fmt: skip
         if offsets.shape[0] > 0:
             offsets[k] = oout

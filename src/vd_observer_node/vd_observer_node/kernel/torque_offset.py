@@ -13,13 +13,13 @@ from typing import Final
 import numpy as np
 from numpy.typing import NDArray
 
+from vd_observer_node.estimation.faults import stamp_dt as _stamp_dt
 from vd_observer_node.estimation.torque_offset import (
     TorqueOffset,
     TorqueOffsetConfig,
     TorqueOffsetState,
 )
 from vd_observer_node.kernel._jit import jit
-from vd_observer_node.estimation.faults import stamp_dt as _stamp_dt
 
 __all__ = [
     'OFFSET_CLAMPED_SLOT',
