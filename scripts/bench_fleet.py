@@ -81,7 +81,7 @@ sys.path[:0] = json.loads(sys.argv[3])
     + _HWM
     + """
 from vd_observer_node.tools.replay import replay_bag
-from vd_observer_node.kernel.chain import warm_up
+from vd_observer_node.chain import warm_up
 from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_observer_node.estimation.vehicle import load_vehicle_params
 warm_up(TyreCurves.from_tire(load_vehicle_params().tire))

@@ -1,16 +1,15 @@
 #!/usr/bin/env python3
-"""The compiled kernel against the Python reference: cost per 4-wheel sample, start-up time.
+"""The chain's one implementation: cost per 4-wheel sample in blocks and per stamp, start-up.
 
-Prints, side by side in one run (issue 14's targets: <= 20 us per sample for cascade +
-monitor, node start-up <= 3 s with a warm compile cache):
+Prints (issue 14's targets: <= 20 us per sample for cascade + monitor, node start-up <= 3 s
+with a warm compile cache):
 
-1. offline blocks (what `vd replay` runs): `run_cascade` + `run_situation` against their
-   compiled twins, on the first 30 s of paper_table1 and of launch_low_mu at 1 kHz with the
-   96-count encoder and speed noise;
-2. per stamp (what the live nodes run, N = 1 per call): `chain.PythonChain.update` against
-   `kernel.chain.CompiledChain.update`;
-3. start-up of pipeline_node and observer_node with each kernel: from the process start to
-   its 'ready' log line (median of 3; the numba cache is warm after the first).
+1. offline blocks (what `vd replay` runs): `run_cascade` + `run_situation` on the first 30 s
+   of paper_table1 and of launch_low_mu at 1 kHz with the 96-count encoder and speed noise;
+   the same source uncompiled (``VD_JIT=0``, a child process) on the first 2 s, for scale;
+2. per stamp (what the live pipeline node runs, N = 1 per call): `chain.Chain.update`;
+3. start-up of pipeline_node, observer_node and alerts_node: from the process start to its
+   'ready' log line (median of 3; the numba cache is warm).
 
 Run inside ``. ./env.sh``; about a minute.
 """
@@ -28,16 +27,10 @@ from pathlib import Path
 
 import numpy as np
 from vd_common.vehicle.params import default_vehicle_file, load_vehicle
-from vd_observer_node.chain import ChainSettings, PythonChain
+from vd_observer_node.chain import Chain, ChainSettings, warm_up
 from vd_observer_node.estimation.cascade import run_cascade
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
-from vd_observer_node.kernel.chain import (
-    CompiledChain,
-    compiled_monitor,
-    run_cascade_compiled,
-    run_situation_compiled,
-    warm_up,
-)
+from vd_observer_node.kernel._jit import JIT_ENABLED
 from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_observer_node.situation.monitor import SituationMonitor, run_situation
 from vd_observer_node.testing.launcher import NodeSpec
@@ -58,51 +51,68 @@ def record(name: str, duration: float) -> tuple[np.ndarray, ...]:
     return sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque
 
 
-def blocks(name: str, vehicle: object, curves: TyreCurves) -> None:
-    t, angle, speed, torque = record(name, 30.0)
+def _block_cost(
+    name: str, seconds: float, vehicle: object, curves: TyreCurves
+) -> tuple[float, ...]:
+    """(cascade, monitor) CPU [us] per sample, median of 5 (1 uncompiled), and N."""
+    t, angle, speed, torque = record(name, seconds)
     n = len(t)
     loads = vehicle.static_wheel_loads[[0, 2]]  # type: ignore[attr-defined]
     radius = vehicle.effective_radius  # type: ignore[attr-defined]
-    start = time.process_time()
-    cascade = run_cascade(t, angle, speed, torque, vehicle)
-    mid = time.process_time()
-    run_situation(SituationMonitor(curves, loads, radius), angle, speed, torque, cascade)
-    end = time.process_time()
-    py = ((mid - start) / n * 1e6, (end - mid) / n * 1e6)
     runs = []
-    for _ in range(5):
-        monitor = compiled_monitor(curves, loads, radius)
+    for _ in range(5 if JIT_ENABLED else 1):
+        monitor = SituationMonitor(curves, loads, radius)
         start = time.process_time()
-        compiled = run_cascade_compiled(t, angle, speed, torque, vehicle)
+        cascade = run_cascade(t, angle, speed, torque, vehicle)
         mid = time.process_time()
-        run_situation_compiled(monitor, angle, speed, torque, compiled)
+        run_situation(monitor, angle, speed, torque, cascade)
         end = time.process_time()
         runs.append(((mid - start) / n * 1e6, (end - mid) / n * 1e6))
-    cc = statistics.median(r[0] for r in runs)
-    cs = statistics.median(r[1] for r in runs)
-    print(
-        f'  {name:14s} ({n} samples, mu valid {cascade.mu_valid.mean():.0%}): python '
-        f'{py[0]:6.1f} + {py[1]:6.1f} = {sum(py):6.1f} us   compiled {cc:5.2f} + {cs:5.2f} = '
-        f'{cc + cs:5.2f} us   ratio {sum(py) / (cc + cs):5.0f}x'
+    return statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs), n
+
+
+def blocks(name: str, vehicle: object, curves: TyreCurves) -> None:
+    cc, cs, n = _block_cost(name, 30.0, vehicle, curves)
+    code = (
+        'import sys; sys.argv = ["x"]; import runpy; '
+        f'm = runpy.run_path({str(Path(__file__))!r}); '
+        f'print(*m["uncompiled"]({name!r}))'
     )
+    env = dict(os.environ, VD_JIT='0')
+    out = subprocess.run(
+        [sys.executable, '-c', code], env=env, capture_output=True, text=True, check=True
+    )
+    pc, ps = (float(v) for v in out.stdout.split()[-2:])
+    print(
+        f'  {name:14s} ({n} samples): compiled {cc:5.2f} + {cs:5.2f} = {cc + cs:5.2f} us   '
+        f'uncompiled (VD_JIT=0, 2 s) {pc:7.1f} + {ps:7.1f} = {pc + ps:7.1f} us   '
+        f'ratio {(pc + ps) / (cc + cs):5.0f}x'
+    )
+
+
+def uncompiled(name: str) -> tuple[float, float]:
+    """The block cost with ``VD_JIT=0`` (called in a child process)."""
+    vehicle = load_estimator_vehicle(default_vehicle_file())
+    curves = TyreCurves.from_tire(load_vehicle(default_vehicle_file()).tire)
+    cc, cs, _ = _block_cost(name, 2.0, vehicle, curves)
+    return cc, cs
 
 
 def per_stamp(vehicle: object, curves: TyreCurves) -> None:
     t, angle, speed, torque = record('launch_low_mu', 5.0)
-    settings = ChainSettings(vehicle=vehicle, curves=curves)  # type: ignore[arg-type]
-    for label, chain in (('python', PythonChain(settings)), ('compiled', CompiledChain(settings))):
-        start = time.process_time()
-        for k in range(len(t)):
-            chain.update(float(t[k]), angle[k], float(speed[k]), torque[k])
-        cost = (time.process_time() - start) / len(t) * 1e6
-        print(f'  {label:8s} chain.update: {cost:7.1f} us per stamp (N = 1, outputs as objects)')
+    chain = Chain(ChainSettings(vehicle=vehicle, curves=curves))  # type: ignore[arg-type]
+    start = time.process_time()
+    for k in range(len(t)):
+        chain.update(float(t[k]), angle[k], float(speed[k]), torque[k])
+    cost = (time.process_time() - start) / len(t) * 1e6
+    print(f'  Chain.update: {cost:7.1f} us per stamp (N = 1, outputs as objects)')
 
 
-def startup(executable: str, kernel: str, env: dict[str, str]) -> float:
+def startup(executable: str, env: dict[str, str]) -> float:
     """Median wall time [s] from spawn to the node's 'ready' line, over 3 starts."""
     times = []
     for _ in range(3):
-        argv = NodeSpec('vd_observer_node', executable, executable, {'kernel': kernel}).argv()
+        argv = NodeSpec('vd_observer_node', executable, executable, {}).argv()
         with tempfile.TemporaryFile() as log:
             start = time.monotonic()
             proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT, env=env)
@@ -132,14 +142,10 @@ def main() -> int:
     env['ROS_DOMAIN_ID'] = str(60 + os.getpid() % 30)
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     for executable in ('pipeline_node', 'observer_node', 'alerts_node'):
-        line = ', '.join(
-            f'{kernel} {startup(executable, kernel, env):.2f} s'
-            for kernel in ('compiled', 'python')
-        )
-        print(f'  {executable:14s} {line}')
+        print(f'  {executable:14s} {startup(executable, env):.2f} s')
     print(f'load average {os.getloadavg()[0]:.2f}')
     return 0
 
 
-if __name__ == '__main__':
+if __name__ == '__main__' and sys.argv[1:2] != ['x']:
     sys.exit(main())

@@ -3,7 +3,7 @@
 
 Runs sim_node (real-time factor 1.0, the first `--duration` s of the paper scenario) with the
 estimation nodes of each layout (``nodes``: observer_node, estimator_node and alerts_node;
-``pipeline``: pipeline_node) and each kernel (``compiled``, ``python``), with and without
+``pipeline``: pipeline_node), with and without
 recorder_node, each node its
 own process (GraphLauncher, like ``ros2 run``), plus a probe process
 (scripts/latency_probe.py) that notes the wall-clock reception time of every message.
@@ -255,7 +255,6 @@ def run_graph(
     salt: int = 0,
     timeout_s: float | None = None,
     layout: str = 'nodes',
-    kernel: str = '',
 ) -> RunResult:
     """Run the graph once and measure it.
 
@@ -270,7 +269,6 @@ def run_graph(
         timeout_s: give up on the simulator after this wall time [s] (default 3x duration
             + 30 s).
         layout: 'nodes' (observer, estimator and alerts nodes) or 'pipeline' (pipeline_node).
-        kernel: value of the estimation nodes' ``kernel`` parameter ('' = default).
     """
     result = RunResult(rate_hz, duration_s, recorder)
     work.mkdir(parents=True, exist_ok=True)
@@ -295,7 +293,7 @@ def run_graph(
                     NodeSpec('vd_observer_node', 'recorder_node', 'recorder', {'output': str(bag)})
                 )
                 ready.append((rec, 'recording to'))
-            params: dict[str, object] = {'kernel': kernel} if kernel else {}
+            params: dict[str, object] = {}
             for executable, name, text in LAYOUTS[layout]:
                 proc = NodeProcess(
                     NodeSpec('vd_observer_node', executable, name, dict(params)), logs, node_env
@@ -470,9 +468,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         '--layouts', nargs='*', default=['nodes', 'pipeline'], choices=sorted(LAYOUTS)
     )
-    parser.add_argument(
-        '--kernels', nargs='*', default=['compiled', 'python'], choices=['compiled', 'python']
-    )
     args = parser.parse_args(argv)
     if args.quick:
         args.duration, args.sweep_duration, args.sweep = 5.0, 3.0, [200.0, 1000.0]
@@ -494,36 +489,33 @@ def main(argv: list[str] | None = None) -> int:
             return run_graph(rate, duration, work=base / f'{tag}_{salt}', salt=salt, **kw)  # type: ignore[arg-type]
 
         for layout in args.layouts:
-            for kernel in args.kernels:
-                label = f'{layout} ({kernel} kernel)'
-                if 'main' not in args.skip:
-                    runs = [
-                        run(
-                            f'main_{layout}_{kernel}',
-                            args.rate,
-                            args.duration,
-                            recorder=False,
-                            publish_truth=truth,
-                            layout=layout,
-                            kernel=kernel,
-                        )
-                        for _ in range(args.repeat)
-                    ]
-                    _print_runs(f'sim + {label} at {args.rate:g} Hz', runs)
-                if 'rec' not in args.skip:
-                    runs = [
-                        run(
-                            f'rec_{layout}_{kernel}',
-                            args.rate,
-                            args.duration,
-                            recorder=True,
-                            publish_truth=truth,
-                            layout=layout,
-                            kernel=kernel,
-                        )
-                        for _ in range(args.repeat)
-                    ]
-                    _print_runs(f'sim + {label} + recorder at {args.rate:g} Hz', runs)
+            label = layout
+            if 'main' not in args.skip:
+                runs = [
+                    run(
+                        f'main_{layout}',
+                        args.rate,
+                        args.duration,
+                        recorder=False,
+                        publish_truth=truth,
+                        layout=layout,
+                    )
+                    for _ in range(args.repeat)
+                ]
+                _print_runs(f'sim + {label} at {args.rate:g} Hz', runs)
+            if 'rec' not in args.skip:
+                runs = [
+                    run(
+                        f'rec_{layout}',
+                        args.rate,
+                        args.duration,
+                        recorder=True,
+                        publish_truth=truth,
+                        layout=layout,
+                    )
+                    for _ in range(args.repeat)
+                ]
+                _print_runs(f'sim + {label} + recorder at {args.rate:g} Hz', runs)
         if 'sweep' not in args.skip:
             print(
                 f'\n== rate sweep, {args.sweep_duration:g} s runs, observer + estimator + alerts',

@@ -148,8 +148,7 @@ def bench_replay(folder: Path, seconds: float, rate: float) -> None:
             {'cascade': _null_cascade, 'situation': False},
         ),
         ('cascade without alerts', {'situation': False}),
-        ('full (cascade + alerts and friction potential), compiled kernel', {}),
-        ('full, Python reference kernel', {'kernel': 'python'}),
+        ('full (cascade + alerts and friction potential)', {}),
     )
     for i, (label, kwargs) in enumerate(runs):
         out = folder / f'out_{i}'

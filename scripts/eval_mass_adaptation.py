@@ -57,13 +57,15 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 # the evaluation window and RMS of the estimator evaluation, so the figures compare
 from eval_estimators import evaluation_mask, rms  # noqa: E402
 from vd_common.vehicle.params import VehicleParams, load_vehicle  # noqa: E402
-from vd_observer_node.estimation.cascade import CascadeResult  # noqa: E402
+from vd_observer_node.estimation.cascade import (  # noqa: E402
+    CascadeResult,
+    run_cascade,
+)
 from vd_observer_node.estimation.drivetrain import Drivetrain  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.estimation.mass_grade import MassGradeConfig  # noqa: E402
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
 from vd_observer_node.estimation.vehicle import EstimatorVehicle  # noqa: E402
-from vd_observer_node.kernel.chain import run_cascade_compiled  # noqa: E402
 from vd_sim_node.vehicle.scenario import Scenario, load_scenario  # noqa: E402
 from vd_sim_node.vehicle.simulation import SimResult, simulate  # noqa: E402
 from vd_sim_node.vehicle.variants import loaded, tyre_radius_scale, with_torque_offset  # noqa: E402
@@ -132,7 +134,7 @@ def _cascade(
     if drivetrain is not None:
         engine = np.stack([sim.engine_torque, sim.gear.astype(float), sim.engine_speed], axis=1)
         engine_path = {'torque_source': 'engine', 'engine': engine, 'drivetrain': drivetrain}
-    return run_cascade_compiled(
+    return run_cascade(
         sim.t,
         sim.wheel_angle,
         sim.body_speed,

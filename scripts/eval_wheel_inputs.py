@@ -42,10 +42,10 @@ from eval_estimators import (  # noqa: E402
     evaluation_mask,
     figures,
 )
+from vd_observer_node.estimation.cascade import run_cascade  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle  # noqa: E402
-from vd_observer_node.kernel.chain import run_cascade_compiled  # noqa: E402
 from vd_observer_node.testing.standard_bags import abs_wheel_speeds  # noqa: E402
 
 SHOWN = ('slope_rms_deg', 'mu_rms', 'fx_rms_pct', 'fz_rms_pct', 'omega_rel_pct', 'omega_dot_rms')
@@ -109,7 +109,7 @@ def main() -> None:
                 speed_lipschitz=TUNED['noisy']['speed_lipschitz'],
                 wheel_input=wheel_input,
             )
-            est = run_cascade_compiled(
+            est = run_cascade(
                 run.t, wheels, run.body_speed, run.wheel_torque, vehicle, observer, estimator
             )
             result = figures(run, est, vehicle, mask)

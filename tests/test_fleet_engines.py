@@ -2,8 +2,8 @@
 loopback give identical results; an interrupted run resumes without processing a bag twice
 and ends with the same report; the exit code says when bags failed.
 
-The bags are short synthetic drives made here (one corrupt, one truncated), replayed with the
-Python reference kernel so that no worker process spends its first bag compiling numba.
+The bags are short synthetic drives made here (one corrupt, one truncated); the workers load
+the compiled step functions from numba's cache (``make setup`` builds it).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from vd_observer_node.tools.fleet import (
     write_fleet_report,
 )
 
-SETTINGS = FleetSettings(kernel='python')
+SETTINGS = FleetSettings()
 GOOD = 8  # + 1 corrupt + 1 truncated
 
 
@@ -142,7 +142,7 @@ def test_changed_bag_or_settings_are_processed_again(fleet: TestFleet, tmp_path:
     assert (again.processed, again.skipped) == (0, 2)
     retried = run_fleet(bags, tmp_path, SETTINGS, workers=1, progress=False, retry_failed=True)
     assert (retried.processed, retried.skipped) == (1, 1)
-    other = FleetSettings(kernel='compiled', replay=False)  # another fingerprint
+    other = FleetSettings(replay=False)  # another fingerprint
     assert run_fleet(bags, tmp_path, other, workers=1, progress=False).processed == 2
 
 
@@ -197,8 +197,6 @@ def test_killed_command_resumes(
         str(out),
         '--workers',
         '2',
-        '--kernel',
-        'python',
         '--no-figures',
     ]
     first = subprocess.Popen(
@@ -242,7 +240,7 @@ def _vd(*argv: str) -> subprocess.CompletedProcess[str]:
 def test_command_exit_codes_and_baseline(
     fleet: TestFleet, local_run: Path, tmp_path: Path
 ) -> None:
-    common = ['--workers', '2', '--kernel', 'python', '--no-progress', '--no-figures']
+    common = ['--workers', '2', '--no-progress', '--no-figures']
     good = _vd('fleet', *map(str, fleet.good[:2]), '--out', str(tmp_path / 'good'), *common)
     assert good.returncode == 0, good.stderr
     assert 'fleet: 2 bags, 2 processed now, 0 done before, 0 failed' in good.stdout
@@ -296,8 +294,6 @@ def test_output_folder_among_the_bags(fleet: TestFleet, tmp_path: Path) -> None:
         '--keep-bags',
         '--workers',
         '1',
-        '--kernel',
-        'python',
         '--no-progress',
         '--no-figures',
     ]

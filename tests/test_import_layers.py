@@ -84,6 +84,8 @@ def _room(module: str, package: str) -> str | None:
         return 'jit'
     if package == 'vd_common':
         return name
+    if parts[1:3] == ['kernel', '_jit']:
+        return 'jit'
     return 'nodes' if name.endswith('_node') or name in _NODE_PLUMBING else name
 
 

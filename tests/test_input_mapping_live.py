@@ -307,9 +307,9 @@ def test_a_mapping_file_and_mapping_parameters_together_are_refused(tmp_path: Pa
     values = {'input_mapping': str(tmp_path / 'car.yaml'), 'inputs.body_speed.topic': '/odom'}
     with pytest.raises(MappingError, match=r'inputs\.body_speed\.topic are both'):
         take_input_mapping(dict(values))
-    values = {'input_mapping': '', 'inputs.body_speed.topic': None, 'kernel': 'python'}
+    values = {'input_mapping': '', 'inputs.body_speed.topic': None, 'max_gap': 0.5}
     mapping = take_input_mapping(values)
-    assert mapping.is_default and values == {'kernel': 'python'}  # the mapping's taken out
+    assert mapping.is_default and values == {'max_gap': 0.5}  # the mapping's taken out
 
 
 def test_messages_serialized_by_rclpy_decode_like_the_replays() -> None:

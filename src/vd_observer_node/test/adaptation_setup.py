@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from vd_common.vehicle.params import load_vehicle
-from vd_observer_node.chain import ChainSettings, PythonChain
+from vd_observer_node.chain import Chain, ChainSettings
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import FaultReport
@@ -147,15 +147,14 @@ def looped_record(
 def chain_run(
     sim: SimResult, config: EstimatorConfig, name: str
 ) -> tuple[np.ndarray, list[FaultReport]]:
-    """The per-stamp Python chain (what the nodes run) over `sim`: the estimate `name` per
+    """The per-stamp chain (what the pipeline node runs) over `sim`: the estimate `name` per
     stamp and the fault report once a second, as the nodes publish it."""
     settings = ChainSettings(
         vehicle=VEHICLE,
         curves=TyreCurves.from_tire(PARAMS.tire),
         estimator=config,
-        kernel='python',
     )
-    chain = PythonChain(settings)
+    chain = Chain(settings)
     reports = []
     values = np.empty(sim.t.size)
     for k in range(sim.t.size):

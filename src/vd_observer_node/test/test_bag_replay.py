@@ -202,9 +202,9 @@ SIM_RATE = 200.0  # [Hz] enough for the launch's spin-up, small enough for a fas
 
 @pytest.fixture(scope='module')
 def launch(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, object]:
-    """launch_low_mu at 200 Hz written as a recording, and its replay with the Python kernel
-    (compared bit for bit with the reference objects below; the compiled replay is compared
-    with this one in `test_compiled_replay_equals_the_python_replay`)."""
+    """launch_low_mu at 200 Hz written as a recording, and its replay (compared with the
+    per-stamp objects below; the same source uncompiled is compared with it in
+    `test_the_uncompiled_source_replays_the_same`)."""
     from vd_common.vehicle.params import load_vehicle
     from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
     from vd_sim_node.vehicle.scenario import load_scenario
@@ -218,20 +218,37 @@ def launch(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, object
     )
     stamps = np.round(sim.t * 1e9).astype(np.int64) + 1_700_000_000 * 10**9
     write_topic_arrays_bag(folder / 'in', stamps, sim_topics(sim))
-    report = replay_bag(folder / 'in', folder / 'out', progress=False, kernel='python')
+    report = replay_bag(folder / 'in', folder / 'out', progress=False)
     return folder / 'in', folder / 'out', report
 
 
-def test_compiled_replay_equals_the_python_replay(
+def test_the_uncompiled_source_replays_the_same(
     launch: tuple[Path, Path, object], tmp_path: Path
 ) -> None:
-    """Every replayed topic: the compiled kernel within 1e-9 of the Python reference."""
-    in_bag, python_bag, _ = launch
-    replay_bag(in_bag, tmp_path / 'compiled', progress=False, kernel='compiled')
+    """Every replayed topic: the step functions run as plain Python (``VD_JIT=0``, what a
+    user debugs) within 1e-9 of their compiled code (numba's semantics are Python's)."""
+    import os
+    import subprocess
+    import sys
+
+    in_bag, compiled_bag, _ = launch
+    code = (
+        'import sys; from vd_observer_node.tools.replay import replay_bag; '
+        'from vd_observer_node.kernel import _jit; assert not _jit.JIT_ENABLED; '
+        'replay_bag(sys.argv[1], sys.argv[2], progress=False)'
+    )
+    env = dict(os.environ, VD_JIT='0')
+    subprocess.run(
+        [sys.executable, '-c', code, str(in_bag), str(tmp_path / 'uncompiled')],
+        env=env,
+        check=True,
+        timeout=600,
+    )
+    python_bag, compiled = tmp_path / 'uncompiled', compiled_bag
     potential = ESTIMATES_FRICTION_POTENTIAL
     fixed = {**DEFAULT_ESTIMATES, potential: ALERT_TOPICS[potential]}
     ref = BagReader(python_bag).topic_arrays(list(fixed))
-    got = BagReader(tmp_path / 'compiled').topic_arrays(list(fixed))
+    got = BagReader(compiled).topic_arrays(list(fixed))
     for topic, msgtype in fixed.items():
         a = decode_batch(msgtype, ref[topic].datas)
         b = decode_batch(msgtype, got[topic].datas)
@@ -247,7 +264,7 @@ def test_compiled_replay_equals_the_python_replay(
     alerts = ESTIMATES_ALERTS
     for (_, _, _, x), (_, _, _, y) in zip(
         BagReader(python_bag).messages([alerts]),
-        BagReader(tmp_path / 'compiled').messages([alerts]),
+        BagReader(compiled).messages([alerts]),
         strict=True,
     ):
         assert x == y

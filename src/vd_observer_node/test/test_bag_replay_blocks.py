@@ -151,10 +151,6 @@ def test_standard_bag_latest_alignment_in_tiny_blocks_equals_one_block(
     assert report.samples > 1000 and report.stale >= 1 and report.unmatched > 0
 
 
-def test_python_kernel_in_tiny_blocks_equals_one_block(vd_bag: Path, tmp_path: Path) -> None:
-    _check(vd_bag, tmp_path, kernel='python', situation=False)
-
-
 def test_a_bag_out_of_log_time_order_is_replayed_as_one_block(
     vd_bag: Path, tmp_path: Path
 ) -> None:

@@ -1,7 +1,8 @@
 """A record run block by block with a carried `CascadeState` equals one call on the whole record.
 
-Both kernels (the Python reference `run_cascade` and `run_cascade_compiled`), every torque
-path (measured, engine with clutch slip and an upshift, none), wheel angles and wheel speeds,
+`run_cascade` (the one cascade loop, `cascade_step.cascade_block`, which the live chain runs
+on one stamp at a time), every torque path (measured, engine with clutch slip and an upshift,
+none), wheel angles and wheel speeds,
 with faulty samples and a gap inside the record; blocks of uneven sizes, including empty ones
 and one stamp. Bit for bit: the streamed replay relies on it.
 """
@@ -22,7 +23,6 @@ from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
-from vd_observer_node.kernel.chain import run_cascade_compiled
 from vd_sim_node.vehicle.scenario import load_scenario
 from vd_sim_node.vehicle.simulation import simulate
 
@@ -86,17 +86,16 @@ def _concat(parts: list[CascadeResult]) -> CascadeResult:
     return dataclasses.replace(last, **values)
 
 
-@pytest.mark.parametrize('kernel', ['python', 'compiled'])
 @pytest.mark.parametrize(
     ('source', 'wheel_input'),
     [('measured', 'angle'), ('engine', 'angle'), ('none', 'angle'), ('measured', 'speed')],
 )
 @pytest.mark.parametrize('adaptation', ['off', 'mass', 'mass+radius'])
 def test_blocks_with_a_carried_state_equal_the_whole_record(
-    record: dict[str, np.ndarray], kernel: str, source: str, wheel_input: str,
+    record: dict[str, np.ndarray], source: str, wheel_input: str,
     adaptation: str,
 ) -> None:  # fmt: skip
-    run: Any = run_cascade if kernel == 'python' else run_cascade_compiled
+    run: Any = run_cascade
     wheels = record['angle'] if wheel_input == 'angle' else record['omega']
     observer = ObserverConfig(wheel_input=wheel_input)
     # the online mass and radius live in the estimator's state: carried with it

@@ -3,8 +3,8 @@
 * `engine_wheel_torques` against the simulator's own driveline (vd_sim_node.vehicle.model:
   clutch -> gearbox * final drive -> open differential -> front wheels): with the same
   vehicle file, the wheel torque the simulator applies while its clutch is closed;
-* each torque source through the cascade (measured, engine, none), the compiled twin equal to
-  the reference on each, and the no-torque path's outputs (0, invalid, finite).
+* each torque source through the cascade (measured, engine, none), and the no-torque path's
+  outputs (0, invalid, finite).
 """
 
 from __future__ import annotations
@@ -32,8 +32,6 @@ from vd_observer_node.estimation.drivetrain import (
 )
 from vd_observer_node.estimation.estimator import Estimator
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
-from vd_observer_node.kernel.chain import run_cascade_compiled
-from vd_observer_node.kernel.estimation import CompiledEstimator
 from vd_sim_node.vehicle.scenario import load_scenario
 from vd_sim_node.vehicle.simulation import SimResult, simulate
 
@@ -168,23 +166,14 @@ def test_ratios_efficiency_axles_reverse_and_bad_gears() -> None:
 
 
 def cascades(sim: SimResult, source: str, engine: np.ndarray) -> CascadeResult:
-    """Reference and compiled cascade on one record, required equal; returns the reference."""
+    """The cascade on one record with the torque source `source`."""
     args: tuple[Any, ...] = (sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, VEHICLE)
     kw: dict[str, Any] = {'torque_source': source, 'engine': engine, 'drivetrain': DRIVETRAIN}
-    reference = run_cascade(*args, **kw)
-    compiled = run_cascade_compiled(*args, **kw)
-    for f in dataclasses.fields(reference):
-        a, b = getattr(compiled, f.name), getattr(reference, f.name)
-        if isinstance(b, np.ndarray) and b.dtype != bool:
-            scale = max(float(np.max(np.abs(b))), 1e-300) if b.size else 1.0
-            np.testing.assert_allclose(a, b, rtol=RTOL, atol=RTOL * scale, err_msg=f.name)
-        else:
-            np.testing.assert_array_equal(a, b, err_msg=f.name)
-    return reference
+    return run_cascade(*args, **kw)
 
 
 @pytest.mark.parametrize('name', ['paper_table1', 'braking_low_mu'])
-def test_each_torque_source_compiled_equals_reference(name: str) -> None:
+def test_each_torque_source_through_the_cascade(name: str) -> None:
     sim = sim_run(name, 25.0)
     engine = engine_record(sim)
     # faults on the engine path: a gear the box lacks, a nan engine torque and speed
@@ -210,8 +199,12 @@ def test_each_torque_source_compiled_equals_reference(name: str) -> None:
     for result in (measured, eng, none):
         for f in dataclasses.fields(result):
             value = getattr(result, f.name)
-            if isinstance(value, np.ndarray):
+            if isinstance(value, np.ndarray) and f.name != 'wheel_torque_used':
                 assert np.isfinite(value.astype(float)).all(), f.name
+    # the torque the estimator got is nan exactly where the engine path had none (a gear the
+    # box lacks, a nan engine torque): the estimator counted those, its outputs stay finite
+    lacking = ~np.isfinite(eng.wheel_torque_used).all(axis=1)
+    assert lacking[[700, 900, 1100]].all() and lacking.sum() == 3
 
 
 def test_engine_path_accuracy_on_the_paper_scenario() -> None:
@@ -243,29 +236,27 @@ def test_no_torque_loads_come_from_the_acceleration() -> None:
     assert float(err.max()) < 0.05
 
 
-def test_estimator_classes_refuse_unknown_sources_and_carry_theirs() -> None:
-    for cls in (Estimator, CompiledEstimator):
-        with pytest.raises(ConfigurationError):
-            cls(VEHICLE, None, 7)
-        est = cls(VEHICLE, None, TORQUE_NONE)
-        out = est.update(0.0, np.ones(4), np.zeros(4), 10.0, 0.0, np.full(4, 100.0))
-        assert out.torque_source == TORQUE_NONE and np.all(out.fx == 0.0)
-        measured = cls(VEHICLE).update(0.0, np.ones(4), np.zeros(4), 10.0, 0.0, np.ones(4))
-        assert measured.torque_source == TORQUE_MEASURED
-        held = cls(VEHICLE).update(0.0, np.ones(4), np.zeros(4), 10.0, 0.0, np.ones(4), False)
-        assert not held.mu_valid.any() and not held.slope_valid
+def test_the_estimator_refuses_unknown_sources_and_carries_its_own() -> None:
+    with pytest.raises(ConfigurationError):
+        Estimator(VEHICLE, None, 7)
+    est = Estimator(VEHICLE, None, TORQUE_NONE)
+    out = est.update(0.0, np.ones(4), np.zeros(4), 10.0, 0.0, np.full(4, 100.0))
+    assert out.torque_source == TORQUE_NONE and np.all(out.fx == 0.0)
+    measured = Estimator(VEHICLE).update(0.0, np.ones(4), np.zeros(4), 10.0, 0.0, np.ones(4))
+    assert measured.torque_source == TORQUE_MEASURED
+    held = Estimator(VEHICLE).update(0.0, np.ones(4), np.zeros(4), 10.0, 0.0, np.ones(4), False)
+    assert not held.mu_valid.any() and not held.slope_valid
 
 
 def test_engine_path_needs_its_inputs() -> None:
     sim = sim_run('paper_table1', 10.0)
     args = (sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, VEHICLE)
-    for run in (run_cascade, run_cascade_compiled):
-        with pytest.raises(ConfigurationError, match='engine'):
-            run(*args, torque_source='engine')
-        with pytest.raises(InputShapeError):
-            run(*args, torque_source='engine', engine=np.zeros((3, 3)), drivetrain=DRIVETRAIN)
-        with pytest.raises(ConfigurationError):
-            run(*args, torque_source='wheel')
+    with pytest.raises(ConfigurationError, match='engine'):
+        run_cascade(*args, torque_source='engine')
+    with pytest.raises(InputShapeError):
+        run_cascade(*args, torque_source='engine', engine=np.zeros((3, 3)), drivetrain=DRIVETRAIN)
+    with pytest.raises(ConfigurationError):
+        run_cascade(*args, torque_source='wheel')
 
 
 def test_engine_path_while_braking() -> None:

@@ -37,8 +37,8 @@ from vd_observer_node.tools.fleet.process import bag_id
 from vd_observer_node.tools.fleet.report import fleet_csv, fleet_markdown, sort_worst_first
 from vd_observer_node.tools.replay import replay_bag
 
-#: The Python reference kernel: no numba compilation in a test's first bag.
-PY = FleetSettings(kernel='python')
+#: The default settings (the step functions load from numba's cache, built by make setup).
+PY = FleetSettings()
 DURATION, RATE = 2.0, 200.0
 
 
@@ -196,9 +196,9 @@ def test_zero_true_force_is_a_row_without_that_figure(tmp_path: Path) -> None:
 
 def test_no_replay_judges_the_recorded_estimates_alike(fleet: TestFleet, tmp_path: Path) -> None:
     replayed = tmp_path / 'replayed'
-    replay_bag(fleet.good[0], replayed, progress=False, kernel='python')
+    replay_bag(fleet.good[0], replayed, progress=False)
     by_replay = process_bag(str(fleet.good[0]), PY)['row']
-    recorded = process_bag(str(replayed), FleetSettings(replay=False, kernel='python'))['row']
+    recorded = process_bag(str(replayed), FleetSettings(replay=False))['row']
     assert recorded['status'] == 'ok'
     same = ['distance_m', 'has_truth', 'omega_rel_rms_pct', 'targets_met', 'alerts_traction']
     assert {k: recorded[k] for k in same} == {k: by_replay[k] for k in same}
@@ -208,7 +208,7 @@ def test_no_replay_judges_the_recorded_estimates_alike(fleet: TestFleet, tmp_pat
 
 def test_kept_bags(fleet: TestFleet, tmp_path: Path) -> None:
     keep = tmp_path / 'replayed'
-    record = process_bag(str(fleet.good[0]), FleetSettings(kernel='python', keep_dir=str(keep)))
+    record = process_bag(str(fleet.good[0]), FleetSettings(keep_dir=str(keep)))
     assert [p.name for p in keep.iterdir()] == [record['id']]  # no temporary left behind
     assert (keep / record['id'] / 'metadata.yaml').is_file()
 
@@ -218,7 +218,7 @@ def test_fingerprint_follows_settings_and_their_files(tmp_path: Path) -> None:
     config.write_text('observer: {}\n')
     a = FleetSettings(config_file=str(config)).fingerprint()
     assert FleetSettings(config_file=str(config)).fingerprint() == a
-    assert FleetSettings(config_file=str(config), kernel='python').fingerprint() != a
+    assert FleetSettings(config_file=str(config)).fingerprint() != a
     config.write_text('observer: {speed_lipschitz: 20.0}\n')
     assert FleetSettings(config_file=str(config)).fingerprint() != a
 

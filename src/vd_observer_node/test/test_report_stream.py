@@ -295,7 +295,7 @@ def test_fleet_row_figures_equal_the_whole_bag_path(tmp_path: Path) -> None:
     fleet = write_test_fleet(tmp_path / 'fleet', 2, corrupt=False, truncated=False)
     for k, bag in enumerate(fleet.good):
         replayed = tmp_path / f'replayed_{k}'
-        _replay(str(bag), replayed, FleetSettings(kernel='python'))
+        _replay(str(bag), replayed, FleetSettings())
         whole = bag_figures_whole(replayed, str(bag))
         for block in (17, 200_000):
             assert bag_figures(replayed, str(bag), block) == whole

@@ -132,11 +132,10 @@ def _cascade_of(rows: list[tuple[float, ...]]) -> tuple[np.ndarray, ...]:
 
 
 def test_run_situation_equals_the_stamp_by_stamp_monitor() -> None:
-    """run_situation, and the compiled block of kernel.chain, against `update` per stamp,
+    """run_situation (the block) against `update` per stamp (the same block on one stamp),
     across a looped record (the second half starts again at t = 0)."""
     from types import SimpleNamespace
 
-    from vd_observer_node.kernel.chain import compiled_monitor, run_situation_compiled
     from vd_observer_node.situation.monitor import run_situation
 
     curves = TyreCurves.from_tire(load_vehicle(VEHICLE_FILE).tire)
@@ -149,10 +148,7 @@ def test_run_situation_equals_the_stamp_by_stamp_monitor() -> None:
         t=t, omega=omega, mu=mu, mu_valid=np.ones((t.size, 4), bool), fz=np.full((t.size, 4), 3e3)
     )
     config = SituationConfig(max_observer_disagreement=0.5)
-    for make, run in (
-        (SituationMonitor, run_situation),
-        (compiled_monitor, run_situation_compiled),
-    ):
+    for make, run in ((SituationMonitor, run_situation),):
         stepped = make(curves, STATIC, RADIUS, situation=config)
         whole = make(curves, STATIC, RADIUS, situation=config)
         # in two blocks: the state carries across them

@@ -1,72 +1,58 @@
 """The whole per-stamp chain in one object: observers -> estimator -> situation monitor.
 
 What ``pipeline_node`` runs per stamp-matched set of sensor messages (wheel angles, body speed,
-wheel torques, or the engine torque and gear on the engine path), ROS-free. It computes exactly
-what offline replay computes on the same stamps
-(:func:`vd_observer_node.estimation.cascade.run_cascade` followed by
-:func:`vd_observer_node.situation.monitor.run_situation`): the wheel and speed observers, the
-estimator fed the measured (or the observer's) speed, and the situation monitor fed the sensors and
-the cascade's omega, mu and Fz. The torque source (`ChainSettings.torque_source`) is the replay's:
-measured wheel torques, the engine path (`drivetrain.EnginePath`; the monitor then gets the
-torques it gave the estimator, 0 where it had none) or no torque (0 to the monitor).
-
-Two implementations behind one interface, chosen by `ChainSettings.kernel`:
-
-* ``'python'``: the reference objects (`Observer`, `Estimator`, `SituationMonitor`);
-* ``'compiled'``: the numba kernel (:mod:`vd_observer_node.kernel`), tested equal to the
-  reference.
+wheel torques, or the engine torque and gear on the engine path), ROS-free. `Chain.update` runs
+the one cascade loop (`estimation.cascade_step.cascade_block`) and the one monitor loop
+(`situation.monitor_step.situation_block`) on one stamp: what the offline replay runs on blocks
+of stamps (`estimation.cascade.run_cascade`, then `situation.monitor.run_situation`), so the
+node's outputs are the replay's on the same stamps. The torque source
+(`ChainSettings.torque_source`) is the replay's: measured wheel torques, the engine path (the
+monitor then gets the torques it gave the estimator, 0 where it had none) or no torque (0 to
+the monitor). ``VD_JIT=0`` runs the same source as plain Python.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Final, NamedTuple, Protocol
+from typing import Any, Final, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimation.cascade import CascadeBlock, CascadeParts
+from vd_observer_node.estimation.cascade_step import cascade_block
 from vd_observer_node.estimation.drivetrain import (
     TORQUE_ENGINE,
     TORQUE_NONE,
     Drivetrain,
-    EnginePath,
     torque_source_code,
 )
-from vd_observer_node.estimation.estimator import Estimates, Estimator, EstimatorConfig
-from vd_observer_node.estimation.faults import (
-    ENGINE_FAULTS,
-    FaultCounter,
-    FaultReport,
-    merge_reports,
-)
-from vd_observer_node.estimation.observer import (
-    ObserverConfig,
-    SpeedObserver,
-    SpeedState,
-    WheelObserver,
-    WheelState,
-)
-from vd_observer_node.estimation.torque_offset import TorqueOffset
+from vd_observer_node.estimation.estimator import Estimates, EstimatorConfig, estimates_from_record
+from vd_observer_node.estimation.faults import FaultCounter, FaultReport, merge_reports
+from vd_observer_node.estimation.observer import ObserverConfig, SpeedState, WheelState
+from vd_observer_node.estimation.torque_offset import TorqueOffset, offset_from_record
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
-from vd_observer_node.situation.monitor import Situation, SituationConfig, SituationMonitor
+from vd_observer_node.situation.monitor import (
+    Situation,
+    SituationBlock,
+    SituationConfig,
+    SituationInputs,
+    SituationMonitor,
+)
 
 __all__ = [
     'ESTIMATOR_SPEEDS',
-    'KERNELS',
     'Chain',
     'ChainOutput',
     'ChainSettings',
-    'PythonChain',
     'chain_faults',
     'engine_row',
-    'make_chain',
+    'warm_up',
 ]
 
-#: Implementations of the per-stamp math: the compiled kernel, or the Python reference.
-KERNELS: Final = ('compiled', 'python')
 #: Speed fed to the estimator: the measured body speed, or the observer's filtered one.
 ESTIMATOR_SPEEDS: Final = ('measured', 'observer')
 
@@ -84,7 +70,6 @@ class ChainSettings:
         friction: friction-potential settings.
         situation: fast-observer and gate settings of the monitor.
         estimator_speed: one of `ESTIMATOR_SPEEDS`.
-        kernel: one of `KERNELS`.
         torque_source: 'measured' (the wheel torques), 'engine' (from the engine torque and
             gear through `drivetrain`) or 'none' (no torque: Fx 0, mu and slope invalid), as
             `cascade.run_cascade` takes it.
@@ -99,7 +84,6 @@ class ChainSettings:
     friction: FrictionPotentialConfig = field(default_factory=FrictionPotentialConfig)
     situation: SituationConfig = field(default_factory=SituationConfig)
     estimator_speed: str = 'measured'
-    kernel: str = 'compiled'
     torque_source: str = 'measured'
     drivetrain: Drivetrain | None = None
 
@@ -108,8 +92,6 @@ class ChainSettings:
             raise ConfigurationError(
                 f'estimator_speed must be one of {ESTIMATOR_SPEEDS}, got {self.estimator_speed!r}'
             )
-        if self.kernel not in KERNELS:
-            raise ConfigurationError(f'kernel must be one of {KERNELS}, got {self.kernel!r}')
         if self.source == TORQUE_ENGINE and self.drivetrain is None:
             raise ConfigurationError('torque_source engine needs a drivetrain')
 
@@ -156,51 +138,27 @@ class ChainOutput(NamedTuple):
     torque_offset: TorqueOffset | None = None
 
 
-class Chain(Protocol):
-    """What `pipeline_node` needs of an implementation."""
+class Chain:
+    """Observers, estimator and situation monitor on the one loop of each, one stamp a call.
 
-    def update(
-        self,
-        t: float,
-        wheel_angle: ArrayLike,
-        speed: float,
-        wheel_torque: ArrayLike,
-        engine: ArrayLike | None = None,
-    ) -> ChainOutput:
-        """Advance the chain to stamp t [s] with the sensors of that stamp (`engine`: the
-        engine path's (3,) engine torque [N m], gear, engine speed [rad/s])."""
-        ...
-
-    def fault_report(self) -> FaultReport:
-        """Faults since the previous call, per part ('wheel', 'speed', 'estimator', and
-        'engine' where the engine path learns the torque offset)."""
-        ...
-
-
-class PythonChain:
-    """The reference implementation: the pure-Python objects, fed as replay feeds them."""
+    Attributes:
+        settings: the chain's settings.
+        parts: the cascade's parts (observers, estimator, torque path) and their records.
+        monitor: the situation monitor.
+        engine_faults: the engine path's own faults where it learns the torque offset.
+    """
 
     def __init__(self, settings: ChainSettings) -> None:
-        """Create the observers, the estimator and the monitor from `settings`."""
+        """Create the parts from `settings` (compiled now, or loaded from numba's cache)."""
         self.settings = settings
         vehicle = settings.vehicle
-        self.wheels = WheelObserver(settings.observer)
-        self.speed = SpeedObserver(settings.observer)
-        self.estimator = Estimator(vehicle, settings.estimator, settings.source)
-        est = settings.estimator
-        self.engine = (
-            EnginePath(
-                settings.drivetrain, est.torque_offset if est.torque_offset_adaptation else None
-            )
-            if settings.drivetrain is not None and settings.source == TORQUE_ENGINE
-            else None
-        )
-        self._none = settings.source == TORQUE_NONE
-        # the engine path's own fault (a clamped torque offset), where it learns the offset
-        self.engine_faults = (
-            FaultCounter(ENGINE_FAULTS)
-            if self.engine is not None and self.engine.offset_config is not None
-            else None
+        self.parts = CascadeParts(
+            vehicle,
+            settings.observer,
+            settings.estimator,
+            settings.estimator_speed,
+            settings.torque_source,
+            settings.drivetrain,
         )
         self.monitor = SituationMonitor(
             settings.curves,
@@ -211,7 +169,11 @@ class PythonChain:
             friction=settings.friction,
             situation=settings.situation,
         )
-        self._measured = settings.estimator_speed == 'measured'
+        self.engine_faults: FaultCounter | None = self.parts.engine_faults
+        self._none = self.parts.source == TORQUE_NONE
+        self._out = CascadeBlock.empty(1, self.parts.offset_on)
+        self._situation = SituationBlock.empty(1)
+        self._no_engine = np.zeros((1, 3))
 
     def update(
         self,
@@ -237,42 +199,63 @@ class PythonChain:
             InputShapeError: an array input has the wrong shape, or no engine on the engine
                 path.
         """
-        angles = np.asarray(wheel_angle, dtype=np.float64)
-        torques = np.asarray(wheel_torque, dtype=np.float64)
-        row = engine_row(engine) if self.engine is not None else None
+        angles = np.ascontiguousarray(wheel_angle, dtype=np.float64)
+        torques = np.ascontiguousarray(wheel_torque, dtype=np.float64)
+        if angles.shape != (4,) or torques.shape != (4,):
+            raise InputShapeError(
+                f'wheel_angle and wheel_torque must have shape (4,), got {angles.shape}, '
+                f'{torques.shape}'
+            )
+        parts = self.parts
+        row = engine_row(engine)[None] if parts.engine_on else self._no_engine
         if self._none:
             torques = np.zeros(4)  # the replay's: no torque topic, zeros everywhere
-        wheel = self.wheels.update(t, angles)
-        body = self.speed.update(t, speed)
-        torque_ok = True
-        if self.engine is not None and row is not None:
-            torques, torque_ok = self.engine.update(t, row, wheel.omega, wheel.omega_dot)
-        est = self.estimator.update(
-            t,
-            wheel.omega,
-            wheel.omega_dot,
-            speed if self._measured else body.speed,
-            body.accel,
-            torques,
-            torque_ok,
+        stamp = np.array([float(t)])
+        speeds = np.array([float(speed)])
+        out = self._out
+        block: Any = cascade_block  # its arguments come as tuples
+        block(*parts.args(), stamp, angles[None], speeds, torques[None], row, *out.outputs())
+        est = out.est[0]
+        if parts.engine_on:
+            # the torques the engine path gave the estimator (0 where it had none)
+            torques = np.where(np.isfinite(out.used[0]), out.used[0], 0.0)
+        wheel = out.wheel[0]
+        self.monitor.run(
+            stamp,
+            SituationInputs(
+                angles[None],
+                speeds,
+                torques[None],
+                out.wheel[:, 1].copy(),
+                out.est.mu.copy(),
+                out.est.mu_valid != 0,
+                out.est.fz.copy(),
+            ),
+            self._situation,
         )
-        if self.engine is not None:
-            # the monitor gets the torques the engine path gave the estimator (0 where it
-            # had none: a gear the box lacks), as the replay feeds it
-            torques = np.where(np.isfinite(torques), torques, 0.0)
-        situation = self.monitor.update(
-            t, angles, speed, torques, wheel.omega, est.mu, est.mu_valid, est.fz
+        situation = self.monitor.last
+        assert situation is not None  # run just set it
+        offset = None
+        if parts.offset_on:
+            offset = offset_from_record(out.offsets[0])
+            if offset.clamped and self.engine_faults is not None:
+                self.engine_faults.count('torque_offset_clamped')
+        return ChainOutput(
+            WheelState(
+                wheel[0].copy(), wheel[1].copy(), wheel[2].copy(), out.wheel_valid[0].copy()
+            ),
+            SpeedState(float(out.body[0, 0]), float(out.body[0, 1]), bool(out.body_valid[0])),
+            estimates_from_record(est),
+            situation,
+            offset,
         )
-        offset = self.engine.offset if self.engine is not None else None
-        if offset is not None and offset.clamped and self.engine_faults is not None:
-            self.engine_faults.count('torque_offset_clamped')
-        return ChainOutput(wheel, body, est, situation, offset)
 
     def fault_report(self) -> FaultReport:
         """Faults since the previous call, per part ('wheel', 'speed', 'estimator', and
         'engine' where the engine path learns the torque offset)."""
+        parts = self.parts
         return chain_faults(
-            self.wheels.faults, self.speed.faults, self.estimator.faults, self.engine_faults
+            parts.wheels.faults, parts.speed.faults, parts.estimator.faults, self.engine_faults
         )
 
 
@@ -289,11 +272,22 @@ def chain_faults(
     return merge_reports(parts)
 
 
-def make_chain(settings: ChainSettings) -> Chain:
-    """The implementation `settings.kernel` names."""
-    if settings.kernel == 'python':
-        return PythonChain(settings)
-    from vd_observer_node.kernel.chain import CompiledChain
+_warm = False
 
-    chain: Chain = CompiledChain(settings)
-    return chain
+
+def warm_up(curves: TyreCurves) -> None:
+    """Compile (or load from numba's disk cache) the chain's loops now, once per process.
+
+    `curves` only gives the tyre arrays their types (any tyre will do); a chain of any
+    settings then runs compiled code from its first stamp.
+    """
+    global _warm
+    if _warm:
+        return
+    vehicle = EstimatorVehicle(
+        mass=1000.0, wheelbase=2.5, cg_to_front_axle=1.0, cg_height=0.5, inertia_front=1.0,
+        inertia_rear=1.0, effective_radius=0.3, drag_coefficient=0.3, frontal_area=2.0,
+        air_density=1.2, rolling_c0=0.01, rolling_c1=0.0, gravity=9.81,
+    )  # fmt: skip
+    Chain(ChainSettings(vehicle=vehicle, curves=curves)).update(0.0, np.zeros(4), 1.0, np.zeros(4))
+    _warm = True

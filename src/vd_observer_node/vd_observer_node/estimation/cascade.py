@@ -1,7 +1,9 @@
-"""Whole observer + estimator cascade on arrays (offline; replay, report, tests).
+"""The observer + estimator cascade over a record of stamps (replay, fleet, report, tests).
 
-`run_cascade` feeds the same online objects the ROS nodes use, sample by sample, so the
-offline figures are those the nodes would produce on the same stamps.
+`run_cascade` runs `cascade_step.cascade_block`, the one loop of the cascade, on the parts'
+records (`CascadeParts`): the same step functions the live pipeline node runs one stamp at a
+time, so the offline figures are those the nodes produce on the same stamps. A record can be
+run in blocks with a carried `CascadeState` (what the streamed replay does).
 """
 
 from __future__ import annotations
@@ -13,22 +15,35 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimation.cascade_step import cascade_block
+from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.drivetrain import (
     TORQUE_ENGINE,
     TORQUE_MEASURED,
+    TORQUE_NONE,
     Drivetrain,
-    EnginePath,
     torque_source_code,
 )
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
-from vd_observer_node.estimation.observer import Observer, ObserverConfig
-from vd_observer_node.estimation.torque_offset import TorqueOffset
+from vd_observer_node.estimation.estimator_step import ESTIMATES
+from vd_observer_node.estimation.faults import ENGINE_FAULTS, FaultCounter
+from vd_observer_node.estimation.observer import WHEEL_INPUTS, ObserverConfig
+from vd_observer_node.estimation.torque_offset import (
+    OFFSET_ESTIMATE_DTYPE,
+    TorqueOffset,
+    new_offset_estimate,
+    new_offset_state,
+    offset_params,
+)
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
 __all__ = [
+    'CascadeBlock',
+    'CascadeParts',
     'CascadeResult',
     'CascadeState',
     'OffsetRecord',
+    'cascade_result',
     'checked_engine',
     'checked_record',
     'offset_result_name',
@@ -86,6 +101,9 @@ class CascadeResult:
         torque_offset_used: shape (N,), [N m] what the engine path subtracted from the signal.
         torque_offset_episodes: shape (N,), int, neutral episodes used so far.
         torque_offset_clamped: shape (N,), bool, the offset is at its bound.
+        wheel_torque_used: shape (N, 4), [N m] the wheel torques the estimator got (the
+            measured ones, the engine path's (nan where it had none), or zeros without
+            torque).
     """
 
     t: FloatArray
@@ -127,24 +145,23 @@ class CascadeResult:
         default_factory=lambda: np.zeros(0, dtype=np.int64)
     )
     torque_offset_clamped: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    wheel_torque_used: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
 
 
 @dataclass
 class CascadeState:
     """What one call of a cascade function hands to the next, so a record can be run in blocks.
 
-    Pass a fresh state to the first call of `run_cascade` (or
-    :func:`vd_observer_node.kernel.chain.run_cascade_compiled`) and the same one to the calls
-    on the following blocks: the first call stores its observers, estimator and torque path
-    here and the later ones go on from them, so the blocks give what one call on the whole
-    record gives (tested). The settings of the first call hold for the later ones; a state
-    belongs to one function (kernel) and one record.
+    Pass a fresh state to the first call of `run_cascade` and the same one to the calls on
+    the following blocks: the first call stores its parts here and the later ones go on from
+    them, so the blocks give what one call on the whole record gives (tested). The settings
+    of the first call hold for the later ones; a state belongs to one record.
 
     Attributes:
-        parts: the function's state objects (None before the first call).
+        parts: the cascade's parts (None before the first call).
     """
 
-    parts: tuple[Any, ...] | None = None
+    parts: CascadeParts | None = None
 
 
 @dataclass(frozen=True)
@@ -174,11 +191,6 @@ class OffsetRecord:
             np.zeros(n), np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n),
             np.zeros(n, dtype=np.int64), np.zeros(n, dtype=bool),
         )  # fmt: skip
-
-    def store(self, k: int, estimate: TorqueOffset) -> None:
-        """Write stamp k's estimate (its attributes are this record's arrays)."""
-        for name in TorqueOffset._fields:
-            getattr(self, name)[k] = getattr(estimate, name)
 
     def fields(self) -> dict[str, Any]:
         """The `CascadeResult` fields (``torque_offset*``)."""
@@ -244,6 +256,146 @@ def checked_engine(
     return code, record
 
 
+class CascadeParts:
+    """The cascade's parts and their records: what `cascade_step.cascade_block` advances.
+
+    Attributes:
+        wheels: the wheel observer's differentiator (4 channels).
+        speed: the speed observer's differentiator (1 channel).
+        estimator: the estimator.
+        source: the torque source's code (`drivetrain.TORQUE_SOURCES`).
+        measured: the estimator gets the measured speed (else the observer's).
+        dprm: `Drivetrain.params_array` on the engine path, else empty.
+        engine_state: shape (2,), the engine path's state (`cascade_step.cascade_step`).
+        offset_on: the engine path learns the engine-torque offset.
+        offset_params, offset_state, offset_estimate: the offset estimator's records.
+        engine_faults: the engine path's own fault counter where it learns the offset.
+    """
+
+    def __init__(
+        self,
+        vehicle: EstimatorVehicle,
+        observer_config: ObserverConfig | None = None,
+        estimator_config: EstimatorConfig | None = None,
+        estimator_speed: str = 'measured',
+        torque_source: str = 'measured',
+        drivetrain: Drivetrain | None = None,
+    ) -> None:
+        """Create the parts (compiled, or loaded from numba's cache, by their wrappers).
+
+        Raises:
+            ConfigurationError: unknown estimator_speed or torque_source, or the engine path
+                without a drivetrain.
+        """
+        if estimator_speed not in ('measured', 'observer'):
+            raise ConfigurationError(
+                f'estimator_speed must be measured or observer: {estimator_speed}'
+            )
+        config = observer_config or ObserverConfig()
+        estimator_config = estimator_config or EstimatorConfig()
+        self.source = torque_source_code(torque_source)
+        if self.source == TORQUE_ENGINE and drivetrain is None:
+            raise ConfigurationError('torque_source engine needs a drivetrain')
+
+        def differentiator(lipschitz: float, n: int, input_derivative: int) -> Any:
+            return LevantDifferentiator(
+                lipschitz,
+                n_channels=n,
+                gains=config.gains,
+                discretization=config.discretization,
+                init=config.init,
+                max_gap=config.max_gap,
+                init_baseline=config.init_baseline,
+                input_derivative=input_derivative,
+            )
+
+        wheel_input = WHEEL_INPUTS.index(config.wheel_input)
+        self.wheels: LevantDifferentiator = differentiator(config.wheel_lipschitz, 4, wheel_input)
+        self.speed: LevantDifferentiator = differentiator(config.speed_lipschitz, 1, 0)
+        self.estimator = Estimator(vehicle, estimator_config, self.source)
+        self.measured = estimator_speed == 'measured'
+        engine_on = self.source == TORQUE_ENGINE and drivetrain is not None
+        self.dprm = drivetrain.params_array() if engine_on and drivetrain else np.zeros(0)
+        self.engine_state = np.array([-np.inf, np.nan])
+        self.offset_on = engine_on and estimator_config.torque_offset_adaptation
+        self.offset_params = offset_params(estimator_config.torque_offset)
+        self.offset_state = new_offset_state()
+        self.offset_estimate = new_offset_estimate()
+        self.engine_faults = FaultCounter(ENGINE_FAULTS) if self.offset_on else None
+
+    @property
+    def engine_on(self) -> bool:
+        """The wheel torques come from the engine path."""
+        return bool(self.dprm.shape[0] > 0)
+
+    def args(self) -> tuple[Any, ...]:
+        """`cascade_block`'s leading arguments (the records, advanced in place)."""
+        return (
+            *self.wheels.kernel_args, *self.speed.kernel_args, self.estimator.params,
+            *self.estimator.state.args, self.measured, self.engine_on, self.dprm,
+            self.engine_state, self.offset_on, self.offset_params, self.offset_state,
+            self.offset_estimate,
+        )  # fmt: skip
+
+    def faults(self) -> dict[str, int]:
+        """Total fault counts per kind ('wheel.<kind>', 'speed.<kind>', 'estimator.<kind>',
+        and 'engine.torque_offset_clamped' where the offset is learnt)."""
+        counts = {
+            f'{part}.{kind}': n
+            for part, counter in (
+                ('wheel', self.wheels.faults),
+                ('speed', self.speed.faults),
+                ('estimator', self.estimator.faults),
+            )
+            for kind, n in counter.counts.items()
+        }
+        if self.offset_on:
+            counts['engine.torque_offset_clamped'] = int(self.offset_state.clamped)
+        return counts
+
+
+@dataclass
+class CascadeBlock:
+    """The outputs of `cascade_block` over N stamps (allocated for it, then read).
+
+    Attributes:
+        wheel: shape (N, 3, 4): angle, omega, omega_dot.
+        wheel_valid: shape (N, 4).
+        body: shape (N, 3): speed, accel, jerk.
+        body_valid: shape (N,).
+        used: shape (N, 4), [N m] the wheel torques the estimator got.
+        est: shape (N,) `estimator_step.ESTIMATES` records.
+        torque_valid: shape (N,).
+        offsets: shape (N,) `OFFSET_ESTIMATE_DTYPE` records where learnt, else (0,).
+    """
+
+    wheel: FloatArray
+    wheel_valid: BoolArray
+    body: FloatArray
+    body_valid: BoolArray
+    used: FloatArray
+    est: np.recarray
+    torque_valid: BoolArray
+    offsets: np.recarray
+
+    @classmethod
+    def empty(cls, n: int, offsets: bool) -> CascadeBlock:
+        """Buffers for N stamps."""
+        return cls(
+            np.zeros((n, 3, 4)), np.zeros((n, 4), dtype=np.bool_), np.zeros((n, 3)),
+            np.zeros(n, dtype=np.bool_), np.zeros((n, 4)),
+            np.zeros(n, ESTIMATES).view(np.recarray), np.zeros(n, dtype=np.bool_),
+            np.zeros(n if offsets else 0, OFFSET_ESTIMATE_DTYPE).view(np.recarray),
+        )  # fmt: skip
+
+    def outputs(self) -> tuple[Any, ...]:
+        """`cascade_block`'s trailing (written) arguments."""
+        return (
+            self.wheel, self.wheel_valid, self.body, self.body_valid, self.used, self.est,
+            self.torque_valid, self.offsets,
+        )  # fmt: skip
+
+
 def run_cascade(
     t: ArrayLike,
     wheel_angle: ArrayLike,
@@ -274,9 +426,9 @@ def run_cascade(
             low-pass does the smoothing, no observer lag), 'observer' the observer's
             filtered speed.
         torque_source: 'measured' (wheel_torque), 'engine' (wheel torques from `engine`
-            with `drivetrain.engine_wheel_torques`, using the wheel observer's omega_dot for
-            the engine-inertia term; invalid where `drivetrain.clutch_engaged` is False and
-            for `Drivetrain.clutch_settle_time` after it was, or after a gear change) or
+            through `drivetrain` (`drivetrain.engine_torques`), using the wheel observer's
+            omega_dot for the engine-inertia term; invalid where the clutch is not engaged
+            and for `Drivetrain.clutch_settle_time` after it was, or after a gear change) or
             'none' (wheel_torque ignored; Fx 0, mu and slope invalid).
         engine: shape (N, 3): engine torque [N m], gear (0 neutral, -1 reverse), engine speed
             [rad/s] (nan if not measured); needed by the engine path only.
@@ -294,118 +446,65 @@ def run_cascade(
     )
     n = stamps.shape[0]
     source, engine_record = checked_engine(n, torque_source, engine, drivetrain)
-    wheel4 = np.zeros((n, 4))
-    out = {
-        k: wheel4.copy()
-        for k in ('angle', 'omega', 'omega_dot', 'fx', 'fz', 'mu', 'slip', 'rolling')
-    }
-    scalars = {
-        k: np.zeros(n)
-        for k in (
-            'speed', 'accel', 'aero', 'slope', 'mass', 'mass_std', 'mass_used', 'radius',
-            'radius_std', 'radius_used',
-        )
-    }  # fmt: skip
-    flags = {
-        k: np.zeros(n, dtype=bool) for k in ('mass_converged', 'mass_excited', 'radius_converged')
-    }
-    free_wheels = np.zeros(n, dtype=np.int64)
-    mu_valid = np.zeros((n, 4), dtype=bool)
-    wheel_valid = np.zeros((n, 4), dtype=bool)
-    slope_valid = np.zeros(n, dtype=bool)
-    # every array but the observer's holds the `Estimates` field of its name, stamp by stamp
-    kept = {
-        k: a
-        for part in (out, scalars, flags)
-        for k, a in part.items()
-        if k not in ('angle', 'omega', 'omega_dot', 'speed', 'accel')
-    }
-    kept.update(mu_valid=mu_valid, slope_valid=slope_valid, radius_free_wheels=free_wheels)
-    torque_valid = np.full(n, source != torque_source_code('none'))
+    if source == TORQUE_NONE:
+        torques = np.zeros((n, 4))  # no torque topic: zeros everywhere
     if state is not None and state.parts is not None:
-        observer, estimator, engine_path = state.parts
+        parts = state.parts
     else:
-        observer = Observer(observer_config or ObserverConfig())
-        estimator = Estimator(vehicle, estimator_config, source)
-        config = estimator_config or EstimatorConfig()
-        engine_path = (
-            EnginePath(
-                drivetrain, config.torque_offset if config.torque_offset_adaptation else None
-            )
-            if drivetrain is not None and source == TORQUE_ENGINE
-            else None
-        )
+        parts = CascadeParts(
+            vehicle, observer_config, estimator_config, estimator_speed, torque_source,
+            drivetrain,
+        )  # fmt: skip
         if state is not None:
-            state.parts = (observer, estimator, engine_path)
-    use_measured = estimator_speed == 'measured'
-    learns = engine_path is not None and engine_path.offset_config is not None
-    offset = OffsetRecord.empty(n if learns else 0)
-    for k in range(n):
-        tk = float(stamps[k])
-        wheel = observer.wheels.update(tk, angles[k])
-        body = observer.speed.update(tk, float(speeds[k]))
-        speed = float(speeds[k]) if use_measured else body.speed
-        torque, torque_ok = torques[k], True
-        if engine_path is not None:
-            torque, torque_ok = engine_path.update(
-                tk, engine_record[k], wheel.omega, wheel.omega_dot
-            )
-            torque_valid[k] = torque_ok
-            if engine_path.offset is not None:
-                offset.store(k, engine_path.offset)
-        est = estimator.update(
-            tk, wheel.omega, wheel.omega_dot, speed, body.accel, torque, torque_ok
-        )
-        out['angle'][k] = wheel.angle
-        out['omega'][k] = wheel.omega
-        out['omega_dot'][k] = wheel.omega_dot
-        wheel_valid[k] = wheel.valid
-        scalars['speed'][k] = body.speed
-        scalars['accel'][k] = body.accel
-        for name, array in kept.items():
-            array[k] = getattr(est, name)
+            state.parts = parts
+    out = CascadeBlock.empty(n, parts.offset_on)
+    block: Any = cascade_block  # its arguments come as tuples
+    block(*parts.args(), stamps, angles, speeds, torques, engine_record, *out.outputs())
+    if source == TORQUE_NONE:
+        out.torque_valid[:] = False
+    return cascade_result(stamps, source, parts, out)
+
+
+def cascade_result(
+    stamps: FloatArray, source: int, parts: CascadeParts, out: CascadeBlock
+) -> CascadeResult:
+    """The `CascadeResult` of a block's outputs (copies of its arrays)."""
+    est = out.est
+    offsets = out.offsets
+    learnt = OffsetRecord(
+        offsets.offset.copy(), offsets.offset_std.copy(), offsets.converged.copy(),
+        offsets.used.copy(), offsets.episodes.copy(), offsets.clamped.copy(),
+    )  # fmt: skip
     return CascadeResult(
         t=stamps.copy(),
-        omega=out['omega'],
-        omega_dot=out['omega_dot'],
-        speed=scalars['speed'],
-        accel=scalars['accel'],
-        fx=out['fx'],
-        fz=out['fz'],
-        mu=out['mu'],
-        mu_valid=mu_valid,
-        slip=out['slip'],
-        rolling=out['rolling'],
-        aero=scalars['aero'],
-        slope=scalars['slope'],
-        slope_valid=slope_valid,
-        wheel_valid=wheel_valid,
-        torque_valid=torque_valid,
+        omega=out.wheel[:, 1, :].copy(),
+        omega_dot=out.wheel[:, 2, :].copy(),
+        speed=out.body[:, 0].copy(),
+        accel=out.body[:, 1].copy(),
+        fx=est.fx.copy(),
+        fz=est.fz.copy(),
+        mu=est.mu.copy(),
+        mu_valid=est.mu_valid != 0,
+        slip=est.slip.copy(),
+        rolling=est.rolling.copy(),
+        aero=est.aero.copy(),
+        slope=est.slope.copy(),
+        slope_valid=est.slope_valid.copy(),
+        wheel_valid=out.wheel_valid.copy(),
+        torque_valid=out.torque_valid.copy(),
         torque_source=source,
-        angle=out['angle'],
-        faults={
-            f'{part}.{kind}': n
-            for part, counter in (
-                ('wheel', observer.wheels.faults),
-                ('speed', observer.speed.faults),
-                ('estimator', estimator.faults),
-            )
-            for kind, n in counter.counts.items()
-        }
-        | (
-            {'engine.torque_offset_clamped': int(engine_path.state.offset.clamped)}
-            if learns and engine_path is not None
-            else {}
-        ),
-        mass=scalars['mass'],
-        mass_std=scalars['mass_std'],
-        mass_converged=flags['mass_converged'],
-        mass_used=scalars['mass_used'],
-        mass_excited=flags['mass_excited'],
-        radius=scalars['radius'],
-        radius_std=scalars['radius_std'],
-        radius_converged=flags['radius_converged'],
-        radius_used=scalars['radius_used'],
-        radius_free_wheels=free_wheels,
-        **offset.fields(),
+        angle=out.wheel[:, 0, :].copy(),
+        faults=parts.faults(),
+        mass=est.mass.copy(),
+        mass_std=est.mass_std.copy(),
+        mass_converged=est.mass_converged.copy(),
+        mass_used=est.mass_used.copy(),
+        mass_excited=est.mass_excited.copy(),
+        radius=est.radius.copy(),
+        radius_std=est.radius_std.copy(),
+        radius_converged=est.radius_converged.copy(),
+        radius_used=est.radius_used.copy(),
+        radius_free_wheels=est.radius_free_wheels.astype(np.int64),
+        **learnt.fields(),
+        wheel_torque_used=out.used.copy(),
     )

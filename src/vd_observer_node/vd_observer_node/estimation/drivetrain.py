@@ -33,22 +33,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Final, NamedTuple
+from typing import Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from vd_common.vehicle.params import VehicleParams
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.estimation.torque_offset import (
-    TorqueOffset,
-    TorqueOffsetConfig,
-    new_offset_estimate,
-    new_offset_state,
-    offset_from_record,
-    offset_params,
-    torque_offset_step,
-)
+from vd_observer_node.kernel._jit import jit
 
 __all__ = [
     'DRIVEN_AXLES',
@@ -58,12 +50,9 @@ __all__ = [
     'TORQUE_NONE',
     'TORQUE_SOURCES',
     'Drivetrain',
-    'EnginePath',
-    'EngineState',
     'clutch_engaged',
-    'engine_path_step',
+    'engine_torques',
     'engine_wheel_torques',
-    'engine_wheel_torques_record',
     'gear_number',
     'torque_source_code',
 ]
@@ -206,7 +195,7 @@ class Drivetrain:
         return math.nan
 
     def params_array(self) -> FloatArray:
-        """The compiled twin's parameters:
+        """The parameters of `engine_torques` (an array: the number of gears varies):
         [n, final, reverse, eta, J_e, max slip, settle time, driven (4), ratios (n)]."""
         return np.array(
             [
@@ -223,13 +212,73 @@ class Drivetrain:
         )
 
 
+@jit
+def engine_torques(
+    dprm: FloatArray,
+    engine_torque: float,
+    gear_value: float,
+    engine_speed: float,
+    omega: FloatArray,
+    omega_dot: FloatArray,
+    out: FloatArray,
+) -> bool:
+    """Wheel torques from the engine torque into ``out`` (4,) [N m]; returns whether the
+    clutch is engaged (the compiled step of `engine_wheel_torques` and `clutch_engaged`).
+
+    Args:
+        dprm: `Drivetrain.params_array`.
+        engine_torque: net engine torque [N m].
+        gear_value: the gear as a float (`gear_number` rules: no gear gives nan torques).
+        engine_speed: [rad/s], nan if not measured (then only the gear is checked).
+        omega: shape (4,), [rad/s] wheel speeds.
+        omega_dot: shape (4,), [rad/s^2] wheel accelerations (the engine-inertia term).
+        out: shape (4,), written.
+    """
+    n_gears = int(dprm[0])
+    ratio = math.nan
+    if math.isfinite(gear_value) and gear_value == round(gear_value) and abs(gear_value) < 2.0**31:
+        gear = int(gear_value)
+        if gear == 0:
+            ratio = 0.0
+        elif gear == -1:
+            ratio = -dprm[2] * dprm[1]
+        elif 1 <= gear <= n_gears:
+            ratio = dprm[11 + gear - 1] * dprm[1]
+    if not math.isfinite(ratio):
+        out[:] = math.nan
+        return False
+    if ratio == 0.0:
+        out[:] = 0.0  # neutral: nothing reaches the wheels, whatever the engine does
+        return True
+    n_driven = dprm[7] + dprm[8] + dprm[9] + dprm[10]
+    carrier_accel = 0.0
+    carrier_speed = 0.0
+    for i in range(4):
+        carrier_accel += dprm[7 + i] * omega_dot[i]
+        carrier_speed += dprm[7 + i] * omega[i]
+    if math.isfinite(engine_torque):
+        clutch = engine_torque - dprm[4] * ratio * (carrier_accel / n_driven)
+        total = ratio * clutch
+        # The engine turns forward in every gear: a positive clutch torque sends power to
+        # the wheels (losses take eta of it), a negative one (engine braking) draws it.
+        eta = dprm[3]
+        total = total * eta if clutch >= 0.0 else total / eta
+        for i in range(4):
+            out[i] = total * dprm[7 + i] / n_driven
+    else:
+        out[:] = math.nan
+    if not math.isfinite(engine_speed):
+        return True
+    return bool(abs(engine_speed - ratio * (carrier_speed / n_driven)) <= dprm[5])
+
+
 def engine_wheel_torques(
     engine_torque: float,
     gear: int,
     drivetrain: Drivetrain,
     wheel_omega_dot: ArrayLike | None = None,
 ) -> FloatArray:
-    """Drive torque per wheel from the engine torque and the engaged gear.
+    """Drive torque per wheel from the engine torque and the engaged gear (`engine_torques`).
 
     Args:
         engine_torque: net engine torque at the crankshaft [N m] (combustion minus drag, as
@@ -248,27 +297,17 @@ def engine_wheel_torques(
     Raises:
         InputShapeError: wheel_omega_dot is not of shape (4,).
     """
-    driven = drivetrain.driven
-    ratio = drivetrain.overall_ratio(int(gear))
-    if ratio == 0.0:
-        return np.zeros(4)  # neutral: nothing reaches the wheels, whatever the engine does
-    if not (math.isfinite(engine_torque) and math.isfinite(ratio)):
-        return np.full(4, math.nan)
-    clutch = float(engine_torque)
+    accel = np.zeros(4)
     if wheel_omega_dot is not None:
-        accel = np.asarray(wheel_omega_dot, dtype=np.float64)
+        accel = np.ascontiguousarray(wheel_omega_dot, dtype=np.float64)
         if accel.shape != (4,):
             raise InputShapeError(f'wheel_omega_dot must have shape (4,), got {accel.shape}')
-        n_driven = float(np.sum(driven))
-        carrier = float(np.sum(driven * accel)) / n_driven
-        clutch -= drivetrain.engine_inertia * ratio * carrier
-    total = ratio * clutch
-    # The engine turns forward in every gear: a positive clutch torque sends power to the
-    # wheels (losses take eta of it), a negative one (engine braking) draws it from them.
-    eta = drivetrain.efficiency
-    total = total * eta if clutch >= 0.0 else total / eta
-    share: FloatArray = total * driven / float(np.sum(driven))
-    return share
+    out = np.empty(4)
+    engine_torques(
+        drivetrain.params_array(), float(engine_torque), float(gear), math.nan, np.zeros(4),
+        accel, out,
+    )  # fmt: skip
+    return out
 
 
 def clutch_engaged(
@@ -291,164 +330,11 @@ def clutch_engaged(
     Raises:
         InputShapeError: wheel_omega is not of shape (4,).
     """
-    omega = np.asarray(wheel_omega, dtype=np.float64)
+    omega = np.ascontiguousarray(wheel_omega, dtype=np.float64)
     if omega.shape != (4,):
         raise InputShapeError(f'wheel_omega must have shape (4,), got {omega.shape}')
-    ratio = drivetrain.overall_ratio(int(gear))
-    if not math.isfinite(ratio):
-        return False
-    if ratio == 0.0 or not math.isfinite(engine_speed):
-        return True
-    driven = drivetrain.driven
-    carrier = float(np.sum(driven * omega)) / float(np.sum(driven))
-    return abs(engine_speed - ratio * carrier) <= drivetrain.max_clutch_slip
-
-
-class EngineState(NamedTuple):
-    """The engine path's memory between samples.
-
-    Attributes:
-        last_unsettled: [s] stamp at which the clutch last slipped or the gear changed
-            (-inf before any).
-        last_gear: the previous sample's gear (`gear_number`), None before the first.
-        offset: the engine-torque offset estimator's state (`torque_offset.OFFSET_STATE_DTYPE`
-            record; `engine_path_step` steps a copy, so the default is never changed).
-    """
-
-    last_unsettled: float = -math.inf
-    last_gear: int | None = None
-    offset: np.record = new_offset_state()
-
-
-def engine_path_step(
-    drivetrain: Drivetrain,
-    state: EngineState,
-    t: float,
-    engine: ArrayLike,
-    wheel_omega: ArrayLike,
-    wheel_omega_dot: ArrayLike,
-    offset_config: TorqueOffsetConfig | None = None,
-) -> tuple[FloatArray, bool, TorqueOffset | None, EngineState]:
-    """One sample of the engine path (pure): wheel torques, whether they hold, next state.
-
-    The torques hold where the clutch is closed (`clutch_engaged`) and has been for
-    ``drivetrain.clutch_settle_time`` since it last slipped or the gear changed. With
-    ``offset_config`` the offset of the engine-torque signal is learnt in neutral
-    (`torque_offset`) and, once converged, subtracted before the wheel torques are computed.
-
-    Args:
-        drivetrain: the vehicle's driveline.
-        state: the state after the previous sample (`EngineState()` at the start).
-        t: stamp [s].
-        engine: shape (3,): engine torque [N m], gear (a float; 0 neutral, -1 reverse),
-            engine speed [rad/s] (nan if not measured).
-        wheel_omega: shape (4,), [rad/s] the observer's wheel speeds.
-        wheel_omega_dot: shape (4,), [rad/s^2] the observer's wheel accelerations.
-        offset_config: settings of the offset estimator; None: the signal is taken as it is.
-
-    Returns:
-        (wheel torques (4,) [N m] as `engine_wheel_torques` gives them, torque valid, the
-        offset estimate after the sample (None without ``offset_config``), the next state).
-
-    Raises:
-        InputShapeError: an array of the wrong shape.
-    """
-    row = np.asarray(engine, dtype=np.float64)
-    if row.shape != (3,):
-        raise InputShapeError(f'engine must have shape (3,), got {row.shape}')
-    engine_torque, gear, engine_speed = (float(v) for v in row)
-    gear_code = gear_number(gear)  # no gear at all: nan torques, a fault
-    offset: TorqueOffset | None = None
-    offset_state = state.offset
-    if offset_config is not None:
-        offset_state = offset_state.copy()  # the step advances its record in place
-        out = new_offset_estimate()
-        torque_offset_step(
-            offset_params(offset_config),
-            drivetrain.engine_inertia,
-            offset_state,
-            t,
-            engine_torque,
-            float(gear_code),
-            engine_speed,
-            out,
-        )
-        offset = offset_from_record(out)
-        engine_torque -= offset.used
-    torque = engine_wheel_torques(engine_torque, gear_code, drivetrain, wheel_omega_dot)
-    engaged = clutch_engaged(engine_speed, gear_code, wheel_omega, drivetrain)
-    last_unsettled = state.last_unsettled
-    if not engaged or gear_code != state.last_gear:
-        last_unsettled = t
-    valid = engaged and t - last_unsettled >= drivetrain.clutch_settle_time
-    return torque, valid, offset, EngineState(last_unsettled, gear_code, offset_state)
-
-
-class EnginePath:
-    """`engine_path_step` with its state kept: what the cascade and the live chain run.
-
-    Attributes:
-        drivetrain: the vehicle's driveline.
-        offset_config: settings of the engine-torque offset estimator (None: off).
-        state: the state after the last sample.
-        offset: the offset estimate after the last sample (None when off).
-    """
-
-    def __init__(
-        self, drivetrain: Drivetrain, offset_config: TorqueOffsetConfig | None = None
-    ) -> None:
-        """Start with no sample seen."""
-        self.drivetrain = drivetrain
-        self.offset_config = offset_config
-        self.state = EngineState()
-        self.offset: TorqueOffset | None = None
-
-    def update(
-        self, t: float, engine: ArrayLike, wheel_omega: ArrayLike, wheel_omega_dot: ArrayLike
-    ) -> tuple[FloatArray, bool]:
-        """Wheel torques (4,) [N m] and whether they hold at stamp t [s] (`engine_path_step`).
-
-        Raises:
-            InputShapeError: an array of the wrong shape.
-        """
-        torque, valid, self.offset, self.state = engine_path_step(
-            self.drivetrain,
-            self.state,
-            t,
-            engine,
-            wheel_omega,
-            wheel_omega_dot,
-            self.offset_config,
-        )
-        return torque, valid
-
-
-def engine_wheel_torques_record(
-    engine: ArrayLike, drivetrain: Drivetrain, wheel_omega_dot: ArrayLike
-) -> FloatArray:
-    """`engine_wheel_torques` over a record (what the engine path feeds the estimator).
-
-    Args:
-        engine: shape (N, 3): engine torque [N m], gear (float), engine speed (unused).
-        drivetrain: the vehicle's driveline.
-        wheel_omega_dot: shape (N, 4), [rad/s^2] the observer's wheel accelerations.
-
-    Returns:
-        shape (N, 4), [N m]; rows of nan where `engine_wheel_torques` gives nan.
-
-    Raises:
-        InputShapeError: inconsistent shapes.
-    """
-    record = np.asarray(engine, dtype=np.float64)
-    accel = np.asarray(wheel_omega_dot, dtype=np.float64)
-    n = record.shape[0] if record.ndim == 2 else -1
-    if record.shape != (n, 3) or accel.shape != (n, 4):
-        raise InputShapeError(
-            f'expected engine (N, 3) and wheel_omega_dot (N, 4), got {record.shape}, {accel.shape}'
-        )
-    out = np.empty((n, 4))
-    for k in range(n):
-        out[k] = engine_wheel_torques(
-            float(record[k, 0]), gear_number(float(record[k, 1])), drivetrain, accel[k]
-        )
-    return out
+    engaged = engine_torques(
+        drivetrain.params_array(), 0.0, float(gear), float(engine_speed), omega, np.zeros(4),
+        np.empty(4),
+    )  # fmt: skip
+    return bool(engaged)

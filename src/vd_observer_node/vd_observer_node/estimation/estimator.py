@@ -37,6 +37,10 @@ returns the previous estimates unchanged (counted in `rejected_count`); a stamp 
 than `max_gap` (a looped bag) or a gap longer than `max_gap` resets the estimator; a wheel
 lifting off, mu or slope outside their plausible range clear the flags. Every case is counted
 per kind in `Estimator.faults` (see docs/faults.md).
+
+The per-stamp math is compiled, in `estimator_step` (`estimator_update` over named records);
+`Estimator` builds its records (`estimator_params`, `EstimatorState`) and calls it, and so
+does the cascade loop (`cascade_step.cascade_block`).
 """
 
 from __future__ import annotations
@@ -49,20 +53,19 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.estimation import formulas as phys
-from vd_observer_node.estimation.drivetrain import (
-    TORQUE_ENGINE,
-    TORQUE_MEASURED,
-    TORQUE_NONE,
-    TORQUE_SOURCES,
+from vd_observer_node.estimation.drivetrain import TORQUE_MEASURED, TORQUE_SOURCES
+from vd_observer_node.estimation.estimator_step import (
+    ESTIMATES,
+    ESTIMATOR_PARAMS,
+    ESTIMATOR_STATE,
+    REJECTED_SLOT,
+    estimator_reset,
+    estimator_update,
 )
 from vd_observer_node.estimation.faults import ESTIMATOR_FAULTS, FaultCounter
-from vd_observer_node.estimation.filters import LowPass
-from vd_observer_node.estimation.mass_grade import MassGradeConfig, MassGradeEstimator
-from vd_observer_node.estimation.rolling_radius import (
-    RollingRadiusConfig,
-    RollingRadiusEstimator,
-)
+from vd_observer_node.estimation.filters import new_record
+from vd_observer_node.estimation.mass_grade import MassGradeConfig, mass_params
+from vd_observer_node.estimation.rolling_radius import RollingRadiusConfig, radius_params
 from vd_observer_node.estimation.torque_offset import TorqueOffsetConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
@@ -77,6 +80,9 @@ __all__ = [
     'Estimates',
     'Estimator',
     'EstimatorConfig',
+    'EstimatorState',
+    'estimates_from_record',
+    'estimator_params',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -290,22 +296,122 @@ class Estimates:
     radius_free_wheels: int = 0
 
 
+def estimator_params(
+    vehicle: EstimatorVehicle, config: EstimatorConfig, torque_source: int = TORQUE_MEASURED
+) -> np.record:
+    """The `estimator_step.ESTIMATOR_PARAMS` record of a vehicle, settings and torque source.
+
+    The online mass and radius run on measured torques only (module docstring).
+    """
+    static = vehicle.static_wheel_loads
+    p = new_record(ESTIMATOR_PARAMS)
+    p.mass = vehicle.mass
+    p.gravity = vehicle.gravity
+    p.radius = vehicle.effective_radius
+    p.inertia_front = vehicle.inertia_front
+    p.inertia_rear = vehicle.inertia_rear
+    p.drag = vehicle.drag_factor
+    p.rolling_c0 = vehicle.rolling_c0
+    p.rolling_c1 = vehicle.rolling_c1
+    p.rolling_reg = vehicle.rolling_regularisation_speed
+    p.cg_height = vehicle.cg_height
+    p.cg_to_front = vehicle.cg_to_front_axle
+    p.cg_to_rear = vehicle.cg_to_rear_axle
+    p.wheelbase = vehicle.wheelbase
+    p.load_transfer = LOAD_TRANSFER_SOURCES.index(config.load_transfer_source)
+    p.force_tau = config.force_filter_tau
+    p.slope_tau = config.slope_filter_tau
+    p.slope_accel = SLOPE_ACCEL_SOURCES.index(config.slope_accel_source)
+    p.min_load = config.min_load_ratio * float(np.min(static))
+    p.min_excitation = config.min_excitation_ratio
+    p.max_sine = math.sin(config.max_slope)
+    p.min_speed = config.min_speed
+    p.slip_eps = config.slip_eps
+    p.max_gap = config.max_gap
+    p.max_mu = config.max_mu
+    p.static_front = static[0]
+    p.static_rear = static[2]
+    p.torque_source = torque_source
+    measured = torque_source == TORQUE_MEASURED
+    p.mass_on = config.mass_adaptation and measured
+    p.radius_on = config.radius_adaptation and measured
+    p.mass_waits = config.mass_waits_for_radius
+    p.mass_p = mass_params(vehicle, config.mass)
+    p.radius_p = radius_params(vehicle, config.radius)
+    return p
+
+
+def estimates_from_record(est: np.record) -> Estimates:
+    """The `Estimates` of an `estimator_step.ESTIMATES` record (copies)."""
+    return Estimates(
+        t=float(est.t),
+        fx=np.array(est.fx),
+        fz=np.array(est.fz),
+        mu=np.array(est.mu),
+        slip=np.array(est.slip),
+        mu_valid=np.array(est.mu_valid, dtype=np.bool_),
+        rolling=np.array(est.rolling),
+        aero=float(est.aero),
+        slope=float(est.slope),
+        slope_valid=bool(est.slope_valid),
+        torque_source=int(est.torque_source),
+        mass=float(est.mass),
+        mass_std=float(est.mass_std),
+        mass_converged=bool(est.mass_converged),
+        mass_used=float(est.mass_used),
+        mass_excited=bool(est.mass_excited),
+        radius=float(est.radius),
+        radius_std=float(est.radius_std),
+        radius_converged=bool(est.radius_converged),
+        radius_used=float(est.radius_used),
+        radius_free_wheels=int(est.radius_free_wheels),
+    )
+
+
+class EstimatorState:
+    """The records and arrays `estimator_step.estimator_update` advances.
+
+    Attributes:
+        record: the `ESTIMATOR_STATE` record (stamps, slope, held inputs, the online mass
+            and radius, the last estimate, the fault counts).
+        force_stages: shape (order, 5), the force low-pass's stages (Fx (4), G).
+        slope_stages: shape (order, 1), the slope balance's low-pass stages.
+        speed_stages: shape (order, 1), the speed low-pass's stages.
+    """
+
+    def __init__(self, params: np.record, order: int) -> None:
+        """A reset state for filters of `order` stages."""
+        self.record = new_record(ESTIMATOR_STATE)
+        self.force_stages = np.zeros((order, 5))
+        self.slope_stages = np.zeros((order, 1))
+        self.speed_stages = np.zeros((order, 1))
+        estimator_reset(params, self.record)
+
+    @property
+    def args(self) -> tuple[np.record, FloatArray, FloatArray, FloatArray]:
+        """(record, force, slope, speed stages): the state arguments of `estimator_update`."""
+        return self.record, self.force_stages, self.slope_stages, self.speed_stages
+
+
 def _as_wheels(name: str, value: ArrayLike) -> FloatArray:
-    array = np.asarray(value, dtype=np.float64)
+    array = np.ascontiguousarray(value, dtype=np.float64)
     if array.shape != (4,):
         raise InputShapeError(f'{name} must have shape (4,), got {array.shape}')
     return array
 
 
-def _all_finite(est: Estimates) -> bool:
-    # One sum is the cheapest check at the sensor rate: NaN/Inf anywhere makes it non-finite
-    # (so do values near 1e308, which are an overflow in all but name).
-    total = float(np.sum(np.concatenate((est.fx, est.fz, est.mu, est.slip, est.rolling))))
-    return math.isfinite(total + est.aero + est.slope)
-
-
 class Estimator:
-    """Stateful per-stamp estimator (the estimator node calls `update` per aligned stamp)."""
+    """Stateful per-stamp estimator (the estimator node calls `update` per aligned stamp):
+    the records of `estimator_step.estimator_update`, and its fault counts as a
+    `FaultCounter`.
+
+    Attributes:
+        vehicle: parameters from the shared vehicle file.
+        config: the settings.
+        torque_source: the torque source code (`drivetrain.TORQUE_*`).
+        params: the `ESTIMATOR_PARAMS` record.
+        state: the `EstimatorState`.
+    """
 
     def __init__(
         self,
@@ -332,40 +438,47 @@ class Estimator:
         self.vehicle = vehicle
         self.config = config or EstimatorConfig()
         self.torque_source = int(torque_source)
-        self._force_filter = LowPass(self.config.force_filter_tau, self.config.filter_order)
-        self._slope_filter = LowPass(self.config.slope_filter_tau, self.config.filter_order)
-        self._speed_filter = LowPass(self.config.slope_filter_tau, self.config.filter_order)
-        self._min_load = self.config.min_load_ratio * float(np.min(vehicle.static_wheel_loads))
-        self.rejected_count = 0
-        self.faults = FaultCounter(ESTIMATOR_FAULTS)
-        # The online mass (None: the file's); on measured torques only (module docstring).
-        self.mass_estimator = (
-            MassGradeEstimator(vehicle, self.config.mass)
-            if self.config.mass_adaptation and self.torque_source == TORQUE_MEASURED
-            else None
-        )
-        self.radius_estimator = (
-            RollingRadiusEstimator(vehicle, self.config.radius)
-            if self.config.radius_adaptation and self.torque_source == TORQUE_MEASURED
-            else None
-        )
-        self.reset()
+        self.params = estimator_params(vehicle, self.config, self.torque_source)
+        self.state = EstimatorState(self.params, self.config.filter_order)
+        self._faults = FaultCounter(ESTIMATOR_FAULTS)
+        self._synced = np.zeros(len(ESTIMATOR_FAULTS), dtype=np.int64)
+        self._est = new_record(ESTIMATES)
+        self._last: Estimates | None = None  # what `last` and a rejected stamp return
 
     def reset(self) -> None:
         """Forget the history (slope back to 0, filters empty); fault counters stay."""
-        self._t: float | None = None
-        self._slope = 0.0
-        # Last finite inputs, packed as omega (4), omega_dot (4), torque (4), speed, accel.
-        self._held = np.zeros(14)
-        self._radius_prev = math.nan  # [m] the radius of the last stamp's Fx (nan: none)
-        self._force_filter.reset()
-        self._slope_filter.reset()
-        self._speed_filter.reset()
-        if self.mass_estimator is not None:
-            self.mass_estimator.reset()
-        if self.radius_estimator is not None:
-            self.radius_estimator.reset()
-        self.last: Estimates | None = None
+        estimator_reset(self.params, self.state.record)
+        self._last = None
+
+    @property
+    def mass_adaptation(self) -> bool:
+        """Whether the online mass runs (configured, and the torques are measured)."""
+        return bool(self.params.mass_on)
+
+    @property
+    def radius_adaptation(self) -> bool:
+        """Whether the online radius runs (configured, and the torques are measured)."""
+        return bool(self.params.radius_on)
+
+    @property
+    def rejected_count(self) -> int:
+        """Stamps rejected (non-finite, repeated or slightly older)."""
+        return int(self.state.record.counts[REJECTED_SLOT])
+
+    @property
+    def last(self) -> Estimates | None:
+        """The last estimate (None before the first, and after a reset)."""
+        return self._last if self.state.record.has_last else None
+
+    @property
+    def faults(self) -> FaultCounter:
+        """Input faults per kind (synced from the state's counts)."""
+        counts = np.array(self.state.record.counts[:REJECTED_SLOT])
+        delta = counts - self._synced
+        for slot in np.flatnonzero(delta).tolist():
+            self._faults.count(ESTIMATOR_FAULTS[slot], int(delta[slot]))
+        self._synced = counts
+        return self._faults
 
     def update(
         self,
@@ -392,252 +505,16 @@ class Estimator:
         Raises:
             InputShapeError: a per-wheel input is not of shape (4,).
         """
-        packed = np.empty(14)
-        packed[0:4] = _as_wheels('omega', omega)
-        packed[4:8] = _as_wheels('omega_dot', omega_dot)
-        packed[8:12] = _as_wheels('torque', torque)
-        packed[12] = speed
-        packed[13] = accel
-        if not math.isfinite(t):
-            return self._reject('non_finite_stamp', t)
-        if self._t is not None:
-            if t <= self._t:
-                if self._t - t <= self.config.max_gap:
-                    return self._reject('duplicate_stamp' if t == self._t else 'out_of_order', t)
-                self.faults.count('time_jump_back')
-                self._restart()
-            elif t - self._t > self.config.max_gap:
-                self.faults.count('gap')
-                self._restart()
-        dt = 0.0 if self._t is None else t - self._t
-        self._t = t
-        ok = np.isfinite(packed)
-        if ok.all():
-            wheel_ok = np.ones(4, dtype=bool)
-            body_ok = True
-        else:
-            self.faults.count('non_finite_value')
-            packed = np.where(ok, packed, self._held)
-            wheel_ok = ok[0:4] & ok[4:8] & ok[8:12] & ok[12]
-            body_ok = bool(ok.all())
-        self._held = packed
-        if not torque_ok:
-            wheel_ok = np.zeros(4, dtype=bool)
-            body_ok = False
-        est = self._estimate(t, dt, packed, wheel_ok, body_ok)
-        if not _all_finite(est):
-            # Overflow from absurd (finite) input: drop the poisoned state, report nothing valid.
-            self.faults.count('non_finite_output')
-            self.reset()
-            self._t = t
-            est = self._empty(t)
-            self.last = est
-        return est
-
-    def _reject(self, kind: str, t: float) -> Estimates:
-        self.faults.count(kind)
-        self.rejected_count += 1
-        return self.last if self.last is not None else self._empty(t)
-
-    def _restart(self) -> None:
-        """Reset after a time jump or gap, keeping the last finite inputs to hold."""
-        held = self._held
-        self.reset()
-        self._held = held
-
-    def _estimate(
-        self,
-        t: float,
-        dt: float,
-        x: FloatArray,
-        wheel_ok: NDArray[np.bool_],
-        body_ok: bool,
-    ) -> Estimates:
-        veh, cfg = self.vehicle, self.config
-        omega, omega_dot, torque = x[0:4], x[4:8], x[8:12]
-        no_torque = self.torque_source == TORQUE_NONE
-        v = float(x[12])
-        accel = float(x[13])
-        all_ok = bool(wheel_ok.all()) and body_ok
-        radius = self._radius_step(t, omega, torque, v, all_ok)
-        r_used = radius[3]
-        waiting = self.radius_estimator is not None and cfg.mass_waits_for_radius and not radius[2]
-        # Fx uses another radius from now on: the mass learnt so far is rescaled to it
-        rescale = not (waiting or math.isnan(self._radius_prev) or r_used == self._radius_prev)
-        mass_est = self.mass_estimator
-        if rescale and mass_est is not None and mass_est.rescale_force(self._radius_prev / r_used):
-            self.faults.count('mass_clamped')
-        self._radius_prev = r_used
-        # Without the torque the balance has no force: Fx is 0 (not -J*omega_dot/R).
-        fx_raw = (
-            np.zeros(4)
-            if no_torque
-            else phys.tire_longitudinal_force(torque, omega_dot, veh, r_used)
-        )
-        if waiting:
-            mass = self._fixed_mass()
-        else:
-            mass = self._mass_step(t, float(np.sum(fx_raw)), v, all_ok)
-        m_used = mass[3]
-        # Same smooth sign as the simulator's rolling resistance; drag is exactly k*v*|v|.
-        direction = float(phys.motion_direction(v, veh.rolling_regularisation_speed))
-        aero = float(phys.aero_drag(v, veh))
-        aero_signed = math.copysign(aero, v)
-        c_roll = float(phys.rolling_coefficient(v, veh))
-        cos_prev, sin_prev = math.cos(self._slope), math.sin(self._slope)
-        weight = m_used * veh.gravity
-
-        # Sum of the rolling resistances follows from sum(Fz) = m*g*cos(alpha) in both
-        # load-transfer forms, so it does not depend on the transfer itself.
-        rolling_sum = c_roll * weight * cos_prev
-        if cfg.load_transfer_source == 'tire_forces' and not no_torque:
-            ground = float(np.sum(fx_raw)) - direction * rolling_sum
-        else:
-            ground = m_used * accel + weight * sin_prev + aero_signed
-        filtered = self._force_filter.update(dt, np.append(fx_raw, ground))
-        fx, ground_f = filtered[:4], float(filtered[4])
-
-        # A load transfer beyond the axle's load means the wheel has lifted off: Fz = 0.
-        fz = np.maximum(phys.wheel_loads(ground_f, cos_prev, veh, m_used), 0.0)
-        rolling = phys.rolling_resistance(v, fz, veh)
-        mu, mu_valid = phys.utilised_friction(fx, fz, self._min_load, cfg.min_excitation_ratio)
-        mu_valid &= wheel_ok & (not no_torque)
-        if bool(np.any(fz < self._min_load)):
-            self.faults.count('wheel_lift')
-        implausible = mu_valid & (np.abs(mu) > cfg.max_mu)
-        if implausible.any():
-            self.faults.count('mu_out_of_range')
-            mu_valid &= ~implausible
-        mu = np.where(mu_valid, mu, 0.0)
-        slip = phys.slip_ratio(omega, v, veh, cfg.slip_eps, r_used)
-
-        forces = float(np.sum(fx_raw)) - direction * rolling_sum - aero_signed
-        if cfg.slope_accel_source == 'speed' and cfg.slope_filter_tau > 0.0:
-            self._speed_filter.update(dt, v)
-            accel_f = float(self._speed_filter.derivative())
-            net_f = float(self._slope_filter.update(dt, forces)) - m_used * accel_f
-        else:
-            net_f = float(self._slope_filter.update(dt, forces - m_used * accel))
-        slope, in_range = phys.slope_from_forces(net_f, veh, cfg.max_slope, m_used)
-        usable = body_ok and abs(v) >= cfg.min_speed and not no_torque
-        if usable and not in_range:
-            # |N| > m g has no arcsin at all; below that the slope is only implausible.
-            sine = net_f / weight
-            self.faults.count('arcsin_domain' if abs(sine) > 1.0 else 'slope_out_of_range')
-        slope_valid = bool(in_range) and usable
-        if self.torque_source == TORQUE_ENGINE and usable and not in_range:
-            # The balance needs a force the engine path cannot know of (the brakes): the
-            # torques are wrong, so is mu.
-            mu_valid = np.zeros(4, dtype=bool)
-            mu = np.zeros(4)
-        if slope_valid:
-            # An invalid stamp keeps the last valid slope (it is published as invalid).
-            self._slope = float(slope)
-        self.last = Estimates(
-            t=t,
-            fx=fx,
-            fz=fz,
-            mu=mu,
-            slip=slip,
-            mu_valid=mu_valid,
-            rolling=rolling,
-            aero=aero,
-            slope=self._slope,
-            slope_valid=slope_valid,
-            torque_source=self.torque_source,
-            mass=mass[0],
-            mass_std=mass[1],
-            mass_converged=bool(mass[2]),
-            mass_used=m_used,
-            mass_excited=bool(mass[4]),
-            radius=radius[0],
-            radius_std=radius[1],
-            radius_converged=bool(radius[2]),
-            radius_used=r_used,
-            radius_free_wheels=int(radius[4]),
-        )
-        return self.last
-
-    def _radius_step(
-        self, t: float, omega: FloatArray, torque: FloatArray, v: float, ok: bool
-    ) -> tuple[float, ...]:
-        """Advance the online radius: (radius, radius_std, converged, radius_used, free).
-
-        Args:
-            t: stamp [s] (accepted by the estimator).
-            omega: shape (4,), [rad/s] wheel speeds.
-            torque: shape (4,), [N m] reported wheel torques.
-            v: the estimator's body speed [m/s].
-            ok: every input of the stamp was finite and the torque trusted; else the radius
-                holds (its estimator is not called).
-        """
-        est = self.radius_estimator
-        if est is None or not ok:
-            return self._fixed_radius()
-        clamped = est.faults['radius_clamped']
-        out = est.update(t, omega, torque, v)
-        if est.faults['radius_clamped'] != clamped:
-            self.faults.count('radius_clamped')
-        return out.radius, out.radius_std, float(out.converged), out.radius_used, out.free_wheels
-
-    def _fixed_radius(self) -> tuple[float, ...]:
-        """The radius fields where nothing was estimated: the file's or the estimator's."""
-        r0 = self.vehicle.effective_radius
-        if self.radius_estimator is None:
-            return r0, 0.0, 0.0, r0, 0
-        out = self.radius_estimator.current()
-        return out.radius, out.radius_std, float(out.converged), out.radius_used, 0
-
-    def _mass_step(self, t: float, sum_fx: float, v: float, ok: bool) -> tuple[float, ...]:
-        """Advance the online mass: (mass, mass_std, converged, mass_used, excited).
-
-        Args:
-            t: stamp [s] (accepted by the estimator).
-            sum_fx: sum of the four tyre forces [N] from the wheel torque balance.
-            v: the estimator's body speed [m/s].
-            ok: every input of the stamp was finite and the torque trusted; else the mass
-                estimator holds (it is given a non-finite force, which it skips).
-        """
-        est = self.mass_estimator
-        if est is None:
-            return self._fixed_mass()
-        clamped = est.faults['mass_clamped']
-        out = est.update(t, sum_fx if ok else math.nan, v)
-        if est.faults['mass_clamped'] != clamped:
-            self.faults.count('mass_clamped')
-        # a held stamp (skipped here) did not update the mass, whatever the last one did
-        excited = float(out.excited and ok)
-        return out.mass, out.mass_std, float(out.converged), out.mass_used, excited
-
-    def _fixed_mass(self) -> tuple[float, ...]:
-        """The mass fields where nothing was estimated: the file's or the mass estimator's."""
-        m0 = self.vehicle.mass
-        if self.mass_estimator is None:
-            return m0, 0.0, 0.0, m0, 0.0
-        out = self.mass_estimator.current()
-        return out.mass, out.mass_std, float(out.converged), out.mass_used, 0.0
-
-    def _empty(self, t: float) -> Estimates:
-        zeros = np.zeros(4)
-        mass = self._fixed_mass()
-        radius = self._fixed_radius()
-        return Estimates(
-            t=t if math.isfinite(t) else 0.0,
-            fx=zeros,
-            fz=self.vehicle.static_wheel_loads,
-            mu=zeros,
-            slip=zeros,
-            mu_valid=np.zeros(4, dtype=bool),
-            rolling=zeros,
-            aero=0.0,
-            slope=0.0,
-            slope_valid=False,
-            torque_source=self.torque_source,
-            mass=mass[0],
-            mass_std=mass[1],
-            mass_converged=False,
-            mass_used=mass[3],
-            radius=radius[0],
-            radius_std=radius[1],
-            radius_used=radius[3],
-        )
+        rejected = self.rejected_count
+        estimator_update(
+            self.params, *self.state.args, float(t), _as_wheels('omega', omega),
+            _as_wheels('omega_dot', omega_dot), float(speed), float(accel),
+            _as_wheels('torque', torque), bool(torque_ok), self._est,
+        )  # fmt: skip
+        if self.rejected_count != rejected:
+            # a rejected stamp: the last estimate itself, or a new empty one before any
+            if self._last is not None and self.state.record.has_last:
+                return self._last
+            return estimates_from_record(self._est)
+        self._last = estimates_from_record(self._est)
+        return self._last

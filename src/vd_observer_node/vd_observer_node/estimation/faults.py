@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Final
 
 from vd_observer_node.errors import ConfigurationError
+from vd_observer_node.kernel._jit import jit
 
 __all__ = [
     'ENGINE_FAULTS',
@@ -29,6 +30,8 @@ __all__ = [
     'FaultReport',
     'classify_stamp',
     'merge_reports',
+    'stamp_dt',
+    'stamp_step',
     'summarise',
 ]
 
@@ -161,14 +164,55 @@ def merge_reports(reports: Mapping[str, FaultReport]) -> FaultReport:
     return FaultReport(level=level, active=active, counts=counts)
 
 
-def classify_stamp(
-    last: float | None, t: float, max_gap: float
-) -> tuple[str | None, float | None]:
-    """The stamp rules of the online estimators, as a pure step.
+#: `stamp_step`'s codes: indices into `STAMP_FAULTS` (-1: no fault).
+_NON_FINITE_STAMP, _DUPLICATE, _OUT_OF_ORDER, _GAP, _JUMP_BACK = 0, 2, 3, 4, 5
+
+
+@jit
+def stamp_step(last: float, t: float, max_gap: float) -> tuple[int, float]:
+    """The stamp rules of the online estimators, as a compiled step.
 
     A non-finite stamp, a repeated one or one slightly older than the last (by at most
     ``max_gap``) is rejected; one older by more (a looped bag) or newer by more than
     ``max_gap`` restarts from this sample (`RESTART_FAULTS`).
+
+    Args:
+        last: stamp [s] of the last accepted sample, nan before the first.
+        t: this sample's stamp [s].
+        max_gap: [s] > 0.
+
+    Returns:
+        (index into `STAMP_FAULTS` of the fault to count, -1 for none; dt [s]): dt nan
+        rejects the sample, 0.0 starts (again) at t, > 0 steps on.
+    """
+    if not math.isfinite(t):
+        return _NON_FINITE_STAMP, math.nan
+    if math.isnan(last):
+        return -1, 0.0
+    dt = t - last
+    if dt == 0.0:
+        return _DUPLICATE, math.nan
+    if dt < 0.0:
+        if -dt <= max_gap:
+            return _OUT_OF_ORDER, math.nan
+        return _JUMP_BACK, 0.0
+    if dt > max_gap:
+        return _GAP, 0.0
+    return -1, dt
+
+
+@jit
+def stamp_dt(last: float, t: float, max_gap: float) -> float:
+    """`stamp_step` without the fault kind: dt [s] (0.0 at the start), nan to hold (a
+    rejected stamp), -1.0 to restart (a gap or a jump back)."""
+    kind, dt = stamp_step(last, t, max_gap)
+    return -1.0 if kind in (_GAP, _JUMP_BACK) else dt
+
+
+def classify_stamp(
+    last: float | None, t: float, max_gap: float
+) -> tuple[str | None, float | None]:
+    """`stamp_step` with the kind by name and None for the missing stamp and dt.
 
     Args:
         last: stamp [s] of the last accepted sample, None before the first.
@@ -179,17 +223,5 @@ def classify_stamp(
         (the fault kind to count or None, dt [s]): dt None rejects the sample, 0.0 starts
         (again) at t, > 0 steps on.
     """
-    if not math.isfinite(t):
-        return 'non_finite_stamp', None
-    if last is None:
-        return None, 0.0
-    dt = t - last
-    if dt == 0.0:
-        return 'duplicate_stamp', None
-    if dt < 0.0:
-        if -dt <= max_gap:
-            return 'out_of_order', None
-        return 'time_jump_back', 0.0
-    if dt > max_gap:
-        return 'gap', 0.0
-    return None, dt
+    kind, dt = stamp_step(math.nan if last is None else float(last), float(t), float(max_gap))
+    return (None if kind < 0 else STAMP_FAULTS[kind]), (None if math.isnan(dt) else dt)

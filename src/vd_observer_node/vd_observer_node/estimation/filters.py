@@ -1,15 +1,101 @@
-"""Low-pass filter of estimates on irregular time steps."""
+"""Low-pass filter of estimates on irregular time steps.
+
+`lowpass_update` and `lowpass_derivative` are the compiled step (what the estimator runs per
+stamp); `LowPass` keeps one filter's state and calls them. The state of a filter of ``order``
+stages over ``d`` channels: ``stages`` (order, d), ``prev`` (d,) the last output before the
+latest step, and a `LOWPASS_META` record.
+"""
 
 from __future__ import annotations
 
 import math
+from typing import Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError
+from vd_observer_node.kernel._jit import jit
 
-__all__ = ['LowPass']
+__all__ = [
+    'LOWPASS_META',
+    'LowPass',
+    'lowpass_derivative',
+    'lowpass_reset',
+    'lowpass_update',
+    'new_record',
+]
+
+FloatArray = NDArray[np.float64]
+
+#: A filter's bookkeeping: its stages hold a signal, ``prev`` holds the output before the
+#: latest step, and that step's length [s].
+LOWPASS_META: Final = np.dtype(
+    [('started', 'b1'), ('has_prev', 'b1'), ('last_dt', 'f8')], align=True
+)
+
+
+def new_record(dtype: np.dtype[np.void]) -> np.record:
+    """One zeroed record of `dtype` (fields readable and writable by name, compiled or not)."""
+    record: np.record = np.zeros(1, dtype).view(np.recarray)[0]
+    return record
+
+
+@jit
+def lowpass_reset(meta: np.record) -> None:
+    """Forget the state: the next input initialises every stage."""
+    meta.started = False
+    meta.has_prev = False
+    meta.last_dt = 0.0
+
+
+@jit
+def lowpass_update(
+    tau: float,
+    stages: FloatArray,
+    prev: FloatArray,
+    meta: np.record,
+    dt: float,
+    x: FloatArray,
+    out: FloatArray,
+) -> None:
+    """Advance by ``dt`` [s] with the (finite) input ``x`` (d,) and write the output to ``out``.
+
+    Each stage y <- y + (1 - exp(-dt / tau)) * (x - y); tau = 0 passes ``x`` through. The
+    first input after a reset initialises every stage (a steady start).
+    """
+    if tau == 0.0:
+        out[:] = x
+        return
+    if not meta.started:
+        for j in range(stages.shape[0]):
+            stages[j, :] = x
+        meta.started = True
+        out[:] = x
+        return
+    alpha = -math.expm1(-max(dt, 0.0) / tau)
+    prev[:] = stages[-1]
+    meta.has_prev = True
+    meta.last_dt = dt
+    for i in range(x.shape[0]):
+        signal = x[i]
+        for j in range(stages.shape[0]):
+            stages[j, i] += alpha * (signal - stages[j, i])
+            signal = stages[j, i]
+        out[i] = signal
+
+
+@jit
+def lowpass_derivative(
+    stages: FloatArray, prev: FloatArray, meta: np.record, out: FloatArray
+) -> None:
+    """Rate of change of the output over the last step, (y_k - y_(k-1)) / dt, into ``out``
+    (d,); zeros before the second update (or with tau = 0: never updated)."""
+    if not (meta.started and meta.has_prev and meta.last_dt > 0.0):
+        out[:] = 0.0
+        return
+    for i in range(out.shape[0]):
+        out[i] = (stages[-1, i] - prev[i]) / meta.last_dt
 
 
 class LowPass:
@@ -36,9 +122,11 @@ class LowPass:
             raise ConfigurationError(f'filter order must be >= 1: {order}')
         self._tau = float(tau)
         self._order = order
-        self._stages: list[NDArray[np.float64]] | None = None
-        self._previous: NDArray[np.float64] | None = None
-        self._last_dt = 0.0
+        self._meta = new_record(LOWPASS_META)
+        # sized by the first input (any shape, filtered element-wise)
+        self._shape: tuple[int, ...] = ()
+        self._stages = np.zeros((order, 1))
+        self._prev = np.zeros(1)
 
     @property
     def delay(self) -> float:
@@ -47,11 +135,9 @@ class LowPass:
 
     def reset(self) -> None:
         """Forget the state; the next input initialises every stage."""
-        self._stages = None
-        self._previous = None
-        self._last_dt = 0.0
+        lowpass_reset(self._meta)
 
-    def derivative(self) -> NDArray[np.float64]:
+    def derivative(self) -> FloatArray:
         """Rate of change of the output over the last step [unit/s]: (y_k - y_(k-1)) / dt.
 
         This is the same low-pass applied to the backward difference of the input (the
@@ -59,23 +145,22 @@ class LowPass:
         signal is obtained without differentiating the raw signal; exact on a ramp in steady
         state, with half a sample of delay. Zero before the second update or with tau = 0.
         """
-        if self._previous is None or self._last_dt <= 0.0 or self._stages is None:
-            return np.zeros(()) if self._stages is None else np.zeros_like(self._stages[-1])
-        return (self._stages[-1] - self._previous) / self._last_dt
+        if not self._meta.started:
+            return np.zeros(())
+        out = np.empty(self._prev.shape[0])
+        lowpass_derivative(self._stages, self._prev, self._meta, out)
+        return out.reshape(self._shape)
 
-    def update(self, dt: float, x: ArrayLike) -> NDArray[np.float64]:
+    def update(self, dt: float, x: ArrayLike) -> FloatArray:
         """Advance by dt [s] with the (finite) input x and return the output (same shape)."""
         value = np.array(x, dtype=np.float64)
         if self._tau == 0.0:
             return value
-        if self._stages is None:
-            self._stages = [value.copy() for _ in range(self._order)]
-            return value
-        alpha = -math.expm1(-max(dt, 0.0) / self._tau)
-        self._previous = self._stages[-1].copy()
-        self._last_dt = dt
-        signal = value
-        for stage in self._stages:
-            stage += alpha * (signal - stage)
-            signal = stage
-        return signal.copy()
+        flat = np.ascontiguousarray(value.reshape(-1))
+        if not self._meta.started and value.shape != self._shape:
+            self._shape = value.shape
+            self._stages = np.zeros((self._order, flat.shape[0]))
+            self._prev = np.zeros(flat.shape[0])
+        out = np.empty(flat.shape[0])
+        lowpass_update(self._tau, self._stages, self._prev, self._meta, float(dt), flat, out)
+        return out.reshape(value.shape)

@@ -52,9 +52,10 @@ so a wrong mass never diverges; a non-finite input or stamp is rejected and coun
 repeated or slightly older stamp is rejected; a gap longer than ``max_gap`` or a jump back
 in time resets the estimator to the nominal mass (as the observers re-initialise).
 
-The RLS step is a pure function, :func:`rls_step` (any number of parameters, vector
-forgetting, partial update); :class:`MassGradeEstimator` wraps it with the filters, the
-gating, the clamping, the slope output and the fault counts.
+The per-stamp math is compiled, in `mass_grade_step` (`mass_update`, over named records);
+:class:`MassGradeEstimator` keeps its records and calls it, and so does the estimator's own
+step. The RLS step is :func:`rls_step` (any number of parameters, vector forgetting, partial
+update), the same compiled `mass_grade_step.rls_update` the estimators run.
 """
 
 from __future__ import annotations
@@ -67,7 +68,18 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.estimation.faults import RESTART_FAULTS, STAMP_FAULTS, classify_stamp
+from vd_observer_node.estimation.filters import new_record
+from vd_observer_node.estimation.mass_grade_step import (
+    MASS_GRADE_FAULTS,
+    MASS_PARAMS,
+    MASS_STATE,
+    forgetting_factor,
+    mass_held,
+    mass_rescale,
+    mass_reset,
+    mass_update,
+    rls_update,
+)
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
 __all__ = [
@@ -77,6 +89,8 @@ __all__ = [
     'MassGradeEstimator',
     'MassGradeTrack',
     'forgetting_factor',
+    'mass_estimate',
+    'mass_params',
     'rls_step',
     'run_mass_grade',
     'slope_with_mass',
@@ -84,26 +98,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
-
-#: Fault kinds :class:`MassGradeEstimator` counts (all handled: the output stays finite).
-MASS_GRADE_FAULTS = (*STAMP_FAULTS, 'mass_clamped')
-
-_KMH_REFERENCE = 160.0  # [km/h] speed scale of paper eq. 7 (as estimation.formulas)
-
-
-def forgetting_factor(dt: float, tau: float) -> float:
-    """Forgetting factor of one step ``dt`` for a memory of ``tau`` seconds.
-
-    Args:
-        dt: step, [s], >= 0.
-        tau: memory time constant, [s]; ``inf`` (or 0 steps) means no forgetting.
-
-    Returns:
-        ``exp(-dt / tau)`` in (0, 1], [-].
-    """
-    if math.isinf(tau) or dt <= 0.0:
-        return 1.0
-    return math.exp(-dt / tau)
 
 
 def rls_step(
@@ -123,6 +117,7 @@ def rls_step(
     innovation variance still counts their uncertainty). The covariance update is the Joseph form
     ``(I - K phi^T) P (I - K phi^T)^T + K noise_var K^T``, valid for any gain, so P stays
     symmetric positive definite; with every parameter updated it is the usual RLS.
+    (`mass_grade_step.rls_update`, on new arrays.)
 
     Args:
         theta: parameters, shape (n,).
@@ -138,24 +133,21 @@ def rls_step(
     Returns:
         (theta, P) after the step, new arrays of the same shapes.
     """
-    th = np.asarray(theta, dtype=np.float64)
-    p = np.asarray(cov, dtype=np.float64)
-    f = np.asarray(phi, dtype=np.float64)
-    d = 1.0 / np.sqrt(np.asarray(forgetting, dtype=np.float64))
-    p = p * np.outer(d, d)
-    sel = np.asarray(update, dtype=bool)
-    if not sel.any():
-        return th.copy(), p
-    # Schmidt ("consider") gain: the held parameters' uncertainty still enters the
-    # innovation variance, so the selected ones do not over-trust the measurement.
-    p_phi = p @ f
-    k = np.zeros_like(th)
-    k[sel] = p_phi[sel] / (float(f @ p_phi) + noise_var)
-    innovation = y - float(f @ th)
-    a = np.eye(th.size) - np.outer(k, f)
-    p_new = a @ p @ a.T + noise_var * np.outer(k, k)
-    p_new = 0.5 * (p_new + p_new.T)
-    return th + k * innovation, p_new
+    th = np.array(theta, dtype=np.float64, ndmin=1)
+    n = th.shape[0]
+    theta_out, cov_out = np.empty(n), np.empty((n, n))
+    rls_update(
+        th,
+        np.ascontiguousarray(cov, dtype=np.float64).reshape(n, n),
+        np.ascontiguousarray(phi, dtype=np.float64).reshape(n),
+        float(y),
+        np.ascontiguousarray(forgetting, dtype=np.float64).reshape(n),
+        float(noise_var),
+        np.ascontiguousarray(update, dtype=np.bool_).reshape(n),
+        theta_out,
+        cov_out,
+    )
+    return theta_out, cov_out
 
 
 def slope_with_mass(
@@ -310,8 +302,55 @@ class MassGradeEstimate:
     excited_time: float
 
 
+def mass_params(vehicle: EstimatorVehicle, config: MassGradeConfig) -> np.record:
+    """The `mass_grade_step.MASS_PARAMS` record of a vehicle and settings."""
+    p = new_record(MASS_PARAMS)
+    p.mass = vehicle.mass
+    p.gravity = vehicle.gravity
+    p.drag = vehicle.drag_factor
+    p.rolling_c0 = vehicle.rolling_c0
+    p.rolling_c1 = vehicle.rolling_c1
+    p.mass_tau = config.mass_tau
+    p.grade_tau = config.grade_tau
+    p.filter_tau = config.filter_tau
+    p.noise_density = config.accel_noise_density
+    p.std_ratio = config.initial_mass_std_ratio
+    p.min_speed = config.min_speed
+    p.slope_min_speed = config.slope_min_speed
+    p.min_accel = config.min_accel
+    p.min_force_ratio = config.min_force_ratio
+    p.min_change_ratio = config.min_force_change_ratio
+    p.max_force_rate = config.max_force_rate
+    p.theta_min = 1.0 / (vehicle.mass * config.mass_max_ratio)
+    p.theta_max = 1.0 / (vehicle.mass * config.mass_min_ratio)
+    p.converged_std_ratio = config.converged_std_ratio
+    p.min_excited_time = config.min_excited_time
+    p.max_sine = math.sin(config.max_slope)
+    p.max_gap = config.max_gap
+    # no mass update this long after a (re)start: the filters start from the first sample
+    # as if it were steady, so until they have forgotten it F_hp and y_hp are not
+    # simultaneous (three times the longest delay of the chain)
+    p.warmup = 3.0 * (2.0 * config.filter_tau + config.grade_tau)
+    return p
+
+
+def mass_estimate(out: np.record) -> MassGradeEstimate:
+    """The `MassGradeEstimate` of a `mass_grade_step.MASS_OUT` record."""
+    return MassGradeEstimate(
+        mass=float(out.mass),
+        mass_std=float(out.mass_std),
+        converged=bool(out.converged),
+        mass_used=float(out.mass_used),
+        excited=bool(out.excited),
+        slope=float(out.slope),
+        slope_valid=bool(out.slope_valid),
+        excited_time=float(out.excited_time),
+    )
+
+
 class MassGradeEstimator:
-    """Stateful mass and grade estimator: feed it one stamp at a time.
+    """Stateful mass and grade estimator: feed it one stamp at a time (the records of
+    `mass_grade_step.mass_update`).
 
     Example::
 
@@ -322,7 +361,8 @@ class MassGradeEstimator:
     Attributes:
         config: the settings.
         vehicle: the nominal vehicle (the file's values).
-        faults: counts per kind of :data:`MASS_GRADE_FAULTS`.
+        params: the `MASS_PARAMS` record.
+        state: the `MASS_STATE` record.
     """
 
     def __init__(self, vehicle: EstimatorVehicle, config: MassGradeConfig | None = None) -> None:
@@ -334,61 +374,34 @@ class MassGradeEstimator:
         """
         self.vehicle = vehicle
         self.config = config or MassGradeConfig()
-        self.faults: dict[str, int] = dict.fromkeys(MASS_GRADE_FAULTS, 0)
-        #: [s] no mass update this long after a (re)start: the filters start from the first
-        #: sample as if it were steady, so until they have forgotten it F_hp and y_hp are
-        #: not simultaneous (three times the longest delay of the chain).
-        self.warmup = 3.0 * (2.0 * self.config.filter_tau + self.config.grade_tau)
-        self._theta_min = 1.0 / (vehicle.mass * self.config.mass_max_ratio)
-        self._theta_max = 1.0 / (vehicle.mass * self.config.mass_min_ratio)
+        self.params = mass_params(vehicle, self.config)
+        self.state = new_record(MASS_STATE)
         self.reset()
+
+    @property
+    def warmup(self) -> float:
+        """[s] no mass update this long after a (re)start (`mass_params`)."""
+        return float(self.params.warmup)
+
+    @property
+    def faults(self) -> dict[str, int]:
+        """Counts per kind of :data:`MASS_GRADE_FAULTS`."""
+        return dict(zip(MASS_GRADE_FAULTS, self.state.counts.tolist(), strict=True))
+
+    @property
+    def theta(self) -> FloatArray:
+        """shape (1,): the estimate of 1/m [1/kg]."""
+        return np.array(self.state.theta)
+
+    @property
+    def cov(self) -> FloatArray:
+        """shape (1, 1): its variance."""
+        return np.array(self.state.cov)
 
     def reset(self) -> None:
         """Forget everything: nominal mass, prior covariance, filters empty."""
-        c, m0 = self.config, self.vehicle.mass
-        self.theta: FloatArray = np.array([1.0 / m0])
-        sigma_inv_m = c.initial_mass_std_ratio / m0  # d(1/m) = dm / m^2
-        self.cov: FloatArray = np.array([[sigma_inv_m * sigma_inv_m]])
-        self._t: float | None = None
-        self._lp: list[float] | None = None  # two low-pass stages of F, then of v
-        self._f_slow = math.nan  # grade_tau low-pass of F_lp and y (F_hp = F_lp - F_slow)
-        self._y_slow = math.nan
-        self._slope = 0.0
-        self._excited_time = 0.0
-        self._running = 0.0  # [s] since the (re)start: the filters' warm-up
-        self._converged = False
+        mass_reset(self.params, self.state)
         self._last: MassGradeEstimate | None = None
-
-    # -- helpers ----------------------------------------------------------------------
-
-    def _mass_std(self) -> float:
-        # products, not ** 2: pow() and the compiled kernel's square differ in the last bit
-        theta = float(self.theta[0])
-        return math.sqrt(max(float(self.cov[0, 0]), 0.0)) / (theta * theta)
-
-    def _estimate(self, excited: bool, valid: bool) -> MassGradeEstimate:
-        mass = 1.0 / float(self.theta[0])
-        return MassGradeEstimate(
-            mass=mass,
-            mass_std=self._mass_std(),
-            converged=self._converged,
-            mass_used=mass if self._converged else self.vehicle.mass,
-            excited=excited,
-            slope=self._slope,
-            slope_valid=valid,
-            excited_time=self._excited_time,
-        )
-
-    def _accept_stamp(self, t: float) -> float | None:
-        """dt [s] of a usable stamp (0.0: (re)start); None to hold the last estimate."""
-        kind, dt = classify_stamp(self._t, t, self.config.max_gap)
-        if kind is not None:
-            self.faults[kind] += 1
-        if kind in RESTART_FAULTS:
-            self.reset()
-        if dt is not None:
-            self._t = t
-        return dt
 
     def rescale_force(self, ratio: float) -> bool:
         """The force fed from now on is ``ratio`` times what it was (the radius `Fx` is
@@ -401,25 +414,14 @@ class MassGradeEstimator:
         excited stamp (the prior is not learnt from any force). Returns whether the
         rescaled 1/m had to be clamped.
         """
-        if self._excited_time <= 0.0:
-            return False
-        theta = float(self.theta[0]) / ratio
-        clamped = not self._theta_min <= theta <= self._theta_max
-        theta = min(max(theta, self._theta_min), self._theta_max)
-        self.theta = np.array([theta])
-        self.cov = self.cov / (ratio * ratio)
-        if self._lp is not None:
-            self._lp[0] *= ratio
-            self._lp[1] *= ratio
-        if not math.isnan(self._f_slow):
-            self._f_slow *= ratio
-        return clamped
+        return bool(mass_rescale(self.params, self.state, float(ratio)))
 
     def current(self) -> MassGradeEstimate:
         """The last estimate (the nominal mass and prior deviation before any stamp)."""
-        return self._last or self._estimate(False, False)
-
-    # -- the step ---------------------------------------------------------------------
+        if self._last is not None:
+            return self._last
+        mass_held(self.params, self.state)
+        return mass_estimate(self.state.out)
 
     def update(self, t: float, sum_fx: float, speed: float) -> MassGradeEstimate:
         """Process one stamp.
@@ -435,91 +437,10 @@ class MassGradeEstimator:
             The estimate after this stamp (the previous one, unchanged, for a rejected
             stamp).
         """
-        c, veh = self.config, self.vehicle
-        if not (math.isfinite(sum_fx) and math.isfinite(speed)):
-            if math.isfinite(t):
-                self.faults['non_finite_value'] += 1
-            else:
-                self.faults['non_finite_stamp'] += 1
-            return self._last or self._estimate(False, False)
-        dt = self._accept_stamp(t)
-        if dt is None:
-            return self._last or self._estimate(False, False)
-        g = veh.gravity
-        weight = veh.mass * g
-        direction = 1.0 if speed >= 0.0 else -1.0
-        force = sum_fx - direction * veh.drag_factor * speed * speed
-
-        # F and v through the same two first-order stages (the estimator's slope filter);
-        # dv/dt is the backward difference of the filtered speed.
-        if dt == 0.0 or self._lp is None:
-            self._lp = [force, force, speed, speed]
-            accel = 0.0
-            force_rate = 0.0
-        else:
-            w = 1.0 if c.filter_tau <= 0.0 else -math.expm1(-dt / c.filter_tau)
-            f1, f2, v1, v2 = self._lp
-            f1 += w * (force - f1)
-            f2_new = f2 + w * (f1 - f2)
-            v1 += w * (speed - v1)
-            v2_new = v2 + w * (v1 - v2)
-            accel = (v2_new - v2) / dt
-            force_rate = (f2_new - f2) / dt
-            self._lp = [f1, f2_new, v1, v2_new]
-        f_lp, v_lp = self._lp[1], self._lp[3]
-        c_r = veh.rolling_c0 * (1.0 + veh.rolling_c1 * abs(v_lp) / _KMH_REFERENCE)
-        y = accel + direction * g * c_r * math.cos(self._slope)
-
-        # The high-pass removes a grade that is constant over grade_tau (same on both sides).
-        if dt == 0.0 or math.isnan(self._f_slow):
-            self._f_slow, self._y_slow = f_lp, y
-        else:
-            w_slow = -math.expm1(-dt / c.grade_tau)
-            self._f_slow += w_slow * (f_lp - self._f_slow)
-            self._y_slow += w_slow * (y - self._y_slow)
-        f_hp = f_lp - self._f_slow
-        y_hp = y - self._y_slow
-
-        self._running += dt
-        excited = (
-            dt > 0.0
-            and self._running >= self.warmup
-            and abs(speed) >= c.min_speed
-            and (abs(accel) >= c.min_accel or abs(f_lp) >= c.min_force_ratio * weight)
-            and abs(f_hp) >= c.min_force_change_ratio * weight
-            and abs(force_rate) <= c.max_force_rate * weight
-        )
-        if excited:
-            theta, cov = rls_step(
-                self.theta,
-                self.cov,
-                (f_hp,),
-                y_hp,
-                (forgetting_factor(dt, c.mass_tau),),
-                c.accel_noise_density * c.accel_noise_density / dt,
-                (True,),
-            )
-            if math.isfinite(float(theta[0])) and math.isfinite(float(cov[0, 0])):
-                if not self._theta_min <= theta[0] <= self._theta_max:
-                    self.faults['mass_clamped'] += 1
-                    theta[0] = min(max(float(theta[0]), self._theta_min), self._theta_max)
-                self.theta, self.cov = theta, cov
-            self._excited_time += dt
-            if (
-                self._excited_time >= c.min_excited_time
-                and self._mass_std() * float(self.theta[0]) <= c.converged_std_ratio
-            ):
-                self._converged = True
-
-        valid = False
-        if abs(speed) >= c.slope_min_speed:
-            m_used = 1.0 / float(self.theta[0]) if self._converged else veh.mass
-            sine = (f_lp / m_used - y) / g
-            bound = math.sin(c.max_slope)
-            self._slope = math.asin(min(max(sine, -bound), bound))
-            valid = abs(sine) <= bound
-        self._last = self._estimate(excited, valid)
-        return self._last
+        if mass_update(self.params, self.state, float(t), float(sum_fx), float(speed)):
+            self._last = mass_estimate(self.state.out)
+            return self._last
+        return self.current()
 
 
 @dataclass(frozen=True)

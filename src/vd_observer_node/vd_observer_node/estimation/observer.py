@@ -158,7 +158,7 @@ class _DifferentiatorObserver:
 
     def __init__(self, config: ObserverConfig) -> None:
         """Create the observer from its settings."""
-        #: the differentiator (its records are what the fused kernels of `kernel.chain` step)
+        #: the differentiator (its records are what `cascade_step.cascade_block` steps)
         self.differentiator = LevantDifferentiator(
             self._lipschitz(config),
             n_channels=self._channels,

@@ -22,28 +22,42 @@ it*, which is what the slip and the tyre force need.
 Robustness as in :mod:`.mass_grade`: the radius is clamped to ``[scale_min, scale_max]``
 times the file's value (counted as ``radius_clamped``); bad stamps and values are dropped and
 counted; a gap or a jump back in time resets to the file's value.
+
+The per-stamp math is compiled (`radius_update`, over the named records `RADIUS_PARAMS`,
+`RADIUS_STATE`): :class:`RollingRadiusEstimator` keeps the records and calls it, and so does
+the estimator's own step (`estimator_step`).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.estimation.faults import RESTART_FAULTS, STAMP_FAULTS, classify_stamp
-from vd_observer_node.estimation.mass_grade import rls_step
+from vd_observer_node.estimation.faults import STAMP_FAULTS, stamp_step
+from vd_observer_node.estimation.filters import new_record
+from vd_observer_node.estimation.mass_grade_step import forgetting_factor, rls_update
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
+from vd_observer_node.kernel._jit import jit
 
 __all__ = [
+    'RADIUS_OUT',
+    'RADIUS_PARAMS',
+    'RADIUS_STATE',
     'ROLLING_RADIUS_FAULTS',
     'RollingRadiusConfig',
     'RollingRadiusEstimate',
     'RollingRadiusEstimator',
     'RollingRadiusTrack',
+    'radius_estimate',
+    'radius_held',
+    'radius_params',
+    'radius_reset',
+    'radius_update',
     'run_rolling_radius',
 ]
 
@@ -51,7 +65,171 @@ FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
 #: Fault kinds :class:`RollingRadiusEstimator` counts (all handled).
-ROLLING_RADIUS_FAULTS = (*STAMP_FAULTS, 'radius_clamped')
+ROLLING_RADIUS_FAULTS: Final = (*STAMP_FAULTS, 'radius_clamped')
+_NON_FINITE_STAMP, _NON_FINITE_VALUE = 0, 1
+_CLAMPED: Final = len(STAMP_FAULTS)
+
+#: The settings as the step uses them (`radius_params`): the file's radius [m], the
+#: `RollingRadiusConfig` fields, the radius bounds [m].
+RADIUS_PARAMS: Final = np.dtype(
+    [
+        ('radius', 'f8'),
+        ('tau', 'f8'),
+        ('min_speed', 'f8'),
+        ('max_wheel_torque', 'f8'),
+        ('max_accel', 'f8'),
+        ('accel_filter_tau', 'f8'),
+        ('noise_density', 'f8'),
+        ('std_ratio', 'f8'),
+        ('lo', 'f8'),
+        ('hi', 'f8'),
+        ('converged_std_ratio', 'f8'),
+        ('min_free_time', 'f8'),
+        ('max_gap', 'f8'),
+    ],
+    align=True,
+)
+#: One estimate (`RollingRadiusEstimate`'s fields).
+RADIUS_OUT: Final = np.dtype(
+    [
+        ('radius', 'f8'),
+        ('radius_std', 'f8'),
+        ('converged', 'b1'),
+        ('radius_used', 'f8'),
+        ('free_wheels', 'i8'),
+        ('free_time', 'f8'),
+    ],
+    align=True,
+)
+#: The estimator's memory: last stamp (nan: none), the two low-pass stages of v (``lp_on``:
+#: started), R and its variance, free rolling time [s], the last estimate (``has_last``) and
+#: the fault counts (`ROLLING_RADIUS_FAULTS` order).
+RADIUS_STATE: Final = np.dtype(
+    [
+        ('t', 'f8'),
+        ('lp_on', 'b1'),
+        ('v1', 'f8'),
+        ('v2', 'f8'),
+        ('theta', 'f8', (1,)),
+        ('cov', 'f8', (1, 1)),
+        ('free_time', 'f8'),
+        ('converged', 'b1'),
+        ('has_last', 'b1'),
+        ('out', RADIUS_OUT),
+        ('counts', 'i8', (len(ROLLING_RADIUS_FAULTS),)),
+    ],
+    align=True,
+)
+
+
+@jit
+def radius_reset(p: np.record, s: np.record) -> None:
+    """Forget everything: the file's radius, the prior covariance, empty filter."""
+    s.t = math.nan
+    s.lp_on = False
+    s.theta[0] = p.radius
+    sigma = p.std_ratio * p.radius
+    s.cov[0, 0] = sigma * sigma
+    s.free_time = 0.0
+    s.converged = False
+    s.has_last = False
+
+
+@jit
+def _radius_out(p: np.record, s: np.record, free: int) -> None:
+    radius = s.theta[0]
+    o = s.out
+    o.radius = radius
+    o.radius_std = math.sqrt(max(s.cov[0, 0], 0.0))
+    o.converged = s.converged
+    o.radius_used = radius if s.converged else p.radius
+    o.free_wheels = free
+    o.free_time = s.free_time
+
+
+@jit
+def radius_held(p: np.record, s: np.record) -> None:
+    """``s.out`` as `RollingRadiusEstimator.current`: the last estimate, or the fresh one."""
+    if not s.has_last:
+        _radius_out(p, s, 0)
+
+
+@jit
+def radius_update(
+    p: np.record, s: np.record, t: float, omega: FloatArray, torque: FloatArray, speed: float
+) -> bool:
+    """One stamp (`RollingRadiusEstimator.update`) into ``s.out``.
+
+    Args:
+        p: `RADIUS_PARAMS` record.
+        s: `RADIUS_STATE` record; its fault counts are incremented.
+        t: stamp [s].
+        omega: shape (4,), [rad/s] wheel speeds.
+        torque: shape (4,), [N m] reported wheel torques.
+        speed: body speed [m/s].
+
+    Returns:
+        Whether the stamp was accepted (else ``s.out`` is the held estimate).
+    """
+    finite = math.isfinite(speed)
+    for i in range(4):
+        finite = finite and math.isfinite(omega[i]) and math.isfinite(torque[i])
+    if not finite:
+        s.counts[_NON_FINITE_VALUE if math.isfinite(t) else _NON_FINITE_STAMP] += 1
+        radius_held(p, s)
+        return False
+    kind, dt = stamp_step(s.t, t, p.max_gap)
+    if kind >= 0:
+        s.counts[kind] += 1
+    if math.isnan(dt):
+        radius_held(p, s)
+        return False
+    if kind >= 0:  # a gap or a jump back: start again from this sample
+        radius_reset(p, s)
+    s.t = t
+    # dv/dt as the derivative of a two-stage low-pass of v (noise never differentiated raw)
+    if dt == 0.0 or not s.lp_on:
+        s.lp_on = True
+        s.v1, s.v2 = speed, speed
+        accel = 0.0
+    else:
+        a = 1.0 if p.accel_filter_tau <= 0.0 else -math.expm1(-dt / p.accel_filter_tau)
+        v1 = s.v1 + a * (speed - s.v1)
+        v2 = s.v2 + a * (v1 - s.v2)
+        accel = (v2 - s.v2) / dt
+        s.v1, s.v2 = v1, v2
+    n_free = 0
+    mean_omega = 0.0
+    for i in range(4):
+        if abs(torque[i]) <= p.max_wheel_torque:
+            n_free += 1
+            mean_omega += omega[i]
+    mean_omega /= max(n_free, 1)
+    if not (dt > 0.0 and n_free > 0 and abs(speed) >= p.min_speed and abs(accel) <= p.max_accel):
+        _radius_out(p, s, 0)
+        s.has_last = True
+        return True
+    theta = np.empty(1)
+    cov = np.empty((1, 1))
+    rls_update(
+        s.theta, s.cov, np.full(1, mean_omega), speed, np.full(1, forgetting_factor(dt, p.tau)),
+        p.noise_density * p.noise_density / dt, np.ones(1, np.bool_), theta, cov,
+    )  # fmt: skip
+    if math.isfinite(theta[0]) and math.isfinite(cov[0, 0]):
+        if not p.lo <= theta[0] <= p.hi:
+            s.counts[_CLAMPED] += 1
+            theta[0] = min(max(theta[0], p.lo), p.hi)
+        s.theta[0] = theta[0]
+        s.cov[0, 0] = cov[0, 0]
+    s.free_time += dt
+    if (
+        s.free_time >= p.min_free_time
+        and math.sqrt(s.cov[0, 0]) <= p.converged_std_ratio * s.theta[0]
+    ):
+        s.converged = True
+    _radius_out(p, s, n_free)
+    s.has_last = True
+    return True
 
 
 @dataclass(frozen=True)
@@ -144,13 +322,47 @@ class RollingRadiusEstimate:
     free_time: float
 
 
+def radius_params(vehicle: EstimatorVehicle, config: RollingRadiusConfig) -> np.record:
+    """The `RADIUS_PARAMS` record of a vehicle and settings."""
+    r0 = vehicle.effective_radius
+    p = new_record(RADIUS_PARAMS)
+    p.radius = r0
+    p.tau = config.tau
+    p.min_speed = config.min_speed
+    p.max_wheel_torque = config.max_wheel_torque
+    p.max_accel = config.max_accel
+    p.accel_filter_tau = config.accel_filter_tau
+    p.noise_density = config.speed_noise_density
+    p.std_ratio = config.initial_std_ratio
+    p.lo = config.scale_min * r0
+    p.hi = config.scale_max * r0
+    p.converged_std_ratio = config.converged_std_ratio
+    p.min_free_time = config.min_free_time
+    p.max_gap = config.max_gap
+    return p
+
+
+def radius_estimate(out: np.record) -> RollingRadiusEstimate:
+    """The `RollingRadiusEstimate` of a `RADIUS_OUT` record."""
+    return RollingRadiusEstimate(
+        radius=float(out.radius),
+        radius_std=float(out.radius_std),
+        converged=bool(out.converged),
+        radius_used=float(out.radius_used),
+        free_wheels=int(out.free_wheels),
+        free_time=float(out.free_time),
+    )
+
+
 class RollingRadiusEstimator:
-    """Stateful rolling-radius estimator: feed it one stamp at a time.
+    """Stateful rolling-radius estimator: feed it one stamp at a time (the records of
+    `radius_update`).
 
     Attributes:
         config: the settings.
         vehicle: the nominal vehicle (the file's R_eff).
-        faults: counts per kind of :data:`ROLLING_RADIUS_FAULTS`.
+        params: the `RADIUS_PARAMS` record.
+        state: the `RADIUS_STATE` record.
     """
 
     def __init__(
@@ -164,49 +376,26 @@ class RollingRadiusEstimator:
         """
         self.vehicle = vehicle
         self.config = config or RollingRadiusConfig()
-        self.faults: dict[str, int] = dict.fromkeys(ROLLING_RADIUS_FAULTS, 0)
-        r0 = vehicle.effective_radius
-        self._bounds = (self.config.scale_min * r0, self.config.scale_max * r0)
+        self.params = radius_params(vehicle, self.config)
+        self.state = new_record(RADIUS_STATE)
         self.reset()
+
+    @property
+    def faults(self) -> dict[str, int]:
+        """Counts per kind of :data:`ROLLING_RADIUS_FAULTS`."""
+        return dict(zip(ROLLING_RADIUS_FAULTS, self.state.counts.tolist(), strict=True))
 
     def reset(self) -> None:
         """Forget everything: the file's radius, the prior covariance, empty filter."""
-        r0 = self.vehicle.effective_radius
-        self.theta: FloatArray = np.array([r0])
-        # products, not ** 2: pow() and the compiled kernel's square differ in the last bit
-        sigma = self.config.initial_std_ratio * r0
-        self.cov: FloatArray = np.array([[sigma * sigma]])
-        self._t: float | None = None
-        self._v_lp: list[float] | None = None
-        self._free_time = 0.0
-        self._converged = False
+        radius_reset(self.params, self.state)
         self._last: RollingRadiusEstimate | None = None
-
-    def _estimate(self, free: int) -> RollingRadiusEstimate:
-        radius = float(self.theta[0])
-        return RollingRadiusEstimate(
-            radius=radius,
-            radius_std=math.sqrt(max(float(self.cov[0, 0]), 0.0)),
-            converged=self._converged,
-            radius_used=radius if self._converged else self.vehicle.effective_radius,
-            free_wheels=free,
-            free_time=self._free_time,
-        )
 
     def current(self) -> RollingRadiusEstimate:
         """The last estimate (the file's radius and the prior deviation before any stamp)."""
-        return self._last or self._estimate(0)
-
-    def _accept_stamp(self, t: float) -> float | None:
-        """dt [s] of a usable stamp (0.0: (re)start); None to hold the last estimate."""
-        kind, dt = classify_stamp(self._t, t, self.config.max_gap)
-        if kind is not None:
-            self.faults[kind] += 1
-        if kind in RESTART_FAULTS:
-            self.reset()
-        if dt is not None:
-            self._t = t
-        return dt
+        if self._last is not None:
+            return self._last
+        radius_held(self.params, self.state)
+        return radius_estimate(self.state.out)
 
     def update(
         self, t: float, omega: ArrayLike, wheel_torque: ArrayLike, speed: float
@@ -225,64 +414,16 @@ class RollingRadiusEstimator:
         Raises:
             InputShapeError: omega or wheel_torque is not of shape (4,).
         """
-        w = np.asarray(omega, dtype=np.float64)
-        tq = np.asarray(wheel_torque, dtype=np.float64)
+        w = np.ascontiguousarray(omega, dtype=np.float64)
+        tq = np.ascontiguousarray(wheel_torque, dtype=np.float64)
         if w.shape != (4,) or tq.shape != (4,):
             raise InputShapeError(
                 f'omega and wheel_torque must have shape (4,), got {w.shape}, {tq.shape}'
             )
-        if not (np.all(np.isfinite(w)) and np.all(np.isfinite(tq)) and math.isfinite(speed)):
-            key = 'non_finite_value' if math.isfinite(t) else 'non_finite_stamp'
-            self.faults[key] += 1
-            return self._last or self._estimate(0)
-        dt = self._accept_stamp(t)
-        if dt is None:
-            return self._last or self._estimate(0)
-        c = self.config
-        # dv/dt as the derivative of a two-stage low-pass of v (noise never differentiated raw).
-        if dt == 0.0 or self._v_lp is None:
-            self._v_lp = [speed, speed]
-            accel = 0.0
-        else:
-            a = 1.0 if c.accel_filter_tau <= 0.0 else -math.expm1(-dt / c.accel_filter_tau)
-            v1, v2 = self._v_lp
-            v1 += a * (speed - v1)
-            v2_new = v2 + a * (v1 - v2)
-            accel = (v2_new - v2) / dt
-            self._v_lp = [v1, v2_new]
-        free = np.abs(tq) <= c.max_wheel_torque
-        n_free = int(free.sum())
-        # the mean as an explicit left-to-right sum, as the compiled twin adds it
-        mean_omega = 0.0
-        for i in range(4):
-            if free[i]:
-                mean_omega += float(w[i])
-        mean_omega /= max(n_free, 1)
-        if not (dt > 0.0 and n_free and abs(speed) >= c.min_speed and abs(accel) <= c.max_accel):
-            self._last = self._estimate(0)
+        if radius_update(self.params, self.state, float(t), w, tq, float(speed)):
+            self._last = radius_estimate(self.state.out)
             return self._last
-        theta, cov = rls_step(
-            self.theta,
-            self.cov,
-            (mean_omega,),
-            speed,
-            (math.exp(-dt / c.tau) if math.isfinite(c.tau) else 1.0,),
-            c.speed_noise_density * c.speed_noise_density / dt,
-            (True,),
-        )
-        if math.isfinite(float(theta[0])) and math.isfinite(float(cov[0, 0])):
-            lo, hi = self._bounds
-            if not lo <= theta[0] <= hi:
-                self.faults['radius_clamped'] += 1
-                theta[0] = min(max(float(theta[0]), lo), hi)
-            self.theta, self.cov = theta, cov
-        self._free_time += dt
-        if self._free_time >= c.min_free_time and math.sqrt(
-            float(self.cov[0, 0])
-        ) <= c.converged_std_ratio * float(self.theta[0]):
-            self._converged = True
-        self._last = self._estimate(n_free)
-        return self._last
+        return self.current()
 
 
 @dataclass(frozen=True)

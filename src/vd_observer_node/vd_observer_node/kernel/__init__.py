@@ -1,8 +1,9 @@
-"""The compiled per-sample kernel (numba): observers, estimator and situation monitor.
+"""numba's jit with the project's settings (`_jit.jit`), and the build of its disk cache.
 
-Every piece mirrors a pure-Python reference of the package and is tested equal to it
-(outputs to 1e-9, fault counters exactly); the Python path stays selectable everywhere
-(``kernel`` parameter of the nodes, ``--kernel`` of ``vd replay``). See docs/performance.md.
+Every piece of per-sample math is one step function in its concept's module
+(`estimation.levant_step`, `estimation.estimator_step`, `situation.monitor_step`, ...),
+compiled with `_jit.jit`; ``VD_JIT=0`` runs the same source as plain Python. ``python -m
+vd_observer_node.kernel`` (run by ``make setup``) compiles them all into numba's cache.
 """
 
 from __future__ import annotations

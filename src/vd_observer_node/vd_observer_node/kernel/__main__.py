@@ -16,9 +16,9 @@ __all__ = ['main']
 def main() -> int:
     """Compile (or load) every kernel; exit code 0."""
     start = time.perf_counter()
+    from vd_observer_node.chain import warm_up
     from vd_observer_node.estimation.vehicle import load_vehicle_params
     from vd_observer_node.kernel._jit import PACKAGE
-    from vd_observer_node.kernel.chain import warm_up
     from vd_observer_node.situation.friction_potential import TyreCurves
 
     # the chain of every node and of the replay, its observers, estimator and monitor

@@ -11,8 +11,7 @@ road class) and ``/vd/estimates/alerts`` (vd_msgs/Alerts: traction, lock and low
 alerts per wheel, with hysteresis and onset stamps). Health goes to ``/diagnostics``, with a
 WARN naming a mapped input topic that stopped. All logic
 is in :mod:`vd_observer_node.situation.monitor` (see docs/alerts.md); offline replay runs the same.
-``kernel`` 'compiled' (default) gives its fast wheel observer the compiled differentiator (the
-monitor's own step is compiled either way); messages travel as CDR bytes
+Its step functions are compiled (numba); messages travel as CDR bytes
 (:mod:`vd_observer_node.bag.cdr_message`).
 """
 
@@ -57,7 +56,6 @@ from vd_observer_node.inputs.mapping import InputMapping
 from vd_observer_node.nodes.node_params import (
     ALERTS_PARAMS,
     INPUT_PARAMS,
-    KERNEL,
     input_message_class,
     take_input_mapping,
     undeclared_inputs,
@@ -77,7 +75,7 @@ from vd_observer_node.situation.monitor import SituationConfig, SituationMonitor
 
 __all__ = ['PARAMS', 'AlertsNode', 'main']
 
-PARAMS = [KERNEL, *ALERTS_PARAMS, *INPUT_PARAMS]
+PARAMS = [*ALERTS_PARAMS, *INPUT_PARAMS]
 
 TOPICS = ('angles', 'speed', 'torques', 'states', 'friction', 'forces')
 #: the node's name of each mapped sensor input
@@ -116,7 +114,6 @@ class AlertsNode(Node):
         mapping = take_input_mapping(values, undeclared_inputs(self), estimates=True)
         sensors = {key: getattr(mapping, name) for key, name in _SENSORS.items()}
         classes = {key: input_message_class(spec) for key, spec in sensors.items()}
-        self.kernel = values.pop('kernel')
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')
         # One read of the file gives the estimator vehicle and the tyre alike.
@@ -175,7 +172,7 @@ class AlertsNode(Node):
         self._active: tuple[Any, ...] = ()
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
-            f'alerts ready: {self.kernel} kernel, vehicle {vehicle.name!r} ({vehicle_file})'
+            f'alerts ready: vehicle {vehicle.name!r} ({vehicle_file})'
             + (f', inputs from {mapping.source}' if mapping.source else '')
         )
 
@@ -227,8 +224,7 @@ class AlertsNode(Node):
             if active
             else 'no alert'
         )
-        values = {
-            'kernel': self.kernel,
+        values: dict[str, object] = {
             **self.counts,
             **self.aligner.counts(),
         }

@@ -9,8 +9,8 @@ one, joins each match with its latest value: :func:`held_inputs`) and publishes,
 ``/vd/estimates/resistances`` (Resistances) and ``/vd/estimates/slope`` (Slope). Health and
 fault counters go to ``/diagnostics`` once per second, with a WARN naming a mapped input
 topic that stopped. All math is in
-:mod:`vd_observer_node.estimation.estimator`; ``kernel`` selects its compiled twin (default) or the
-Python reference. Messages travel as CDR bytes (:mod:`vd_observer_node.bag.cdr_message`).
+:mod:`vd_observer_node.estimation.estimator` (its compiled step). Messages travel as CDR
+bytes (:mod:`vd_observer_node.bag.cdr_message`).
 """
 
 from __future__ import annotations
@@ -60,7 +60,6 @@ from vd_observer_node.inputs.mapping import InputMapping
 from vd_observer_node.nodes.node_params import (
     ESTIMATOR_PARAMS,
     INPUT_PARAMS,
-    KERNEL,
     input_message_class,
     take_input_mapping,
     undeclared_inputs,
@@ -79,7 +78,7 @@ from vd_observer_node.nodes.raw_io import (
 
 __all__ = ['EstimatorNode', 'main']
 
-PARAMS = [KERNEL, *ESTIMATOR_PARAMS, *INPUT_PARAMS]
+PARAMS = [*ESTIMATOR_PARAMS, *INPUT_PARAMS]
 
 TOPICS = ('states', 'accel', 'speed', 'torques')
 _INPUT_TYPES = {
@@ -111,7 +110,6 @@ class EstimatorNode(Node):
         self.refusals = PublishRefusals(self)  # a refused publish is counted, not fatal
         values = declare_parameters(self, PARAMS)
         mapping = take_input_mapping(values, undeclared_inputs(self), estimates=True)
-        self.kernel = values.pop('kernel')
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')
         measured = values.pop('speed_source') == 'measured'
@@ -122,13 +120,11 @@ class EstimatorNode(Node):
         classes = {key: input_message_class(spec) for key, spec in sensors.items()}
         self.vehicle = load_estimator_vehicle(vehicle_file)
         config = EstimatorConfig.from_mapping(values)
-        if self.kernel == 'compiled':
-            from vd_observer_node.kernel.estimation import CompiledEstimator
-
-            # compiled (or loaded from numba's cache) here, not at the first sample
-            self.estimator: Any = CompiledEstimator(self.vehicle, config)
-        else:
-            self.estimator = Estimator(self.vehicle, config)
+        self.estimator = Estimator(self.vehicle, config)
+        # compile (or load from numba's cache) now, on a scratch estimator, not at the first
+        # sample
+        zeros = np.zeros(4)
+        Estimator(self.vehicle, config).update(0.0, zeros, zeros, 0.0, 0.0, zeros)
         max_gap_ns = round(self.estimator.config.max_gap * 1e9)
         # TOPICS: the wheel sensor's stamps first; they drive, as in the replay
         self.aligner = input_matcher(
@@ -189,7 +185,7 @@ class EstimatorNode(Node):
             self.create_subscription(classes[key], spec.topic, callback, STREAM_QOS, raw=True)
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
-            f'estimator ready: {self.kernel} kernel, vehicle {self.vehicle.name!r} '
+            f'estimator ready: vehicle {self.vehicle.name!r} '
             f'({vehicle_file})' + (f', inputs from {mapping.source}' if mapping.source else '')
         )
 
@@ -254,8 +250,7 @@ class EstimatorNode(Node):
             }
         )
         self._align_reported = align
-        values = {
-            'kernel': self.kernel,
+        values: dict[str, object] = {
             **self.counts,
             **self.aligner.counts(),
             **report.counts,

@@ -3,8 +3,7 @@
 Each list is built from the core's configuration dataclasses (`dataclass_param_specs`), so a
 parameter's description and default cannot drift from the core. ``observer_node``,
 ``estimator_node`` and ``alerts_node`` declare their own list; ``pipeline_node`` declares the
-union (one ``max_gap`` for observers and estimator, one ``vehicle_file`` and ``align_capacity``)
-plus ``kernel``.
+union (one ``max_gap`` for observers and estimator, one ``vehicle_file`` and ``align_capacity``).
 
 Every node that reads sensor topics also declares the input mapping (:data:`INPUT_PARAMS`):
 ``input_mapping``, the path of a mapping file, or the same settings as nested parameters
@@ -21,7 +20,7 @@ from typing import Any, Final
 from vd_common.ros_common import ParamSpec, dataclass_param_specs, ros_message_class
 from vd_common.topics import OBSERVER_BODY_VELOCITY, SENSORS_BODY_VELOCITY, SENSORS_NAMESPACE
 
-from vd_observer_node.chain import ESTIMATOR_SPEEDS, KERNELS
+from vd_observer_node.chain import ESTIMATOR_SPEEDS
 from vd_observer_node.estimation.differentiator import (
     DEFAULT_GAINS,
     DISCRETIZATIONS,
@@ -61,7 +60,6 @@ __all__ = [
     'ESTIMATOR_PARAMS',
     'INPUT_MAPPING',
     'INPUT_PARAMS',
-    'KERNEL',
     'OBSERVER_PARAMS',
     'PIPELINE_PARAMS',
     'VEHICLE_FILE',
@@ -81,13 +79,6 @@ ALIGN_CAPACITY: Final = ParamSpec(
     'messages buffered per topic while matching stamps (1000: a 1 s lag between inputs at 1 kHz)',
     low=1,
     high=100000,
-)
-KERNEL: Final = ParamSpec(
-    'kernel',
-    'compiled',
-    "per-sample math: 'compiled' (numba kernel) or 'python' (the reference; same results, "
-    'about 30x the CPU per sample)',
-    choices=KERNELS,
 )
 
 INPUT_MAPPING: Final = ParamSpec(
@@ -275,7 +266,6 @@ _SITUATION_CORE: Final = [
 ALERTS_PARAMS: Final = [VEHICLE_FILE, ALIGN_CAPACITY, *_SITUATION_CORE]
 
 PIPELINE_PARAMS: Final = [
-    KERNEL,
     *ESTIMATOR_PARAMS,
     *(p for p in OBSERVER_PARAMS if p.name != 'max_gap'),
     *_SITUATION_CORE,

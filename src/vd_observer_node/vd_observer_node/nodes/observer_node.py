@@ -10,10 +10,9 @@ speed ``/vd/observer/body_velocity`` (geometry_msgs/TwistStamped, which the esti
 that the live graph computes exactly what the offline cascade does). Health and fault
 counters go to ``/diagnostics`` once per second, with a WARN naming an input topic that
 stopped. All math is in
-:mod:`vd_observer_node.estimation.observer`, whose differentiator step is compiled (``kernel``
-is read but both values run it). Messages travel as CDR bytes: raw subscriptions decoded with
-``struct`` and bytes published (:mod:`vd_observer_node.bag.cdr_message`), never Python message
-objects.
+:mod:`vd_observer_node.estimation.observer`, whose differentiator step is compiled.
+Messages travel as CDR bytes: raw subscriptions decoded with ``struct`` and bytes published
+(:mod:`vd_observer_node.bag.cdr_message`), never Python message objects.
 """
 
 from __future__ import annotations
@@ -49,7 +48,6 @@ from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.nodes.node_params import (
     INPUT_PARAMS,
-    KERNEL,
     OBSERVER_PARAMS,
     VEHICLE_FILE,
     input_message_class,
@@ -60,7 +58,7 @@ from vd_observer_node.nodes.raw_io import Encoders, InputWatch, merge_status
 
 __all__ = ['ObserverNode', 'main']
 
-PARAMS = [KERNEL, VEHICLE_FILE, *OBSERVER_PARAMS, *INPUT_PARAMS]
+PARAMS = [VEHICLE_FILE, *OBSERVER_PARAMS, *INPUT_PARAMS]
 
 _NS = 1e-9
 _ZEROS5 = (0.0, 0.0, 0.0, 0.0, 0.0)
@@ -76,7 +74,6 @@ class ObserverNode(Node):
         mapping = take_input_mapping(values, undeclared_inputs(self))
         angles_spec, speed_spec = mapping.wheels, mapping.body_speed
         classes = [input_message_class(spec) for spec in (angles_spec, speed_spec)]
-        self.kernel = values.pop('kernel')
         vehicle_file = values.pop('vehicle_file') or None
         # the vehicle file matters here only for wheel speeds given in m/s or km/h
         radius = (
@@ -86,8 +83,8 @@ class ObserverNode(Node):
         )
         # angles or ABS wheel speeds: the mapping says which
         self.config = ObserverConfig.from_mapping({**values, 'wheel_input': mapping.wheel_input})
-        # one implementation whatever ``kernel`` says: the differentiator's step is compiled
-        # (or loaded from numba's disk cache) here, before the first sample
+        # the differentiator's step is compiled (or loaded from numba's disk cache) here,
+        # before the first sample
         self.wheels = WheelObserver(self.config)
         self.speed = SpeedObserver(self.config)
         self.pub_states = self.refusals.publisher(WheelStates, OBSERVER_WHEEL_STATES, STREAM_QOS)
@@ -119,7 +116,7 @@ class ObserverNode(Node):
         }
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
-            f'observer ready: {self.kernel} kernel, {self.config.discretization} '
+            f'observer ready: {self.config.discretization} '
             f'discretization, L_wheel={self.config.wheel_lipschitz:g}, '
             f'L_speed={self.config.speed_lipschitz:g}'
             + (f', inputs from {mapping.source}' if mapping.source else '')
@@ -193,7 +190,6 @@ class ObserverNode(Node):
             level, message, self.watch, time.monotonic_ns()
         )
         values: dict[str, Any] = {
-            'kernel': self.kernel,
             **self.counts,
             'rejected_wheel_stamps': self.wheels.rejected_count,
             'rejected_speed_stamps': self.speed.rejected_count,

@@ -6,12 +6,12 @@ or the topics and types of an input mapping: ``input_mapping`` or ``inputs.*``, 
 docs/bags.md), matches them by header stamp (an input without header, Float64MultiArray, is
 stamped with its receive time by the node clock and joins each match with its latest value),
 runs :mod:`vd_observer_node.chain` (observers -> estimator ->
-situation monitor; the compiled kernel by default) and publishes, with the sensors' stamp,
+situation monitor, compiled) and publishes, with the sensors' stamp,
 every topic those three nodes publish: ``/vd/observer/{wheel_states, body_accel,
 body_velocity}``, ``/vd/estimates/{tire_forces, friction, resistances, slope,
 friction_potential, alerts}``, and ``/diagnostics`` once per second. Its parameters are the
-union of the three nodes' (one ``max_gap``, ``vehicle_file`` and ``align_capacity``) plus
-``kernel`` and the input mapping. A mapped topic that stops arriving is reported on
+union of the three nodes' (one ``max_gap``, ``vehicle_file`` and ``align_capacity``) and
+the input mapping. A mapped topic that stops arriving is reported on
 ``/diagnostics`` (WARN naming it and the time since its last message).
 
 The mapping's ``torque_source`` (docs/bags.md) picks the torque path, as ``vd replay`` does:
@@ -75,7 +75,7 @@ from vd_msgs.msg import (
     WheelStates,
 )
 from vd_observer_node.bag.cdr_message import MessageCodec
-from vd_observer_node.chain import ChainOutput, ChainSettings, make_chain
+from vd_observer_node.chain import Chain, ChainOutput, ChainSettings
 from vd_observer_node.estimation.differentiator import LevantGains
 from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
@@ -142,7 +142,6 @@ def _settings(
     """Chain settings from the declared parameters and the mapping's torque source (the
     engine path takes the vehicle file's drivetrain); also the vehicle file used."""
     vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
-    kernel = values.pop('kernel')
     speed_source = values.pop('speed_source')
     estimator_keys = set(EstimatorConfig.setting_keys())
     situation_keys = set(SituationConfig.__dataclass_fields__)
@@ -168,7 +167,6 @@ def _settings(
             {k: v for k, v in values.items() if k in situation_keys}
         ),
         estimator_speed=speed_source,
-        kernel=kernel,
         torque_source=torque_source,
         drivetrain=Drivetrain.from_params(params) if torque_source == 'engine' else None,
     )
@@ -197,9 +195,8 @@ class PipelineNode(Node):
         settings = replace(
             settings, observer=replace(settings.observer, wheel_input=mapping.wheel_input)
         )
-        self.kernel = settings.kernel
-        # Builds (or loads from numba's disk cache) the compiled kernel now, before any sample.
-        self.chain = make_chain(settings)
+        # Builds (or loads from numba's disk cache) the compiled chain now, before any sample.
+        self.chain = Chain(settings)
         max_gap_ns = round(settings.estimator.max_gap * 1e9)
         names = tuple(spec.name for spec in specs)
         self._wheels = mapping.wheels.name  # 'wheel_angles' or 'wheel_speeds'
@@ -253,7 +250,7 @@ class PipelineNode(Node):
         self._last_alerts = ''
         self.create_timer(1.0, self.publish_diagnostics)
         self.get_logger().info(
-            f'pipeline ready: {self.kernel} kernel, vehicle {settings.vehicle.name!r} '
+            f'pipeline ready: vehicle {settings.vehicle.name!r} '
             f'({vehicle_file}), torque source {self.torque_source}'
             + (f', inputs from {mapping.source}' if mapping.source else '')
         )
@@ -377,7 +374,6 @@ class PipelineNode(Node):
             self._capacity,
         )
         values = {
-            'kernel': self.kernel,
             'torque_source': self.torque_source,
             **self.counts,
             **self.aligner.counts(),

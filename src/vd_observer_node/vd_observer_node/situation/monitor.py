@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
-from typing import Any, Final
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -32,21 +32,25 @@ from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.cascade import CascadeResult
 from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.observer import WHEEL_INPUTS, ObserverConfig
-from vd_observer_node.kernel._jit import jit
 from vd_observer_node.situation.alerts import (
     ALERT_KINDS,
     Alert,
     AlertConfig,
     AlertMonitor,
     alert_records,
-    alerts_update,
 )
-from vd_observer_node.situation.friction_fit import friction_update, vehicle_road_class
 from vd_observer_node.situation.friction_potential import (
     FrictionPotential,
     FrictionPotentialConfig,
     FrictionPotentialEstimator,
     TyreCurves,
+)
+from vd_observer_node.situation.monitor_step import (
+    LEVELS_CHANGED,
+    MONITOR_PARAMS,
+    MONITOR_STATE,
+    POTENTIAL_MOVED,
+    situation_block,
 )
 from vd_observer_node.situation.records import new_record
 
@@ -56,35 +60,16 @@ __all__ = [
     'MONITOR_STATE',
     'POTENTIAL_MOVED',
     'Situation',
+    'SituationBlock',
     'SituationConfig',
+    'SituationInputs',
     'SituationMonitor',
     'SituationSeries',
-    'monitor_restarts',
-    'monitor_step',
     'run_situation',
 ]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
-
-#: Settings of `monitor_step` besides those of its parts: radius [m] the effective rolling
-#: radius; slip_floor_speed, max_observer_disagreement [m/s] as `SituationConfig`; max_gap
-#: [s] the observers' (a stamp older than the last by more than this restarts the monitor).
-MONITOR_PARAMS: Final = np.dtype(
-    [
-        ('radius', 'f8'),
-        ('slip_floor_speed', 'f8'),
-        ('max_observer_disagreement', 'f8'),
-        ('max_gap', 'f8'),
-    ],
-    align=True,
-)
-#: State of `monitor_step` besides its parts': t [s] the stamp of the last call (nan before).
-MONITOR_STATE: Final = np.dtype([('t', 'f8')], align=True)
-#: `monitor_step` flags: the friction potential took the stamp (new solution)...
-POTENTIAL_MOVED: Final = 1
-#: ...a reported alert level changed.
-LEVELS_CHANGED: Final = 2
 
 
 @dataclass(frozen=True)
@@ -145,90 +130,6 @@ class Situation:
     potential: FrictionPotential
     alerts: tuple[Alert, ...]
     slip: FloatArray
-
-
-@jit
-def monitor_restarts(p: Any, s: Any, t: float) -> bool:
-    """Whether stamp t must restart the monitor: older than the last call's stamp by more than
-    ``max_gap`` (a looped bag or a restarted source), as the observers restart."""
-    return not math.isnan(s.t) and t < s.t - p.max_gap
-
-
-@jit
-def monitor_step(
-    p: Any,
-    s: Any,
-    fp: Any,
-    tyre: Any,
-    scales: FloatArray,
-    table: FloatArray,
-    fs: Any,
-    cost: FloatArray,
-    pot: Any,
-    ap: Any,
-    al: Any,
-    t: float,
-    fast_omega: FloatArray,
-    fast_valid: BoolArray,
-    speed: float,
-    torque: FloatArray,
-    omega: FloatArray,
-    mu: FloatArray,
-    mu_valid: BoolArray,
-    fz: FloatArray,
-    slip: FloatArray,
-) -> int:
-    """One stamp of the monitor after its fast observer: friction potential, then alerts.
-
-    Args:
-        p: `MONITOR_PARAMS` record.
-        s: `MONITOR_STATE` record.
-        fp, tyre, scales, table, fs, cost, pot: the friction fit's settings and state
-            (`friction_fit.friction_update`).
-        ap, al: the alerts' settings and state (`alerts.alerts_update`).
-        t: stamp [s].
-        fast_omega: shape (4,), [rad/s] the fast observer's wheel speed at t.
-        fast_valid: shape (4,), its validity.
-        speed: [m/s] measured body speed.
-        torque: shape (4,), [N m] drive minus brake torque.
-        omega: shape (4,), [rad/s] the cascade observer's wheel speed.
-        mu: shape (4,), [-] utilised friction (estimator).
-        mu_valid: shape (4,), bool.
-        fz: shape (4,), [N] wheel loads (estimator).
-        slip: shape (4,), written: [-] the fast slip the traction and lock alerts see.
-
-    Returns:
-        `POTENTIAL_MOVED` | `LEVELS_CHANGED` flags.
-    """
-    radius, gate = p.radius, p.max_observer_disagreement
-    sv_fast = np.empty(4)
-    sv_cascade = np.empty(4)
-    steady = np.empty(4, dtype=np.bool_)
-    for i in range(4):
-        sv_fast[i] = fast_omega[i] * radius - speed if fast_valid[i] else 0.0
-        # vd_common.vehicle.tire.slip_ratio: the denominator floored at slip_floor_speed
-        slip[i] = sv_fast[i] / max(max(abs(sv_fast[i] + speed), abs(speed)), p.slip_floor_speed)
-        sv_cascade[i] = omega[i] * radius - speed
-        # While the two observers disagree the cascade's omega (and its omega-dot, hence mu)
-        # lags a fast wheel transient: such (slip, mu) pairs lie off the tyre's curve.
-        agree = abs(sv_fast[i] - sv_cascade[i]) <= gate if gate > 0.0 else True
-        steady[i] = agree and mu_valid[i]
-    flags = 0
-    if friction_update(
-        fp, tyre, scales, table, fs, cost, pot, t, sv_cascade, speed, mu, steady, fz
-    ):
-        flags |= POTENTIAL_MOVED
-    wheel_mu_max = np.empty(4)
-    wheel_slip_peak = np.empty(4)
-    for i in range(4):
-        wheel_mu_max[i] = pot.mu_max[i // 2]
-        wheel_slip_peak[i] = pot.slip_peak[i // 2]
-    if alerts_update(
-        ap, al, t, slip, sv_fast, torque, mu, mu_valid, wheel_mu_max, wheel_slip_peak
-    ):
-        flags |= LEVELS_CHANGED
-    s.t = t
-    return flags
 
 
 def _floats(name: str, value: ArrayLike, dtype: type = np.float64) -> NDArray[Any]:
@@ -298,11 +199,17 @@ class SituationMonitor:
         self.params.max_gap = fc.max_gap
         self.state = new_record(MONITOR_STATE)
         self.slip = np.zeros(4)
+        #: the output buffers of `update` (one stamp)
+        self._one = SituationBlock.empty(1)
         self.reset()
-        # compile (or load from numba's cache) now, not at the first sample; on copies
-        zeros, ones = np.zeros(4), np.ones(4)
-        valid = zeros != 0.0
-        self.step_records(0.0, zeros, valid, 1.0, zeros, zeros, zeros, valid, ones, copy=True)
+        # compile (or load from numba's cache) now, not at the first sample: on copies
+        zeros = np.zeros((1, 4))
+        block: Any = situation_block
+        block(
+            *(a.copy() for a in self.args()), np.zeros(1), zeros, np.ones(1), zeros, zeros,
+            zeros, zeros != 0.0, np.ones((1, 4)), *SituationBlock.empty(1).outputs(),
+            np.zeros(4),
+        )  # fmt: skip
 
     def reset(self) -> None:
         """Back to the initial state (after a time jump or a new bag)."""
@@ -312,77 +219,26 @@ class SituationMonitor:
         self.state.t = math.nan
         self.last: Situation | None = None
 
-    def step_records(
-        self,
-        t: float,
-        fast_omega: FloatArray,
-        fast_valid: BoolArray,
-        speed: float,
-        torque: FloatArray,
-        omega: FloatArray,
-        mu: FloatArray,
-        mu_valid: BoolArray,
-        load: FloatArray,
-        *,
-        copy: bool = False,
-    ) -> int:
-        """`monitor_step` on this monitor's records (``copy``: on copies of them, which stay
-        untouched); contiguous float64 (bool) arrays of shape (4,). Returns its flags."""
+    def args(self) -> tuple[Any, ...]:
+        """`monitor_step.situation_block`'s leading arguments (the records, advanced in
+        place)."""
         f, a = self.friction, self.monitor
-        records: tuple[Any, ...] = (self.state, f.state, f.cost, f.potential, a.state)
-        if copy:
-            records = tuple(r.copy() for r in records)
-        s, fs, cost, pot, al = records
-        flags: int = monitor_step(
-            self.params, s, f.params, f.tyre, f.scales, f.table, fs, cost, pot, a.params, al,
-            float(t), fast_omega, fast_valid, float(speed), torque, omega, mu, mu_valid, load,
-            self.slip,
+        return (
+            *self.fast.kernel_args, self.params, self.state, f.params, f.tyre, f.scales,
+            f.table, f.static_load, f.state, f.cost, f.potential, a.params, a.state,
         )  # fmt: skip
+
+    def run(self, t: FloatArray, inputs: SituationInputs, out: SituationBlock) -> int:
+        """`situation_block` over the N stamps `t` [s] (contiguous arrays, checked by the
+        callers); returns the or-ed `monitor_step` flags and keeps `last` up to date."""
+        block: Any = situation_block  # its arguments come as tuples
+        flags: int = block(*self.args(), t, *inputs, *out.outputs(), self.slip)
+        self.refresh(flags)
+        if t.shape[0]:
+            self.last = Situation(
+                float(t[-1]), self.friction.last, self.monitor.last, self.slip.copy()
+            )
         return flags
-
-    def advance(
-        self,
-        t: float,
-        wheel_angle: ArrayLike,
-        speed: float,
-        wheel_torque: ArrayLike,
-        omega: ArrayLike,
-        mu: ArrayLike,
-        mu_valid: ArrayLike,
-        load: ArrayLike,
-    ) -> int:
-        """`update` without building the result: the records, and `slip`, hold it.
-
-        Returns:
-            The `monitor_step` flags.
-
-        Raises:
-            InputShapeError: an array input has the wrong shape.
-        """
-        angles = _floats('wheel_angle', wheel_angle)
-        inputs = (
-            _floats('wheel_torque', wheel_torque),
-            _floats('omega', omega),
-            _floats('mu', mu),
-            _floats('mu_valid', mu_valid, np.bool_),
-            _floats('load', load),
-        )
-        if monitor_restarts(self.params, self.state, float(t)):
-            # a looped bag or a restarted source: start again, as the observers do
-            self.reset()
-        fast = self.fast.update(t, angles)
-        torque, omega_c, mu_c, valid, fz = inputs
-        return self.step_records(
-            t,
-            np.ascontiguousarray(fast.first, dtype=np.float64),
-            np.ascontiguousarray(fast.valid, dtype=np.bool_),
-            speed,
-            torque,
-            omega_c,
-            mu_c,
-            valid,
-            fz,
-        )
 
     def refresh(self, flags: int = POTENTIAL_MOVED | LEVELS_CHANGED) -> None:
         """Rebuild the wrapped parts' results (`last`) from the records after ``flags``."""
@@ -402,7 +258,7 @@ class SituationMonitor:
         mu_valid: ArrayLike,
         load: ArrayLike,
     ) -> Situation:
-        """Advance to stamp t.
+        """Advance to stamp t (`situation_block` on one stamp).
 
         Args:
             t: stamp [s].
@@ -423,9 +279,72 @@ class SituationMonitor:
         Raises:
             InputShapeError: an array input has the wrong shape.
         """
-        self.refresh(self.advance(t, wheel_angle, speed, wheel_torque, omega, mu, mu_valid, load))
-        self.last = Situation(float(t), self.friction.last, self.monitor.last, self.slip.copy())
+        inputs = SituationInputs(
+            _floats('wheel_angle', wheel_angle)[None],
+            np.array([float(speed)]),
+            _floats('wheel_torque', wheel_torque)[None],
+            _floats('omega', omega)[None],
+            _floats('mu', mu)[None],
+            _floats('mu_valid', mu_valid, np.bool_)[None],
+            _floats('load', load)[None],
+        )
+        self.run(np.array([float(t)]), inputs, self._one)
+        assert self.last is not None  # run just set it
         return self.last
+
+
+class SituationInputs(NamedTuple):
+    """The monitor's inputs over N stamps (contiguous; `situation_block`'s order).
+
+    Attributes:
+        angles: shape (N, 4), [rad] wheel angles (or speeds [rad/s]).
+        speeds: shape (N,), [m/s] measured body speed.
+        torques: shape (N, 4), [N m].
+        omega: shape (N, 4), [rad/s] the cascade's wheel speed.
+        mu: shape (N, 4), [-].
+        mu_valid: shape (N, 4), bool.
+        fz: shape (N, 4), [N].
+    """
+
+    angles: FloatArray
+    speeds: FloatArray
+    torques: FloatArray
+    omega: FloatArray
+    mu: FloatArray
+    mu_valid: BoolArray
+    fz: FloatArray
+
+
+@dataclass
+class SituationBlock:
+    """The monitor's outputs over N stamps (`situation_block` writes them; see
+    `SituationSeries` for the fields)."""
+
+    level: NDArray[np.int64]
+    onset: FloatArray
+    detected: FloatArray
+    mu_max: FloatArray
+    slip_peak: FloatArray
+    confidence: FloatArray
+    road_class: NDArray[np.int64]
+    vehicle_road_class: NDArray[np.int64]
+
+    @classmethod
+    def empty(cls, n: int) -> SituationBlock:
+        """Buffers for N stamps."""
+        kinds = len(ALERT_KINDS)
+        return cls(
+            np.zeros((n, kinds, 4), dtype=np.int64), np.full((n, kinds, 4), math.nan),
+            np.full((n, kinds, 4), math.nan), np.zeros((n, 2)), np.zeros((n, 2)),
+            np.zeros((n, 2)), np.zeros((n, 2), dtype=np.int64), np.zeros(n, dtype=np.int64),
+        )  # fmt: skip
+
+    def outputs(self) -> tuple[Any, ...]:
+        """`situation_block`'s written arguments (before ``slip``)."""
+        return (
+            self.level, self.onset, self.detected, self.mu_max, self.slip_peak,
+            self.confidence, self.road_class, self.vehicle_road_class,
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -462,7 +381,8 @@ def run_situation(
     wheel_torque: ArrayLike,
     cascade: CascadeResult,
 ) -> SituationSeries:
-    """Feed a whole record through `monitor`, one stamp at a time, as the node would.
+    """Feed a whole record (or a block of one) through `monitor` (`situation_block`), as the
+    nodes feed it stamp by stamp.
 
     Args:
         monitor: the monitor (its state carries on; `reset` it for a new record).
@@ -474,53 +394,32 @@ def run_situation(
     Raises:
         InputShapeError: inconsistent shapes.
     """
-    angles = np.asarray(wheel_angle, dtype=np.float64)
-    speeds = np.asarray(speed, dtype=np.float64)
-    torques = np.asarray(wheel_torque, dtype=np.float64)
+    f64 = np.ascontiguousarray
+    angles = f64(wheel_angle, dtype=np.float64)
+    speeds = f64(speed, dtype=np.float64)
+    torques = f64(wheel_torque, dtype=np.float64)
     n = cascade.t.shape[0]
     if angles.shape != (n, 4) or speeds.shape != (n,) or torques.shape != (n, 4):
         raise InputShapeError(
             f'expected wheel_angle ({n}, 4), speed ({n},), wheel_torque ({n}, 4); got '
             f'{angles.shape}, {speeds.shape}, {torques.shape}'
         )
-    kinds = len(ALERT_KINDS)
-    level = np.zeros((n, kinds, 4), dtype=np.int64)
-    onset = np.full((n, kinds, 4), math.nan)
-    detected = np.full((n, kinds, 4), math.nan)
-    axle = {k: np.zeros((n, 2)) for k in ('mu_max', 'slip_peak', 'confidence')}
-    road = np.zeros((n, 2), dtype=np.int64)
-    vehicle_road = np.zeros(n, dtype=np.int64)
-    # the records are updated in place, also by a restart
-    pot, al = monitor.friction.potential, monitor.monitor.state
-    flags = 0
-    for k in range(n):
-        flags |= monitor.advance(
-            float(cascade.t[k]),
-            angles[k],
-            float(speeds[k]),
-            torques[k],
-            cascade.omega[k],
-            cascade.mu[k],
-            cascade.mu_valid[k],
-            cascade.fz[k],
-        )
-        level[k] = al.level
-        onset[k] = al.onset
-        detected[k] = al.detected
-        axle['mu_max'][k] = pot.mu_max
-        axle['slip_peak'][k] = pot.slip_peak
-        axle['confidence'][k] = pot.confidence
-        road[k] = pot.road_class
-        vehicle_road[k] = vehicle_road_class(pot.road_class, pot.confidence)
-    monitor.refresh(flags)
+    inputs = SituationInputs(
+        angles, speeds, torques, f64(cascade.omega, dtype=np.float64),
+        f64(cascade.mu, dtype=np.float64), f64(cascade.mu_valid, dtype=np.bool_),
+        f64(cascade.fz, dtype=np.float64),
+    )  # fmt: skip
+    out = SituationBlock.empty(n)
+    t = f64(cascade.t, dtype=np.float64)
+    monitor.run(t, inputs, out)
     return SituationSeries(
-        t=cascade.t.copy(),
-        level=level,
-        onset=onset,
-        detected=detected,
-        mu_max=axle['mu_max'],
-        slip_peak=axle['slip_peak'],
-        confidence=axle['confidence'],
-        road_class=road,
-        vehicle_road_class=vehicle_road,
+        t=t.copy(),
+        level=out.level,
+        onset=out.onset,
+        detected=out.detected,
+        mu_max=out.mu_max,
+        slip_peak=out.slip_peak,
+        confidence=out.confidence,
+        road_class=out.road_class,
+        vehicle_road_class=out.vehicle_road_class,
     )

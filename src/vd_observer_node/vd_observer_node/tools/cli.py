@@ -3,7 +3,7 @@
     vd bag info BAG [--recover]
     vd bag repair BAG [--no-backup]
     vd replay IN_BAG OUT_BAG [--vehicle FILE] [--config FILE] [--mapping FILE]
-              [--torque-source {measured,engine,none}] [--no-progress] [--kernel K]
+              [--torque-source {measured,engine,none}] [--no-progress]
     vd report BAG [--out DIR] ...
     vd fleet BAGS... --out DIR [--workers N] [--engine local|dask] [--baseline OLD] ...
 
@@ -95,7 +95,6 @@ def _replay(args: argparse.Namespace) -> int:
         friction_config=config.friction,
         situation_config=config.situation,
         progress=not args.no_progress,
-        kernel=args.kernel,
         mapping=mapping,
         torque_source=args.torque_source,
     )
@@ -158,12 +157,6 @@ def _parser() -> argparse.ArgumentParser:
         "default: the mapping's torque_source (measured)",
     )
     replay.add_argument('--no-progress', action='store_true', help='no progress bar')
-    replay.add_argument(
-        '--kernel',
-        choices=('compiled', 'python'),
-        default='compiled',
-        help='per-sample math: the compiled kernel (default) or the Python reference',
-    )
     replay.set_defaults(run=_replay)
     add_report_parser(commands)
     add_fleet_parser(commands)

@@ -75,7 +75,6 @@ from vd_observer_node.estimation.cascade import (
 from vd_observer_node.estimation.drivetrain import (
     TORQUE_SOURCES,
     Drivetrain,
-    engine_wheel_torques_record,
     torque_source_code,
 )
 from vd_observer_node.estimation.estimator import (
@@ -135,7 +134,7 @@ BLOCK_MESSAGES = 1 << 17
 #: [s] an input whose stamps fall this far behind another's (stopped) holds the others no
 #: longer (`BlockAligner` max_wait): bounds the carry between blocks
 MAX_WAIT_S = 10.0
-_SITUATION_BLOCK = 1000  # samples per progress-bar update of the situation phase
+_SITUATION_BLOCK = 20_000  # samples per progress-bar update of the situation phase
 
 
 @dataclass(frozen=True)
@@ -348,9 +347,7 @@ def situation_topics(
         result: the cascade on the same N stamps (t, omega, mu, mu_valid, fz used).
         monitor: a fresh (or reset) situation monitor (`runner`'s kind).
         progress: called with the number of stamps done since its last call.
-        runner: `run_situation`, or the compiled
-            :func:`vd_observer_node.kernel.chain.run_situation_compiled` with a monitor from
-            :func:`~vd_observer_node.kernel.chain.compiled_monitor`.
+        runner: `run_situation` (injectable for tests).
         block: stamps per call of `runner` (per progress-bar update).
 
     Returns:
@@ -409,7 +406,6 @@ def replay_bag(
     alert_config: AlertConfig | None = None,
     friction_config: FrictionPotentialConfig | None = None,
     situation_config: SituationConfig | None = None,
-    kernel: str = 'compiled',
     mapping: InputMapping | None = None,
     torque_source: str | None = None,
     drivetrain: Drivetrain | None = None,
@@ -431,8 +427,8 @@ def replay_bag(
         estimator_config: estimator settings; default EstimatorConfig().
         progress: show a tqdm progress bar on stderr.
         cascade: the array cascade (injectable for tests); signature of ``run_cascade``,
-            called once per block with ``state=`` (a `CascadeState` to carry); default the
-            one of `kernel`.
+            called once per block with ``state=`` (a `CascadeState` to carry); default
+            `run_cascade`.
         cascade_kwargs: further keyword arguments of the cascade (settings added to
             ``run_cascade`` later, so the replay can match the live nodes' parameters).
         vehicle_file: vehicle YAML of the estimator vehicle (unless ``vehicle`` is given) and
@@ -444,8 +440,6 @@ def replay_bag(
         alert_config: alert settings; default AlertConfig().
         friction_config: friction-potential settings; default FrictionPotentialConfig().
         situation_config: fast-observer settings; default SituationConfig().
-        kernel: 'compiled' (the numba kernel, :mod:`vd_observer_node.kernel`) or 'python'
-            (the reference implementation; equal results, ~30x the time).
         mapping: which topics, types, joints, units and signs are the wheel angles (or
             speeds), body speed and wheel torques, and how their samples are aligned
             (:mod:`vd_observer_node.inputs.mapping`); default vd's own ``/vd/sensors/*``
@@ -467,18 +461,10 @@ def replay_bag(
         VehicleParameterError: the vehicle file is unreadable or invalid.
     """
     started = time.perf_counter()
-    if kernel not in ('compiled', 'python'):
-        raise ConfigurationError(f"kernel must be 'compiled' or 'python', got {kernel!r}")
     if block_messages is not None and block_messages < 1:
         raise ConfigurationError(f'block_messages must be >= 1, got {block_messages}')
-    compiled = kernel == 'compiled'
     if cascade is None:
-        if compiled:
-            from vd_observer_node.kernel.chain import run_cascade_compiled
-
-            cascade = run_cascade_compiled
-        else:
-            cascade = run_cascade
+        cascade = run_cascade
     target = Path(out_bag)
     if target.exists() and (not target.is_dir() or any(target.iterdir())):
         # Fail before minutes of work, not when the output is finally written.
@@ -509,12 +495,6 @@ def replay_bag(
         drivetrain = Drivetrain.from_params(params)
     curves = TyreCurves.from_tire(params.tire)
     make_monitor: Any = SituationMonitor
-    if situation and compiled:
-        from vd_observer_node.kernel.chain import compiled_monitor, warm_up
-
-        # its fast observer compiled too: what run_situation_compiled runs
-        make_monitor = compiled_monitor
-        warm_up(curves)
 
     def new_monitor() -> Any:
         if not situation:
@@ -549,7 +529,6 @@ def replay_bag(
             cascade_kwargs={**torque_kwargs, **extra},
             drivetrain=drivetrain if source == 'engine' else None,
             monitor=new_monitor(),
-            compiled=compiled,
         )
 
     raw_topics = [*inputs, *truth]
@@ -787,7 +766,6 @@ class _Run:
         cascade_kwargs: dict[str, Any],
         drivetrain: Drivetrain | None,
         monitor: Any,
-        compiled: bool,
     ) -> None:
         self.mapping = mapping
         self.used = mapping.used_specs  # wheels, body speed, and the torque input of the path
@@ -798,7 +776,6 @@ class _Run:
         self.cascade_kwargs = cascade_kwargs
         self.drivetrain = drivetrain
         self.monitor = monitor
-        self.compiled = compiled
         self.state = CascadeState()
         self.aligner = BlockAligner(
             len(self.used), mapping.alignment, mapping.max_age, max_wait=MAX_WAIT_S
@@ -905,34 +882,20 @@ class _Run:
         self.result = result
         self.samples += n
         self.torque_valid += int(np.count_nonzero(result.torque_valid))
-        if engine is not None and self.drivetrain is not None:
+        if engine is not None and result.wheel_torque_used.shape[0] == n:
             # the situation monitor gets the torques the engine path gave the estimator
             # (0 where the path had none: a gear the box lacks)
-            if result.torque_offset_used.shape[0]:
-                engine = np.column_stack((engine[:, 0] - result.torque_offset_used, engine[:, 1:]))
-            derived = engine_wheel_torques_record(engine, self.drivetrain, result.omega_dot)
-            wheel_torque = np.where(np.isfinite(derived), derived, 0.0)
+            given = result.wheel_torque_used
+            wheel_torque = np.where(np.isfinite(given), given, 0.0)
         situation_values: dict[str, dict[str, np.ndarray]] = {}
         failure: list[BaseException] = []
 
         def run_monitor() -> None:
             situation_start = time.perf_counter()
             try:
-                runner: dict[str, Any] = {}
-                if self.compiled:
-                    from vd_observer_node.kernel.chain import run_situation_compiled
-
-                    # larger blocks: a compiled call's cost is mostly its fixed Python overhead
-                    runner = {'runner': run_situation_compiled, 'block': 20 * _SITUATION_BLOCK}
                 situation_values.update(
                     situation_topics(
-                        wheel_angle,
-                        body_speed,
-                        wheel_torque,
-                        result,
-                        self.monitor,
-                        phase.update,
-                        **runner,
+                        wheel_angle, body_speed, wheel_torque, result, self.monitor, phase.update
                     )
                 )
             except BaseException as exc:  # re-raised by the caller after the join
@@ -941,13 +904,10 @@ class _Run:
 
         worker = None
         if self.monitor is not None:
-            if self.compiled:
-                # The compiled monitor releases the GIL: it runs on the second core while this
-                # thread encodes the cascade's topics.
-                worker = threading.Thread(target=run_monitor, name='replay-monitor')
-                worker.start()
-            else:
-                run_monitor()
+            # The compiled monitor releases the GIL: it runs on the second core while this
+            # thread encodes the cascade's topics.
+            worker = threading.Thread(target=run_monitor, name='replay-monitor')
+            worker.start()
         log_ns = picked[0]['log']
         # the sensor's angles as the observer node publishes them; with speeds, the observer's
         observed = result.angle if self.mapping.wheel_input == 'speed' else wheel_angle

@@ -3,7 +3,7 @@
     vd fleet BAG_OR_FOLDER_OR_PATTERN... [--list FILE] --out DIR [--workers N]
              [--engine local|dask] [--scheduler ADDRESS] [--baseline OLD_REPORT]
              [--no-replay] [--keep-bags] [--retry-failed] [--vehicle FILE] [--config FILE]
-             [--mapping FILE] [--kernel K] [--no-figures] [--no-progress]
+             [--mapping FILE] [--no-figures] [--no-progress]
              [--fail-on-regression]
 
 Exit status: 0 every bag processed; 1 some bags failed (listed in the report and on
@@ -86,7 +86,6 @@ def add_fleet_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentPar
     parser.add_argument('--vehicle', type=Path, help='vehicle YAML (default: the Clio file)')
     parser.add_argument('--config', type=Path, help='replay settings YAML (see vd replay)')
     parser.add_argument('--mapping', type=Path, help='input mapping YAML (see vd replay)')
-    parser.add_argument('--kernel', choices=('compiled', 'python'), default='compiled')
     parser.add_argument('--no-figures', action='store_true', help='no fleet.png')
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
     parser.set_defaults(run=run_fleet_command)
@@ -120,7 +119,6 @@ def run_fleet_command(args: argparse.Namespace) -> int:
         vehicle_file=str(args.vehicle.absolute()) if args.vehicle else None,
         config_file=str(args.config.absolute()) if args.config else None,
         mapping_file=str(args.mapping.absolute()) if args.mapping else None,
-        kernel=args.kernel,
         keep_dir=str((out / 'replayed').absolute()) if args.keep_bags else None,
     )
     run = run_fleet(

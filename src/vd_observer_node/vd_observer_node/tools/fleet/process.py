@@ -100,7 +100,6 @@ class FleetSettings:
         vehicle_file: vehicle YAML of the replay (None: the Clio file).
         config_file: replay settings YAML (``vd replay --config``), or None.
         mapping_file: input mapping YAML (``vd replay --mapping``), or None.
-        kernel: 'compiled' or 'python'.
         keep_dir: folder where the replayed bags are kept (as ``<bag id>``), or None to
             delete them once evaluated. Must be shared with the workers on a cluster.
     """
@@ -109,7 +108,6 @@ class FleetSettings:
     vehicle_file: str | None = None
     config_file: str | None = None
     mapping_file: str | None = None
-    kernel: str = 'compiled'
     keep_dir: str | None = None
 
     def fingerprint(self) -> str:
@@ -117,7 +115,7 @@ class FleetSettings:
 
         A stored result with another fingerprint is stale and recomputed on resume.
         """
-        h = hashlib.sha256(f'vd-fleet {RECORD_VERSION} {self.replay} {self.kernel}'.encode())
+        h = hashlib.sha256(f'vd-fleet {RECORD_VERSION} {self.replay}'.encode())
         for name in (self.vehicle_file, self.config_file, self.mapping_file):
             h.update(b'\0')
             if name is not None:
@@ -321,7 +319,6 @@ def _replay(bag: str, target: Path, settings: FleetSettings) -> Any:
         friction_config=config.friction,
         situation_config=config.situation,
         progress=False,
-        kernel=settings.kernel,
         mapping=mapping,
     )
 

@@ -1,0 +1,138 @@
+"""The cascade's stamp, compiled: wheel and speed observers, the torque path, the estimator.
+
+`cascade_block` is the one loop that runs the cascade, over N >= 1 stamps: the offline
+replay, the fleet and the evaluation call it on blocks of a record (`cascade.run_cascade`),
+the pipeline node on one stamp at a time (`chain.Chain`). Every part is the step function of
+its own module (`levant_step.levant_update`, `torque_offset.torque_offset_step`,
+`drivetrain.engine_torques`, `estimator_step.estimator_update`) on that part's records; with
+``VD_JIT=0`` the same source runs as plain Python.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vd_observer_node.estimation.drivetrain import engine_torques
+from vd_observer_node.estimation.estimator_step import estimator_update
+from vd_observer_node.estimation.levant_step import levant_update
+from vd_observer_node.estimation.torque_offset import torque_offset_step
+from vd_observer_node.kernel._jit import jit
+
+__all__ = ['CLUTCH_SETTLE', 'ENGINE_INERTIA', 'cascade_block', 'cascade_step']
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+#: slots of `Drivetrain.params_array` the torque path reads here
+ENGINE_INERTIA = 4
+CLUTCH_SETTLE = 6
+
+
+@jit
+def cascade_step(
+    wp: np.record, wlip: FloatArray, ws: np.record, wch: np.recarray,
+    sp: np.record, slip_: FloatArray, ss: np.record, sch: np.recarray,
+    ep: np.record, es: np.record, fst: FloatArray, sst: FloatArray, vst: FloatArray,
+    measured: bool, engine_on: bool, dprm: FloatArray, escl: FloatArray, offset_on: bool,
+    op: np.record, os_: np.record, oout: np.record,
+    t: float, angle: FloatArray, speed: float, torque: FloatArray, engine: FloatArray,
+    wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray, body_valid: BoolArray,
+    used: FloatArray, est: np.record,
+) -> bool:  # fmt: skip
+    """One stamp: wheel and speed observers, the torque path, then the estimator.
+
+    Args:
+        wp, wlip, ws, wch: the wheel differentiator (`LevantDifferentiator.kernel_args`).
+        sp, slip_, ss, sch: the speed differentiator (one channel).
+        ep, es, fst, sst, vst: the estimator (`Estimator.params`, `EstimatorState.args`).
+        measured: the estimator gets the measured speed (else the observer's).
+        engine_on: the torque path is the engine's (`dprm`, `escl`, and with ``offset_on``
+            the offset estimator `op`, `os_`, `oout`); else `torque` is used as it is.
+        dprm: `Drivetrain.params_array` (empty off the engine path).
+        escl: shape (2,), the engine path's state: the stamp the clutch last slipped or the
+            gear changed (-inf before), the last gear (nan before).
+        offset_on: the engine path learns the engine-torque offset and subtracts it.
+        op, os_, oout: the offset estimator's settings, state and estimate records.
+        t: stamp [s].
+        angle: shape (4,), [rad] wheel angles (or speeds [rad/s], as the observer takes).
+        speed: [m/s] measured body speed.
+        torque: shape (4,), [N m] measured wheel torques (read off the engine path only).
+        engine: shape (3,), engine torque [N m], gear, engine speed [rad/s] (engine path).
+        wheel: shape (3, 4), written: angle, omega, omega_dot.
+        wheel_valid: shape (4,), written.
+        body: shape (3, 1), written: speed, accel, jerk of the speed observer.
+        body_valid: shape (1,), written.
+        used: shape (4,), written: the wheel torques the estimator got [N m].
+        est: `estimator_step.ESTIMATES` record, written.
+
+    Returns:
+        Whether the torque path held (the engine path: clutch engaged, gear known, settled).
+    """
+    levant_update(wp, wlip, ws, wch, t, angle, wheel, wheel_valid)
+    sample = np.empty(1)
+    sample[0] = speed
+    levant_update(sp, slip_, ss, sch, t, sample, body, body_valid)
+    v_est = speed if measured else body[0, 0]
+    torque_ok = True
+    if engine_on:
+        engine_torque = engine[0]
+        if offset_on:
+            torque_offset_step(
+                op, dprm[ENGINE_INERTIA], os_, t, engine[0], engine[1], engine[2], oout
+            )
+            engine_torque = engine_torque - oout.used
+        engaged = engine_torques(
+            dprm, engine_torque, engine[1], engine[2], wheel[1], wheel[2], used
+        )
+        if not engaged or engine[1] != escl[1]:
+            escl[0] = t
+        escl[1] = engine[1]
+        torque_ok = engaged and t - escl[0] >= dprm[CLUTCH_SETTLE]
+    else:
+        used[:] = torque
+    estimator_update(
+        ep, es, fst, sst, vst, t, wheel[1], wheel[2], v_est, body[1, 0], used, torque_ok, est
+    )
+    return torque_ok
+
+
+@jit
+def cascade_block(
+    wp: np.record, wlip: FloatArray, ws: np.record, wch: np.recarray,
+    sp: np.record, slip_: FloatArray, ss: np.record, sch: np.recarray,
+    ep: np.record, es: np.record, fst: FloatArray, sst: FloatArray, vst: FloatArray,
+    measured: bool, engine_on: bool, dprm: FloatArray, escl: FloatArray, offset_on: bool,
+    op: np.record, os_: np.record, oout: np.record,
+    t: FloatArray, angles: FloatArray, speeds: FloatArray, torques: FloatArray,
+    engine: FloatArray, wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray,
+    body_valid: BoolArray, used: FloatArray, est: np.ndarray, torque_valid: BoolArray,
+    offsets: np.ndarray,
+) -> None:  # fmt: skip
+    """`cascade_step` over N stamps (the parts' records carry on from block to block).
+
+    Args:
+        (parts): as `cascade_step`.
+        t: shape (N,), [s].
+        angles: shape (N, 4); speeds (N,); torques (N, 4); engine (N, 3) (as `cascade_step`).
+        wheel: shape (N, 3, 4), written; wheel_valid (N, 4); body (N, 3); body_valid (N,).
+        used: shape (N, 4), written: the wheel torques the estimator got.
+        est: shape (N,) `estimator_step.ESTIMATES` records, written.
+        torque_valid: shape (N,), written.
+        offsets: shape (N,) `torque_offset.OFFSET_ESTIMATE_DTYPE` records written where the
+            offset is learnt, else shape (0,).
+    """
+    body1 = np.empty((3, 1))
+    valid1 = np.empty(1, dtype=np.bool_)
+    for k in range(t.shape[0]):
+        torque_valid[k] = cascade_step(
+            wp, wlip, ws, wch, sp, slip_, ss, sch, ep, es, fst, sst, vst, measured, engine_on,
+            dprm, escl, offset_on, op, os_, oout, t[k], angles[k], speeds[k], torques[k],
+            engine[k], wheel[k], wheel_valid[k], body1, valid1, used[k], est[k],
+        )  # fmt: skip
+        if offsets.shape[0] > 0:
+            offsets[k] = oout
+        body[k, 0] = body1[0, 0]
+        body[k, 1] = body1[1, 0]
+        body[k, 2] = body1[2, 0]
+        body_valid[k] = valid1[0]

@@ -1,0 +1,503 @@
+"""The estimator's per-stamp step (compiled), over named records.
+
+The math of `estimator.Estimator` (see its module docstring and docs/estimation.md): the
+wheel spin balance, the load transfer (both sources), utilised friction and its validity,
+slip, rolling and aero resistance, the slope from the filtered force balance (both
+acceleration sources), held inputs, resets and every fault count, with the online radius
+(`rolling_radius.radius_update`) and mass (`mass_grade_step.mass_update`) inside.
+
+Records: `ESTIMATOR_PARAMS` (built by `estimator.estimator_params`; the online mass's and
+radius's settings nested as ``p.mass`` and ``p.radius``), `ESTIMATOR_STATE` (the online mass's
+and radius's states nested as ``s.mass``, ``s.radius``; the last estimate ``s.last``; the
+fault counts) and `ESTIMATES`, one estimate with the fields of `estimator.Estimates`
+(per-wheel fields of shape (4,)). The low-pass filters' stages, of the configured order, are
+plain arrays next to them: force (order, 5), slope (order, 1), speed (order, 1).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+
+from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_NONE
+from vd_observer_node.estimation.faults import ESTIMATOR_FAULTS
+from vd_observer_node.estimation.filters import (
+    LOWPASS_META,
+    lowpass_derivative,
+    lowpass_reset,
+    lowpass_update,
+)
+from vd_observer_node.estimation.mass_grade_step import (
+    MASS_PARAMS,
+    MASS_STATE,
+    mass_held,
+    mass_rescale,
+    mass_reset,
+    mass_update,
+)
+from vd_observer_node.estimation.rolling_radius import (
+    RADIUS_PARAMS,
+    RADIUS_STATE,
+    radius_held,
+    radius_reset,
+    radius_update,
+)
+from vd_observer_node.kernel._jit import jit
+
+__all__ = [
+    'ESTIMATES',
+    'ESTIMATOR_PARAMS',
+    'ESTIMATOR_STATE',
+    'REJECTED_SLOT',
+    'estimator_reset',
+    'estimator_update',
+]
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+#: One estimate: the fields of `estimator.Estimates`, per-wheel ones of shape (4,)
+#: (``mu_valid`` as 0/1).
+ESTIMATES: Final = np.dtype(
+    [
+        ('t', 'f8'),
+        ('fx', 'f8', (4,)),
+        ('fz', 'f8', (4,)),
+        ('mu', 'f8', (4,)),
+        ('slip', 'f8', (4,)),
+        ('mu_valid', 'u1', (4,)),  # 0/1: numba has no nested arrays of bool
+        ('rolling', 'f8', (4,)),
+        ('aero', 'f8'),
+        ('slope', 'f8'),
+        ('slope_valid', 'b1'),
+        ('torque_source', 'i8'),
+        ('mass', 'f8'),
+        ('mass_std', 'f8'),
+        ('mass_converged', 'b1'),
+        ('mass_used', 'f8'),
+        ('mass_excited', 'b1'),
+        ('radius', 'f8'),
+        ('radius_std', 'f8'),
+        ('radius_converged', 'b1'),
+        ('radius_used', 'f8'),
+        ('radius_free_wheels', 'i8'),
+    ],
+    align=True,
+)
+#: The settings as the step uses them: the vehicle (file values), the `EstimatorConfig`
+#: fields (sources as codes: the index in `LOAD_TRANSFER_SOURCES` and `SLOPE_ACCEL_SOURCES`;
+#: the minimum load in [N]; the slope bound as a sine), the static wheel loads [N], the
+#: torque source code, which online parts run and their settings.
+ESTIMATOR_PARAMS: Final = np.dtype(
+    [
+        ('mass', 'f8'),
+        ('gravity', 'f8'),
+        ('radius', 'f8'),
+        ('inertia_front', 'f8'),
+        ('inertia_rear', 'f8'),
+        ('drag', 'f8'),
+        ('rolling_c0', 'f8'),
+        ('rolling_c1', 'f8'),
+        ('rolling_reg', 'f8'),
+        ('cg_height', 'f8'),
+        ('cg_to_front', 'f8'),
+        ('cg_to_rear', 'f8'),
+        ('wheelbase', 'f8'),
+        ('load_transfer', 'i8'),
+        ('force_tau', 'f8'),
+        ('slope_tau', 'f8'),
+        ('slope_accel', 'i8'),
+        ('min_load', 'f8'),
+        ('min_excitation', 'f8'),
+        ('max_sine', 'f8'),
+        ('min_speed', 'f8'),
+        ('slip_eps', 'f8'),
+        ('max_gap', 'f8'),
+        ('max_mu', 'f8'),
+        ('static_front', 'f8'),
+        ('static_rear', 'f8'),
+        ('torque_source', 'i8'),
+        ('mass_on', 'b1'),
+        ('radius_on', 'b1'),
+        ('mass_waits', 'b1'),
+        ('mass_p', MASS_PARAMS),
+        ('radius_p', RADIUS_PARAMS),
+    ],
+    align=True,
+)
+#: Fault slots: `ESTIMATOR_FAULTS` in order, then the rejected stamps.
+REJECTED_SLOT: Final = len(ESTIMATOR_FAULTS)
+(_NON_FINITE_STAMP, _NON_FINITE_VALUE, _DUPLICATE, _OUT_OF_ORDER, _GAP, _JUMP_BACK,
+ _NON_FINITE_OUTPUT, _WHEEL_LIFT, _MU_RANGE, _SLOPE_RANGE, _ARCSIN, _MASS_CLAMPED,
+ _RADIUS_CLAMPED) = range(13)  # fmt: skip
+assert ESTIMATOR_FAULTS[_RADIUS_CLAMPED] == 'radius_clamped'
+assert ESTIMATOR_FAULTS[_NON_FINITE_OUTPUT] == 'non_finite_output'
+_M_CLAMPED: Final = 6  # 'mass_clamped' in MASS_GRADE_FAULTS, 'radius_clamped' likewise
+_KMH_REFERENCE: Final = 160.0  # [km/h] speed scale of paper eq. 7 (estimation.formulas)
+
+#: The estimator's memory: last stamp (nan: none), slope [rad], whether ``last`` holds an
+#: estimate, the radius of the last stamp's Fx (nan: none), the last finite inputs (omega,
+#: omega_dot, torque (4 each), v, accel), the three low-passes' previous outputs and
+#: bookkeeping, the online mass's and radius's states and the fault counts.
+ESTIMATOR_STATE: Final = np.dtype(
+    [
+        ('t', 'f8'),
+        ('slope', 'f8'),
+        ('has_last', 'b1'),
+        ('radius_prev', 'f8'),
+        ('held', 'f8', (14,)),
+        ('force_prev', 'f8', (5,)),
+        ('slope_prev', 'f8', (1,)),
+        ('speed_prev', 'f8', (1,)),
+        ('force_lp', LOWPASS_META),
+        ('slope_lp', LOWPASS_META),
+        ('speed_lp', LOWPASS_META),
+        ('mass_s', MASS_STATE),
+        ('radius_s', RADIUS_STATE),
+        ('last', ESTIMATES),
+        ('counts', 'i8', (len(ESTIMATOR_FAULTS) + 1,)),
+    ],
+    align=True,
+)
+
+
+@jit
+def estimator_reset(p: np.record, s: np.record) -> None:
+    """Forget the history: slope 0, filters empty, no last estimate, the online mass and
+    radius from the start (fault counts stay)."""
+    s.t = math.nan
+    s.slope = 0.0
+    s.has_last = False
+    s.radius_prev = math.nan
+    s.held[:] = 0.0
+    lowpass_reset(s.force_lp)
+    lowpass_reset(s.slope_lp)
+    lowpass_reset(s.speed_lp)
+    mass_reset(p.mass_p, s.mass_s)
+    radius_reset(p.radius_p, s.radius_s)
+
+
+@jit
+def _mass_fields(p: np.record, s: np.record, est: np.record) -> None:
+    """The mass fields where nothing was estimated: the file's, or the online mass's last."""
+    if p.mass_on:
+        mass_held(p.mass_p, s.mass_s)
+        o = s.mass_s.out
+        est.mass, est.mass_std, est.mass_converged = o.mass, o.mass_std, o.converged
+        est.mass_used, est.mass_excited = o.mass_used, o.excited
+    else:
+        est.mass, est.mass_std, est.mass_converged = p.mass, 0.0, False
+        est.mass_used, est.mass_excited = p.mass, False
+
+
+@jit
+def _radius_fields(p: np.record, s: np.record, est: np.record) -> None:
+    """The radius fields (free wheels as the online radius's last, or the file's radius)."""
+    if p.radius_on:
+        radius_held(p.radius_p, s.radius_s)
+        o = s.radius_s.out
+        est.radius, est.radius_std, est.radius_converged = o.radius, o.radius_std, o.converged
+        est.radius_used, est.radius_free_wheels = o.radius_used, o.free_wheels
+    else:
+        est.radius, est.radius_std, est.radius_converged = p.radius, 0.0, False
+        est.radius_used, est.radius_free_wheels = p.radius, 0
+
+
+@jit
+def _empty(p: np.record, s: np.record, t: float, est: np.record) -> None:
+    """No estimate: zero forces, static loads, nothing valid; mass and radius as held."""
+    est.t = t if math.isfinite(t) else 0.0
+    est.fx[:] = 0.0
+    for i in range(4):
+        est.fz[i] = p.static_front if i < 2 else p.static_rear
+    est.mu[:] = 0.0
+    est.slip[:] = 0.0
+    est.mu_valid[:] = 0
+    est.rolling[:] = 0.0
+    est.aero = 0.0
+    est.slope = 0.0
+    est.slope_valid = False
+    est.torque_source = p.torque_source
+    _mass_fields(p, s, est)
+    _radius_fields(p, s, est)
+    est.mass_converged = False
+    est.mass_excited = False
+    est.radius_converged = False
+    est.radius_free_wheels = 0
+
+
+@jit
+def _copy(src: np.record, dst: np.record) -> None:
+    """One `ESTIMATES` record into another, field by field."""
+    dst.t = src.t
+    dst.fx[:] = src.fx
+    dst.fz[:] = src.fz
+    dst.mu[:] = src.mu
+    dst.slip[:] = src.slip
+    dst.mu_valid[:] = src.mu_valid
+    dst.rolling[:] = src.rolling
+    dst.aero, dst.slope, dst.slope_valid = src.aero, src.slope, src.slope_valid
+    dst.torque_source = src.torque_source
+    dst.mass, dst.mass_std, dst.mass_converged = src.mass, src.mass_std, src.mass_converged
+    dst.mass_used, dst.mass_excited = src.mass_used, src.mass_excited
+    dst.radius, dst.radius_std = src.radius, src.radius_std
+    dst.radius_converged, dst.radius_used = src.radius_converged, src.radius_used
+    dst.radius_free_wheels = src.radius_free_wheels
+
+
+@jit
+def _online_radius(
+    p: np.record, s: np.record, t: float, x: FloatArray, ok: bool, est: np.record
+) -> None:
+    """Advance the online radius (held where not every input was finite and trusted)."""
+    if p.radius_on and ok:
+        r = s.radius_s
+        clamped = r.counts[_M_CLAMPED]
+        radius_update(p.radius_p, r, t, x[0:4], x[8:12], x[12])
+        if r.counts[_M_CLAMPED] != clamped:
+            s.counts[_RADIUS_CLAMPED] += 1
+        _radius_fields(p, s, est)
+    else:
+        _radius_fields(p, s, est)
+        est.radius_free_wheels = 0
+
+
+@jit
+def _online_mass(
+    p: np.record, s: np.record, t: float, sum_fx: float, v: float, ok: bool, waiting: bool,
+    est: np.record,
+) -> None:  # fmt: skip
+    """Advance the online mass; a stamp not all finite and trusted gives it a nan force (it
+    holds); while it waits for the radius it is not called."""
+    if p.mass_on and not waiting:
+        m = s.mass_s
+        clamped = m.counts[_M_CLAMPED]
+        mass_update(p.mass_p, m, t, sum_fx if ok else math.nan, v)
+        if m.counts[_M_CLAMPED] != clamped:
+            s.counts[_MASS_CLAMPED] += 1
+        _mass_fields(p, s, est)
+        # a held stamp (skipped) did not update the mass, whatever the last one did
+        est.mass_excited = est.mass_excited and ok
+    else:
+        _mass_fields(p, s, est)
+        est.mass_excited = False
+
+
+@jit
+def _estimate(
+    p: np.record, s: np.record, f_stages: FloatArray, s_stages: FloatArray,
+    v_stages: FloatArray, t: float, dt: float, x: FloatArray, wheel_ok: BoolArray,
+    body_ok: bool, est: np.record,
+) -> None:  # fmt: skip
+    """Every estimate of an accepted stamp from the packed inputs ``x`` (14,)."""
+    gravity = p.gravity
+    v = x[12]
+    accel = x[13]
+    no_torque = p.torque_source == TORQUE_NONE
+    all_ok = body_ok and wheel_ok[0] and wheel_ok[1] and wheel_ok[2] and wheel_ok[3]
+    # the online radius first: Fx and the slip use radius_used
+    _online_radius(p, s, t, x, all_ok, est)
+    radius = est.radius_used
+    waiting = p.radius_on and p.mass_waits and not est.radius_converged
+    # Fx uses another radius from now on: the mass learnt so far is rescaled to it
+    previous = s.radius_prev
+    rescale = not (waiting or math.isnan(previous) or radius == previous)
+    if rescale and p.mass_on and mass_rescale(p.mass_p, s.mass_s, previous / radius):
+        s.counts[_MASS_CLAMPED] += 1
+    s.radius_prev = radius
+    # the wheel spin balance; without the torque the balance has no force (not -J*omega_dot/R)
+    fx_raw = np.zeros(4)
+    if not no_torque:
+        for i in range(4):
+            inertia = p.inertia_front if i < 2 else p.inertia_rear
+            fx_raw[i] = (x[8 + i] - inertia * x[4 + i]) / radius
+    fx_sum = fx_raw[0] + fx_raw[1] + fx_raw[2] + fx_raw[3]
+    # then the online mass: the rest uses mass_used
+    _online_mass(p, s, t, fx_sum, v, all_ok, waiting, est)
+    mass = est.mass_used
+    # the simulator's smooth sign of the rolling resistance; drag is exactly k*v*|v|
+    reg = p.rolling_reg
+    direction = math.tanh(v / reg) if reg > 0.0 else (1.0 if v > 0 else (-1.0 if v < 0 else v))
+    aero = p.drag * v * v
+    aero_signed = math.copysign(aero, v)
+    c_roll = p.rolling_c0 * (1.0 + p.rolling_c1 * abs(v) / _KMH_REFERENCE)
+    cos_prev, sin_prev = math.cos(s.slope), math.sin(s.slope)
+    weight = mass * gravity
+    # sum(Fz) = m g cos(alpha) in both load-transfer forms: the rolling sum needs no transfer
+    rolling_sum = c_roll * weight * cos_prev
+    if p.load_transfer == 0 and not no_torque:
+        ground = fx_sum - direction * rolling_sum
+    else:
+        ground = mass * accel + weight * sin_prev + aero_signed
+    force_in = np.empty(5)
+    force_in[:4] = fx_raw
+    force_in[4] = ground
+    filtered = np.empty(5)
+    lowpass_update(p.force_tau, f_stages, s.force_prev, s.force_lp, dt, force_in, filtered)
+    ground_f = filtered[4]
+
+    # the moment balance; a load transfer beyond the axle's load lifts the wheel: Fz = 0
+    weight_normal = mass * gravity * cos_prev
+    transfer = ground_f * p.cg_height
+    front = max(0.5 * (weight_normal * p.cg_to_rear - transfer) / p.wheelbase, 0.0)
+    rear = max(0.5 * (weight_normal * p.cg_to_front + transfer) / p.wheelbase, 0.0)
+    min_load = p.min_load
+    lift = False
+    implausible = False
+    for i in range(4):
+        fz = front if i < 2 else rear
+        fx = filtered[i]
+        est.fx[i] = fx
+        est.fz[i] = fz
+        est.rolling[i] = c_roll * fz
+        valid = (fz >= min_load) and (abs(fx) >= p.min_excitation * fz) and math.isfinite(fx)
+        mu = fx / fz if valid else 0.0
+        valid = valid and wheel_ok[i] and not no_torque
+        lift = lift or fz < min_load
+        if valid and abs(mu) > p.max_mu:
+            implausible = True
+            valid = False
+        est.mu[i] = mu if valid else 0.0
+        est.mu_valid[i] = 1 if valid else 0
+        # vd_common.vehicle.tire.slip_ratio of the slip velocity
+        sv = x[i] * radius - v
+        den = max(max(abs(sv + v), abs(v)), p.slip_eps)
+        est.slip[i] = sv / den
+    if lift:
+        s.counts[_WHEEL_LIFT] += 1
+    if implausible:
+        s.counts[_MU_RANGE] += 1
+
+    # the slope from the filtered longitudinal balance
+    forces = fx_sum - direction * rolling_sum - aero_signed
+    one = np.empty(1)
+    net_out = np.empty(1)
+    if p.slope_accel == 0 and p.slope_tau > 0.0:
+        # m*dv/dt as the derivative of the same low-pass applied to the speed
+        one[0] = v
+        lowpass_update(p.slope_tau, v_stages, s.speed_prev, s.speed_lp, dt, one, net_out)
+        lowpass_derivative(v_stages, s.speed_prev, s.speed_lp, net_out)
+        accel_f = net_out[0]
+        one[0] = forces
+        lowpass_update(p.slope_tau, s_stages, s.slope_prev, s.slope_lp, dt, one, net_out)
+        net_f = net_out[0] - mass * accel_f
+    else:
+        one[0] = forces - mass * accel
+        lowpass_update(p.slope_tau, s_stages, s.slope_prev, s.slope_lp, dt, one, net_out)
+        net_f = net_out[0]
+    sine = net_f / weight
+    in_range = abs(sine) <= p.max_sine
+    usable = body_ok and abs(v) >= p.min_speed and not no_torque
+    if usable and not in_range:
+        # |N| > m g has no arcsin at all; below that the slope is only implausible
+        s.counts[_ARCSIN if abs(sine) > 1.0 else _SLOPE_RANGE] += 1
+    slope_valid = in_range and usable
+    if p.torque_source == TORQUE_ENGINE and usable and not in_range:
+        # the balance needs a force the engine path cannot know of (the brakes): the
+        # torques are wrong, so is mu
+        est.mu_valid[:] = 0
+        est.mu[:] = 0.0
+    if slope_valid:
+        # an invalid stamp keeps the last valid slope (it is published as invalid)
+        s.slope = math.asin(sine)
+    est.t = t
+    est.aero = aero
+    est.slope = s.slope
+    est.slope_valid = slope_valid
+    est.torque_source = p.torque_source
+
+
+@jit
+def _reject(p: np.record, s: np.record, kind: int, t: float, est: np.record) -> None:
+    s.counts[kind] += 1
+    s.counts[REJECTED_SLOT] += 1
+    if s.has_last:
+        _copy(s.last, est)
+    else:
+        _empty(p, s, t, est)
+
+
+@jit
+def estimator_update(
+    p: np.record, s: np.record, f_stages: FloatArray, s_stages: FloatArray,
+    v_stages: FloatArray, t: float, omega: FloatArray, omega_dot: FloatArray, speed: float,
+    accel: float, torque: FloatArray, torque_ok: bool, est: np.record,
+) -> None:  # fmt: skip
+    """Estimate everything for stamp t into ``est`` (`estimator.Estimator.update`).
+
+    Args:
+        p: `ESTIMATOR_PARAMS` record.
+        s: `ESTIMATOR_STATE` record (its fault counts are incremented).
+        f_stages: (order, 5) force low-pass stages.
+        s_stages: (order, 1) slope low-pass stages.
+        v_stages: (order, 1) speed low-pass stages.
+        t: stamp [s].
+        omega: shape (4,), [rad/s] wheel speeds.
+        omega_dot: shape (4,), [rad/s^2] wheel accelerations.
+        speed: body speed [m/s].
+        accel: body acceleration [m/s^2].
+        torque: shape (4,), [N m] wheel torques.
+        torque_ok: False where the torque source cannot be trusted at this stamp.
+        est: `ESTIMATES` record written.
+    """
+    packed = np.empty(14)
+    packed[0:4] = omega
+    packed[4:8] = omega_dot
+    packed[8:12] = torque
+    packed[12] = speed
+    packed[13] = accel
+    if not math.isfinite(t):
+        _reject(p, s, _NON_FINITE_STAMP, t, est)
+        return
+    if not math.isnan(s.t):
+        restart = False
+        if t <= s.t:
+            if s.t - t <= p.max_gap:
+                _reject(p, s, _DUPLICATE if t == s.t else _OUT_OF_ORDER, t, est)
+                return
+            s.counts[_JUMP_BACK] += 1
+            restart = True
+        elif t - s.t > p.max_gap:
+            s.counts[_GAP] += 1
+            restart = True
+        if restart:  # reset, keeping the last finite inputs to hold
+            kept = s.held.copy()
+            estimator_reset(p, s)
+            s.held[:] = kept
+    dt = 0.0 if math.isnan(s.t) else t - s.t
+    s.t = t
+    ok = np.empty(14, dtype=np.bool_)
+    all_ok = True
+    for j in range(14):
+        ok[j] = math.isfinite(packed[j])
+        all_ok = all_ok and ok[j]
+    wheel_ok = np.ones(4, dtype=np.bool_)
+    body_ok = True
+    if not all_ok:
+        s.counts[_NON_FINITE_VALUE] += 1
+        for j in range(14):
+            if not ok[j]:
+                packed[j] = s.held[j]
+        for i in range(4):
+            wheel_ok[i] = ok[i] and ok[4 + i] and ok[8 + i] and ok[12]
+        body_ok = False
+    s.held[:] = packed
+    if not torque_ok:
+        wheel_ok[:] = False
+        body_ok = False
+    _estimate(p, s, f_stages, s_stages, v_stages, t, dt, packed, wheel_ok, body_ok, est)
+    # one sum is the cheapest check: NaN/Inf anywhere makes it non-finite
+    total = est.aero + est.slope
+    for i in range(4):
+        total += est.fx[i] + est.fz[i] + est.mu[i] + est.slip[i] + est.rolling[i]
+    if not math.isfinite(total):
+        # overflow from absurd (finite) input: drop the poisoned state, report nothing valid
+        s.counts[_NON_FINITE_OUTPUT] += 1
+        estimator_reset(p, s)
+        s.t = t
+        _empty(p, s, t, est)
+    _copy(est, s.last)
+    s.has_last = True
