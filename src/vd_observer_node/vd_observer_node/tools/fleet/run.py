@@ -180,7 +180,15 @@ def _local_results(
                 while (source or pending) and not broken:
                     while source and len(pending) < limit:
                         bag = source.pop()
-                        pending[pool.submit(function, bag, settings)] = bag
+                        try:
+                            pending[pool.submit(function, bag, settings)] = bag
+                        except BrokenProcessPool:
+                            # a worker died since the last wait: this bag never started
+                            source.append(bag)
+                            broken = True
+                            break
+                    if not pending:
+                        break
                     done, _ = wait(pending, return_when=FIRST_COMPLETED)
                     for future in done:
                         bag = pending.pop(future)
