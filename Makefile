@@ -4,11 +4,12 @@ SHELL := /bin/bash
 .SHELLFLAGS := -e -o pipefail -c
 RUN := . ./env.sh &&
 
-.PHONY: setup build demo test pytest lint typecheck format bench clean help
+.PHONY: setup build demo test test-all pytest lint typecheck format bench clean help
 
 help:
 	@echo 'make demo   set up if needed, run the simulator/observer/estimator graph, report'
-	@echo 'make test   set up if needed, lint, type-check and run every test'
+	@echo 'make test   set up if needed, lint, type-check and run the tests (long end-to-end runs: CI)'
+	@echo 'make test-all  the same with the long end-to-end runs (what CI runs)'
 	@echo 'make bench  benchmarks and accuracy evaluations (print figures)'
 	@echo 'make setup  only the set-up (.venv, ROS 2, colcon build, env.sh)'
 
@@ -21,6 +22,10 @@ demo: setup
 	$(RUN) python scripts/demo.py $(DEMO_ARGS)
 
 test: setup lint typecheck pytest
+
+# every test, the long end-to-end runs (marked slow) included: what CI runs (.ci/run)
+test-all:
+	VD_TEST_ALL=1 $(MAKE) test
 
 pytest: setup
 	$(RUN) python -m pytest $(PYTEST_ARGS)

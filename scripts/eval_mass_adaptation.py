@@ -67,8 +67,12 @@ from vd_observer_node.estimation.mass_grade import MassGradeConfig  # noqa: E402
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
 from vd_observer_node.estimation.vehicle import EstimatorVehicle  # noqa: E402
 from vd_sim_node.vehicle.scenario import Scenario, load_scenario  # noqa: E402
-from vd_sim_node.vehicle.simulation import SimResult, simulate  # noqa: E402
-from vd_sim_node.vehicle.variants import loaded, tyre_radius_scale, with_torque_offset  # noqa: E402
+from vd_sim_node.vehicle.simulation import (  # noqa: E402
+    SimResult,
+    simulate,
+    with_torque_offset,
+)
+from vd_sim_node.vehicle.variants import loaded, tyre_radius_scale  # noqa: E402
 
 CONFIG = ROOT / 'src' / 'vd_sim_node' / 'config'
 VEHICLE_FILE = ROOT / 'src' / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'

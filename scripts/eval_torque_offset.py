@@ -68,7 +68,7 @@ def _simulate(scenario_path: Path, case: str, sensors: str) -> tuple[float, SimR
     base, offset = CASES[case]
     true_vp, sim = simulate_case(nominal, load_scenario(scenario_path), base, sensors)
     if case == '+125kg&torque+10':
-        from vd_sim_node.vehicle.variants import with_torque_offset
+        from vd_sim_node.vehicle.simulation import with_torque_offset
 
         sim = with_torque_offset(sim, true_vp, offset)
     noise = ENGINE_SPEED_NOISE[sensors]

@@ -19,6 +19,9 @@ from vd_observer_node.bag import BagReader
 
 from vd_msgs.msg import Alert
 
+#: every test here is a long end-to-end run (CI runs it; locally: make test-all)
+pytestmark = pytest.mark.slow
+
 NS = 1_000_000_000
 
 

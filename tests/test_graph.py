@@ -32,6 +32,9 @@ from vd_common.topics import (
 from vd_observer_node.bag import BagReader
 from vd_observer_node.tools.replay import replay_bag
 
+#: every test here is a long end-to-end run (CI runs it; locally: make test-all)
+pytestmark = pytest.mark.slow
+
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
 WAIT_FOR_STAMP = Path(__file__).parent / 'ros_scripts' / 'wait_for_stamp.py'
 RATE_HZ = 100.0

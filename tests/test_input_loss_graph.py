@@ -17,6 +17,9 @@ from test_graph import wait_exit, wait_for_last_stamp
 from test_publish_refusals_graph import refusing
 from vd_common.topics import OBSERVER_BODY_ACCEL, SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES
 
+#: every test here is a long end-to-end run (CI runs it; locally: make test-all)
+pytestmark = pytest.mark.slow
+
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
 COLLECT = Path(__file__).parent / 'ros_scripts' / 'collect_outputs.py'
 

@@ -77,6 +77,7 @@ def _wait_exit(proc: RosProcess, timeout: float) -> int:
     return code
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 def test_pipeline_node_runs_on_standard_types_and_reports_a_stopped_topic(
     procs: RosProcessGroup, tmp_path: Path
@@ -229,6 +230,7 @@ def test_bad_mappings_refuse_to_start_with_one_line_naming_the_key(
         _refused(proc, *words)
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 def test_the_player_plays_a_users_bag_to_the_nodes_given_the_same_mapping(
     procs: RosProcessGroup, tmp_path: Path
@@ -346,6 +348,7 @@ def test_messages_serialized_by_rclpy_decode_like_the_replays() -> None:
     )
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     procs: RosProcessGroup, tmp_path: Path
@@ -408,6 +411,7 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     assert all(live[t] == expected[t] for t in live)
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 @pytest.mark.parametrize('source', ['engine', 'none'])
 def test_pipeline_node_on_the_engine_and_no_torque_paths_computes_what_the_replay_computes(

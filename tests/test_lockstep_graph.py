@@ -22,6 +22,9 @@ from vd_common.topics import (
 )
 from vd_observer_node.bag import BagReader
 
+#: every test here is a long end-to-end run (CI runs it; locally: make test-all)
+pytestmark = pytest.mark.slow
+
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
 SLOW = Path(__file__).parent / 'ros_scripts' / 'slow_consumer.py'
 RATE_HZ = 1000.0

@@ -33,6 +33,9 @@ from vd_common.topics import (
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.tools.replay import replay_bag
 
+#: every test here is a long end-to-end run (CI runs it; locally: make test-all)
+pytestmark = pytest.mark.slow
+
 #: excited (0.4 s) and converged (at 1.6 s) within the 4 s launch; the defaults need more
 #: driving
 MASS_PARAMS = {

@@ -148,6 +148,7 @@ def _last_diag(diag: list[dict[str, Any]], name: str) -> dict[str, Any]:
     return mine[-1]
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 def test_sensor_faults_through_the_live_nodes(procs: RosProcessGroup, tmp_path: Path) -> None:
     obs = procs.node('observer', 'vd_observer_node', 'observer_node')

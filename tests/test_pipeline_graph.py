@@ -34,6 +34,9 @@ from vd_common.topics import (
 )
 from vd_observer_node.tools.replay import replay_bag
 
+#: every test here is a long end-to-end run (CI runs it; locally: make test-all)
+pytestmark = pytest.mark.slow
+
 OUTPUTS = {
     OBSERVER_WHEEL_STATES: ('omega', 'omega_dot'),
     ESTIMATES_TIRE_FORCES: ('fx', 'fz'),

@@ -19,6 +19,9 @@ from rosproc import RosProcessGroup
 from test_graph import wait_exit, wait_for_last_stamp
 from vd_common.topics import ESTIMATES_SLOPE, OBSERVER_BODY_ACCEL
 
+#: every test here is a long end-to-end run (CI runs it; locally: make test-all)
+pytestmark = pytest.mark.slow
+
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
 COLLECT = Path(__file__).parent / 'ros_scripts' / 'collect_outputs.py'
 INJECT = Path(__file__).parent / 'ros_scripts' / 'refuse_publishes'

@@ -19,6 +19,9 @@ from test_graph import wait_for_last_stamp
 from vd_common.topics import SENSORS_WHEEL_ANGLES, TRUTH_SLOPE
 from vd_observer_node.bag import BagReader
 
+#: every test here is a long end-to-end run (CI runs it; locally: make test-all)
+pytestmark = pytest.mark.slow
+
 SCENARIO = Path(__file__).parent / 'data' / 'short_launch.yaml'
 
 

@@ -73,6 +73,7 @@ def wait_guarded(procs: dict[str, RosProcess], timeout: float = 60.0) -> dict[st
     return guarded
 
 
+@pytest.mark.slow
 @pytest.mark.ros
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_every_node_stops_cleanly_at_random_moments(

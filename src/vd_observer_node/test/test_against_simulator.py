@@ -108,6 +108,7 @@ def test_quasi_static_loads_follow_the_dynamic_truth(sim: Any) -> None:
     assert np.sqrt(np.mean(error**2)) < 0.01
 
 
+@pytest.mark.slow
 def test_whole_cascade_on_simulated_sensors(sim: Any) -> None:
     est = run_cascade(
         sim.t,

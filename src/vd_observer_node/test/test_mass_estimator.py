@@ -56,6 +56,7 @@ def test_adaptation_off_publishes_the_files_mass() -> None:
     assert not any(e.mass_converged or e.mass_excited for e in out)
 
 
+@pytest.mark.slow
 def test_a_loaded_car_converges_and_fz_mu_slope_use_the_estimated_mass() -> None:
     m_true = M0 + 125.0
     drive = model_drive(m_true, duration=40.0)

@@ -55,6 +55,7 @@ def _run(
     return est, out
 
 
+@pytest.mark.slow
 def test_the_radius_converges_and_fx_uses_it() -> None:
     r_true = 0.97 * R0
     inputs = _fwd_inputs(M0, r_true, 60.0)
@@ -91,6 +92,7 @@ def test_adaptation_off_is_todays_estimator_bit_for_bit() -> None:
         assert not e.radius_converged and e.radius_free_wheels == 0
 
 
+@pytest.mark.slow
 def test_the_mass_waits_for_the_radius_and_then_learns_the_true_mass() -> None:
     r_true, m_true = 0.97 * R0, M0 + 125.0
     inputs = _fwd_inputs(m_true, r_true, 120.0)
@@ -106,6 +108,7 @@ def test_the_mass_waits_for_the_radius_and_then_learns_the_true_mass() -> None:
     assert abs(out[-1].mass / m_true - 1.0) < 0.02
 
 
+@pytest.mark.slow
 def test_without_the_wait_the_early_mass_is_rescaled_when_the_radius_converges() -> None:
     r_true, m_true = 0.97 * R0, M0 + 125.0
     _, out = _run(EAGER, _fwd_inputs(m_true, r_true, 120.0))
@@ -160,6 +163,7 @@ def test_settings_nested_and_flat_and_a_bad_one() -> None:
 # -- held inputs, a looped record, the clamp and the engine path -------------------------
 
 
+@pytest.mark.slow
 def test_held_inputs_and_a_looped_record_with_both_adaptations() -> None:
     t, omega, omega_dot, v, accel, torque = _fwd_inputs(M0 + 125.0, 0.97 * R0, 60.0)
     torque = torque.copy()

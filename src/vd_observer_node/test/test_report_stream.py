@@ -159,6 +159,7 @@ def low_mu(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return bag
 
 
+@pytest.mark.slow
 def test_paper_scenario_equal_to_the_reference(paper: tuple[Any, dict, Path]) -> None:
     ref = _assert_streamed_equal(paper[2])
     # the bag exercises what the streaming must carry across blocks
@@ -167,6 +168,7 @@ def test_paper_scenario_equal_to_the_reference(paper: tuple[Any, dict, Path]) ->
     assert {q.key for q in ref.quantities} >= {'omega', 'fx', 'fz', 'mu', 'slope'}
 
 
+@pytest.mark.slow
 def test_low_mu_launch_equal_to_the_reference(low_mu: Path) -> None:
     ref = _assert_streamed_equal(low_mu)
     assert ref.alerts is not None
@@ -175,6 +177,7 @@ def test_low_mu_launch_equal_to_the_reference(low_mu: Path) -> None:
     assert {e.status for e in ref.alerts.episodes} >= {'met', 'missed'}
 
 
+@pytest.mark.slow
 def test_late_logged_repeated_and_missing_stamps(
     paper: tuple[Any, dict, Path], tmp_path: Path
 ) -> None:
@@ -202,6 +205,7 @@ def test_late_logged_repeated_and_missing_stamps(
     _assert_streamed_equal(bag, (13, 997, 200_000))
 
 
+@pytest.mark.slow
 def test_partial_bags_equal_the_reference_notes_and_all(
     paper: tuple[Any, dict, Path], tmp_path: Path
 ) -> None:

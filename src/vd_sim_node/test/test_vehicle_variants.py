@@ -17,14 +17,13 @@ from vd_common.vehicle.params import VehicleParams, load_vehicle
 from vd_sim_node.errors import ScenarioError, SimulationError
 from vd_sim_node.vehicle.model import Geometry, VehicleModel
 from vd_sim_node.vehicle.scenario import VehicleVariant, parse_scenario
-from vd_sim_node.vehicle.simulation import SimResult, Simulator, simulate
+from vd_sim_node.vehicle.simulation import SimResult, Simulator, simulate, with_torque_offset
 from vd_sim_node.vehicle.variants import (
     DEFAULT_LOAD_POSITION,
     apply_variant,
     load_position_for_cg_shift,
     loaded,
     tyre_radius_scale,
-    with_torque_offset,
 )
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -18,6 +18,7 @@ samples of the current chunk one by one and integrates the next chunk when neede
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, fields
@@ -26,6 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy.integrate import odeint
+from vd_common.errors import ParameterError
 from vd_common.vehicle.friction import friction_table
 from vd_common.vehicle.params import VehicleParams
 
@@ -43,7 +45,14 @@ from vd_sim_node.vehicle.scenario import Scenario
 from vd_sim_node.vehicle.sensors import SensorModel
 from vd_sim_node.vehicle.variants import apply_variant, driven_wheel_torque_offset
 
-__all__ = ['HOLD_BRAKE_PEDAL', 'SampleFrame', 'SimResult', 'Simulator', 'simulate']
+__all__ = [
+    'HOLD_BRAKE_PEDAL',
+    'SampleFrame',
+    'SimResult',
+    'Simulator',
+    'simulate',
+    'with_torque_offset',
+]
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -660,3 +669,38 @@ def simulate(
 
 # Keep the wheel order documented next to the data it orders.
 assert WHEELS == ('FL', 'FR', 'RL', 'RR')
+
+
+def with_torque_offset(
+    result: SimResult, params: VehicleParams, engine_offset_nm: float
+) -> SimResult:
+    """The run with an offset on its torque SIGNALS (the physics is unchanged).
+
+    Models a torque signal computed from an engine map whose torque is off by a constant:
+    the engine torque signal gets ``engine_offset_nm`` and each driven (front) wheel's
+    torque signal gets ``engine_offset_nm * ratio(gear) * final_drive / 2`` (open
+    differential) while a gear is engaged (``gear >= 1``); during a shift (gear 0) the wheel
+    signals are left as they are.
+
+    Args:
+        result: a finished run of :func:`~vd_sim_node.vehicle.simulation.simulate`.
+        params: the vehicle it ran (its gear ratios).
+        engine_offset_nm: offset on the engine torque, [N m].
+
+    Returns:
+        A copy of ``result`` with ``engine_torque`` and ``wheel_torque`` offset.
+
+    Raises:
+        ParameterError: ``engine_offset_nm`` is not finite.
+    """
+    if not math.isfinite(engine_offset_nm):
+        raise ParameterError(f'engine torque offset must be finite, got {engine_offset_nm}')
+    per_wheel = driven_wheel_torque_offset(params, result.gear, engine_offset_nm)
+    wheel_torque = np.array(result.wheel_torque, dtype=float, copy=True)
+    wheel_torque[:, 0] += per_wheel
+    wheel_torque[:, 1] += per_wheel
+    return dataclasses.replace(
+        result,
+        engine_torque=np.asarray(result.engine_torque, dtype=float) + engine_offset_nm,
+        wheel_torque=wheel_torque,
+    )

@@ -11,9 +11,9 @@ measure what a wrong parameter costs and what an adaptation recovers (issue 16).
   model derives all of them from :class:`~vd_common.vehicle.params.ChassisParams`).
 * :func:`tyre_radius_scale` scales the effective rolling radius R_eff (worn tyre, low
   pressure: about -3 % ... +1 %).
-* :func:`with_torque_offset` adds an offset to the simulated torque SIGNALS of a finished
-  run (engine torque, and the driven wheels' torque through the gear ratio), not to the
-  physics: the car drives as before, only the sensor lies.
+* :func:`vd_sim_node.vehicle.simulation.with_torque_offset` adds an offset to the simulated
+  torque SIGNALS of a finished run (engine torque, and the driven wheels' torque through the
+  gear ratio), not to the physics: the car drives as before, only the sensor lies.
 
 A scenario's ``true_vehicle`` section (:class:`~vd_sim_node.vehicle.scenario.VehicleVariant`)
 makes the :class:`~vd_sim_node.vehicle.simulation.Simulator` do both itself
@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,9 +35,6 @@ from vd_common.vehicle.params import VehicleParams
 
 from vd_sim_node.vehicle.scenario import VehicleVariant
 
-if TYPE_CHECKING:  # the simulator imports this module: no import cycle at run time
-    from vd_sim_node.vehicle.simulation import SimResult
-
 __all__ = [
     'DEFAULT_LOAD_POSITION',
     'apply_variant',
@@ -46,7 +42,6 @@ __all__ = [
     'load_position_for_cg_shift',
     'loaded',
     'tyre_radius_scale',
-    'with_torque_offset',
 ]
 
 #: Default position of an added load behind the front axle, [m]: the centroid of rear-seat
@@ -256,38 +251,3 @@ def driven_wheel_torque_offset(
     overall = np.concatenate(([0.0], np.asarray(gb.ratios) * gb.final_drive))
     out: NDArray[np.float64] = 0.5 * engine_offset_nm * overall[np.clip(gear, 0, len(gb.ratios))]
     return out
-
-
-def with_torque_offset(
-    result: SimResult, params: VehicleParams, engine_offset_nm: float
-) -> SimResult:
-    """The run with an offset on its torque SIGNALS (the physics is unchanged).
-
-    Models a torque signal computed from an engine map whose torque is off by a constant:
-    the engine torque signal gets ``engine_offset_nm`` and each driven (front) wheel's
-    torque signal gets ``engine_offset_nm * ratio(gear) * final_drive / 2`` (open
-    differential) while a gear is engaged (``gear >= 1``); during a shift (gear 0) the wheel
-    signals are left as they are.
-
-    Args:
-        result: a finished run of :func:`~vd_sim_node.vehicle.simulation.simulate`.
-        params: the vehicle it ran (its gear ratios).
-        engine_offset_nm: offset on the engine torque, [N m].
-
-    Returns:
-        A copy of ``result`` with ``engine_torque`` and ``wheel_torque`` offset.
-
-    Raises:
-        ParameterError: ``engine_offset_nm`` is not finite.
-    """
-    if not math.isfinite(engine_offset_nm):
-        raise ParameterError(f'engine torque offset must be finite, got {engine_offset_nm}')
-    per_wheel = driven_wheel_torque_offset(params, result.gear, engine_offset_nm)
-    wheel_torque = np.array(result.wheel_torque, dtype=float, copy=True)
-    wheel_torque[:, 0] += per_wheel
-    wheel_torque[:, 1] += per_wheel
-    return dataclasses.replace(
-        result,
-        engine_torque=np.asarray(result.engine_torque, dtype=float) + engine_offset_nm,
-        wheel_torque=wheel_torque,
-    )
