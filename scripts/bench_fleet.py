@@ -83,8 +83,8 @@ sys.path[:0] = json.loads(sys.argv[3])
 from vd_observer_node.tools.replay import replay_bag
 from vd_observer_node.chain import warm_up
 from vd_observer_node.situation.friction_potential import TyreCurves
-from vd_observer_node.estimation.vehicle import load_vehicle_params
-warm_up(TyreCurves.from_tire(load_vehicle_params().tire))
+from vd_observer_node.estimation.vehicle import load_vehicle_params, vehicle_tire
+warm_up(TyreCurves.from_tire(vehicle_tire(load_vehicle_params())))
 base = hwm()
 started = time.perf_counter()
 report = replay_bag(sys.argv[1], sys.argv[2], progress=False)

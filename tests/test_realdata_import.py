@@ -164,3 +164,64 @@ def test_the_full_reference_dbc_loads_through_the_subset() -> None:
         cantools.database.load_string(text, 'dbc')  # why the importer takes a subset
     db = cantools.database.load_string(module.dbc_subset(text, [0xAA, 0x1D0]), 'dbc')
     assert sorted(m.name for m in db.messages) == ['ECT1F03', 'VSC1F01']
+
+
+def test_the_real_drive_replays_with_the_estimation_only_file(
+    imported: tuple[ModuleType, Path, Path], tmp_path: Path
+) -> None:
+    """The imported drive through `vd replay` with its shipped mapping, the RAV4's estimation-
+    only vehicle file and the 100 Hz settings: without a torque (none on this bus; the
+    torque converter is not modelled) the loads, speeds and resistances come out, physical
+    and finite; Fx, mu and slope say invalid; the alerts are skipped, saying why."""
+    from vd_common.topics import (
+        ESTIMATES_RESISTANCES,
+        ESTIMATES_TIRE_FORCES,
+        OBSERVER_WHEEL_STATES,
+    )
+    from vd_observer_node.bag import BagReader
+    from vd_observer_node.bag.cdr_batch import decode_batch
+    from vd_observer_node.inputs.mapping import load_input_mapping
+    from vd_observer_node.tools.replay import ESTIMATE_TOPICS, load_replay_config, replay_bag
+
+    _module, segment, bag = imported
+    config_dir = REPO_ROOT / 'src' / 'vd_observer_node' / 'config'
+    vehicle = REPO_ROOT / 'src' / 'vd_common' / 'config' / 'toyota_rav4_2017_estimation.yaml'
+    config = load_replay_config(config_dir / 'replay_100hz_example.yaml')
+    report = replay_bag(
+        bag,
+        tmp_path / 'out',
+        progress=False,
+        mapping=load_input_mapping(config_dir / 'input_mapping_comma2k19.yaml'),
+        vehicle_file=vehicle,
+        observer_config=config.observer,
+        estimator_config=config.estimator,
+    )
+    assert report.samples == 4974 and report.torque_source == 'none'
+    assert report.notes and 'no tire section' in report.notes[0]
+    assert report.vehicle == f'Toyota RAV4 2017 ({vehicle})'
+    out = BagReader(tmp_path / 'out')
+    arrays = out.topic_arrays(
+        [ESTIMATES_TIRE_FORCES, ESTIMATES_RESISTANCES, OBSERVER_WHEEL_STATES]
+    )
+
+    def decode(topic: str) -> dict[str, np.ndarray]:
+        fields = decode_batch(ESTIMATE_TOPICS[topic], arrays[topic].datas)
+        return {'t': fields.stamp_ns * 1e-9, **fields.values}
+
+    forces = decode(ESTIMATES_TIRE_FORCES)
+    fz = np.asarray(forces['fz'])
+    assert np.isfinite(fz).all() and (fz > 0).all()
+    # no torque, no slope: the loads add up to the weight of the file's mass
+    np.testing.assert_allclose(fz.sum(axis=1), 1660.0 * 9.81, rtol=1e-3)
+    assert np.all(np.asarray(forces['fx']) == 0.0)
+    # the wheels' speed agrees with the pose's to the radius' uncertainty (a few percent)
+    states = decode(OBSERVER_WHEEL_STATES)
+    omega = np.asarray(states['omega'])
+    pose_t = np.load(segment / 'global_pose' / 'frame_times')
+    pose_v = np.linalg.norm(np.load(segment / 'global_pose' / 'frame_velocities'), axis=1)
+    wheel_v = omega.mean(axis=1) * 0.345
+    ratio = wheel_v[500:] / np.interp(states['t'][500:], pose_t, pose_v)
+    assert 0.97 < np.median(ratio) < 1.03
+    resist = decode(ESTIMATES_RESISTANCES)
+    aero = np.asarray(resist['aero'])
+    assert np.isfinite(aero).all() and 20.0 < aero.max() < 500.0  # 0.5 rho Cx A v^2, v <= 20 m/s

@@ -88,8 +88,45 @@ def test_values_are_the_files_own_numbers() -> None:
 def test_same_numbers_as_the_simulator() -> None:
     params = load_vehicle(VEHICLE_FILE)
     assert EstimatorVehicle.from_params(params) == load_estimator_vehicle(VEHICLE_FILE)
-    assert load_vehicle_params(VEHICLE_FILE) == params
-    assert load_vehicle_params() == load_vehicle_params(VEHICLE_FILE)  # default: the Clio
+    read = load_vehicle_params(VEHICLE_FILE)
+    assert EstimatorVehicle.from_params(read) == EstimatorVehicle.from_params(params)
+    assert read.tire == params.tire
+    default = load_vehicle_params()  # the Clio: the installed copy, or the source tree's
+    assert dataclasses.replace(default, source='') == dataclasses.replace(read, source='')
+
+
+def test_an_estimation_only_file_estimates_and_says_what_it_lacks(tmp_path: Path) -> None:
+    """A vehicle file with only the estimators' keys: the cascade runs, the engine path and
+    the alerts are refused in one line naming the section, vd replay skips the alerts and
+    says so, and says which vehicle file it used."""
+    import yaml
+    from vd_observer_node.errors import ConfigurationError, VehicleParameterError
+    from vd_observer_node.estimation.drivetrain import Drivetrain
+    from vd_observer_node.estimation.vehicle import vehicle_tire
+    from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
+    from vd_observer_node.tools.replay import ALERT_TOPICS, replay_bag
+
+    full = yaml.safe_load(VEHICLE_FILE.read_text(encoding='utf-8'))
+    only = {k: full[k] for k in ('name', 'chassis', 'wheel', 'aero', 'rolling_resistance',
+                                 'environment')}  # fmt: skip
+    path = tmp_path / 'estimation_only.yaml'
+    path.write_text(yaml.safe_dump(only), encoding='utf-8')
+    params = load_vehicle_params(path)
+    assert EstimatorVehicle.from_params(params) == load_estimator_vehicle(VEHICLE_FILE)
+    with pytest.raises(VehicleParameterError, match=r'tire is missing'):
+        vehicle_tire(params)
+    with pytest.raises(ConfigurationError, match=r'gearbox is missing'):
+        Drivetrain.from_params(params)
+    write_synthetic_drive_bag(tmp_path / 'in', duration_s=1.0, rate_hz=100.0, with_truth=False)
+    report = replay_bag(tmp_path / 'in', tmp_path / 'out', progress=False, vehicle_file=path)
+    assert report.vehicle == f'{only["name"]} ({path})'
+    assert report.notes == (
+        f'vehicle file {path} has no tire section: friction potential and alerts not computed',
+    )
+    from vd_observer_node.bag import BagReader
+
+    written = set(BagReader(tmp_path / 'out').topics)
+    assert not written & set(ALERT_TOPICS) and report.samples > 0
 
 
 def _write(tmp_path: Path, data: dict[str, object]) -> Path:

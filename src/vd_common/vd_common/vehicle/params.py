@@ -35,6 +35,9 @@ __all__ = [
     'default_vehicle_file',
     'load_vehicle',
     'parse_vehicle',
+    'read_aero',
+    'read_rolling',
+    'read_tire',
 ]
 
 # The shipped parameter file, in ``config/`` of this package (vd_common).
@@ -244,7 +247,7 @@ def _wheel(r: MappingReader) -> WheelParams:
     )
 
 
-def _aero(r: MappingReader) -> AeroParams:
+def read_aero(r: MappingReader) -> AeroParams:
     return AeroParams(
         drag_coefficient=r.number('drag_coefficient', '', ge=0.0),
         frontal_area=r.number('frontal_area', 'm^2', ge=0.0),
@@ -252,7 +255,7 @@ def _aero(r: MappingReader) -> AeroParams:
     )
 
 
-def _rolling(r: MappingReader) -> RollingResistanceParams:
+def read_rolling(r: MappingReader) -> RollingResistanceParams:
     return RollingResistanceParams(
         c0=r.number('c0', '', ge=0.0),
         c1=r.number('c1', '', ge=0.0),
@@ -260,7 +263,7 @@ def _rolling(r: MappingReader) -> RollingResistanceParams:
     )
 
 
-def _tire(r: MappingReader) -> TireParams:
+def read_tire(r: MappingReader) -> TireParams:
     return TireParams(
         nominal_load=r.number('nominal_load', 'N', gt=0.0),
         pCx1=r.number('pCx1', '', gt=0.0, lt=2.0),
@@ -365,12 +368,12 @@ def parse_vehicle(data: object) -> VehicleParams:
         chassis=_chassis(r.section('chassis')),
         suspension=_suspension(r.section('suspension')),
         wheel=_wheel(r.section('wheel')),
-        aero=_aero(r.section('aero')),
-        rolling_resistance=_rolling(r.section('rolling_resistance')),
+        aero=read_aero(r.section('aero')),
+        rolling_resistance=read_rolling(r.section('rolling_resistance')),
         environment=EnvironmentParams(
             gravity=r.section('environment').number('gravity', 'm/s^2', gt=0.0)
         ),
-        tire=_tire(r.section('tire')),
+        tire=read_tire(r.section('tire')),
         engine=engine,
         clutch=_clutch(r.section('clutch'), engine.idle_speed),
         gearbox=_gearbox(r.section('gearbox')),

@@ -37,6 +37,8 @@ from typing import Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from vd_common.errors import ParameterError
+from vd_common.vehicle.estimation import EstimationVehicleParams
 from vd_common.vehicle.params import VehicleParams
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
@@ -153,27 +155,43 @@ class Drivetrain:
 
     @classmethod
     def from_params(
-        cls, params: VehicleParams, *, efficiency: float = 1.0, driven_axle: str = 'front'
+        cls,
+        params: VehicleParams | EstimationVehicleParams,
+        *,
+        efficiency: float = 1.0,
+        driven_axle: str = 'front',
     ) -> Drivetrain:
-        """The drivetrain of the vehicle file (``gearbox:`` and ``engine.inertia``).
+        """The drivetrain of the vehicle file (``gearbox.ratios``, ``gearbox.final_drive``
+        and ``engine.inertia``).
 
         The file has no efficiency, driven axle or reverse ratio: the simulator models a
         lossless front-wheel drive with an open differential, hence the defaults; pass
         other values for another car.
 
         Args:
-            params: the parsed vehicle file.
+            params: the parsed vehicle file (the estimators' or the simulator's).
             efficiency: eta in (0, 1].
             driven_axle: one of :data:`DRIVEN_AXLES`.
+
+        Raises:
+            ConfigurationError: the file has no gearbox (one line naming it).
         """
-        gearbox = params.gearbox
+        if isinstance(params, EstimationVehicleParams):
+            try:
+                line = params.require_driveline()
+            except ParameterError as exc:
+                raise ConfigurationError(str(exc)) from exc
+            ratios, final, inertia = line.ratios, line.final_drive, line.engine_inertia
+        else:
+            ratios = tuple(params.gearbox.ratios)
+            final, inertia = params.gearbox.final_drive, params.engine.inertia
         return cls(
-            ratios=tuple(gearbox.ratios),
-            final_drive=gearbox.final_drive,
-            reverse_ratio=gearbox.ratios[0],
+            ratios=tuple(ratios),
+            final_drive=final,
+            reverse_ratio=ratios[0],
             efficiency=efficiency,
             driven_axle=driven_axle,
-            engine_inertia=params.engine.inertia,
+            engine_inertia=inertia,
         )
 
     @property

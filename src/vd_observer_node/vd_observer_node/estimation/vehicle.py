@@ -1,10 +1,11 @@
-"""The estimators' view of the vehicle parameter file shared with the simulator.
+"""The estimators' view of the vehicle parameter file.
 
-The file (`vd_common/config/clio_rl_1_1.yaml`) has one parser,
-:mod:`vd_common.vehicle.params`: it reads, range-checks and names every key, for the
-simulator and for the estimators alike. :class:`EstimatorVehicle` is the subset the
-estimators need, taken from its typed :class:`~vd_common.vehicle.params.VehicleParams`
-by :meth:`EstimatorVehicle.from_params`; there is no second key table here.
+The estimators read a vehicle file with :mod:`vd_common.vehicle.estimation`: only the keys
+they use, the simulator's sections optional (a full simulator file such as
+`vd_common/config/clio_rl_1_1.yaml` works as it is); it range-checks and names every key.
+:class:`EstimatorVehicle` is the numeric subset, taken from that or from the simulator's
+:class:`~vd_common.vehicle.params.VehicleParams` by :meth:`EstimatorVehicle.from_params`;
+there is no second key table here.
 """
 
 from __future__ import annotations
@@ -17,11 +18,12 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 from vd_common.errors import ParameterError
-from vd_common.vehicle.params import VehicleParams, default_vehicle_file, load_vehicle
+from vd_common.vehicle.estimation import EstimationVehicleParams, load_estimation_vehicle
+from vd_common.vehicle.params import TireParams, VehicleParams, default_vehicle_file
 
 from vd_observer_node.errors import VehicleParameterError
 
-__all__ = ['EstimatorVehicle', 'load_estimator_vehicle', 'load_vehicle_params']
+__all__ = ['EstimatorVehicle', 'load_estimator_vehicle', 'load_vehicle_params', 'vehicle_tire']
 
 # c0 = 0, c1 = 0, Cx = 0, A = 0 or rho = 0 switch a resistance off, as the simulator's
 # parser allows; every other quantity is a divisor or a physical size and must be > 0.
@@ -92,7 +94,7 @@ class EstimatorVehicle:
             )
 
     @classmethod
-    def from_params(cls, params: VehicleParams) -> EstimatorVehicle:
+    def from_params(cls, params: VehicleParams | EstimationVehicleParams) -> EstimatorVehicle:
         """The estimators' subset of the simulator's validated parameters.
 
         The file already holds whole-vehicle quantities (``chassis.mass`` includes the
@@ -101,8 +103,8 @@ class EstimatorVehicle:
         estimators and the simulator see the same numbers bit for bit.
 
         Args:
-            params: parameters from :func:`vd_common.vehicle.params.load_vehicle` or
-                ``parse_vehicle``.
+            params: parameters from :func:`vd_common.vehicle.estimation.load_estimation_vehicle`
+                (or the simulator's :func:`vd_common.vehicle.params.load_vehicle`).
 
         Returns:
             The estimator vehicle.
@@ -152,18 +154,20 @@ class EstimatorVehicle:
         return np.array([front, front, rear, rear])
 
 
-def load_vehicle_params(path: str | os.PathLike[str] | None = None) -> VehicleParams:
-    """Read the vehicle file with the shared parser, refusing it as vd_observer_node does.
+def load_vehicle_params(
+    path: str | os.PathLike[str] | None = None,
+) -> EstimationVehicleParams:
+    """Read the vehicle file for the estimators, refusing it as vd_observer_node does.
 
     For callers that need more than :class:`EstimatorVehicle` from the same file (the tyre
-    of the friction potential): one read gives both.
+    of the friction potential, the driveline of the engine path): one read gives all.
 
     Args:
         path: YAML file; None: the shipped Clio file
             (:func:`vd_common.vehicle.params.default_vehicle_file`).
 
     Returns:
-        The simulator's validated parameters.
+        The estimators' validated parameters (``source`` says which file).
 
     Raises:
         VehicleParameterError: the parser's one-line message, e.g. ``vehicle file x.yaml:
@@ -171,7 +175,19 @@ def load_vehicle_params(path: str | os.PathLike[str] | None = None) -> VehiclePa
             the vd tool report it as one line like their other refusals).
     """
     try:
-        return load_vehicle(default_vehicle_file() if path is None else Path(path))
+        return load_estimation_vehicle(default_vehicle_file() if path is None else Path(path))
+    except ParameterError as exc:
+        raise VehicleParameterError(str(exc)) from exc
+
+
+def vehicle_tire(params: EstimationVehicleParams) -> TireParams:
+    """The file's tyre (the friction potential and the alerts need it).
+
+    Raises:
+        VehicleParameterError: the file has no ``tire`` section; one line naming it.
+    """
+    try:
+        return params.require_tire()
     except ParameterError as exc:
         raise VehicleParameterError(str(exc)) from exc
 

@@ -17,12 +17,12 @@ def main() -> int:
     """Compile (or load) every kernel; exit code 0."""
     start = time.perf_counter()
     from vd_observer_node.chain import warm_up
-    from vd_observer_node.estimation.vehicle import load_vehicle_params
+    from vd_observer_node.estimation.vehicle import load_vehicle_params, vehicle_tire
     from vd_observer_node.kernel._jit import PACKAGE
     from vd_observer_node.situation.friction_potential import TyreCurves
 
     # the chain of every node and of the replay, its observers, estimator and monitor
-    warm_up(TyreCurves.from_tire(load_vehicle_params().tire))
+    warm_up(TyreCurves.from_tire(vehicle_tire(load_vehicle_params())))
     print(
         f'kernels compiled into the __pycache__ folders of {PACKAGE} in '
         f'{time.perf_counter() - start:.1f} s',

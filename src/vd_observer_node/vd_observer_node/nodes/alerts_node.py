@@ -50,7 +50,11 @@ from vd_msgs.msg import (
 )
 from vd_observer_node.estimation.faults import OK, WARN
 from vd_observer_node.estimation.observer import ObserverConfig
-from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
+from vd_observer_node.estimation.vehicle import (
+    EstimatorVehicle,
+    load_vehicle_params,
+    vehicle_tire,
+)
 from vd_observer_node.inputs.decode import has_header
 from vd_observer_node.inputs.mapping import InputMapping
 from vd_observer_node.nodes.node_params import (
@@ -122,7 +126,7 @@ class AlertsNode(Node):
         situation_keys = set(SituationConfig.__dataclass_fields__)
         friction_keys = set(FrictionPotentialConfig.__dataclass_fields__)
         self.monitor = SituationMonitor(
-            TyreCurves.from_tire(params.tire),
+            TyreCurves.from_tire(vehicle_tire(params)),
             vehicle.static_wheel_loads[[0, 2]],
             vehicle.effective_radius,
             # its fast wheel observer reads the wheel sensor: angles or ABS speeds

@@ -81,7 +81,11 @@ from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import ERROR
 from vd_observer_node.estimation.observer import ObserverConfig
-from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
+from vd_observer_node.estimation.vehicle import (
+    EstimatorVehicle,
+    load_vehicle_params,
+    vehicle_tire,
+)
 from vd_observer_node.inputs.mapping import ENGINE_INPUT
 from vd_observer_node.nodes.node_params import (
     INPUT_PARAMS,
@@ -154,7 +158,7 @@ def _settings(
     taken = _OBSERVER_KEYS | _GAIN_KEYS | estimator_keys | situation_keys | friction_keys
     settings = ChainSettings(
         vehicle=EstimatorVehicle.from_params(params),
-        curves=TyreCurves.from_tire(params.tire),
+        curves=TyreCurves.from_tire(vehicle_tire(params)),
         observer=observer,
         estimator=EstimatorConfig.from_mapping(
             {k: v for k, v in values.items() if k in estimator_keys}

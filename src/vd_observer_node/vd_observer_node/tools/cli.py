@@ -115,6 +115,9 @@ def _replay(args: argparse.Namespace) -> int:
     for stats in report.inputs:
         print(f'  input {stats.text()}')
     print(f'torque path: {path}')
+    print(f'vehicle: {report.vehicle}')
+    for note in report.notes:
+        print(f'note: {note}')
     return EXIT_OK
 
 

@@ -162,6 +162,8 @@ class ReplayReport:
         torque_source: the torque path: 'measured', 'engine' or 'none'.
         torque_valid_fraction: share of the samples where the torque path held (1 when
             measured, 0 with none, below 1 on the engine path while the clutch slipped).
+        vehicle: the vehicle file's name and path, e.g. 'clio_rl_1_1 (/.../clio_rl_1_1.yaml)'.
+        notes: what the replay left out and why (one line each).
     """
 
     samples: int
@@ -177,6 +179,8 @@ class ReplayReport:
     inputs: tuple[InputStats, ...] = ()
     torque_source: str = 'measured'
     torque_valid_fraction: float = 1.0
+    vehicle: str = ''
+    notes: tuple[str, ...] = ()
 
     @property
     def real_time_factor(self) -> float:
@@ -493,7 +497,15 @@ def replay_bag(
     estimator_vehicle = vehicle or EstimatorVehicle.from_params(params)
     if source == 'engine' and drivetrain is None:
         drivetrain = Drivetrain.from_params(params)
-    curves = TyreCurves.from_tire(params.tire)
+    notes: list[str] = []
+    if situation and params.tire is None:
+        # an estimation-only vehicle file: everything but the friction potential and alerts
+        situation = False
+        notes.append(
+            f'vehicle file {params.source} has no tire section: friction potential and '
+            'alerts not computed'
+        )
+    curves = TyreCurves.from_tire(params.tire) if params.tire is not None else None
     make_monitor: Any = SituationMonitor
 
     def new_monitor() -> Any:
@@ -579,7 +591,11 @@ def replay_bag(
         clear()
         raise
     wall = time.perf_counter() - started
-    return run.report(written, wall)
+    return replace(
+        run.report(written, wall),
+        vehicle=f'{params.name} ({params.source})',
+        notes=tuple(notes),
+    )
 
 
 class _OutOfOrderError(Exception):
