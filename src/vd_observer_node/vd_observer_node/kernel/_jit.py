@@ -7,7 +7,7 @@ would load stale machine code (the replay then silently runs the old estimator).
 `clear_stale_cache` removes the package's numba cache when anything compiled into it may have
 changed, once per import: it keys the cache on every source file of the package (the step
 functions, their callees, the constants they read), and the numba, numpy and Python versions.
-``python -m vd_observer_node.kernel`` (run by ``make setup``) then builds the cache anew.
+``python -m vd_observer_node.chain`` (run by ``make setup``) then builds the cache anew.
 """
 
 from __future__ import annotations
