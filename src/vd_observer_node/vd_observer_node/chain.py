@@ -175,6 +175,9 @@ class Chain:
         self.engine_faults: FaultCounter | None = self.parts.engine_faults
         self._none = self.parts.source == TORQUE_NONE
         self._out = CascadeBlock.empty(1, self.parts.offset_on)
+        #: the estimate as a plain structured array: its fields read without a recarray's
+        #: Python attribute lookup (the live chain reads them every stamp)
+        self._est_fields = self._out.est.view(np.ndarray)
         self._situation = SituationBlock.empty(1)
         self._no_engine = np.zeros((1, 3))
 
@@ -223,6 +226,7 @@ class Chain:
             # the torques the engine path gave the estimator (0 where it had none)
             torques = np.where(np.isfinite(out.used[0]), out.used[0], 0.0)
         wheel = out.wheel[0]
+        fields = self._est_fields
         self.monitor.run(
             stamp,
             SituationInputs(
@@ -230,9 +234,9 @@ class Chain:
                 speeds,
                 torques[None],
                 out.wheel[:, 1].copy(),
-                out.est.mu.copy(),
-                out.est.mu_valid != 0,
-                out.est.fz.copy(),
+                fields['mu'].copy(),
+                fields['mu_valid'] != 0,
+                fields['fz'].copy(),
             ),
             self._situation,
         )

@@ -341,30 +341,39 @@ def estimator_params(
     return p
 
 
+#: the `ESTIMATES` fields in their order (what ``item()`` returns)
+_ESTIMATE_FIELDS: tuple[str, ...] = tuple(ESTIMATES.names or ())
+
+
 def estimates_from_record(est: np.record) -> Estimates:
-    """The `Estimates` of an `estimator_step.ESTIMATES` record (copies)."""
+    """The `Estimates` of an `estimator_step.ESTIMATES` record (copies).
+
+    Read in one ``item()`` call (Python scalars, fresh arrays): a record's attribute access
+    costs about 2 us in Python, and the live chain builds one `Estimates` per stamp.
+    """
+    v = dict(zip(_ESTIMATE_FIELDS, est.item(), strict=True))
     return Estimates(
-        t=float(est.t),
-        fx=np.array(est.fx),
-        fz=np.array(est.fz),
-        mu=np.array(est.mu),
-        slip=np.array(est.slip),
-        mu_valid=np.array(est.mu_valid, dtype=np.bool_),
-        rolling=np.array(est.rolling),
-        aero=float(est.aero),
-        slope=float(est.slope),
-        slope_valid=bool(est.slope_valid),
-        torque_source=int(est.torque_source),
-        mass=float(est.mass),
-        mass_std=float(est.mass_std),
-        mass_converged=bool(est.mass_converged),
-        mass_used=float(est.mass_used),
-        mass_excited=bool(est.mass_excited),
-        radius=float(est.radius),
-        radius_std=float(est.radius_std),
-        radius_converged=bool(est.radius_converged),
-        radius_used=float(est.radius_used),
-        radius_free_wheels=int(est.radius_free_wheels),
+        t=float(v['t']),
+        fx=v['fx'],
+        fz=v['fz'],
+        mu=v['mu'],
+        slip=v['slip'],
+        mu_valid=np.asarray(v['mu_valid'], dtype=np.bool_),
+        rolling=v['rolling'],
+        aero=float(v['aero']),
+        slope=float(v['slope']),
+        slope_valid=bool(v['slope_valid']),
+        torque_source=int(v['torque_source']),
+        mass=float(v['mass']),
+        mass_std=float(v['mass_std']),
+        mass_converged=bool(v['mass_converged']),
+        mass_used=float(v['mass_used']),
+        mass_excited=bool(v['mass_excited']),
+        radius=float(v['radius']),
+        radius_std=float(v['radius_std']),
+        radius_converged=bool(v['radius_converged']),
+        radius_used=float(v['radius_used']),
+        radius_free_wheels=int(v['radius_free_wheels']),
     )
 
 

@@ -477,14 +477,16 @@ def _wheels(name: str, value: ArrayLike, dtype: type = np.float64) -> NDArray[An
 def alert_records(s: Any) -> tuple[Alert, ...]:
     """The 12 `Alert` records of an `ALERT_STATE` (kinds in ALERT_KINDS order, wheels 0..3
     within each kind)."""
+    v = dict(zip(s.dtype.names, s.item(), strict=True))  # one read: record access is slow
+    level, onset, detected = v['level'].tolist(), v['onset'].tolist(), v['detected'].tolist()
     return tuple(
         Alert(
             kind=ALERT_KINDS[k],
             wheel=w,
-            level=int(s.level[k, w]),
-            active=bool(s.level[k, w] > LEVEL_OK),
-            onset=float(s.onset[k, w]),
-            detected=float(s.detected[k, w]),
+            level=int(level[k][w]),
+            active=level[k][w] > LEVEL_OK,
+            onset=float(onset[k][w]),
+            detected=float(detected[k][w]),
         )
         for k in range(len(ALERT_KINDS))
         for w in range(4)

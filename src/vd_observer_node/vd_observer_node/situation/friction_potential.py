@@ -286,14 +286,15 @@ class FrictionPotential:
 
     @classmethod
     def from_record(cls, pot: Any) -> FrictionPotential:
-        """The potential held in a `POTENTIAL` record (copied)."""
+        """The potential held in a `POTENTIAL` record (copied, in one ``item()`` call)."""
+        v = dict(zip(pot.dtype.names, pot.item(), strict=True))
         return cls(
-            t=float(pot.t),
-            mu_max=pot.mu_max.copy(),
-            slip_peak=pot.slip_peak.copy(),
-            confidence=pot.confidence.copy(),
-            road_class=pot.road_class.copy(),
-            road_scale=pot.road_scale.copy(),
+            t=float(v['t']),
+            mu_max=v['mu_max'],
+            slip_peak=v['slip_peak'],
+            confidence=v['confidence'],
+            road_class=v['road_class'],
+            road_scale=v['road_scale'],
         )
 
 
