@@ -348,18 +348,19 @@ _ESTIMATE_FIELDS: tuple[str, ...] = tuple(ESTIMATES.names or ())
 def estimates_from_record(est: np.record) -> Estimates:
     """The `Estimates` of an `estimator_step.ESTIMATES` record (copies).
 
-    Read in one ``item()`` call (Python scalars, fresh arrays): a record's attribute access
-    costs about 2 us in Python, and the live chain builds one `Estimates` per stamp.
+    Read in one ``item()`` call (Python scalars; its arrays are views into the record, so
+    they are copied): a record's attribute access costs about 2 us in Python, and the live
+    chain builds one `Estimates` per stamp.
     """
     v = dict(zip(_ESTIMATE_FIELDS, est.item(), strict=True))
     return Estimates(
         t=float(v['t']),
-        fx=v['fx'],
-        fz=v['fz'],
-        mu=v['mu'],
-        slip=v['slip'],
-        mu_valid=np.asarray(v['mu_valid'], dtype=np.bool_),
-        rolling=v['rolling'],
+        fx=v['fx'].copy(),
+        fz=v['fz'].copy(),
+        mu=v['mu'].copy(),
+        slip=v['slip'].copy(),
+        mu_valid=np.array(v['mu_valid'], dtype=np.bool_),
+        rolling=v['rolling'].copy(),
         aero=float(v['aero']),
         slope=float(v['slope']),
         slope_valid=bool(v['slope_valid']),

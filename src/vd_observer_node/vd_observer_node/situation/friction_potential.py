@@ -286,15 +286,16 @@ class FrictionPotential:
 
     @classmethod
     def from_record(cls, pot: Any) -> FrictionPotential:
-        """The potential held in a `POTENTIAL` record (copied, in one ``item()`` call)."""
+        """The potential held in a `POTENTIAL` record (read in one ``item()`` call, whose
+        arrays are views into the record: copied)."""
         v = dict(zip(pot.dtype.names, pot.item(), strict=True))
         return cls(
             t=float(v['t']),
-            mu_max=v['mu_max'],
-            slip_peak=v['slip_peak'],
-            confidence=v['confidence'],
-            road_class=v['road_class'],
-            road_scale=v['road_scale'],
+            mu_max=v['mu_max'].copy(),
+            slip_peak=v['slip_peak'].copy(),
+            confidence=v['confidence'].copy(),
+            road_class=v['road_class'].copy(),
+            road_scale=v['road_scale'].copy(),
         )
 
 
