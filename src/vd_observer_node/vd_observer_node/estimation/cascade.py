@@ -36,6 +36,7 @@ from vd_observer_node.estimation.torque_offset import (
     offset_params,
 )
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
+from vd_observer_node.kernel._jit import record_array
 
 __all__ = [
     'CascadeBlock',
@@ -322,6 +323,7 @@ class CascadeParts:
         self.offset_state = new_offset_state()
         self.offset_estimate = new_offset_estimate()
         self.engine_faults = FaultCounter(ENGINE_FAULTS) if self.offset_on else None
+        self._args: tuple[Any, ...] | None = None
 
     @property
     def engine_on(self) -> bool:
@@ -329,13 +331,24 @@ class CascadeParts:
         return bool(self.dprm.shape[0] > 0)
 
     def args(self) -> tuple[Any, ...]:
-        """`cascade_block`'s leading arguments (the records, advanced in place)."""
-        return (
-            *self.wheels.kernel_args, *self.speed.kernel_args, self.estimator.params,
-            *self.estimator.state.args, self.measured, self.engine_on, self.dprm,
-            self.engine_state, self.offset_on, self.offset_params, self.offset_state,
-            self.offset_estimate,
+        """`cascade_block`'s leading arguments (the records, as the 1-element arrays they
+        live in, advanced in place)."""
+        if self._args is not None:
+            return self._args
+        a = record_array
+        wp, wlip, ws, wch = self.wheels.kernel_args
+        sp, slip_, ss, sch = self.speed.kernel_args
+        es, fst, sst, vst = self.estimator.state.args
+        # the records are never replaced (every reset works in place): built once
+        # the channel tables as plain arrays too: a recarray's attributes are Python lookups
+        wplain, splain = wch.view(np.ndarray), sch.view(np.ndarray)
+        self._args = (
+            a(wp), wlip, a(ws), wplain, a(sp), slip_, a(ss), splain,
+            a(self.estimator.params), a(es), fst, sst, vst, self.measured, self.engine_on,
+            self.dprm, self.engine_state, self.offset_on, a(self.offset_params),
+            a(self.offset_state), a(self.offset_estimate),
         )  # fmt: skip
+        return self._args
 
     def faults(self) -> dict[str, int]:
         """Total fault counts per kind ('wheel.<kind>', 'speed.<kind>', 'estimator.<kind>',
@@ -389,10 +402,11 @@ class CascadeBlock:
         )  # fmt: skip
 
     def outputs(self) -> tuple[Any, ...]:
-        """`cascade_block`'s trailing (written) arguments."""
+        """`cascade_block`'s trailing (written) arguments (the record arrays as plain
+        arrays: a recarray's attributes are Python lookups numba would pay for per call)."""
         return (
-            self.wheel, self.wheel_valid, self.body, self.body_valid, self.used, self.est,
-            self.torque_valid, self.offsets,
+            self.wheel, self.wheel_valid, self.body, self.body_valid, self.used,
+            self.est.view(np.ndarray), self.torque_valid, self.offsets.view(np.ndarray),
         )  # fmt: skip
 
 

@@ -99,11 +99,11 @@ def cascade_step(
 
 @jit
 def cascade_block(
-    wp: np.record, wlip: FloatArray, ws: np.record, wch: np.recarray,
-    sp: np.record, slip_: FloatArray, ss: np.record, sch: np.recarray,
-    ep: np.record, es: np.record, fst: FloatArray, sst: FloatArray, vst: FloatArray,
+    wp_: np.ndarray, wlip: FloatArray, ws_: np.ndarray, wch: np.recarray,
+    sp_: np.ndarray, slip_: FloatArray, ss_: np.ndarray, sch: np.recarray,
+    ep_: np.ndarray, es_: np.ndarray, fst: FloatArray, sst: FloatArray, vst: FloatArray,
     measured: bool, engine_on: bool, dprm: FloatArray, escl: FloatArray, offset_on: bool,
-    op: np.record, os_: np.record, oout: np.record,
+    op_: np.ndarray, os__: np.ndarray, oout_: np.ndarray,
     t: FloatArray, angles: FloatArray, speeds: FloatArray, torques: FloatArray,
     engine: FloatArray, wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray,
     body_valid: BoolArray, used: FloatArray, est: np.ndarray, torque_valid: BoolArray,
@@ -112,7 +112,8 @@ def cascade_block(
     """`cascade_step` over N stamps (the parts' records carry on from block to block).
 
     Args:
-        (parts): as `cascade_step`.
+        (parts): as `cascade_step`, each record as the 1-element array it lives in
+            (`kernel._jit.record_array`: numba types arrays on its fast path, records not).
         t: shape (N,), [s].
         angles: shape (N, 4); speeds (N,); torques (N, 4); engine (N, 3) (as `cascade_step`).
         wheel: shape (N, 3, 4), written; wheel_valid (N, 4); body (N, 3); body_valid (N,).
@@ -122,6 +123,8 @@ def cascade_block(
         offsets: shape (N,) `torque_offset.OFFSET_ESTIMATE_DTYPE` records written where the
             offset is learnt, else shape (0,).
     """
+    wp, ws, sp, ss, ep, es = wp_[0], ws_[0], sp_[0], ss_[0], ep_[0], es_[0]
+    op, os_, oout = op_[0], os__[0], oout_[0]
     body1 = np.empty((3, 1))
     valid1 = np.empty(1, dtype=np.bool_)
     for k in range(t.shape[0]):

@@ -33,9 +33,11 @@ from vd_observer_node.estimation.levant_step import (
     STATE_DTYPE,
     levant_reset,
     levant_update,
+    levant_update_arrays,
     new_channels,
     new_record,
 )
+from vd_observer_node.kernel._jit import record_array
 
 __all__ = [
     'DEFAULT_GAINS',
@@ -251,6 +253,9 @@ class LevantDifferentiator:
         self.record = new_record(STATE_DTYPE)
         #: (n,) `levant_step.CHANNEL_DTYPE` records: estimates and initialisation per channel
         self.channels = new_channels(n_channels)
+        #: the two records as the arrays they live in (`update`'s fast numba call)
+        self._params_array = record_array(self.params)
+        self._record_array = record_array(self.record)
         self._faults = FaultCounter(OBSERVER_FAULTS)
         self._synced = dict.fromkeys(OBSERVER_FAULTS, 0)
         self._out = np.zeros((3, n_channels))
@@ -329,8 +334,8 @@ class LevantDifferentiator:
         except ValueError as exc:
             raise InputShapeError(f'expected {self._n} samples, got shape {np.shape(f)}') from exc
         out, valid = self._out, self._valid
-        levant_update(
-            self.params, self.lipschitz, self.record, self.channels, float(t),
+        levant_update_arrays(
+            self._params_array, self.lipschitz, self._record_array, self.channels, float(t),
             np.ascontiguousarray(sample), out, valid,
         )  # fmt: skip
         return DerivativeEstimate(out[0].copy(), out[1].copy(), out[2].copy(), valid.copy())

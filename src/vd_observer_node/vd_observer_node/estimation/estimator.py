@@ -60,7 +60,7 @@ from vd_observer_node.estimation.estimator_step import (
     ESTIMATOR_STATE,
     REJECTED_SLOT,
     estimator_reset,
-    estimator_update,
+    estimator_update_arrays,
 )
 from vd_observer_node.estimation.faults import ESTIMATOR_FAULTS, FaultCounter
 from vd_observer_node.estimation.filters import new_record
@@ -68,6 +68,7 @@ from vd_observer_node.estimation.mass_grade import MassGradeConfig, mass_params
 from vd_observer_node.estimation.rolling_radius import RollingRadiusConfig, radius_params
 from vd_observer_node.estimation.torque_offset import TorqueOffsetConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
+from vd_observer_node.kernel._jit import record_array
 
 __all__ = [
     'LOAD_TRANSFER_SOURCES',
@@ -453,7 +454,14 @@ class Estimator:
         self._faults = FaultCounter(ESTIMATOR_FAULTS)
         self._synced = np.zeros(len(ESTIMATOR_FAULTS), dtype=np.int64)
         self._est = new_record(ESTIMATES)
+        #: the records as the arrays they live in (`update`'s fast numba call)
+        self._arrays = tuple(record_array(r) for r in (self.params, self.state.record, self._est))
         self._last: Estimates | None = None  # what `last` and a rejected stamp return
+        # compile (or load from numba's cache) now, on copies, not at the first stamp
+        p_a, s_a, e_a = (a.copy() for a in self._arrays)
+        f_st, s_st, v_st = (x.copy() for x in self.state.args[1:])
+        z = np.zeros(4)
+        estimator_update_arrays(p_a, s_a, f_st, s_st, v_st, 0.0, z, z, 0.0, 0.0, z, True, e_a)
 
     def reset(self) -> None:
         """Forget the history (slope back to 0, filters empty); fault counters stay."""
@@ -516,10 +524,12 @@ class Estimator:
             InputShapeError: a per-wheel input is not of shape (4,).
         """
         rejected = self.rejected_count
-        estimator_update(
-            self.params, *self.state.args, float(t), _as_wheels('omega', omega),
+        _, f_stages, s_stages, v_stages = self.state.args
+        p_a, s_a, est_a = self._arrays
+        estimator_update_arrays(
+            p_a, s_a, f_stages, s_stages, v_stages, float(t), _as_wheels('omega', omega),
             _as_wheels('omega_dot', omega_dot), float(speed), float(accel),
-            _as_wheels('torque', torque), bool(torque_ok), self._est,
+            _as_wheels('torque', torque), bool(torque_ok), est_a,
         )  # fmt: skip
         if self.rejected_count != rejected:
             # a rejected stamp: the last estimate itself, or a new empty one before any

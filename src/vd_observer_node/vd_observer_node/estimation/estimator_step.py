@@ -54,6 +54,7 @@ __all__ = [
     'REJECTED_SLOT',
     'estimator_reset',
     'estimator_update',
+    'estimator_update_arrays',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -501,3 +502,18 @@ def estimator_update(
         _empty(p, s, t, est)
     _copy(est, s.last)
     s.has_last = True
+
+
+@jit
+def estimator_update_arrays(
+    p_a: np.ndarray, s_a: np.ndarray, f_stages: FloatArray, s_stages: FloatArray,
+    v_stages: FloatArray, t: float, omega: FloatArray, omega_dot: FloatArray, speed: float,
+    accel: float, torque: FloatArray, torque_ok: bool, est_a: np.ndarray,
+) -> None:  # fmt: skip
+    """`estimator_update` with its records as the 1-element arrays they live in
+    (`kernel._jit.record_array`): what `Estimator.update` calls once a stamp, as numba types
+    arrays on its fast path and records not."""
+    estimator_update(
+        p_a[0], s_a[0], f_stages, s_stages, v_stages, t, omega, omega_dot, speed, accel,
+        torque, torque_ok, est_a[0],
+    )  # fmt: skip

@@ -82,6 +82,7 @@ __all__ = [
     'levant_reset',
     'levant_step',
     'levant_update',
+    'levant_update_arrays',
     'new_channels',
     'new_record',
 ]
@@ -521,3 +522,20 @@ def levant_update(
         c.f_last = sample[i] if finite[i] else math.nan
         valid[i] = finite[i] and c.active
     _write_output(channels, out)
+
+
+@jit
+def levant_update_arrays(
+    p_a: np.ndarray,
+    lip: FloatArray,
+    s_a: np.ndarray,
+    channels: np.recarray,
+    t: float,
+    sample: FloatArray,
+    out: FloatArray,
+    valid: BoolArray,
+) -> None:
+    """`levant_update` with its two records as the 1-element arrays they live in
+    (`kernel._jit.record_array`): what the wrapper calls once a sample, as numba types arrays
+    on its fast path and records not."""
+    levant_update(p_a[0], lip, s_a[0], channels, t, sample, out, valid)

@@ -20,7 +20,7 @@ from typing import Any, TypeVar, cast
 
 import numba
 
-__all__ = ['JIT_ENABLED', 'PACKAGE', 'clear_stale_cache', 'jit', 'sources_digest']
+__all__ = ['JIT_ENABLED', 'PACKAGE', 'clear_stale_cache', 'jit', 'record_array', 'sources_digest']
 
 F = TypeVar('F', bound=Callable[..., Any])
 
@@ -118,3 +118,20 @@ def jit(fn: F) -> F:
     if not JIT_ENABLED:
         return fn
     return cast(F, numba.njit(cache=True, nogil=True)(fn))
+
+
+def record_array(record: Any) -> Any:
+    """The 1-element structured array a record (`np.zeros(1, dtype).view(np.recarray)[0]`)
+    lives in, as a plain ndarray sharing its memory.
+
+    The compiled functions called from Python once per stamp take their records this way and
+    index ``[0]``: numba types an array argument on its fast path (two records as arguments
+    cost 53 us a call, two such arrays 1.4 us, measured).
+
+    Raises:
+        TypeError: `record` is not a view into a 1-element array (a copy, say).
+    """
+    base = record.base
+    if getattr(base, 'shape', None) != (1,):
+        raise TypeError('record_array needs a record made as np.zeros(1, dtype)...[0]')
+    return base.view(type=__import__('numpy').ndarray)

@@ -32,6 +32,7 @@ from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.cascade import CascadeResult
 from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.observer import WHEEL_INPUTS, ObserverConfig
+from vd_observer_node.kernel._jit import record_array
 from vd_observer_node.situation.alerts import (
     ALERT_KINDS,
     Alert,
@@ -198,6 +199,7 @@ class SituationMonitor:
         self.params.max_observer_disagreement = self.config.max_observer_disagreement
         self.params.max_gap = fc.max_gap
         self.state = new_record(MONITOR_STATE)
+        self._args: tuple[Any, ...] | None = None
         self.slip = np.zeros(4)
         #: the output buffers of `update` (one stamp)
         self._one = SituationBlock.empty(1)
@@ -220,13 +222,20 @@ class SituationMonitor:
         self.last: Situation | None = None
 
     def args(self) -> tuple[Any, ...]:
-        """`monitor_step.situation_block`'s leading arguments (the records, advanced in
-        place)."""
-        f, a = self.friction, self.monitor
-        return (
-            *self.fast.kernel_args, self.params, self.state, f.params, f.tyre, f.scales,
-            f.table, f.static_load, f.state, f.cost, f.potential, a.params, a.state,
+        """`monitor_step.situation_block`'s leading arguments (the records as the 1-element
+        arrays they live in, advanced in place)."""
+        if self._args is not None:
+            return self._args
+        f, m, r = self.friction, self.monitor, record_array
+        fp, flip, fs, fch = self.fast.kernel_args
+        plain = fch.view(np.ndarray)  # a recarray's attributes are Python lookups
+        # the records are never replaced (every reset works in place): built once
+        self._args = (
+            r(fp), flip, r(fs), plain, r(self.params), r(self.state), r(f.params), r(f.tyre),
+            f.scales, f.table, f.static_load, r(f.state), f.cost, r(f.potential),
+            r(m.params), r(m.state),
         )  # fmt: skip
+        return self._args
 
     def run(self, t: FloatArray, inputs: SituationInputs, out: SituationBlock) -> int:
         """`situation_block` over the N stamps `t` [s] (contiguous arrays, checked by the

@@ -143,9 +143,10 @@ def monitor_step(
 
 @jit
 def situation_block(
-    fp_: np.record, flip: FloatArray, fs_: np.record, fch: np.recarray, mp: Any, ms: Any,
-    fp: Any, tyre: Any, scales: FloatArray, table: FloatArray, static_load: FloatArray,
-    fs: Any, cost: FloatArray, pot: Any, ap: Any, al: Any, t: FloatArray, angles: FloatArray,
+    fp_a: Any, flip: FloatArray, fs_a: Any, fch: np.recarray, mp_a: Any, ms_a: Any,
+    fp_b: Any, tyre_a: Any, scales: FloatArray, table: FloatArray, static_load: FloatArray,
+    fs_b: Any, cost: FloatArray, pot_a: Any, ap_a: Any, al_a: Any, t: FloatArray,
+    angles: FloatArray,
     speeds: FloatArray, torques: FloatArray, omega: FloatArray, mu: FloatArray,
     mu_valid: BoolArray, fz: FloatArray, level: NDArray[np.int64], onset: FloatArray,
     det: FloatArray, mu_max: FloatArray, slip_peak: FloatArray, confidence: FloatArray,
@@ -154,12 +155,12 @@ def situation_block(
     """The monitor over N stamps; returns the `monitor_step` flags of all of them (or-ed; a
     restart sets both).
 
-    Args:
-        fp_, flip, fs_, fch: the fast differentiator (`LevantDifferentiator.kernel_args`).
-        mp, ms: `MONITOR_PARAMS`, `MONITOR_STATE` records.
-        fp, tyre, scales, table, static_load, fs, cost, pot: the friction fit's settings and
-            state (`friction_fit.friction_update`, `fit_reset`).
-        ap, al: the alerts' settings and state.
+    Args (each record as the 1-element array it lives in, `kernel._jit.record_array`):
+        fp_a, flip, fs_a, fch: the fast differentiator (`LevantDifferentiator.kernel_args`).
+        mp_a, ms_a: `MONITOR_PARAMS`, `MONITOR_STATE` records.
+        fp_b, tyre_a, scales, table, static_load, fs_b, cost, pot_a: the friction fit's
+            settings and state (`friction_fit.friction_update`, `fit_reset`).
+        ap_a, al_a: the alerts' settings and state.
         t: shape (N,), [s]; angles (N, 4) wheel angles (or speeds); speeds (N,) measured
             body speed [m/s]; torques (N, 4) [N m]; omega (N, 4) the cascade's wheel speed
             [rad/s]; mu (N, 4); mu_valid (N, 4); fz (N, 4) [N].
@@ -169,6 +170,9 @@ def situation_block(
         road: shape (N, 2), written: road class per axle; vehicle_road (N,) the vehicle's.
         slip: shape (4,), written: the fast slip of the last stamp.
     """
+    # the records come as the 1-element arrays they live in (`kernel._jit.record_array`)
+    fp_, fs_, mp, ms, fp, tyre = fp_a[0], fs_a[0], mp_a[0], ms_a[0], fp_b[0], tyre_a[0]
+    fs, pot, ap, al = fs_b[0], pot_a[0], ap_a[0], al_a[0]
     fast = np.empty((3, 4))
     fast_valid = np.empty(4, dtype=np.bool_)
     flags = 0
