@@ -13,6 +13,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from vd_observer_node.errors import InputShapeError, ObserverError
+from vd_observer_node.kernel._jit import new_record
 from vd_observer_node.situation.alerts import (
     ALERT_KINDS,
     ALERT_STATE,
@@ -30,7 +31,6 @@ from vd_observer_node.situation.alerts import (
     slip_velocity,
     step_channel,
 )
-from vd_observer_node.situation.records import new_record
 
 SIM_CONFIG = Path(__file__).resolve().parents[2] / 'vd_sim_node' / 'config'
 #: the thresholds as the step functions read them (a row of ALERT_PARAMS.thresholds)

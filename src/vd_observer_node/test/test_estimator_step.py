@@ -22,10 +22,10 @@ from vd_observer_node.estimation.filters import (
     LowPass,
     lowpass_derivative,
     lowpass_update,
-    new_record,
 )
 from vd_observer_node.estimation.mass_grade import MassGradeEstimator, mass_params
 from vd_observer_node.estimation.mass_grade_step import MASS_STATE, mass_reset, mass_update
+from vd_observer_node.kernel._jit import new_record
 
 M0 = VEHICLE.mass
 

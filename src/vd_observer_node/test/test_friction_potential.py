@@ -17,6 +17,7 @@ from vd_common.vehicle.friction import unit_peak
 from vd_common.vehicle.params import load_vehicle
 from vd_common.vehicle.tire import magic_formula_fx
 from vd_observer_node.errors import InputShapeError, ObserverError
+from vd_observer_node.kernel._jit import new_record
 from vd_observer_node.situation.friction_fit import (
     FIT_STATE,
     POTENTIAL,
@@ -39,7 +40,6 @@ from vd_observer_node.situation.friction_potential import (
     TyreCurves,
     friction_params,
 )
-from vd_observer_node.situation.records import new_record
 
 RATE = 1000.0  # [Hz]
 SPEED = 20.0  # [m/s]

@@ -35,9 +35,8 @@ from vd_observer_node.estimation.levant_step import (
     levant_update,
     levant_update_arrays,
     new_channels,
-    new_record,
 )
-from vd_observer_node.kernel._jit import record_array
+from vd_observer_node.kernel._jit import new_record, record_array
 
 __all__ = [
     'DEFAULT_GAINS',

@@ -63,12 +63,11 @@ from vd_observer_node.estimation.estimator_step import (
     estimator_update_arrays,
 )
 from vd_observer_node.estimation.faults import ESTIMATOR_FAULTS, FaultCounter
-from vd_observer_node.estimation.filters import new_record
 from vd_observer_node.estimation.mass_grade import MassGradeConfig, mass_params
 from vd_observer_node.estimation.rolling_radius import RollingRadiusConfig, radius_params
 from vd_observer_node.estimation.torque_offset import TorqueOffsetConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
-from vd_observer_node.kernel._jit import record_array
+from vd_observer_node.kernel._jit import new_record, record_array
 
 __all__ = [
     'LOAD_TRANSFER_SOURCES',

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError
-from vd_observer_node.kernel._jit import jit
+from vd_observer_node.kernel._jit import jit, new_record
 
 __all__ = [
     'LOWPASS_META',
@@ -23,7 +23,6 @@ __all__ = [
     'lowpass_derivative',
     'lowpass_reset',
     'lowpass_update',
-    'new_record',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -33,12 +32,6 @@ FloatArray = NDArray[np.float64]
 LOWPASS_META: Final = np.dtype(
     [('started', 'b1'), ('has_prev', 'b1'), ('last_dt', 'f8')], align=True
 )
-
-
-def new_record(dtype: np.dtype[np.void]) -> np.record:
-    """One zeroed record of `dtype` (fields readable and writable by name, compiled or not)."""
-    record: np.record = np.zeros(1, dtype).view(np.recarray)[0]
-    return record
 
 
 @jit

@@ -84,7 +84,6 @@ __all__ = [
     'levant_update',
     'levant_update_arrays',
     'new_channels',
-    'new_record',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -133,12 +132,6 @@ CHANNEL_DTYPE: Final = np.dtype(
     [('z', 'f8', (3,)), ('f_last', 'f8'), ('active', 'b1'), ('pend_t', 'f8'), ('pend_f', 'f8')],
     align=True,
 )
-
-
-def new_record(dtype: np.dtype[np.void]) -> np.record:
-    """A zeroed record of `dtype` whose fields read and write as attributes (also compiled)."""
-    record: np.record = np.zeros(1, dtype).view(np.recarray)[0]
-    return record
 
 
 def new_channels(n: int) -> np.recarray[tuple[int], np.dtype[np.record]]:

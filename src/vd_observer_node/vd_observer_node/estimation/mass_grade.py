@@ -68,7 +68,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.estimation.filters import new_record
 from vd_observer_node.estimation.mass_grade_step import (
     MASS_GRADE_FAULTS,
     MASS_PARAMS,
@@ -81,6 +80,7 @@ from vd_observer_node.estimation.mass_grade_step import (
     rls_update,
 )
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
+from vd_observer_node.kernel._jit import new_record
 
 __all__ = [
     'MASS_GRADE_FAULTS',

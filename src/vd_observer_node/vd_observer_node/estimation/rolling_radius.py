@@ -39,10 +39,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.faults import STAMP_FAULTS, stamp_step
-from vd_observer_node.estimation.filters import new_record
 from vd_observer_node.estimation.mass_grade_step import forgetting_factor, rls_update
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
-from vd_observer_node.kernel._jit import jit
+from vd_observer_node.kernel._jit import jit, new_record
 
 __all__ = [
     'RADIUS_OUT',

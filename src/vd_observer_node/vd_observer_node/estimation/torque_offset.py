@@ -36,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vd_observer_node.errors import ConfigurationError
-from vd_observer_node.kernel._jit import jit
+from vd_observer_node.kernel._jit import jit, new_record
 
 __all__ = [
     'OFFSET_ESTIMATE_DTYPE',
@@ -176,14 +176,9 @@ OFFSET_ESTIMATE_DTYPE: Final = np.dtype(
 )  # fmt: skip
 
 
-def _record(dtype: np.dtype[np.void]) -> np.record:
-    record: np.record = np.zeros(1, dtype).view(np.recarray)[0]
-    return record
-
-
 def offset_params(config: TorqueOffsetConfig) -> np.record:
     """The `OFFSET_PARAMS_DTYPE` record of `config`."""
-    p = _record(OFFSET_PARAMS_DTYPE)
+    p = new_record(OFFSET_PARAMS_DTYPE)
     for name in OFFSET_PARAMS_DTYPE.names or ():
         p[name] = getattr(config, name)
     return p
@@ -191,7 +186,7 @@ def offset_params(config: TorqueOffsetConfig) -> np.record:
 
 def new_offset_state() -> np.record:
     """An `OFFSET_STATE_DTYPE` record with nothing learnt (no stamp, no episode)."""
-    s = _record(OFFSET_STATE_DTYPE)
+    s = new_record(OFFSET_STATE_DTYPE)
     s.last_t = math.nan
     s.t0 = math.nan
     return s
@@ -199,7 +194,7 @@ def new_offset_state() -> np.record:
 
 def new_offset_estimate() -> np.record:
     """A zeroed `OFFSET_ESTIMATE_DTYPE` record for `torque_offset_step` to write into."""
-    return _record(OFFSET_ESTIMATE_DTYPE)
+    return new_record(OFFSET_ESTIMATE_DTYPE)
 
 
 def offset_from_record(out: np.record) -> TorqueOffset:

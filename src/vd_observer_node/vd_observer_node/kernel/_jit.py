@@ -19,8 +19,17 @@ from pathlib import Path
 from typing import Any, TypeVar, cast
 
 import numba
+import numpy as np
 
-__all__ = ['JIT_ENABLED', 'PACKAGE', 'clear_stale_cache', 'jit', 'record_array', 'sources_digest']
+__all__ = [
+    'JIT_ENABLED',
+    'PACKAGE',
+    'clear_stale_cache',
+    'jit',
+    'new_record',
+    'record_array',
+    'sources_digest',
+]
 
 F = TypeVar('F', bound=Callable[..., Any])
 
@@ -120,6 +129,13 @@ def jit(fn: F) -> F:
     return cast(F, numba.njit(cache=True, nogil=True)(fn))
 
 
+def new_record(dtype: np.dtype[Any]) -> np.record:
+    """A zeroed record of `dtype` (an ``np.record``: fields read and written as attributes,
+    compiled or not), living in a 1-element array (`record_array` gives it back)."""
+    record: np.record = np.zeros(1, dtype).view(np.recarray)[0]
+    return record
+
+
 def record_array(record: Any) -> Any:
     """The 1-element structured array a record (`np.zeros(1, dtype).view(np.recarray)[0]`)
     lives in, as a plain ndarray sharing its memory.
@@ -134,4 +150,4 @@ def record_array(record: Any) -> Any:
     base = record.base
     if getattr(base, 'shape', None) != (1,):
         raise TypeError('record_array needs a record made as np.zeros(1, dtype)...[0]')
-    return base.view(type=__import__('numpy').ndarray)
+    return base.view(type=np.ndarray)

@@ -40,8 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import InputShapeError, ObserverError
-from vd_observer_node.kernel._jit import jit
-from vd_observer_node.situation.records import new_record
+from vd_observer_node.kernel._jit import jit, new_record
 
 __all__ = [
     'ALERT_KINDS',

@@ -54,6 +54,7 @@ from vd_common.vehicle.friction import (
 from vd_common.vehicle.params import TireParams
 
 from vd_observer_node.errors import InputShapeError, ObserverError
+from vd_observer_node.kernel._jit import new_record
 from vd_observer_node.situation.friction_fit import (
     FIT_STATE,
     FRICTION_PARAMS,
@@ -63,7 +64,7 @@ from vd_observer_node.situation.friction_fit import (
     friction_update,
     vehicle_road_class,
 )
-from vd_observer_node.situation.records import new_record, record_of
+from vd_observer_node.situation.records import record_of
 
 __all__ = [
     'AXLE_OF_WHEEL',

@@ -32,7 +32,7 @@ from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.cascade import CascadeResult
 from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.observer import WHEEL_INPUTS, ObserverConfig
-from vd_observer_node.kernel._jit import record_array
+from vd_observer_node.kernel._jit import new_record, record_array
 from vd_observer_node.situation.alerts import (
     ALERT_KINDS,
     Alert,
@@ -53,7 +53,6 @@ from vd_observer_node.situation.monitor_step import (
     POTENTIAL_MOVED,
     situation_block,
 )
-from vd_observer_node.situation.records import new_record
 
 __all__ = [
     'LEVELS_CHANGED',

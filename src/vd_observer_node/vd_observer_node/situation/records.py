@@ -12,12 +12,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ['new_record', 'record_of']
+from vd_observer_node.kernel._jit import new_record
 
-
-def new_record(dtype: np.dtype[Any]) -> Any:
-    """A zeroed record of `dtype` (an ``np.record``)."""
-    return np.zeros(1, dtype).view(np.recarray)[0]
+__all__ = ['record_of']
 
 
 def record_of(dtype: np.dtype[Any], source: object) -> Any:
