@@ -23,8 +23,8 @@ from vd_observer_node.estimation.levant_step import (
     levant_step,
     levant_update,
     new_channels,
-    new_record,
 )
+from vd_observer_node.kernel._jit import new_record
 from vd_observer_node.estimation.observer import ObserverConfig, WheelObserver
 
 
