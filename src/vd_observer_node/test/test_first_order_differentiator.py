@@ -24,8 +24,8 @@ from vd_observer_node.estimation.levant_step import (
     levant_update,
     new_channels,
 )
-from vd_observer_node.kernel._jit import new_record
 from vd_observer_node.estimation.observer import ObserverConfig, WheelObserver
+from vd_observer_node.kernel._jit import new_record
 
 
 def _run(disc: str, t: np.ndarray, g: np.ndarray, lip: float, init: str = 'first_sample'):
