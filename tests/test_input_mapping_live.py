@@ -23,6 +23,7 @@ from vd_common.topics import (
     ESTIMATES_TORQUE_OFFSET,
     OBSERVER_WHEEL_STATES,
 )
+from vd_observer_node.estimation.rate_settings import slope_filter_tau_for_rate
 
 NS = 1_000_000_000
 ROOT = Path(__file__).resolve().parents[1]
@@ -101,6 +102,9 @@ def test_pipeline_node_runs_on_standard_types_and_reports_a_stopped_topic(
         *(str(s) for s in PAUSE_S),
     )
     publisher.wait_for('DONE', timeout=90)
+    # the slope filter left unset follows the rate the node measured on its first stamps
+    tau = slope_filter_tau_for_rate(RATE_HZ)
+    pipe.wait_for(f'settings: slope_filter_tau={tau:.3g} (input rate {RATE_HZ:g} Hz)', timeout=5)
     assert _wait_exit(collector, 60) == 0
     lines = collector.output().splitlines()
     msgs = [line.split() for line in lines if line.startswith('MSG ')]
@@ -360,6 +364,7 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     from vd_common.vehicle.params import default_vehicle_file, load_vehicle
     from vd_observer_node.bag import BagReader
     from vd_observer_node.bag.cdr_batch import decode_batch
+    from vd_observer_node.estimation.estimator import EstimatorConfig
     from vd_observer_node.inputs.mapping import mapping_from_dict
     from vd_observer_node.testing.standard_bags import (
         JOINT_TORQUES,
@@ -380,16 +385,26 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     write_standard_bag(bag, sim, CarSensors(torques_in_joint_states=True))
     mapping_file = tmp_path / 'car.yaml'
     mapping_file.write_text(yaml.safe_dump(JOINT_TORQUES), encoding='utf-8')
+    # The slope filter set, not left to the rate: the live node measures the rate over its
+    # first stamps and follows it from then on, the replay from the start (rate_settings).
+    tau = 0.2
     replay_bag(
-        bag, tmp_path / 'replayed', progress=False, mapping=mapping_from_dict(JOINT_TORQUES)
+        bag,
+        tmp_path / 'replayed',
+        progress=False,
+        mapping=mapping_from_dict(JOINT_TORQUES),
+        estimator_config=EstimatorConfig(slope_filter_tau=tau),
     )
     datas = BagReader(tmp_path / 'replayed').topic_arrays([ESTIMATES_SLOPE])[ESTIMATES_SLOPE]
     offline = decode_batch(ESTIMATE_TOPICS[ESTIMATES_SLOPE], datas.datas)
     expected = dict(zip(offline.stamp_ns.tolist(), offline.values['angle'].tolist(), strict=True))
 
-    params = params_file(tmp_path / 'p.yaml', {}, input_mapping=str(mapping_file))
+    params = params_file(
+        tmp_path / 'p.yaml', {}, input_mapping=str(mapping_file), slope_filter_tau=tau
+    )
     pipeline = _start(procs, 'pipeline', 'pipeline_node', params)
     pipeline.wait_for('pipeline ready', timeout=90)
+    pipeline.wait_for(f'slope_filter_tau={tau:g} (parameters)', timeout=10)
     collector = procs.python(
         'collector', SCRIPTS / 'collect_outputs.py', '14', f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope'
     )

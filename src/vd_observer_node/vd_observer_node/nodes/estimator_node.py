@@ -15,6 +15,7 @@ bytes (:mod:`vd_observer_node.bag.cdr_message`).
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -27,6 +28,7 @@ from vd_common.ros_common import (
     STREAM_QOS,
     PublishRefusals,
     declare_parameters,
+    log_settings,
     node_status,
     run_node,
 )
@@ -54,6 +56,7 @@ from vd_msgs.msg import (
 )
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.faults import merge_reports, summarise
+from vd_observer_node.estimation.rate_settings import RateMeter
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.inputs.decode import has_header
 from vd_observer_node.inputs.mapping import InputMapping
@@ -68,6 +71,7 @@ from vd_observer_node.nodes.raw_io import (
     Encoders,
     InputWatch,
     aligned_input,
+    follow_input_rate,
     input_matcher,
     mapped_input,
     mass_values,
@@ -109,6 +113,7 @@ class EstimatorNode(Node):
         super().__init__('estimator_node')
         self.refusals = PublishRefusals(self)  # a refused publish is counted, not fatal
         values = declare_parameters(self, PARAMS)
+        log_settings(self, PARAMS, values)
         mapping = take_input_mapping(values, undeclared_inputs(self), estimates=True)
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')
@@ -131,6 +136,11 @@ class EstimatorNode(Node):
             mapping, TOPICS, capacity, max_gap_ns, max_gap_ns, held=held_inputs(mapping)
         )
         self.watch = InputWatch([spec.topic for spec in sensors.values()], max_gap_ns)
+        # the wheel stamps (the observer's) and a measured speed's set what follows the rate
+        self._wheel_rate: RateMeter | None = RateMeter()
+        self._speed_topic = (
+            mapping.body_speed.topic if measured and has_header(mapping.body_speed) else None
+        )
         # the matcher's queue per input topic, reported against its capacity
         self._queue_topics = {key: spec.topic for key, spec in sensors.items()}
         self._capacity = capacity
@@ -190,6 +200,8 @@ class EstimatorNode(Node):
         )
 
     def estimate(self, stamp_ns: int, m: dict[str, Any]) -> None:
+        if self._wheel_rate is not None:
+            self._wheel_rate.add(stamp_ns)
         frame, (_, omega, omega_dot) = m['states']
         est = self.estimator.update(
             stamp_ns * 1e-9,
@@ -236,6 +248,10 @@ class EstimatorNode(Node):
             )
 
     def publish_diagnostics(self) -> None:
+        if self._wheel_rate is not None:
+            speed_rate = self.watch.rate_hz(self._speed_topic) if self._speed_topic else math.inf
+            if follow_input_rate(self.estimator, self._wheel_rate.rate_hz, speed_rate, self):
+                self._wheel_rate = None
         # Level and message name the faults of the last period; the counters are totals.
         # Stale (older) messages at the aligner are the out-of-order/duplicate stamps of the
         # inputs; its restarts are the looped bag seen before the estimator core sees it.

@@ -43,6 +43,7 @@ from vd_common.ros_common import (
     STREAM_QOS,
     PublishRefusals,
     declare_parameters,
+    log_settings,
     node_status,
     run_node,
 )
@@ -81,11 +82,13 @@ from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import ERROR
 from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.estimation.rate_settings import RateMeter
 from vd_observer_node.estimation.vehicle import (
     EstimatorVehicle,
     load_vehicle_params,
     vehicle_tire,
 )
+from vd_observer_node.inputs.decode import has_header
 from vd_observer_node.inputs.mapping import ENGINE_INPUT
 from vd_observer_node.nodes.node_params import (
     INPUT_PARAMS,
@@ -97,6 +100,7 @@ from vd_observer_node.nodes.node_params import (
 from vd_observer_node.nodes.raw_io import (
     Encoders,
     InputWatch,
+    follow_input_rate,
     input_matcher,
     mapped_input,
     mass_values,
@@ -188,6 +192,7 @@ class PipelineNode(Node):
         super().__init__('pipeline_node')
         self.refusals = PublishRefusals(self)  # a refused publish is counted, not fatal
         values = declare_parameters(self, PARAMS)
+        log_settings(self, PARAMS, values)
         mapping = take_input_mapping(
             values, undeclared_inputs(self), estimates=True, torque_paths=True
         )
@@ -210,6 +215,9 @@ class PipelineNode(Node):
             mapping, names, capacity, max_jump_back_ns=max_gap_ns, max_age_ns=max_gap_ns
         )
         self.watch = InputWatch([spec.topic for spec in specs], max_gap_ns)
+        # the wheel stamps and a stamped body speed's set what follows the rate
+        self._wheel_rate: RateMeter | None = RateMeter()
+        self._speed_topic = mapping.body_speed.topic if has_header(mapping.body_speed) else None
         # the matcher's queue per input topic, reported against its capacity
         self._queue_topics = {spec.name: spec.topic for spec in specs}
         self._capacity = capacity
@@ -263,6 +271,8 @@ class PipelineNode(Node):
         return self.encoders(self._types[key], frame)
 
     def process(self, stamp_ns: int, m: dict[str, Any]) -> None:
+        if self._wheel_rate is not None:
+            self._wheel_rate.add(stamp_ns)
         # SI values with the mapping's signs (raw_io.mapped_input)
         frame, angles = m[self._wheels]  # angles [rad] or speeds [rad/s]
         speed = float(m['body_speed'][1][0])
@@ -360,6 +370,11 @@ class PipelineNode(Node):
         )
 
     def publish_diagnostics(self) -> None:
+        if self._wheel_rate is not None:
+            speed_rate = self.watch.rate_hz(self._speed_topic) if self._speed_topic else math.inf
+            estimator = self.chain.parts.estimator
+            if follow_input_rate(estimator, self._wheel_rate.rate_hz, speed_rate, self):
+                self._wheel_rate = None
         # Level and message name the faults of the last period; the counters are totals.
         report = self.chain.fault_report()
         level, message = report.level, report.message

@@ -14,9 +14,12 @@ to each matched set. `InputWatch` notes every input's arrivals and reports a top
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
+
+from vd_common.settings_log import settings_line
 
 from vd_observer_node.bag.cdr_message import AlertsCodec, MessageCodec
 from vd_observer_node.bag.errors import BagFormatError
@@ -25,8 +28,10 @@ from vd_observer_node.estimation.estimator import (
     MASS_MESSAGE_FIELDS,
     RADIUS_MESSAGE_FIELDS,
     Estimates,
+    Estimator,
 )
 from vd_observer_node.estimation.faults import ERROR, OK, WARN
+from vd_observer_node.estimation.rate_settings import RateMeter
 from vd_observer_node.estimation.torque_offset import OFFSET_MESSAGE_FIELDS, TorqueOffset
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
@@ -39,6 +44,7 @@ __all__ = [
     'InputWatch',
     'LatestMatcher',
     'aligned_input',
+    'follow_input_rate',
     'input_matcher',
     'mapped_input',
     'mass_values',
@@ -295,6 +301,7 @@ class InputWatch:
         self._last: dict[str, int] = {}
         self._problem: dict[str, str] = {}
         self._health: dict[str, StreamHealth] = {}
+        self._rates: dict[str, RateMeter] = {}
 
     def seen(self, topic: str, now_ns: int) -> None:
         """Note a message of `topic` received at `now_ns` (monotonic clock)."""
@@ -307,7 +314,15 @@ class InputWatch:
         health = self._health.get(topic)
         if health is None:
             health = self._health[topic] = StreamHealth()
+            self._rates[topic] = RateMeter()
         health.add(stamp_ns, lag_ns)
+        self._rates[topic].add(stamp_ns)
+
+    def rate_hz(self, topic: str) -> float:
+        """[Hz] the rate of a stamped input over its first stamps (`RateMeter`); nan before
+        them, or for an input stamped on receipt."""
+        meter = self._rates.get(topic)
+        return meter.rate_hz if meter is not None else math.nan
 
     def unfit(self, topic: str, problem: str) -> None:
         """Note a message of `topic` the mapping cannot read (the last problem is reported)."""
@@ -379,6 +394,30 @@ def queued_by_topic(
     input name -> topic; inputs not in the matcher are left out)."""
     queued = matcher.queued()
     return {topics[name]: n for name, n in queued.items() if name in topics}
+
+
+def follow_input_rate(
+    estimator: Estimator, wheel_rate: float, speed_rate: float, node: Any
+) -> bool:
+    """Fix the estimator's settings left to the inputs' rate once the wheel rate is known.
+
+    Args:
+        estimator: the node's estimator (`Estimator.follow_rate`).
+        wheel_rate: [Hz] rate of the wheel stamps (nan: not known yet).
+        speed_rate: [Hz] rate of the body speed (nan: not known yet; inf: not measured here,
+            e.g. the observer's speed at the wheel stamps, or a speed stamped on receipt).
+        node: logs what was fixed (INFO, once).
+
+    Returns:
+        True once done (the caller stops asking).
+    """
+    if math.isnan(wheel_rate) or math.isnan(speed_rate):
+        return False
+    rate = min(wheel_rate, speed_rate)
+    fixed = estimator.follow_rate(rate)
+    if fixed:
+        node.get_logger().info(f'settings: {settings_line({}, "", fixed, rate, rest=False)}')
+    return True
 
 
 def mapped_input(

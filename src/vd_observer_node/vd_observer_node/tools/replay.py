@@ -25,6 +25,7 @@ copied: the output holds the replayed ones only.
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import sys
@@ -83,6 +84,7 @@ from vd_observer_node.estimation.estimator import (
     EstimatorConfig,
 )
 from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.estimation.rate_settings import sample_rate_hz
 from vd_observer_node.estimation.torque_offset import OFFSET_MESSAGE_FIELDS, publish_mask
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.decode import (
@@ -164,6 +166,10 @@ class ReplayReport:
             measured, 0 with none, below 1 on the engine path while the clutch slipped).
         vehicle: the vehicle file's name and path, e.g. 'clio_rl_1_1 (/.../clio_rl_1_1.yaml)'.
         notes: what the replay left out and why (one line each).
+        input_rate_hz: [Hz] rate of the slower of the wheel and body-speed inputs, measured
+            on the first block (`rate_settings.sample_rate_hz`; nan without samples).
+        rate_settings: the estimator settings left unset that followed `input_rate_hz`, by
+            name (``'slope_filter_tau'``), with the value used.
     """
 
     samples: int
@@ -181,6 +187,8 @@ class ReplayReport:
     torque_valid_fraction: float = 1.0
     vehicle: str = ''
     notes: tuple[str, ...] = ()
+    input_rate_hz: float = math.nan
+    rate_settings: dict[str, float] = field(default_factory=dict)
 
     @property
     def real_time_factor(self) -> float:
@@ -200,7 +208,13 @@ class ReplayReport:
 
 @dataclass(frozen=True)
 class ReplayConfig:
-    """Cascade and alert settings of an offline replay (None: the defaults)."""
+    """Cascade and alert settings of an offline replay (None: the defaults).
+
+    Attributes:
+        given: what the file set, by ``section.key`` (nested sections flattened, e.g.
+            ``'estimator.mass.mass_tau'``), for the log of where each setting came from.
+        source: the file's path ('' when not read from a file).
+    """
 
     observer: ObserverConfig | None = None
     estimator: EstimatorConfig | None = None
@@ -208,6 +222,18 @@ class ReplayConfig:
     alerts: AlertConfig | None = None
     friction: FrictionPotentialConfig | None = None
     situation: SituationConfig | None = None
+    given: dict[str, Any] = field(default_factory=dict)
+    source: str = ''
+
+
+def _flat(prefix: str, section: Mapping[str, Any]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in section.items():
+        if isinstance(value, dict):
+            out.update(_flat(f'{prefix}{key}.', value))
+        else:
+            out[f'{prefix}{key}'] = value
+    return out
 
 
 _SECTIONS = ('observer', 'estimator', 'cascade', 'alerts', 'friction_potential', 'situation')
@@ -253,6 +279,13 @@ def load_replay_config(path: str | os.PathLike[str]) -> ReplayConfig:
         situation=SituationConfig.from_mapping(sections['situation'])
         if sections['situation'] is not None
         else None,
+        given={
+            k: v
+            for key, section in sections.items()
+            if section is not None
+            for k, v in _flat(f'{key}.', section).items()
+        },
+        source=str(path),
     )
 
 
@@ -805,6 +838,8 @@ class _Run:
         self.cascade_time = 0.0
         self.situation_time = 0.0
         self.result: CascadeResult | None = None
+        self.input_rate_hz = math.nan
+        self.rate_settings: dict[str, float] = {}
         # (episodes, converged) of the last engine-torque offset written: it is written
         # where it changes, as pipeline_node publishes it
         self.offset_last: tuple[int, bool] | None = None
@@ -872,6 +907,12 @@ class _Run:
         n = len(common)
         if n and self.frame_id is None:
             self.frame_id = picked[0]['frame'][0].decode()
+        if self.result is None:
+            # the first block sets what follows the rate, before the cascade's first stamp
+            rates = [sample_rate_hz(d.stamp_ns) for d in decoded[:2]]  # wheels, body speed
+            self.input_rate_hz = min((r for r in rates if math.isfinite(r)), default=math.nan)
+            config = self.estimator_config or EstimatorConfig()
+            self.estimator_config, self.rate_settings = config.at_rate(self.input_rate_hz)
         frame_id = self.frame_id or ''
         cascade_start = time.perf_counter()
         t = common.astype(np.float64) * 1e-9
@@ -969,4 +1010,6 @@ class _Run:
             inputs=tuple(g.stats() for g in self.gaps),
             torque_source=TORQUE_SOURCES[result.torque_source],
             torque_valid_fraction=self.torque_valid / self.samples if self.samples else 0.0,
+            input_rate_hz=self.input_rate_hz,
+            rate_settings=dict(self.rate_settings),
         )
