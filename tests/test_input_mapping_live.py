@@ -364,7 +364,6 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     from vd_common.vehicle.params import default_vehicle_file, load_vehicle
     from vd_observer_node.bag import BagReader
     from vd_observer_node.bag.cdr_batch import decode_batch
-    from vd_observer_node.estimation.estimator import EstimatorConfig
     from vd_observer_node.inputs.mapping import mapping_from_dict
     from vd_observer_node.testing.standard_bags import (
         JOINT_TORQUES,
@@ -385,26 +384,19 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     write_standard_bag(bag, sim, CarSensors(torques_in_joint_states=True))
     mapping_file = tmp_path / 'car.yaml'
     mapping_file.write_text(yaml.safe_dump(JOINT_TORQUES), encoding='utf-8')
-    # The slope filter set, not left to the rate: the live node measures the rate over its
-    # first stamps and follows it from then on, the replay from the start (rate_settings).
-    tau = 0.2
-    replay_bag(
-        bag,
-        tmp_path / 'replayed',
-        progress=False,
-        mapping=mapping_from_dict(JOINT_TORQUES),
-        estimator_config=EstimatorConfig(slope_filter_tau=tau),
+    # the slope filter left to the rate: live and offline follow it from the same stamp on
+    report = replay_bag(
+        bag, tmp_path / 'replayed', progress=False, mapping=mapping_from_dict(JOINT_TORQUES)
     )
+    tau = slope_filter_tau_for_rate(50.0)  # the odometry's rate, slower than the wheels'
+    assert report.rate_settings == {'slope_filter_tau': tau}
     datas = BagReader(tmp_path / 'replayed').topic_arrays([ESTIMATES_SLOPE])[ESTIMATES_SLOPE]
     offline = decode_batch(ESTIMATE_TOPICS[ESTIMATES_SLOPE], datas.datas)
     expected = dict(zip(offline.stamp_ns.tolist(), offline.values['angle'].tolist(), strict=True))
 
-    params = params_file(
-        tmp_path / 'p.yaml', {}, input_mapping=str(mapping_file), slope_filter_tau=tau
-    )
+    params = params_file(tmp_path / 'p.yaml', {}, input_mapping=str(mapping_file))
     pipeline = _start(procs, 'pipeline', 'pipeline_node', params)
     pipeline.wait_for('pipeline ready', timeout=90)
-    pipeline.wait_for(f'slope_filter_tau={tau:g} (parameters)', timeout=10)
     collector = procs.python(
         'collector', SCRIPTS / 'collect_outputs.py', '14', f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope'
     )
@@ -424,6 +416,7 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     assert set(live) <= set(expected)
     # the same sets in the same order through the same compiled chain: the same bits
     assert all(live[t] == expected[t] for t in live)
+    pipeline.wait_for(f'settings: slope_filter_tau={tau:.3g} (input rate 50 Hz)', timeout=5)
 
 
 @pytest.mark.slow

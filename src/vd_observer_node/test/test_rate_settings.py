@@ -10,8 +10,11 @@ from vd_common.vehicle.params import default_vehicle_file
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.rate_settings import (
+    FOLLOW_AFTER,
     REFERENCE_SLOPE_FILTER_TAU,
     RateMeter,
+    follow_rate_hz,
+    nominal_rate_hz,
     sample_rate_hz,
     slope_filter_tau_for_rate,
 )
@@ -39,15 +42,29 @@ def test_sample_rate_is_one_over_the_median_interval_even_with_loss_and_repeats(
     assert math.isnan(sample_rate_hz([7, 7, 7]))
 
 
-def test_rate_meter_fixes_the_rate_after_its_stamps() -> None:
+def test_rate_meter_keeps_the_first_stamps() -> None:
     meter = RateMeter(size=5)
-    for k in range(4):
-        meter.add(k * 20_000_000)
-        assert math.isnan(meter.rate_hz)
-    meter.add(80_000_000)
-    assert meter.rate_hz == pytest.approx(50.0)
-    meter.add(81_000_000)  # later stamps do not move it
-    assert meter.rate_hz == pytest.approx(50.0)
+    assert [meter.add(k * 20_000_000) for k in range(4)] == [False] * 4
+    assert meter.add(80_000_000) and meter.count == 5  # this one filled it
+    assert not meter.add(81_000_000) and meter.stamps[-1] == 80_000_000
+    more = RateMeter(size=3)
+    more.add_many(np.array([1, 2]))
+    more.add_many(np.array([3, 4, 5]))
+    assert more.stamps == [1, 2, 3]
+
+
+def test_followed_rate_is_the_slower_input_to_three_digits() -> None:
+    wheels = np.arange(FOLLOW_AFTER) * 10_000_000  # 100 Hz
+    assert follow_rate_hz(wheels) == 100.0
+    jitter = np.random.default_rng(2).integers(-3000, 3000, FOLLOW_AFTER)
+    assert follow_rate_hz(wheels + jitter) == 100.0  # a few us of jitter: the same rate
+    speed = np.arange(0, 4_000_000_000, 20_000_000)  # 50 Hz, longer than the wheels
+    assert follow_rate_hz(wheels, speed) == 50.0
+    fast = np.arange(0, 2_000_000_000, 1_000_000)  # 1 kHz speed: the wheels are slower
+    assert follow_rate_hz(wheels, fast) == 100.0
+    assert follow_rate_hz(wheels, [5]) == 100.0  # one speed stamp tells no rate
+    assert math.isnan(follow_rate_hz([7]))
+    assert nominal_rate_hz(41.9712) == 42.0 and nominal_rate_hz(1234.5) == 1230.0
 
 
 def test_config_follows_the_rate_only_where_unset() -> None:

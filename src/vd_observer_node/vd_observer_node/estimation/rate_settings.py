@@ -23,6 +23,11 @@ scripts/example_standard_bag.py), slope RMS [deg] against the tau in use:
 
 A setting follows the rate only where the user left it unset (None in the configuration, no
 node parameter, no key in a ``--config`` file); an explicit value is always used as given.
+Live and offline alike, the rate is measured on the first `FOLLOW_AFTER` wheel stamps
+estimated (and the body speed's header stamps up to the last of them) and the settings follow
+it from the next stamp on; the stamps before use the reference rate's values. So a replay of a
+live recording gives the live estimates, and a stream shorter than that keeps the reference
+values.
 """
 
 from __future__ import annotations
@@ -34,9 +39,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 __all__ = [
+    'FOLLOW_AFTER',
     'REFERENCE_RATE_HZ',
     'REFERENCE_SLOPE_FILTER_TAU',
+    'SPEED_STAMPS_KEPT',
     'RateMeter',
+    'follow_rate_hz',
+    'nominal_rate_hz',
     'sample_rate_hz',
     'slope_filter_tau_for_rate',
 ]
@@ -83,27 +92,75 @@ def sample_rate_hz(stamps_ns: ArrayLike) -> float:
     return 1e9 / float(np.median(steps))
 
 
+#: wheel stamps after which the settings left unset follow the measured rate, live and
+#: offline alike (the stamps before are estimated with the reference rate's values), so a
+#: replay of a live recording gives the live estimates
+FOLLOW_AFTER: Final = 200
+#: body-speed stamps kept for `follow_rate_hz` (a speed up to 4x faster than the wheels)
+SPEED_STAMPS_KEPT: Final = 4 * FOLLOW_AFTER
+
+
+def nominal_rate_hz(rate_hz: float) -> float:
+    """[Hz] `rate_hz` to three significant digits: two measurements of one stream (live and
+    in its recording) give the same settings despite a few microseconds of jitter."""
+    if not (math.isfinite(rate_hz) and rate_hz > 0.0):
+        return math.nan
+    return float(f'{rate_hz:.3g}')
+
+
+def follow_rate_hz(wheel_stamps_ns: ArrayLike, speed_stamps_ns: ArrayLike | None = None) -> float:
+    """[Hz] the rate the settings follow: that of the slower of the wheel and body-speed inputs.
+
+    Args:
+        wheel_stamps_ns: shape (N,), [ns], the first `FOLLOW_AFTER` wheel stamps estimated.
+        speed_stamps_ns: shape (M,), [ns], the body speed's stamps received by then (those
+            after the last wheel stamp are left out); None where the speed has no stamps of
+            its own (stamped on receipt, or the observer's at the wheel stamps).
+
+    Returns:
+        `nominal_rate_hz` of the smaller rate; nan if the wheels' is unknown.
+    """
+    wheels = np.asarray(wheel_stamps_ns, dtype=np.int64)
+    rates = [sample_rate_hz(wheels)]
+    if speed_stamps_ns is not None and wheels.size:
+        speed = np.asarray(speed_stamps_ns, dtype=np.int64)
+        rates.append(sample_rate_hz(speed[speed <= wheels[-1]]))
+    if not math.isfinite(rates[0]):
+        return math.nan
+    return nominal_rate_hz(min(r for r in rates if math.isfinite(r)))
+
+
 class RateMeter:
-    """The rate of a live stream, from its first `size` stamps (`sample_rate_hz`).
+    """The first `size` stamps of a stream, for `follow_rate_hz`.
 
     Attributes:
-        size: stamps measured; the rate is nan until that many arrived, then fixed.
+        size: stamps kept.
     """
 
-    def __init__(self, size: int = 200) -> None:
-        """Measure the first `size` (>= 2) stamps."""
+    def __init__(self, size: int = FOLLOW_AFTER) -> None:
+        """Keep the first `size` (>= 2) stamps."""
         self.size = max(2, int(size))
         self._stamps: list[int] = []
-        self._rate = math.nan
 
-    def add(self, stamp_ns: int) -> None:
-        """Note one stamp [ns] (ignored once the rate is known)."""
-        if len(self._stamps) < self.size:
-            self._stamps.append(stamp_ns)
-            if len(self._stamps) == self.size:
-                self._rate = sample_rate_hz(self._stamps)
+    def add(self, stamp_ns: int) -> bool:
+        """Note one stamp [ns] (ignored once full); True when this one filled the meter."""
+        if len(self._stamps) >= self.size:
+            return False
+        self._stamps.append(stamp_ns)
+        return len(self._stamps) == self.size
+
+    def add_many(self, stamps_ns: ArrayLike) -> None:
+        """Note a block's stamps [ns] (in order) up to `size`."""
+        room = self.size - len(self._stamps)
+        if room > 0:
+            self._stamps.extend(np.asarray(stamps_ns, dtype=np.int64)[:room].tolist())
 
     @property
-    def rate_hz(self) -> float:
-        """[Hz] the measured rate, nan before `size` stamps."""
-        return self._rate
+    def count(self) -> int:
+        """Stamps kept so far."""
+        return len(self._stamps)
+
+    @property
+    def stamps(self) -> list[int]:
+        """[ns] the stamps kept, in arrival order."""
+        return list(self._stamps)

@@ -15,7 +15,6 @@ bytes (:mod:`vd_observer_node.bag.cdr_message`).
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Any
 
@@ -200,8 +199,6 @@ class EstimatorNode(Node):
         )
 
     def estimate(self, stamp_ns: int, m: dict[str, Any]) -> None:
-        if self._wheel_rate is not None:
-            self._wheel_rate.add(stamp_ns)
         frame, (_, omega, omega_dot) = m['states']
         est = self.estimator.update(
             stamp_ns * 1e-9,
@@ -211,6 +208,11 @@ class EstimatorNode(Node):
             float(m['accel'][1][0]),  # accel.linear.x
             np.array(m['torques'][1], dtype=np.float64),  # mapped, SI [N m]
         )
+        if self._wheel_rate is not None and self._wheel_rate.add(stamp_ns):
+            # from the next stamp on, as vd replay does (rate_settings.FOLLOW_AFTER)
+            speed_stamps = self.watch.first_stamps(self._speed_topic)
+            follow_input_rate(self.estimator, self._wheel_rate.stamps, speed_stamps, self)
+            self._wheel_rate = None
         self.counts['estimates'] += 1
         self.counts['mu_invalid_wheel_samples'] += int(4 - np.count_nonzero(est.mu_valid))
         self.counts['slope_invalid'] += int(not est.slope_valid)
@@ -248,10 +250,6 @@ class EstimatorNode(Node):
             )
 
     def publish_diagnostics(self) -> None:
-        if self._wheel_rate is not None:
-            speed_rate = self.watch.rate_hz(self._speed_topic) if self._speed_topic else math.inf
-            if follow_input_rate(self.estimator, self._wheel_rate.rate_hz, speed_rate, self):
-                self._wheel_rate = None
         # Level and message name the faults of the last period; the counters are totals.
         # Stale (older) messages at the aligner are the out-of-order/duplicate stamps of the
         # inputs; its restarts are the looped bag seen before the estimator core sees it.

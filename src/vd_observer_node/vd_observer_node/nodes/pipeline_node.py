@@ -49,6 +49,7 @@ from vd_common.ros_common import (
 )
 from vd_common.topics import (
     ESTIMATES_ALERTS,
+    ESTIMATES_COMBINED,
     ESTIMATES_FRICTION,
     ESTIMATES_FRICTION_POTENTIAL,
     ESTIMATES_MASS,
@@ -65,6 +66,7 @@ from vd_common.vehicle.params import default_vehicle_file
 
 from vd_msgs.msg import (
     Alerts,
+    Estimates,
     Friction,
     FrictionPotential,
     MassEstimate,
@@ -139,7 +141,10 @@ _OUTPUTS = (
     ),
     ('alerts', Alerts, ESTIMATES_ALERTS, 'vd_msgs/msg/Alerts'),
     ('offset', TorqueOffsetEstimate, ESTIMATES_TORQUE_OFFSET, 'vd_msgs/msg/TorqueOffsetEstimate'),
+    ('combined', Estimates, ESTIMATES_COMBINED, 'vd_msgs/msg/Estimates'),
 )
+#: the per-quantity outputs that ``estimate_topics: combined`` carries in one message
+_SEPARATE = ('states', 'accel', 'velocity', 'forces', 'friction', 'resistances', 'slope')
 _OBSERVER_KEYS = {f for f in ObserverConfig.__dataclass_fields__ if f != 'gains'}
 _GAIN_KEYS = set(LevantGains.__dataclass_fields__)
 
@@ -199,6 +204,7 @@ class PipelineNode(Node):
         specs = mapping.used_specs  # wheels, body speed, and the torque path's input if any
         classes = [input_message_class(spec) for spec in specs]
         capacity = values.pop('align_capacity')
+        layout = values.pop('estimate_topics')
         settings, vehicle_file = _settings(values, mapping.torque_source)
         # what the wheel sensors are (angles or ABS speeds) follows from the mapping
         settings = replace(
@@ -229,6 +235,8 @@ class PipelineNode(Node):
             'radius': settings.estimator.radius_adaptation,
             'offset': self.torque_source == 'engine'
             and settings.estimator.torque_offset_adaptation,
+            'combined': layout != 'separate',
+            **dict.fromkeys(_SEPARATE, layout != 'combined'),
         }
         self.pubs = {
             key: self.refusals.publisher(cls, topic, STATE_QOS if key == 'offset' else STREAM_QOS)
@@ -271,8 +279,6 @@ class PipelineNode(Node):
         return self.encoders(self._types[key], frame)
 
     def process(self, stamp_ns: int, m: dict[str, Any]) -> None:
-        if self._wheel_rate is not None:
-            self._wheel_rate.add(stamp_ns)
         # SI values with the mapping's signs (raw_io.mapped_input)
         frame, angles = m[self._wheels]  # angles [rad] or speeds [rad/s]
         speed = float(m['body_speed'][1][0])
@@ -280,6 +286,13 @@ class PipelineNode(Node):
         torques = m['wheel_torques'][1] if source == 'measured' else self._no_torque
         engine = m[ENGINE_INPUT][1] if source == 'engine' else None
         out = self.chain.update(stamp_ns * 1e-9, angles, speed, torques, engine)
+        if self._wheel_rate is not None and self._wheel_rate.add(stamp_ns):
+            # from the next stamp on, as vd replay does (rate_settings.FOLLOW_AFTER)
+            speed_stamps = self.watch.first_stamps(self._speed_topic)
+            follow_input_rate(
+                self.chain.parts.estimator, self._wheel_rate.stamps, speed_stamps, self
+            )
+            self._wheel_rate = None
         self.counts['estimates'] += 1
         if not self._finite(out):
             self.counts['withheld_non_finite'] += 1
@@ -296,7 +309,37 @@ class PipelineNode(Node):
         return math.isfinite(total)
 
     def _publish(self, stamp_ns: int, frame: bytes, out: ChainOutput) -> None:
-        w, s, e, sit = out.wheel, out.speed, out.estimates, out.situation
+        w, s, e = out.wheel, out.speed, out.estimates
+        pubs, codec = self.pubs, self._codec
+        if 'combined' in pubs:
+            pubs['combined'].publish(
+                codec('combined', frame).encode(
+                    stamp_ns,
+                    [
+                        *w.angle.tolist(),
+                        *w.omega.tolist(),
+                        *w.omega_dot.tolist(),
+                        s.speed,
+                        s.accel,
+                        *e.fx.tolist(),
+                        *e.fz.tolist(),
+                        *e.mu.tolist(),
+                        *e.slip.tolist(),
+                        *e.mu_valid.tolist(),
+                        *e.rolling.tolist(),
+                        e.aero,
+                        e.slope,
+                        e.slope_valid,
+                        e.torque_source,
+                    ],
+                )
+            )
+        if 'states' in pubs:
+            self._publish_separate(stamp_ns, frame, out)
+        self._publish_rest(stamp_ns, frame, out)
+
+    def _publish_separate(self, stamp_ns: int, frame: bytes, out: ChainOutput) -> None:
+        w, s, e = out.wheel, out.speed, out.estimates
         pubs, codec = self.pubs, self._codec
         pubs['states'].publish(
             codec('states', frame).encode(
@@ -326,6 +369,10 @@ class PipelineNode(Node):
         pubs['slope'].publish(
             codec('slope', frame).encode(stamp_ns, [e.slope, e.slope_valid, e.torque_source])
         )
+
+    def _publish_rest(self, stamp_ns: int, frame: bytes, out: ChainOutput) -> None:
+        e, sit = out.estimates, out.situation
+        pubs, codec = self.pubs, self._codec
         if 'mass' in pubs:
             pubs['mass'].publish(codec('mass', frame).encode(stamp_ns, mass_values(e)))
         if 'radius' in pubs:
@@ -370,11 +417,6 @@ class PipelineNode(Node):
         )
 
     def publish_diagnostics(self) -> None:
-        if self._wheel_rate is not None:
-            speed_rate = self.watch.rate_hz(self._speed_topic) if self._speed_topic else math.inf
-            estimator = self.chain.parts.estimator
-            if follow_input_rate(estimator, self._wheel_rate.rate_hz, speed_rate, self):
-                self._wheel_rate = None
         # Level and message name the faults of the last period; the counters are totals.
         report = self.chain.fault_report()
         level, message = report.level, report.message

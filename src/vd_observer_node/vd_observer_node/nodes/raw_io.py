@@ -14,7 +14,6 @@ to each matched set. `InputWatch` notes every input's arrivals and reports a top
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
@@ -31,7 +30,11 @@ from vd_observer_node.estimation.estimator import (
     Estimator,
 )
 from vd_observer_node.estimation.faults import ERROR, OK, WARN
-from vd_observer_node.estimation.rate_settings import RateMeter
+from vd_observer_node.estimation.rate_settings import (
+    SPEED_STAMPS_KEPT,
+    RateMeter,
+    follow_rate_hz,
+)
 from vd_observer_node.estimation.torque_offset import OFFSET_MESSAGE_FIELDS, TorqueOffset
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
@@ -301,7 +304,7 @@ class InputWatch:
         self._last: dict[str, int] = {}
         self._problem: dict[str, str] = {}
         self._health: dict[str, StreamHealth] = {}
-        self._rates: dict[str, RateMeter] = {}
+        self._first: dict[str, RateMeter] = {}
 
     def seen(self, topic: str, now_ns: int) -> None:
         """Note a message of `topic` received at `now_ns` (monotonic clock)."""
@@ -314,15 +317,15 @@ class InputWatch:
         health = self._health.get(topic)
         if health is None:
             health = self._health[topic] = StreamHealth()
-            self._rates[topic] = RateMeter()
+            self._first[topic] = RateMeter(SPEED_STAMPS_KEPT)
         health.add(stamp_ns, lag_ns)
-        self._rates[topic].add(stamp_ns)
+        self._first[topic].add(stamp_ns)
 
-    def rate_hz(self, topic: str) -> float:
-        """[Hz] the rate of a stamped input over its first stamps (`RateMeter`); nan before
-        them, or for an input stamped on receipt."""
-        meter = self._rates.get(topic)
-        return meter.rate_hz if meter is not None else math.nan
+    def first_stamps(self, topic: str | None) -> list[int] | None:
+        """[ns] the first header stamps of a stamped input (`SPEED_STAMPS_KEPT`), in arrival
+        order; None for an input stamped on receipt, not heard from, or no topic."""
+        meter = self._first.get(topic) if topic is not None else None
+        return meter.stamps if meter is not None else None
 
     def unfit(self, topic: str, problem: str) -> None:
         """Note a message of `topic` the mapping cannot read (the last problem is reported)."""
@@ -397,27 +400,25 @@ def queued_by_topic(
 
 
 def follow_input_rate(
-    estimator: Estimator, wheel_rate: float, speed_rate: float, node: Any
-) -> bool:
-    """Fix the estimator's settings left to the inputs' rate once the wheel rate is known.
+    estimator: Estimator,
+    wheel_stamps: list[int],
+    speed_stamps: list[int] | None,
+    node: Any,
+) -> None:
+    """Fix the estimator's settings left to the inputs' rate, after its `FOLLOW_AFTER`-th
+    wheel stamp, as `vd replay` does at the same stamp (`rate_settings.follow_rate_hz`).
 
     Args:
         estimator: the node's estimator (`Estimator.follow_rate`).
-        wheel_rate: [Hz] rate of the wheel stamps (nan: not known yet).
-        speed_rate: [Hz] rate of the body speed (nan: not known yet; inf: not measured here,
-            e.g. the observer's speed at the wheel stamps, or a speed stamped on receipt).
+        wheel_stamps: [ns] the first `FOLLOW_AFTER` wheel stamps estimated.
+        speed_stamps: [ns] the body speed's first header stamps (`InputWatch.first_stamps`);
+            None where the speed has none of its own.
         node: logs what was fixed (INFO, once).
-
-    Returns:
-        True once done (the caller stops asking).
     """
-    if math.isnan(wheel_rate) or math.isnan(speed_rate):
-        return False
-    rate = min(wheel_rate, speed_rate)
+    rate = follow_rate_hz(wheel_stamps, speed_stamps)
     fixed = estimator.follow_rate(rate)
     if fixed:
         node.get_logger().info(f'settings: {settings_line({}, "", fixed, rate, rest=False)}')
-    return True
 
 
 def mapped_input(
