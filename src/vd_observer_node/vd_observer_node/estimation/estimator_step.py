@@ -142,10 +142,11 @@ assert ESTIMATOR_FAULTS[_RADIUS_CLAMPED] == 'radius_clamped'
 assert ESTIMATOR_FAULTS[_NON_FINITE_OUTPUT] == 'non_finite_output'
 _M_CLAMPED: Final = 6  # 'mass_clamped' in MASS_GRADE_FAULTS, 'radius_clamped' likewise
 _KMH_REFERENCE: Final = 160.0  # [km/h] speed scale of paper eq. 7 (estimation.formulas)
-#: A gap the slope low-pass bridges (`filters.lowpass_gap`) across which the balance's input
-#: (the forces, or forces - m*dv/dt) changed by more than this share of the weight [-] hid a
-#: transient the bridge could only interpolate: the slope is then invalid (held) until the
-#: filter has forgotten the bridge, (order + 1) * slope_filter_tau after the gap.
+#: A gap the slope low-pass bridges (`filters.lowpass_gap`) after which the balance's input
+#: (the forces, or forces - m*dv/dt) is further than this share of the weight [-] from the
+#: trend before the gap hid a transient the bridge could only interpolate: the slope is then
+#: invalid (held) until the filter has forgotten the bridge, (order + 1) * slope_filter_tau
+#: after the gap.
 GAP_FORCE_CHANGE: Final = 0.05
 
 #: The estimator's memory: last stamp (nan: none), slope [rad], whether ``last`` holds an
@@ -323,8 +324,8 @@ def _bridge_speed(
     f0 = s.slope_prev[1, 0]
     x0 = np.full(1, level)
     rate = np.full(1, (f0 - balance) / mass)
-    curve = np.full(1, (forces - f0) / (2.0 * mass * span))
-    lowpass_bridge(tau, v_stages, s.speed_prev, span, x0, rate, curve)
+    curve = np.full(1, (forces - f0) / (2.0 * mass * dt))
+    lowpass_bridge(tau, v_stages, s.speed_prev, span, dt - span, x0, rate, curve)
     return dt - span
 
 
@@ -419,9 +420,11 @@ def _estimate(
     net_out = np.empty(1)
     by_speed = p.slope_accel == 0 and p.slope_tau > 0.0
     one[0] = forces if by_speed else forces - mass * accel
-    gap = lowpass_gap(p.slope_tau, s.slope_lp, dt) > 0.0
-    if gap and abs(one[0] - s.slope_prev[1, 0]) > GAP_FORCE_CHANGE * weight:
-        s.settle_until = t + (s_stages.shape[0] + 1) * p.slope_tau
+    if lowpass_gap(p.slope_tau, s.slope_lp, dt) > 0.0:
+        # the input the trend before the gap predicts (the bridge is exact for that line)
+        _, trend = lowpass_input(p.slope_tau, s_stages, s.slope_prev, s.slope_lp, 0)
+        if abs(one[0] - s.slope_prev[1, 0] - trend * dt) > GAP_FORCE_CHANGE * weight:
+            s.settle_until = t + (s_stages.shape[0] + 1) * p.slope_tau
     if by_speed:
         # m*dv/dt as the derivative of the same low-pass applied to the speed
         dt_v = _bridge_speed(p.slope_tau, s, v_stages, s_stages, dt, forces, mass)

@@ -10,10 +10,10 @@ signal looks like at the sampling rate. Over a gap (lost messages: a step longer
 ``BRIDGE_FROM`` time constants, `lowpass_gap`) that is wrong: a ramp held at its end value
 for 200 ms is a step, whose derivative the slope's m*dv/dt would see as a spike. The state
 is carried across such a gap (only the caller's ``max_gap`` restarts a filter): all of the
-step but its last sample period is bridged (`lowpass_bridge`) in sub-steps of at most
-``BRIDGE_STEP`` time constants with the input interpolated linearly from the previous sample
-to the new one (or along a polynomial the caller knows better, the estimator's speed), then
-the new sample is taken over one sample period as any other (docs/faults.md, loss).
+step but its last sample period is bridged (`lowpass_bridge`), run as the lost samples with
+the input interpolated linearly from the previous sample to the new one (or along a
+polynomial the caller knows better: the estimator's speed), then the new sample is taken
+over one sample period as any other (docs/faults.md, loss).
 """
 
 from __future__ import annotations
@@ -30,7 +30,6 @@ from vd_observer_node.kernel._jit import jit, new_record
 __all__ = [
     'BRIDGE_FROM',
     'BRIDGE_MAX_STEPS',
-    'BRIDGE_STEP',
     'LOWPASS_META',
     'LowPass',
     'lowpass_bridge',
@@ -45,11 +44,9 @@ FloatArray = NDArray[np.float64]
 
 #: A step longer than this [time constants] is a gap: bridged in sub-steps (module docstring).
 BRIDGE_FROM: Final = 0.2
-#: The longest sub-step of a bridged gap [time constants].
-BRIDGE_STEP: Final = 0.1
-#: At most this many sub-steps (a longer gap takes longer ones: the filter has forgotten the
-#: samples before it anyway).
-BRIDGE_MAX_STEPS: Final = 200
+#: At most this many sub-steps (a longer gap takes longer ones: 0.5 s, vd's ``max_gap``, is
+#: 500 steps at 1 kHz).
+BRIDGE_MAX_STEPS: Final = 1000
 
 #: A filter's bookkeeping: its stages hold a signal, ``prev`` holds the output before the
 #: latest (sub-)step, and that step's length [s].
@@ -87,25 +84,28 @@ def lowpass_bridge(
     stages: FloatArray,
     prev: FloatArray,
     span: float,
+    period: float,
     x0: FloatArray,
     rate: FloatArray,
     curve: FloatArray,
 ) -> None:
     """Advance over a gap of ``span`` [s] with the input x0 + rate * s + curve * s^2 (d,).
 
-    In equal sub-steps of at most ``BRIDGE_STEP * tau`` (at most ``BRIDGE_MAX_STEPS``), each
-    exact for its input held at the sub-step's end value; ``prev[1]`` becomes the input at
-    the end. The output and its derivative are those of the step that follows (the sample
-    after the gap, `lowpass_update` over ``meta.last_dt``).
+    The gap is run as the samples it lost: in equal sub-steps as near ``period`` as divide
+    it (at most ``BRIDGE_MAX_STEPS``), each holding its end value as a sample does, so a
+    ramp leaves the filter where the lost samples would have. ``prev[1]`` becomes the input
+    at the end. The output and its derivative are those of the step that follows (the
+    sample after the gap, `lowpass_update` over ``period``).
 
     Args:
         tau: time constant of each stage [s], > 0.
         stages: (order, d), advanced in place.
         prev: (2, d), its row 1 written.
         span: [s], > 0.
+        period: the sample period [s] of the filter's input before the gap, > 0.
         x0, rate, curve: (d,), the input's polynomial in the time s [s] since the gap began.
     """
-    n_sub = min(math.ceil(span / (BRIDGE_STEP * tau)), BRIDGE_MAX_STEPS)
+    n_sub = min(max(round(span / period), 1), BRIDGE_MAX_STEPS)
     h = span / n_sub
     alpha = -math.expm1(-h / tau)
     for i in range(stages.shape[1]):
@@ -171,8 +171,8 @@ def lowpass_update(
     span = lowpass_gap(tau, meta, step)
     if span > 0.0:
         x0 = prev[1].copy()
-        rate = (x - x0) / span
-        lowpass_bridge(tau, stages, prev, span, x0, rate, np.zeros_like(x))
+        rate = (x - x0) / step  # the line through the two samples
+        lowpass_bridge(tau, stages, prev, span, meta.last_dt, x0, rate, np.zeros_like(x))
         step = step - span
     alpha = -math.expm1(-step / tau)
     prev[0, :] = stages[-1]
