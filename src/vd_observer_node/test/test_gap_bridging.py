@@ -7,12 +7,16 @@ offline cascade for the live chain (the same step functions, stamp by stamp).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+from vd_common.topics import ESTIMATES_SLOPE, SENSORS
 from vd_common.vehicle.params import load_vehicle
+from vd_observer_node.bag import BagReader
+from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.chain import Chain, ChainSettings
 from vd_observer_node.estimation.cascade import run_cascade
 from vd_observer_node.estimation.differentiator import LevantDifferentiator
@@ -29,11 +33,15 @@ from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.kernel._jit import new_record
 from vd_observer_node.situation.friction_potential import TyreCurves
-from vd_observer_node.testing.synthetic import synthetic_trajectory
+from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
+from vd_observer_node.testing.synthetic import SyntheticTrajectory, synthetic_trajectory
+from vd_observer_node.tools.replay import replay_bag
+from vd_sim_node.vehicle.scenario import load_scenario
+from vd_sim_node.vehicle.simulation import SimResult, simulate
 
-PARAMS = load_vehicle(
-    Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
-)
+SRC = Path(__file__).resolve().parents[2]
+PARAMS = load_vehicle(SRC / 'vd_common' / 'config' / 'clio_rl_1_1.yaml')
+PAPER_TABLE1 = SRC / 'vd_sim_node' / 'config' / 'scenarios' / 'paper_table1.yaml'
 VEHICLE = EstimatorVehicle.from_params(PARAMS)
 DT = 1e-3
 
@@ -174,7 +182,9 @@ def test_the_slope_holds_through_a_gap_and_settles_after_a_hidden_transient() ->
     assert len(invalid) in (300, 301)  # 2.2 + 0.3 in floating point: 2.5 itself or not
 
 
-def _synthetic_gaps(noise: float) -> tuple[np.ndarray, np.ndarray, object]:
+def _synthetic_gaps(
+    noise: float,
+) -> tuple[np.ndarray, np.ndarray, tuple[SyntheticTrajectory, np.ndarray]]:
     t = np.round(np.arange(0.0, 8.0, DT), 9)
     traj = synthetic_trajectory(t, VEHICLE)
     rng = np.random.default_rng(7)
@@ -218,3 +228,57 @@ def test_the_live_chain_bridges_a_gap_as_the_offline_cascade() -> None:
         out = chain.update(float(tk[k]), angle[k], float(v[k]), torque[k])
         assert out.estimates.slope == offline.slope[k]
         assert out.estimates.slope_valid == offline.slope_valid[k]
+
+
+def _replayed_slope(folder: Path, sim: SimResult, keep: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(stamp indexes, slope [rad], valid) of `vd replay` of the run's bag with only the
+    stamps `keep` on every sensor topic."""
+    stamp_ns = np.round(sim.t * 1e9).astype(np.int64)
+    topics = sim_topics(sim)
+    for topic in SENSORS:
+        topics[topic] = {name: values[keep] for name, values in topics[topic].items()}
+    write_topic_arrays_bag(
+        folder / 'in', stamp_ns, topics, stamps={topic: stamp_ns[keep] for topic in SENSORS}
+    )
+    replay_bag(folder / 'in', folder / 'out', progress=False)
+    arrays = BagReader(folder / 'out').topic_arrays([ESTIMATES_SLOPE])[ESTIMATES_SLOPE]
+    batch = decode_batch('vd_msgs/msg/Slope', arrays.datas)
+    index = np.round(batch.stamp_ns * 1e-6).astype(np.int64)  # 1 kHz stamps
+    return index, batch.values['angle'], batch.values['valid'].astype(bool)
+
+
+@pytest.mark.slow
+def test_a_bag_with_200_ms_gaps_replays_within_1_5_times_the_lossless_slope_error(
+    tmp_path: Path,
+) -> None:
+    # scripts/eval_loss.py's case gap200: paper_table1 (launch, shifts, slope steps) at 1 kHz
+    # with a 96 counts/rev encoder and 0.05 m/s speed noise (seeded), 200 ms of every second
+    # lost on every topic; slope RMS where valid, away from the slope steps and shifts
+    scenario = load_scenario(PAPER_TABLE1)
+    scenario = dataclasses.replace(
+        scenario,
+        duration=30.0,
+        sensors=dataclasses.replace(
+            scenario.sensors, encoder_counts_per_rev=96, speed_noise_std=0.05
+        ),
+    )
+    sim = simulate(PARAMS, scenario, rate_hz=1000.0)
+    mask = sim.t >= 1.0
+    for stamp, text in sim.events:
+        if 'slope' in text or 'shift' in text:
+            mask &= np.abs(sim.t - stamp) > 0.5
+    k = np.arange(sim.t.size)
+    figures = {}
+    for name, keep in (('lossless', k >= 0), ('gap200', k % 1000 >= 200)):
+        (tmp_path / name).mkdir()
+        index, angle, valid = _replayed_slope(tmp_path / name, sim, keep)
+        assert index.size == keep.sum()  # every stamp estimated
+        take = valid & mask[index]
+        rms = float(np.sqrt(np.mean((angle[take] - sim.slope[index[take]]) ** 2)))
+        figures[name] = (np.degrees(rms), float(valid.mean()))
+    (lossless, lossless_valid), (gapped, gapped_valid) = figures['lossless'], figures['gap200']
+    assert lossless < 0.3  # docs/performance.md: 0.249 deg
+    assert gapped <= 1.5 * lossless, figures  # the issue's target (measured: 1.00x)
+    # the slope settles after the gaps that hid a transient (launch, clutch, wheel spin,
+    # shift): valid on 68 % of the stamps against 72 % without loss
+    assert gapped_valid >= 0.9 * lossless_valid, figures

@@ -73,9 +73,10 @@ def lowpass_gap(tau: float, meta: np.record, dt: float) -> float:
     """
     if not (tau > 0.0 and meta.has_prev and dt > BRIDGE_FROM * tau):
         return 0.0
-    if not 0.0 < meta.last_dt < dt:
+    period: float = meta.last_dt
+    if not 0.0 < period < dt:
         return 0.0
-    return dt - meta.last_dt
+    return dt - period
 
 
 @jit
