@@ -75,17 +75,21 @@ from vd_msgs.msg import (
     WheelStates,
 )
 from vd_observer_node.bag.cdr_message import MessageCodec
+from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.chain import Chain, ChainOutput, ChainSettings
 from vd_observer_node.estimation.differentiator import LevantGains
 from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import ERROR
+from vd_observer_node.estimation.imu_grade import ImuGradeConfig, vehicle_pitch_compliance
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import (
     EstimatorVehicle,
     load_vehicle_params,
     vehicle_tire,
 )
+from vd_observer_node.inputs.decode import InputDecoder
+from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import ENGINE_INPUT
 from vd_observer_node.nodes.node_params import (
     INPUT_PARAMS,
@@ -199,6 +203,12 @@ class PipelineNode(Node):
         settings = replace(
             settings, observer=replace(settings.observer, wheel_input=mapping.wheel_input)
         )
+        if mapping.imu is not None:
+            # the IMU fusion, with the body's pitch under the ground force from a full file
+            settings = replace(
+                settings,
+                imu=ImuGradeConfig(pitch_compliance=vehicle_pitch_compliance(vehicle_file)),
+            )
         # Builds (or loads from numba's disk cache) the compiled chain now, before any sample.
         self.chain = Chain(settings)
         max_gap_ns = round(settings.estimator.max_gap * 1e9)
@@ -250,6 +260,24 @@ class PipelineNode(Node):
                 radius=settings.vehicle.effective_radius,
             )
             self.create_subscription(cls, spec.topic, callback, STREAM_QOS, raw=True)
+        # the newest IMU sample (stamp [s], forward specific force [m/s^2]): held, as the
+        # replay holds it; the fusion judges its age
+        self._imu: tuple[float, float] | None = None
+        if mapping.imu is not None:
+            imu_decoder = InputDecoder(mapping.imu)
+
+            def on_imu(data: bytes) -> None:
+                try:
+                    stamp, _, row = imu_decoder.decode(data, clock.now().nanoseconds)
+                except (BagFormatError, MappingError):
+                    self.counts['undecodable'] += 1
+                    return
+                self._imu = (stamp * 1e-9, row[0])
+
+            self.create_subscription(
+                input_message_class(mapping.imu), mapping.imu.topic, on_imu, STREAM_QOS,
+                raw=True,
+            )  # fmt: skip
         self._active = 0
         self._last_alerts = ''
         self.create_timer(1.0, self.publish_diagnostics)
@@ -269,7 +297,7 @@ class PipelineNode(Node):
         source = self.torque_source
         torques = m['wheel_torques'][1] if source == 'measured' else self._no_torque
         engine = m[ENGINE_INPUT][1] if source == 'engine' else None
-        out = self.chain.update(stamp_ns * 1e-9, angles, speed, torques, engine)
+        out = self.chain.update(stamp_ns * 1e-9, angles, speed, torques, engine, self._imu)
         self.counts['estimates'] += 1
         if not self._finite(out):
             self.counts['withheld_non_finite'] += 1
@@ -314,7 +342,9 @@ class PipelineNode(Node):
             codec('resistances', frame).encode(stamp_ns, [*e.rolling.tolist(), e.aero])
         )
         pubs['slope'].publish(
-            codec('slope', frame).encode(stamp_ns, [e.slope, e.slope_valid, e.torque_source])
+            codec('slope', frame).encode(
+                stamp_ns, [e.slope, e.slope_valid, e.torque_source, out.slope_sources]
+            )
         )
         if 'mass' in pubs:
             pubs['mass'].publish(codec('mass', frame).encode(stamp_ns, mass_values(e)))
