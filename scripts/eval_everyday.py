@@ -79,7 +79,9 @@ def _slope_rms(result: CascadeResult, sim: SimResult) -> float:
     return math.degrees(float(np.sqrt(np.mean(error * error))))
 
 
-def _mass(flag: np.ndarray, mass: np.ndarray, true_mass: float, t: np.ndarray) -> tuple[bool, float]:
+def _mass(
+    flag: np.ndarray, mass: np.ndarray, true_mass: float, t: np.ndarray
+) -> tuple[bool, float]:
     if not flag.any():
         return False, math.nan
     first = int(np.argmax(flag))
@@ -168,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
             errors = [d.mass_error[name] for d in drives if d.converged[name]]
             mass = f'{share:5.0f} %          {_pct(errors, 50)}  {_pct(errors, 90)}'
         else:
-            mass = '    - (the file\'s mass)'
+            mass = "    - (the file's mass)"
         print(f'{name:<14} {_pct(slopes, 50)}   {_pct(slopes, 90)}    {mass}')
     print(f'\n({len(drives)} drives in {time.perf_counter() - start:.0f} s)')
     return 0

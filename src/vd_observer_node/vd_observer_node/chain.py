@@ -290,9 +290,7 @@ class Chain:
         force = float(np.sum(e.fx)) - math.copysign(e.aero, speed)
         ok = torque_ok and not self._none and math.isfinite(force)
         g = self._grade_out
-        self._grade.step(
-            t, stamp, f_x, speed, e.slope, e.slope_valid, force, ok, e.mass_used, g
-        )
+        self._grade.step(t, stamp, f_x, speed, e.slope, e.slope_valid, force, ok, e.mass_used, g)
         fused = replace(e, slope=float(g.slope), slope_valid=bool(g.slope_valid))
         return fused, int(g.sources)
 

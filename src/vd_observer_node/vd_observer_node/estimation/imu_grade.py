@@ -41,6 +41,7 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Final
 
 import numpy as np
@@ -511,7 +512,7 @@ def vehicle_pitch_compliance(path: str | os.PathLike[str] | None) -> float:
     """`pitch_compliance` [rad/N] of a full vehicle file's suspension and tyres; 0 (a rigid
     body) for a file that has none (an estimation-only file), None: the shipped Clio."""
     try:
-        vp = load_vehicle(path if path is not None else default_vehicle_file())
+        vp = load_vehicle(Path(path) if path is not None else default_vehicle_file())
     except ParameterError:
         return 0.0
     s = vp.suspension
