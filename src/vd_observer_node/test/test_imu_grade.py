@@ -7,10 +7,15 @@ from __future__ import annotations
 import dataclasses
 import math
 from functools import lru_cache
+from pathlib import Path
 
 import numpy as np
 import pytest
 from adaptation_setup import PARAMS, VEHICLE
+from vd_common.topics import ESTIMATES_SLOPE, SENSORS_IMU
+from vd_observer_node.bag.cdr_batch import decode_batch
+from vd_observer_node.bag.reader import BagReader
+from vd_observer_node.chain import Chain, ChainSettings
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.imu_grade import (
@@ -19,6 +24,10 @@ from vd_observer_node.estimation.imu_grade import (
     ImuGradeConfig,
     pitch_compliance,
 )
+from vd_observer_node.inputs.mapping import mapping_from_dict
+from vd_observer_node.situation.friction_potential import TyreCurves
+from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
+from vd_observer_node.tools.replay import replay_bag
 from vd_sim_node.vehicle.everyday import EverydaySettings, everyday_scenario
 from vd_sim_node.vehicle.simulation import SimResult, simulate
 
@@ -160,3 +169,55 @@ def test_the_imu_record_and_settings_are_checked() -> None:
         ImuGradeConfig(tau=0.0)
     with pytest.raises(ConfigurationError, match=r'imu\.max_slope'):
         ImuGradeConfig(max_slope=2.0)
+
+
+def test_the_live_chain_fuses_as_the_cascade_does() -> None:
+    sim = _drive()
+    n = int(40.0 * RATE_HZ)  # past the bias's convergence
+    imu = _imu(sim)[:n]
+    imu[2000:2100] = np.nan  # half a second without IMU messages (none held yet is nan too)
+    offline = run_cascade(
+        sim.t[:n], sim.wheel_angle[:n], sim.body_speed[:n], sim.wheel_torque[:n], VEHICLE,
+        imu=imu, imu_config=CONFIG,
+    )  # fmt: skip
+    chain = Chain(
+        ChainSettings(vehicle=VEHICLE, curves=TyreCurves.from_tire(PARAMS.tire), imu=CONFIG)
+    )
+    slope = np.empty(n)
+    sources = np.empty(n, dtype=np.uint8)
+    for k in range(n):
+        held = None if np.isnan(imu[k, 0]) else (float(imu[k, 0]), float(imu[k, 1]))
+        out = chain.update(
+            float(sim.t[k]), sim.wheel_angle[k], float(sim.body_speed[k]), sim.wheel_torque[k],
+            imu=held,
+        )  # fmt: skip
+        slope[k] = out.estimates.slope
+        sources[k] = out.slope_sources
+    np.testing.assert_array_equal(slope, offline.slope)
+    np.testing.assert_array_equal(sources, offline.slope_sources)
+    assert np.any(sources == SOURCE_FORCE | SOURCE_IMU)
+
+
+def test_replay_reads_the_mapped_imu_and_marks_the_slope_sources(tmp_path: Path) -> None:
+    sim = _drive()
+    n = int(40.0 * RATE_HZ)
+    part = SimResult(
+        **{
+            f.name: (getattr(sim, f.name)[:n] if f.name != 'events' else sim.events)
+            for f in dataclasses.fields(SimResult)
+        }
+    )
+    stamps = np.round(part.t * 1e9).astype(np.int64)
+    write_topic_arrays_bag(tmp_path / 'in', stamps, sim_topics(part, truth=False, imu=True))
+    mapping = mapping_from_dict({'imu': {'topic': SENSORS_IMU, 'type': 'sensor_msgs/msg/Imu'}})
+    replay_bag(tmp_path / 'in', tmp_path / 'out', mapping=mapping, situation=False)
+    arrays = BagReader(tmp_path / 'out').topic_arrays([ESTIMATES_SLOPE])[ESTIMATES_SLOPE]
+    slope = decode_batch('vd_msgs/msg/Slope', arrays.datas)
+    t = stamps * 1e-9  # the replay's stamps: the header's nanoseconds
+    expected = run_cascade(
+        t, part.wheel_angle, part.body_speed, part.wheel_torque, VEHICLE,
+        imu=np.column_stack([t, part.imu[:, 0]]), imu_config=CONFIG,
+    )  # fmt: skip
+    np.testing.assert_array_equal(slope.values['angle'], expected.slope)
+    np.testing.assert_array_equal(slope.values['sources'], expected.slope_sources)
+    assert np.any(slope.values['sources'] == SOURCE_FORCE | SOURCE_IMU)

@@ -140,3 +140,14 @@ def test_float64_array_with_three_axes_in_g_or_one_forward_element() -> None:
     assert forward is not None
     stamp, _, row = InputDecoder(forward).decode(_array_message([9.0, -0.8]), receive_ns=42)
     assert stamp == 42 and row == pytest.approx((0.8,))
+
+
+def test_the_player_plays_a_recorded_imu_with_the_mapped_inputs() -> None:
+    from vd_observer_node.nodes.player_node import mapped_topics
+
+    mapping = _mapping(type='sensor_msgs/msg/Imu')
+    own = {spec.topic: spec.msgtype for spec in default_mapping().specs}
+    assert mapped_topics(mapping, own) == list(own)  # not recorded: not played, not refused
+    assert mapped_topics(mapping, {**own, '/imu': 'sensor_msgs/msg/Imu'}) == [*own, '/imu']
+    with pytest.raises(MappingError, match=r'imu\.type: /imu is'):
+        mapped_topics(mapping, {**own, '/imu': 'geometry_msgs/msg/AccelStamped'})

@@ -158,7 +158,7 @@ class ImuGradeConfig:
         max_age: an IMU sample older than this at a stamp is a dropout, [s].
         saturation: |f_x| at or above this is a saturated sensor, [m/s^2].
         max_slope: |fused slope| above this is invalid, [rad].
-        min_speed: the regression uses stamps at or above this speed, [m/s].
+        min_speed: the regression uses stamps at or above this forward speed, [m/s].
         mass_std: prior standard deviation of the mass around the vehicle file's, [kg].
         bias_std: prior standard deviation of the IMU's bias, [m/s^2].
         pitch_compliance: body pitch (nose up) per newton of the longitudinal ground force,
@@ -406,7 +406,8 @@ def imu_grade_step(
     if t - s.since < 3.0 * _ORDER * p.tau:
         _force_only(out, slope_force, force_valid)
         return
-    if usable and abs(speed) >= p.min_speed and dt > 0.0:
+    # forward only: the rolling resistance's sign is the speed's (and reversing is rare)
+    if usable and speed >= p.min_speed and dt > 0.0:
         _regression(p, s, dt, y[0], y[2] / p.gravity, speed)
         m = _mass(p, s)
         out.mass = m

@@ -35,6 +35,7 @@ __all__ = ['EverydaySettings', 'everyday_scenario', 'start_gear']
 
 _KMH = 1.0 / 3.6
 _RAMP_STEP = 0.25  # [s] step of the staircase that makes a grade ramp
+_MARGIN = 3.0  # [m/s] the driver's margin above the band's low end (the model is rough)
 
 
 @dataclass(frozen=True)
@@ -150,8 +151,8 @@ def everyday_scenario(
             hold = min(hold, _grid(float(rng.uniform(1.0, 3.0))))
         # look ahead; turn back where the band would be left
         end = _speed_after(params, mass, v, th, br, grades, t, hold)
-        if end < low:
-            th, br = float(rng.uniform(0.4, 0.8)), 0.0
+        if end < low + _MARGIN:
+            th, br = float(rng.uniform(0.6, 1.0)), 0.0
         elif end > high:
             th, br = 0.0, float(rng.uniform(0.1, 0.3))
             hold = min(hold, 3.0)
