@@ -417,6 +417,15 @@ class SimNode(Node):
 
     def publish_frame(self, f: SampleFrame) -> None:
         header = Header(stamp=self._stamp(f.t), frame_id=self.frame_id)
+        # the IMU first: a node that holds the newest IMU sample then has this stamp's when
+        # the wheel sensors of the stamp complete it (what a replay holds)
+        if self.p_imu is not None:
+            imu = Imu(header=header)
+            imu.orientation_covariance[0] = -1.0  # REP 145: no orientation
+            imu.angular_velocity_covariance[0] = -1.0  # nor angular velocity
+            imu.linear_acceleration.x = float(f.imu[0])
+            imu.linear_acceleration.z = float(f.imu[1])
+            self.p_imu.publish(imu)
         self.p_angles.publish(WheelAngles(header=header, angle=f.wheel_angle.tolist()))
         speed = TwistStamped(header=header)
         speed.twist.linear.x = float(f.body_speed)
@@ -430,13 +439,6 @@ class SimNode(Node):
                 gear=int(f.gear),
             )
         )
-        if self.p_imu is not None:
-            imu = Imu(header=header)
-            imu.orientation_covariance[0] = -1.0  # REP 145: no orientation
-            imu.angular_velocity_covariance[0] = -1.0  # nor angular velocity
-            imu.linear_acceleration.x = float(f.imu[0])
-            imu.linear_acceleration.z = float(f.imu[1])
-            self.p_imu.publish(imu)
         if self.publish_truth:
             self.t_states.publish(
                 WheelStates(

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from dataclasses import replace
 from typing import Any
 
@@ -140,6 +141,8 @@ _OUTPUTS = (
     ('alerts', Alerts, ESTIMATES_ALERTS, 'vd_msgs/msg/Alerts'),
     ('offset', TorqueOffsetEstimate, ESTIMATES_TORQUE_OFFSET, 'vd_msgs/msg/TorqueOffsetEstimate'),
 )
+#: IMU samples kept for the stamps to come (an IMU ahead of the wheels by up to this many)
+_IMU_HELD = 64
 _OBSERVER_KEYS = {f for f in ObserverConfig.__dataclass_fields__ if f != 'gains'}
 _GAIN_KEYS = set(LevantGains.__dataclass_fields__)
 
@@ -260,9 +263,10 @@ class PipelineNode(Node):
                 radius=settings.vehicle.effective_radius,
             )
             self.create_subscription(cls, spec.topic, callback, STREAM_QOS, raw=True)
-        # the newest IMU sample (stamp [s], forward specific force [m/s^2]): held, as the
-        # replay holds it; the fusion judges its age
-        self._imu: tuple[float, float] | None = None
+        # the IMU samples received (stamp [s], forward specific force [m/s^2]), the last few:
+        # each stamp takes the newest not later than it, as the replay holds them; the
+        # fusion judges its age
+        self._imu: deque[tuple[float, float]] = deque(maxlen=_IMU_HELD)
         if mapping.imu is not None:
             imu_decoder = InputDecoder(mapping.imu)
 
@@ -272,7 +276,7 @@ class PipelineNode(Node):
                 except (BagFormatError, MappingError):
                     self.counts['undecodable'] += 1
                     return
-                self._imu = (stamp * 1e-9, row[0])
+                self._imu.append((stamp * 1e-9, row[0]))
 
             self.create_subscription(
                 input_message_class(mapping.imu), mapping.imu.topic, on_imu, STREAM_QOS,
@@ -297,7 +301,9 @@ class PipelineNode(Node):
         source = self.torque_source
         torques = m['wheel_torques'][1] if source == 'measured' else self._no_torque
         engine = m[ENGINE_INPUT][1] if source == 'engine' else None
-        out = self.chain.update(stamp_ns * 1e-9, angles, speed, torques, engine, self._imu)
+        t = stamp_ns * 1e-9
+        imu = next((sample for sample in reversed(self._imu) if sample[0] <= t), None)
+        out = self.chain.update(t, angles, speed, torques, engine, imu)
         self.counts['estimates'] += 1
         if not self._finite(out):
             self.counts['withheld_non_finite'] += 1
