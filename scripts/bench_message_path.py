@@ -181,10 +181,10 @@ def stamp_layout_figures() -> None:
         (TireForces, 'vd_msgs/msg/TireForces', [*four, *four, 0]),
         (Friction, 'vd_msgs/msg/Friction', [*four, *four, True, True, True, True, 0]),
         (Resistances, 'vd_msgs/msg/Resistances', [*four, 1.0]),
-        (Slope, 'vd_msgs/msg/Slope', [0.01, True, 0]),
+        (Slope, 'vd_msgs/msg/Slope', [0.01, True, 0, 1]),
     ]
     combined = [*four, *four, *four, 10.0, 0.5, *four, *four, *four, *four]
-    combined += [True] * 4 + [*four, 1.0, 0.01, True, 0]
+    combined += [True] * 4 + [*four, 1.0, 0.01, True, 1, 0]
     layouts = {
         'separate (7 messages)': [
             (cls, MessageCodec(name, 'base_link').encode(1, values))

@@ -209,7 +209,7 @@ def _imu(stamp_ns: int, accel: FloatArray, gyro: FloatArray) -> Any:
 
 def _slope(stamp_ns: int, angle: float, valid: bool) -> Any:
     return message_class('vd_msgs/msg/Slope')(
-        header=header(stamp_ns), angle=angle, valid=valid, torque_source=0
+        header=header(stamp_ns), angle=angle, valid=valid, torque_source=0, sources=0
     )
 
 

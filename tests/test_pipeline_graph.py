@@ -31,8 +31,11 @@ from vd_common.topics import (
     ESTIMATES_SLOPE,
     ESTIMATES_TIRE_FORCES,
     OBSERVER_WHEEL_STATES,
+    SENSORS_IMU,
     SENSORS_WHEEL_ANGLES,
 )
+from vd_observer_node.estimation.imu_grade import SOURCE_IMU
+from vd_observer_node.inputs.mapping import load_input_mapping
 from vd_observer_node.tools.replay import replay_bag
 
 #: every test here is a long end-to-end run (CI runs it; locally: make test-all)
@@ -69,6 +72,7 @@ COMBINED_FIELDS = (
     (ESTIMATES_RESISTANCES, 'aero', 'aero'),
     (ESTIMATES_SLOPE, 'angle', 'slope'),
     (ESTIMATES_SLOPE, 'valid', 'slope_valid'),
+    (ESTIMATES_SLOPE, 'sources', 'slope_sources'),
 )
 
 
@@ -136,3 +140,50 @@ def test_pipeline_node_publishes_what_offline_replay_computes(
         assert [(r.kind, r.wheel, r.level, r.onset) for r in a] == [
             (r.kind, r.wheel, r.level, r.onset) for r in b
         ]
+
+
+@pytest.mark.ros
+def test_pipeline_node_fuses_a_mapped_imu(procs: RosProcessGroup, tmp_path: Path) -> None:
+    """The simulator's IMU, mapped: the live slope says it used it and is what the replay
+    computes with the same mapping, within the IMU sample the live node held (the replay
+    holds the one of the stamp, the live node the newest that had arrived: one 10 ms
+    sample older at most)."""
+    scenario = tmp_path / 'launch_imu.yaml'
+    scenario.write_text(
+        SCENARIO.read_text(encoding='utf-8').replace(
+            'sensors:\n', 'sensors:\n  imu: true\n  imu_noise_std: 0.02\n  imu_bias: 0.05\n'
+        ),
+        encoding='utf-8',
+    )
+    mapping = tmp_path / 'imu.yaml'
+    mapping.write_text(f'imu:\n  topic: {SENSORS_IMU}\n  type: sensor_msgs/msg/Imu\n')
+    bag = tmp_path / 'live'
+    rec = procs.node('recorder', 'vd_observer_node', 'recorder_node', output=str(bag))
+    pipe = procs.node('pipeline', 'vd_observer_node', 'pipeline_node', input_mapping=str(mapping))
+    for proc, text in ((rec, 'recording to'), (pipe, 'pipeline ready')):
+        proc.wait_for(text, timeout=60)
+    wait_recording(rec, [ESTIMATES_SLOPE])
+    waiter = wait_for_last_stamp(
+        procs, 'waiter', LAST_STAMP_NS, {ESTIMATES_SLOPE: 'vd_msgs.msg/Slope'}
+    )
+    sim = procs.node(
+        'sim', 'vd_sim_node', 'sim_node', scenario_file=str(scenario), rate_hz=RATE_HZ,
+        real_time_factor=1.0, min_sensor_subscribers=2,
+    )  # fmt: skip
+    assert wait_exit(sim, 60) == 0, sim.output()
+    assert wait_exit(waiter, 180) == 0, waiter.output()
+    for proc in (pipe, rec):
+        assert proc.stop() == 0, proc.output()[-3000:]
+    assert 'Traceback' not in pipe.output(), pipe.output()[-3000:]
+    live = by_topic(bag, [SENSORS_IMU, ESTIMATES_SLOPE])
+    assert len(live[SENSORS_IMU]) == N_SAMPLES
+    stamps = sorted(live[ESTIMATES_SLOPE])
+    assert len(stamps) == N_SAMPLES
+    sources = np.array([live[ESTIMATES_SLOPE][s].sources for s in stamps])
+    assert np.any(sources & SOURCE_IMU), 'the live slope never used the IMU'
+    offline_bag = tmp_path / 'offline'
+    replay_bag(bag, offline_bag, mapping=load_input_mapping(mapping), progress=False)
+    offline = by_topic(offline_bag, [ESTIMATES_SLOPE])
+    a = np.array([live[ESTIMATES_SLOPE][s].angle for s in stamps])
+    b = np.array([offline[ESTIMATES_SLOPE][s].angle for s in stamps])
+    np.testing.assert_allclose(a, b, atol=np.radians(0.1))

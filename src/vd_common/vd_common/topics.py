@@ -37,6 +37,7 @@ __all__ = [
     'ON_CHANGE',
     'SENSORS',
     'SENSORS_BODY_VELOCITY',
+    'SENSORS_IMU',
     'SENSORS_NAMESPACE',
     'SENSORS_WHEEL_ANGLES',
     'SENSORS_WHEEL_TORQUES',
@@ -69,6 +70,8 @@ STATUS_NAMESPACE: Final = '/vd/status/'
 SENSORS_WHEEL_ANGLES: Final = '/vd/sensors/wheel_angles'
 SENSORS_BODY_VELOCITY: Final = '/vd/sensors/body_velocity'
 SENSORS_WHEEL_TORQUES: Final = '/vd/sensors/wheel_torques'
+# Optional: the simulator's IMU (specific force), where its scenario has one.
+SENSORS_IMU: Final = '/vd/sensors/imu'
 # The observer's outputs.
 OBSERVER_WHEEL_STATES: Final = '/vd/observer/wheel_states'
 OBSERVER_BODY_ACCEL: Final = '/vd/observer/body_accel'
@@ -100,6 +103,7 @@ SENSORS: Final = {
     SENSORS_WHEEL_ANGLES: 'vd_msgs/msg/WheelAngles',
     SENSORS_BODY_VELOCITY: 'geometry_msgs/msg/TwistStamped',
     SENSORS_WHEEL_TORQUES: 'vd_msgs/msg/WheelTorques',
+    SENSORS_IMU: 'sensor_msgs/msg/Imu',
 }
 OBSERVER: Final = {
     OBSERVER_WHEEL_STATES: 'vd_msgs/msg/WheelStates',

@@ -33,6 +33,7 @@ def _write(path: Path, offset_ns: int = 0) -> None:
             'angle': rng.normal(size=N),
             'valid': rng.integers(0, 2, N).astype(bool),
             'torque_source': rng.integers(0, 3, N),
+            'sources': np.arange(N) % 4,
         },
     )
     with BagWriter(path, chunk_size=CHUNK) as writer:

@@ -79,7 +79,7 @@ def test_decode_rejects_what_it_cannot_read() -> None:
         'vd_msgs/msg/Slope',
         np.array([1]),
         'f',
-        {'angle': [0.5], 'valid': [1], 'torque_source': [0]},
+        {'angle': [0.5], 'valid': [1], 'torque_source': [0], 'sources': [0]},
     )
     with pytest.raises(BagFormatError, match='little-endian'):
         decode_batch('vd_msgs/msg/Slope', [b'\x00\x00' + good[0][2:]])
@@ -92,14 +92,14 @@ def test_decode_rejects_what_it_cannot_read() -> None:
             'vd_msgs/msg/Slope',
             np.array([2**31 * 10**9]),
             'f',
-            {'angle': [0.0], 'valid': [1], 'torque_source': [0]},
+            {'angle': [0.0], 'valid': [1], 'torque_source': [0], 'sources': [0]},
         )
     with pytest.raises(BagUsageError, match='shape'):
         encode_batch(
             'vd_msgs/msg/Slope',
             np.array([1, 2]),
             'f',
-            {'angle': [0.0], 'valid': [1], 'torque_source': [0]},
+            {'angle': [0.0], 'valid': [1], 'torque_source': [0], 'sources': [0]},
         )
 
 
@@ -116,7 +116,12 @@ def test_write_interleaved_is_a_valid_indexed_mcap(tmp_path: Path) -> None:
         'vd_msgs/msg/Slope',
         stamps,
         'yy',
-        {'angle': rng.normal(size=n), 'valid': np.ones(n), 'torque_source': np.ones(n)},
+        {
+            'angle': rng.normal(size=n),
+            'valid': np.ones(n),
+            'torque_source': np.ones(n),
+            'sources': np.ones(n),
+        },
     )
     datas = [angles[k] if which[k] == 0 else slopes[k] for k in range(n)]
     with BagWriter(tmp_path / 'v', chunk_size=8192) as writer:

@@ -69,8 +69,8 @@ def test_codec_refuses_what_it_cannot_code() -> None:
     with pytest.raises(BagUsageError, match='cannot encode'):
         codec.encode(0, [0.5])
     with pytest.raises(BagUsageError, match='int32'):
-        codec.encode(2**31 * 10**9, [0.5, True, 1])
-    good = codec.encode(1, [0.5, True, 1])
+        codec.encode(2**31 * 10**9, [0.5, True, 1, 3])
+    good = codec.encode(1, [0.5, True, 1, 3])
     with pytest.raises(BagFormatError, match='little-endian'):
         codec.decode(b'\x00\x00' + good[2:])
     with pytest.raises(BagFormatError):

@@ -205,6 +205,7 @@ def _messages() -> list[tuple[int, int, bytes]]:
             'angle': rng.normal(size=N),
             'valid': rng.integers(0, 2, N).astype(bool),
             'torque_source': rng.integers(0, 3, N),
+            'sources': np.arange(N) % 4,
         },
     )
     out = []

@@ -37,6 +37,7 @@ def _write(path: Path) -> list[tuple[str, int, bytes]]:
             'angle': rng.normal(size=N),
             'valid': rng.integers(0, 2, N).astype(bool),
             'torque_source': rng.integers(0, 3, N),
+            'sources': np.arange(N) % 4,
         },
     )
     sent = []

@@ -78,7 +78,12 @@ def _stream(n: int) -> tuple[list[str], np.ndarray, list[bytes], np.ndarray]:
         'vd_msgs/msg/Slope',
         stamps,
         'yy',
-        {'angle': rng.normal(size=n), 'valid': np.ones(n), 'torque_source': np.ones(n)},
+        {
+            'angle': rng.normal(size=n),
+            'valid': np.ones(n),
+            'torque_source': np.ones(n),
+            'sources': np.ones(n),
+        },
     )
     which = rng.integers(0, 2, size=n)
     datas = [angles[k] if which[k] == 0 else slopes[k] for k in range(n)]

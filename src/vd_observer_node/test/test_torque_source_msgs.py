@@ -1,5 +1,6 @@
-"""The torque_source field of TireForces, Friction and Slope through the bag CDR code, and bags
-written before the field existed (their embedded definitions) read back and upgraded."""
+"""The torque_source field of TireForces, Friction and Slope (and Slope's sources) through the
+bag CDR code, and bags written before the fields existed (their embedded definitions) read back
+and upgraded."""
 
 from __future__ import annotations
 
@@ -21,6 +22,8 @@ from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_MEASURED, TORQUE_NONE
 
 TYPES = ('vd_msgs/msg/TireForces', 'vd_msgs/msg/Friction', 'vd_msgs/msg/Slope')
+#: fields added after bags were written: torque_source, and Slope's sources (issue 27)
+_ADDED = ('torque_source', 'sources')
 
 
 def values_of(msgtype: str, n: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
@@ -28,7 +31,7 @@ def values_of(msgtype: str, n: int, rng: np.random.Generator) -> dict[str, np.nd
     for f in flat_fields(msgtype):
         shape = (n, f.count) if f.count > 1 else (n,)
         kind = np.dtype(f.dtype).kind
-        if f.name == 'torque_source':
+        if f.name in _ADDED:
             out[f.name] = rng.integers(0, 3, size=shape).astype(np.uint8)
         elif kind == 'b':
             out[f.name] = rng.integers(0, 2, size=shape).astype(bool)
@@ -45,7 +48,9 @@ def test_field_and_constants_round_trip(msgtype: str) -> None:
         TORQUE_ENGINE,
         TORQUE_NONE,
     )
-    assert flat_fields(msgtype)[-1].name == 'torque_source'
+    names = [f.name for f in flat_fields(msgtype)]
+    assert names[-1] == ('sources' if msgtype.endswith('Slope') else 'torque_source')
+    assert 'torque_source' in names
     rng = np.random.default_rng(5)
     stamps = np.arange(6, dtype=np.int64) * 10_000_000
     values = values_of(msgtype, 6, rng)
@@ -60,23 +65,24 @@ def test_field_and_constants_round_trip(msgtype: str) -> None:
             v = values[f.name][k]
             flat.extend(v.tolist() if f.count > 1 else [v.item()])
         assert codec.encode(int(stamps[k]), flat) == data
-        assert codec.decode(data)[2][-1] == values['torque_source'][k]
+        assert codec.decode(data)[2][names.index('torque_source')] == values['torque_source'][k]
         msg = deserialize(data, msgtype)  # rosbags agrees on the layout
         assert msg.torque_source == values['torque_source'][k]
         assert serialize(msg, msgtype) == data
 
 
 def old_definition(msgtype: str) -> str:
-    """Today's definition without the torque-source lines: what older bags embed."""
+    """Today's definition without the torque-source (and slope-sources) lines: what older
+    bags embed."""
     lines = message_definition(msgtype).splitlines()
-    return '\n'.join(
-        line for line in lines if 'TORQUE_' not in line and 'torque_source' not in line
-    )
+    dropped = ('TORQUE_', 'torque_source', 'SOURCE_', 'uint8 sources')
+    return '\n'.join(line for line in lines if not any(d in line for d in dropped))
 
 
 @pytest.mark.parametrize('msgtype', TYPES)
 def test_bags_without_the_field_read_and_upgrade(msgtype: str, tmp_path: Path) -> None:
     old = old_definition(msgtype)
+    names = [f.name for f in flat_fields(msgtype)]
     alias = decoding_type(msgtype, old)
     assert alias != msgtype and alias.endswith(msgtype.split('/')[-1])
     assert decoding_type(msgtype, message_definition(msgtype)) == msgtype
@@ -84,14 +90,17 @@ def test_bags_without_the_field_read_and_upgrade(msgtype: str, tmp_path: Path) -
     rng = np.random.default_rng(9)
     n = 40
     stamps = np.arange(n, dtype=np.int64) * 10_000_000
-    values = {k: v for k, v in values_of(msgtype, n, rng).items() if k != 'torque_source'}
+    values = {k: v for k, v in values_of(msgtype, n, rng).items() if k not in _ADDED}
     old_datas = encode_batch(alias, stamps, 'base_link', values)
     assert len(old_datas[0]) < len(
         encode_batch(
             msgtype,
             stamps[:1],
             'base_link',
-            {**{k: v[:1] for k, v in values.items()}, 'torque_source': np.zeros(1, np.uint8)},
+            {
+                **{k: v[:1] for k, v in values.items()},
+                **{k: np.zeros(1, np.uint8) for k in _ADDED if k in names},
+            },
         )[0]
     )
     with BagWriter(tmp_path / 'old') as writer:
@@ -109,7 +118,8 @@ def test_bags_without_the_field_read_and_upgrade(msgtype: str, tmp_path: Path) -
     upgraded = upgrade_batch(msgtype, arrays.decoding_type, arrays.datas)
     today = decode_batch(msgtype, upgraded)
     np.testing.assert_array_equal(today.stamp_ns, stamps)
-    np.testing.assert_array_equal(today.values['torque_source'], np.zeros(n))
+    for name in (k for k in _ADDED if k in names):
+        np.testing.assert_array_equal(today.values[name], np.zeros(n))
     for name, value in values.items():
         np.testing.assert_array_equal(today.values[name], value)
     assert upgrade_batch(msgtype, msgtype, upgraded) == upgraded

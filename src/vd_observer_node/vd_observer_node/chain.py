@@ -13,9 +13,10 @@ the monitor). ``VD_JIT=0`` runs the same source as plain Python.
 
 from __future__ import annotations
 
+import math
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Final, NamedTuple
 
 import numpy as np
@@ -32,6 +33,7 @@ from vd_observer_node.estimation.drivetrain import (
 )
 from vd_observer_node.estimation.estimator import Estimates, EstimatorConfig, estimates_from_record
 from vd_observer_node.estimation.faults import FaultCounter, FaultReport, merge_reports
+from vd_observer_node.estimation.imu_grade import GRADE_OUT, SOURCE_FORCE, ImuGradeConfig
 from vd_observer_node.estimation.observer import ObserverConfig, SpeedState, WheelState
 from vd_observer_node.estimation.torque_offset import TorqueOffset, offset_from_record
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params, vehicle_tire
@@ -77,6 +79,8 @@ class ChainSettings:
             gear through `drivetrain`) or 'none' (no torque: Fx 0, mu and slope invalid), as
             `cascade.run_cascade` takes it.
         drivetrain: the vehicle's driveline; needed by the engine path only.
+        imu: the IMU fusion's settings (`imu_grade`); None: no IMU, the force balance's
+            slope as it is.
     """
 
     vehicle: EstimatorVehicle
@@ -89,6 +93,7 @@ class ChainSettings:
     estimator_speed: str = 'measured'
     torque_source: str = 'measured'
     drivetrain: Drivetrain | None = None
+    imu: ImuGradeConfig | None = None
 
     def __post_init__(self) -> None:
         if self.estimator_speed not in ESTIMATOR_SPEEDS:
@@ -132,6 +137,8 @@ class ChainOutput(NamedTuple):
         situation: friction potential and the 12 alert records.
         torque_offset: the engine-torque offset estimate (engine path with
             ``torque_offset_adaptation`` only, else None).
+        slope_sources: what ``estimates.slope`` is made of (`imu_grade.SOURCE_FORCE` |
+            `imu_grade.SOURCE_IMU`; 0: nothing valid).
     """
 
     wheel: WheelState
@@ -139,6 +146,7 @@ class ChainOutput(NamedTuple):
     estimates: Estimates
     situation: Situation
     torque_offset: TorqueOffset | None = None
+    slope_sources: int = 0
 
 
 class Chain:
@@ -180,6 +188,8 @@ class Chain:
         self._est_fields = self._out.est.view(np.ndarray)
         self._situation = SituationBlock.empty(1)
         self._no_engine = np.zeros((1, 3))
+        self._grade = self.parts.grade(settings.imu) if settings.imu is not None else None
+        self._grade_out = np.zeros(1, GRADE_OUT).view(np.recarray)[0]
 
     def update(
         self,
@@ -188,6 +198,7 @@ class Chain:
         speed: float,
         wheel_torque: ArrayLike,
         engine: ArrayLike | None = None,
+        imu: tuple[float, float] | None = None,
     ) -> ChainOutput:
         """Advance to stamp t.
 
@@ -200,6 +211,8 @@ class Chain:
                 path only).
             engine: shape (3,): engine torque [N m], gear, engine speed [rad/s] (nan if not
                 measured); read on the engine path only, where it is required.
+            imu: the newest IMU sample: its stamp [s] and forward specific force [m/s^2]
+                (read with ``settings.imu`` only; None: none yet).
 
         Raises:
             InputShapeError: an array input has the wrong shape, or no engine on the engine
@@ -247,15 +260,39 @@ class Chain:
             offset = offset_from_record(out.offsets[0])
             if offset.clamped and self.engine_faults is not None:
                 self.engine_faults.count('torque_offset_clamped')
+        estimates = estimates_from_record(est)
+        sources = SOURCE_FORCE if estimates.slope_valid else 0
+        if self._grade is not None:
+            ok = bool(out.torque_valid[0])
+            estimates, sources = self._fuse(estimates, float(t), float(speed), imu, ok)
         return ChainOutput(
             WheelState(
                 wheel[0].copy(), wheel[1].copy(), wheel[2].copy(), out.wheel_valid[0].copy()
             ),
             SpeedState(float(out.body[0, 0]), float(out.body[0, 1]), bool(out.body_valid[0])),
-            estimates_from_record(est),
+            estimates,
             situation,
             offset,
+            sources,
         )
+
+    def _fuse(
+        self,
+        e: Estimates,
+        t: float,
+        speed: float,
+        imu: tuple[float, float] | None,
+        torque_ok: bool,
+    ) -> tuple[Estimates, int]:
+        """The estimates with the IMU fusion's slope (`imu_grade`), and its sources."""
+        assert self._grade is not None  # called with an IMU only
+        stamp, f_x = imu if imu is not None else (math.nan, math.nan)
+        force = float(np.sum(e.fx)) - math.copysign(e.aero, speed)
+        ok = torque_ok and not self._none and math.isfinite(force)
+        g = self._grade_out
+        self._grade.step(t, stamp, f_x, speed, e.slope, e.slope_valid, force, ok, e.mass_used, g)
+        fused = replace(e, slope=float(g.slope), slope_valid=bool(g.slope_valid))
+        return fused, int(g.sources)
 
     def fault_report(self) -> FaultReport:
         """Faults since the previous call, per part ('wheel', 'speed', 'estimator', and

@@ -34,6 +34,7 @@ from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import Imu
 from std_msgs.msg import Header
 from vd_common.ros_common import (
     CLOCK_QOS,
@@ -54,6 +55,7 @@ from vd_common.ros_common import (
 )
 from vd_common.topics import (
     SENSORS_BODY_VELOCITY,
+    SENSORS_IMU,
     SENSORS_WHEEL_ANGLES,
     SENSORS_WHEEL_TORQUES,
     TRUTH_BODY_ACCEL,
@@ -260,6 +262,8 @@ class SimNode(Node):
         self.p_angles = pub(WheelAngles, SENSORS_WHEEL_ANGLES)
         self.p_speed = pub(TwistStamped, SENSORS_BODY_VELOCITY)
         self.p_torques = pub(WheelTorques, SENSORS_WHEEL_TORQUES)
+        # the IMU only where the scenario's car has one (the other runs keep their topics)
+        self.p_imu = pub(Imu, SENSORS_IMU) if self.sim.scenario.sensors.imu else None
         if self.publish_truth:
             self.t_states = pub(WheelStates, TRUTH_WHEEL_STATES)
             self.t_accel = pub(AccelStamped, TRUTH_BODY_ACCEL)
@@ -415,6 +419,15 @@ class SimNode(Node):
 
     def publish_frame(self, f: SampleFrame) -> None:
         header = Header(stamp=self._stamp(f.t), frame_id=self.frame_id)
+        # the IMU first: a node that holds the newest IMU sample then has this stamp's when
+        # the wheel sensors of the stamp complete it (what a replay holds)
+        if self.p_imu is not None:
+            imu = Imu(header=header)
+            imu.orientation_covariance[0] = -1.0  # REP 145: no orientation
+            imu.angular_velocity_covariance[0] = -1.0  # nor angular velocity
+            imu.linear_acceleration.x = float(f.imu[0])
+            imu.linear_acceleration.z = float(f.imu[1])
+            self.p_imu.publish(imu)
         self.p_angles.publish(WheelAngles(header=header, angle=f.wheel_angle.tolist()))
         speed = TwistStamped(header=header)
         speed.twist.linear.x = float(f.body_speed)

@@ -8,7 +8,7 @@ run in blocks with a carried `CascadeState` (what the streamed replay does).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -27,6 +27,7 @@ from vd_observer_node.estimation.drivetrain import (
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.estimator_step import ESTIMATES
 from vd_observer_node.estimation.faults import ENGINE_FAULTS, FaultCounter
+from vd_observer_node.estimation.imu_grade import SOURCE_FORCE, ImuGrade, ImuGradeConfig
 from vd_observer_node.estimation.observer import WHEEL_INPUTS, ObserverConfig
 from vd_observer_node.estimation.torque_offset import (
     OFFSET_ESTIMATE_DTYPE,
@@ -49,6 +50,7 @@ __all__ = [
     'checked_record',
     'offset_result_name',
     'run_cascade',
+    'with_imu_grade',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -105,6 +107,17 @@ class CascadeResult:
         wheel_torque_used: shape (N, 4), [N m] the wheel torques the estimator got (the
             measured ones, the engine path's (nan where it had none), or zeros without
             torque).
+        slope_sources: shape (N,), uint8: what the slope used, `imu_grade.SOURCE_FORCE`
+            | `imu_grade.SOURCE_IMU` (0: nothing valid).
+        slope_force: shape (N,), [rad] the force balance's own slope (= slope without IMU).
+        slope_imu: shape (N,), [rad] the IMU's bias-corrected grade (nan where it has none;
+            empty without IMU).
+        imu_bias: shape (N,), [m/s^2] the learnt bias of the IMU's specific force (empty
+            without IMU).
+        imu_mass: shape (N,), [kg] the mass the IMU regression found (`imu_grade`; empty
+            without IMU); imu_mass_std its standard deviation.
+        imu_fitted: shape (N,), bool, the regression's mass has converged.
+        imu_trusted: shape (N,), bool, its bias has converged: the slope is the IMU's.
     """
 
     t: FloatArray
@@ -147,6 +160,14 @@ class CascadeResult:
     )
     torque_offset_clamped: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     wheel_torque_used: FloatArray = field(default_factory=lambda: np.zeros((0, 4)))
+    slope_sources: NDArray[np.uint8] = field(default_factory=lambda: np.zeros(0, dtype=np.uint8))
+    slope_force: FloatArray = field(default_factory=lambda: np.zeros(0))
+    slope_imu: FloatArray = field(default_factory=lambda: np.zeros(0))
+    imu_bias: FloatArray = field(default_factory=lambda: np.zeros(0))
+    imu_mass: FloatArray = field(default_factory=lambda: np.zeros(0))
+    imu_mass_std: FloatArray = field(default_factory=lambda: np.zeros(0))
+    imu_fitted: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    imu_trusted: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 @dataclass
@@ -323,7 +344,17 @@ class CascadeParts:
         self.offset_state = new_offset_state()
         self.offset_estimate = new_offset_estimate()
         self.engine_faults = FaultCounter(ENGINE_FAULTS) if self.offset_on else None
+        #: the IMU fusion (`imu_grade`), made by the first block that has an IMU
+        self.imu_grade: ImuGrade | None = None
+        self._vehicle = vehicle
         self._args: tuple[Any, ...] | None = None
+
+    def grade(self, config: ImuGradeConfig | None) -> ImuGrade:
+        """The IMU fusion's records (made on the first call, with `config`)."""
+        if self.imu_grade is None:
+            v = self._vehicle
+            self.imu_grade = ImuGrade(config, v.gravity, v.mass, v.rolling_c0, v.rolling_c1)
+        return self.imu_grade
 
     @property
     def engine_on(self) -> bool:
@@ -424,6 +455,8 @@ def run_cascade(
     engine: ArrayLike | None = None,
     drivetrain: Drivetrain | None = None,
     state: CascadeState | None = None,
+    imu: ArrayLike | None = None,
+    imu_config: ImuGradeConfig | None = None,
 ) -> CascadeResult:
     """Run observers and estimator over a record sampled at common stamps.
 
@@ -449,6 +482,10 @@ def run_cascade(
         drivetrain: the vehicle's driveline; needed by the engine path only.
         state: carried from the previous block of the record (`CascadeState`); None: the
             record is whole. ``faults`` are then the totals since the first block.
+        imu: shape (N, 2): stamp [s] of the newest IMU sample at each stamp (nan: none) and
+            its longitudinal specific force in body axes [m/s^2]; the slope is then the
+            fusion of `imu_grade` (None: the force balance's slope, as without an IMU).
+        imu_config: the fusion's settings (defaults if None).
 
     Raises:
         InputShapeError: inconsistent shapes.
@@ -476,7 +513,46 @@ def run_cascade(
     block(*parts.args(), stamps, angles, speeds, torques, engine_record, *out.outputs())
     if source == TORQUE_NONE:
         out.torque_valid[:] = False
-    return cascade_result(stamps, source, parts, out)
+    result = cascade_result(stamps, source, parts, out)
+    if imu is None:
+        return result
+    return with_imu_grade(result, parts.grade(imu_config), imu, speeds)
+
+
+def with_imu_grade(
+    result: CascadeResult, grade: ImuGrade, imu: ArrayLike, speeds: FloatArray
+) -> CascadeResult:
+    """`result` with its slope fused with the IMU's grade (`imu_grade`).
+
+    Raises:
+        InputShapeError: imu is not of shape (N, 2).
+    """
+    n = result.t.shape[0]
+    record = np.ascontiguousarray(imu, dtype=np.float64)
+    if record.shape != (n, 2):
+        raise InputShapeError(
+            f'imu must have shape ({n}, 2) (sample stamp, specific force), got {record.shape}'
+        )
+    # the longitudinal balance without gravity and rolling: what the regression explains
+    force = result.fx.sum(axis=1) - np.copysign(result.aero, speeds)
+    force_ok = result.torque_valid & np.isfinite(force)
+    fused = grade.run(
+        result.t, record, speeds, result.slope, result.slope_valid, force, force_ok,
+        result.mass_used,
+    )  # fmt: skip
+    return replace(
+        result,
+        slope=fused.slope.copy(),
+        slope_valid=fused.slope_valid.copy(),
+        slope_sources=fused.sources.copy(),
+        slope_force=result.slope,
+        slope_imu=fused.slope_imu.copy(),
+        imu_bias=fused.bias.copy(),
+        imu_mass=fused.mass.copy(),
+        imu_mass_std=fused.mass_std.copy(),
+        imu_fitted=fused.fitted.copy(),
+        imu_trusted=fused.trusted.copy(),
+    )
 
 
 def cascade_result(
@@ -521,4 +597,6 @@ def cascade_result(
         radius_free_wheels=est.radius_free_wheels.astype(np.int64),
         **learnt.fields(),
         wheel_torque_used=out.used.copy(),
+        slope_sources=np.where(est.slope_valid, SOURCE_FORCE, 0).astype(np.uint8),
+        slope_force=est.slope.copy(),
     )

@@ -28,8 +28,11 @@ from vd_observer_node.bag.typestore import deserialize
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.health import StreamHealth
 from vd_observer_node.inputs.mapping import (
+    ACCEL_STAMPED,
     ENGINE_INPUT,
     FLOAT64_ARRAY,
+    IMU_INPUT,
+    IMU_TYPE,
     JOINT_STATE,
     ODOMETRY,
     TWIST_STAMPED,
@@ -159,8 +162,34 @@ def has_header(spec: InputSpec) -> bool:
     return spec.msgtype != FLOAT64_ARRAY
 
 
+def _imu(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[float], bytes]]:
+    """The IMU's forward specific force: the mounting's first row times the sensor's vector
+    (Imu.linear_acceleration, AccelStamped.accel.linear, or a Float64MultiArray's x, y, z;
+    one element of an array is already the forward specific force)."""
+    ax, ay, az = spec.axis if spec.axis else (1.0, 0.0, 0.0)
+
+    def vector(msg: Any, _log: int) -> tuple[int, Sequence[float], bytes]:
+        a = msg.linear_acceleration if spec.msgtype == IMU_TYPE else msg.accel.linear
+        row = [ax * float(a.x) + ay * float(a.y) + az * float(a.z)]
+        return _stamp(msg.header), row, msg.header.frame_id.encode()
+
+    if spec.msgtype in (IMU_TYPE, ACCEL_STAMPED):
+        return vector
+    array = _float64_array(spec)
+    if not spec.axis:
+        return array
+
+    def mounted(msg: Any, log: int) -> tuple[int, Sequence[float], bytes]:
+        stamp, (x, y, z), frame = array(msg, log)
+        return stamp, [ax * x + ay * y + az * z], frame
+
+    return mounted
+
+
 def _extractor(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[float], bytes]]:
     """The per-message extractor of a standard type with variable-length fields."""
+    if spec.name == IMU_INPUT:
+        return _imu(spec)
     if spec.msgtype == JOINT_STATE:
         return _joint_state(spec)
     if spec.msgtype == FLOAT64_ARRAY:

@@ -55,6 +55,22 @@ slope invalid); ``wheel_torques`` is then not read::
       unit: N m               # of the torque: N m | kN m
       speed_unit: rpm         # of the engine speed: rad/s | rpm
 
+``imu`` (optional): the longitudinal specific force of an accelerometer fixed to the body, fused
+with the force balance's slope (`estimation.imu_grade`, docs/estimation.md). From
+``sensor_msgs/msg/Imu`` (``linear_acceleration``), ``geometry_msgs/msg/AccelStamped``
+(``accel.linear``) or ``std_msgs/msg/Float64MultiArray`` (``indices``: the x, y, z elements,
+or one element that is already the body's forward specific force). ``mount_rpy_deg`` is the
+sensor frame's fixed orientation in the body frame (REP 103: x forward, y left, z up; roll,
+pitch, yaw in degrees, applied as tf does, yaw then pitch then roll; positive pitch is nose
+down); the body's forward specific force is the first row of that rotation times the
+sensor's vector::
+
+    imu:
+      topic: /imu
+      type: sensor_msgs/msg/Imu
+      mount_rpy_deg: [0, -2.5, 0]   # the sensor looks 2.5 deg nose up
+      unit: m/s^2                   # m/s^2 | g
+
 ``engine_torque`` from ``vd_msgs/msg/WheelTorques`` reads its ``engine_torque``, ``gear`` and
 ``engine_speed`` (the default: vd's own ``/vd/sensors/wheel_torques``).
 
@@ -95,6 +111,7 @@ from vd_observer_node.inputs.errors import MappingError
 __all__ = [
     'ALIGNMENTS',
     'ENGINE_INPUT',
+    'IMU_INPUT',
     'INPUTS',
     'INPUT_KEYS',
     'PER_RADIUS_UNITS',
@@ -106,6 +123,7 @@ __all__ = [
     'InputMapping',
     'InputSpec',
     'default_mapping',
+    'forward_axis',
     'load_input_mapping',
     'mapping_from_dict',
     'mapping_from_params',
@@ -117,6 +135,8 @@ INPUTS: Final = ('wheel_angles', 'wheel_speeds', 'body_speed', 'wheel_torques')
 SETTINGS: Final = ('alignment', 'max_age')
 #: Optional input of the engine path: engine torque, gear and (optionally) engine speed.
 ENGINE_INPUT: Final = 'engine_torque'
+#: Optional input: an accelerometer's longitudinal specific force (the grade fusion).
+IMU_INPUT: Final = 'imu'
 #: Where the wheel torques come from (`drivetrain.TORQUE_SOURCES`): a top-level key of the
 #: file (replay, report and pipeline_node; not a node parameter of its own).
 TORQUE_SOURCE_KEY: Final = 'torque_source'
@@ -128,6 +148,8 @@ JOINT_STATE: Final = 'sensor_msgs/msg/JointState'
 FLOAT64_ARRAY: Final = 'std_msgs/msg/Float64MultiArray'
 TWIST_STAMPED: Final = SENSORS[SENSORS_BODY_VELOCITY]
 ODOMETRY: Final = 'nav_msgs/msg/Odometry'
+IMU_TYPE: Final = 'sensor_msgs/msg/Imu'
+ACCEL_STAMPED: Final = 'geometry_msgs/msg/AccelStamped'
 
 SUPPORTED_TYPES: Final[dict[str, tuple[str, ...]]] = {
     'wheel_angles': (WHEEL_ANGLES_TYPE, JOINT_STATE, FLOAT64_ARRAY),
@@ -135,6 +157,7 @@ SUPPORTED_TYPES: Final[dict[str, tuple[str, ...]]] = {
     'body_speed': (TWIST_STAMPED, ODOMETRY, FLOAT64_ARRAY),
     'wheel_torques': (WHEEL_TORQUES_TYPE, JOINT_STATE, FLOAT64_ARRAY),
     ENGINE_INPUT: (WHEEL_TORQUES_TYPE, FLOAT64_ARRAY),
+    IMU_INPUT: (IMU_TYPE, ACCEL_STAMPED, FLOAT64_ARRAY),
 }
 
 #: Factor to the SI unit of each input, by unit name; the first is the SI unit (the default).
@@ -150,6 +173,7 @@ UNITS: Final[dict[str, dict[str, float]]] = {
     'body_speed': {'m/s': 1.0, 'km/h': 1.0 / 3.6},
     'wheel_torques': {'N m': 1.0, 'kN m': 1000.0},
     ENGINE_INPUT: {'N m': 1.0, 'kN m': 1000.0},
+    IMU_INPUT: {'m/s^2': 1.0, 'g': 9.80665},
 }
 #: Units of the engine speed (``speed_unit`` of ``engine_torque``) and their factor to rad/s.
 SPEED_UNITS: Final = {'rad/s': 1.0, 'rpm': math.pi / 30.0}
@@ -159,7 +183,8 @@ PER_RADIUS_UNITS: Final = frozenset({'m/s', 'km/h'})
 _PER_WHEEL: Final = frozenset({'wheel_angles', 'wheel_speeds', 'wheel_torques'})
 #: The settings of one input, in the order of a mapping file.
 INPUT_KEYS: Final = ('topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign')
-_KEYS: Final = frozenset((*INPUT_KEYS, 'speed_unit'))  # speed_unit: engine_torque only
+_KEYS: Final = frozenset((*INPUT_KEYS, 'speed_unit', 'mount_rpy_deg'))
+# speed_unit: engine_torque only; mount_rpy_deg: imu only
 
 
 @dataclass(frozen=True)
@@ -177,6 +202,9 @@ class InputSpec:
         per_radius: wheel speeds given as a circumferential speed: the value times ``factor``
             is in m/s and is divided by the effective rolling radius [m] to give rad/s.
         speed_factor: ``engine_torque`` only: multiplies the engine speed to give rad/s.
+        axis: ``imu`` only: shape (3,), the body's forward axis in the sensor's frame (the
+            first row of the mounting rotation): f_x = axis . (f_sx, f_sy, f_sz); () for a
+            Float64MultiArray with one element (already the forward specific force).
     """
 
     name: str
@@ -188,11 +216,12 @@ class InputSpec:
     sign: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0)
     per_radius: bool = False
     speed_factor: float = 1.0
+    axis: tuple[float, ...] = ()
 
     @property
     def width(self) -> int:
-        """Values per sample: 4 for the per-wheel inputs, 1 for the body speed, 3 for the
-        engine (torque, gear, engine speed)."""
+        """Values per sample: 4 for the per-wheel inputs, 1 for the body speed and the IMU
+        (its forward specific force), 3 for the engine (torque, gear, engine speed)."""
         if self.name == ENGINE_INPUT:
             return 3
         return 4 if self.name in _PER_WHEEL else 1
@@ -214,6 +243,7 @@ class InputMapping:
             ``torque_source`` engine only (default: vd's WheelTorques topic).
         torque_source: 'measured' (``wheel_torques``), 'engine' (``engine_torque`` through
             the drivetrain) or 'none' (no torque).
+        imu: the accelerometer (forward specific force [m/s^2] after conversion), or None.
     """
 
     wheels: InputSpec
@@ -224,6 +254,7 @@ class InputMapping:
     max_age: float = 0.5
     engine_torque: InputSpec | None = None
     torque_source: str = 'measured'
+    imu: InputSpec | None = None
 
     @property
     def engine(self) -> InputSpec:
@@ -264,6 +295,7 @@ class InputMapping:
             and self.alignment == default.alignment
             and self.torque_source == 'measured'
             and self.engine_torque is None
+            and self.imu is None
         )
 
 
@@ -315,6 +347,8 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         speed_factor = SPEED_UNITS[speed_unit]
     elif 'speed_unit' in data:
         raise MappingError(f'{where}.speed_unit is for {ENGINE_INPUT} only')
+    if 'mount_rpy_deg' in data and name != IMU_INPUT:
+        raise MappingError(f'{where}.mount_rpy_deg is for {IMU_INPUT} only')
     joints: tuple[str, ...] = ()
     indices: tuple[int, ...] = ()
     if msgtype == JOINT_STATE:
@@ -332,7 +366,7 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
     if msgtype == FLOAT64_ARRAY:
         raw = data.get('indices', list(range(width)))
         # the engine input: torque and gear, and the engine speed if the array has it
-        sizes = (2, 3) if name == ENGINE_INPUT else (width,)
+        sizes = (2, 3) if name == ENGINE_INPUT else (1, 3) if name == IMU_INPUT else (width,)
         if (
             not isinstance(raw, list)
             or len(raw) not in sizes
@@ -357,6 +391,18 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
     sign = tuple(_number(f'{where}.sign', s) for s in raw_sign)
     if any(s not in (1.0, -1.0) for s in sign):
         raise MappingError(f'{where}.sign must list {width} values of +1 or -1')
+    axis: tuple[float, ...] = ()
+    if name == IMU_INPUT:
+        rpy = data.get('mount_rpy_deg', [0.0, 0.0, 0.0])
+        if not isinstance(rpy, list) or len(rpy) != 3:
+            raise MappingError(f'{where}.mount_rpy_deg must list roll, pitch, yaw [deg]')
+        angles = [math.radians(_number(f'{where}.mount_rpy_deg', a)) for a in rpy]
+        one_element = msgtype == FLOAT64_ARRAY and len(indices) == 1
+        if one_element and any(a != 0.0 for a in angles):
+            raise MappingError(
+                f'{where}.mount_rpy_deg needs the 3 axes (indices of x, y, z), not one element'
+            )
+        axis = () if one_element else forward_axis(*angles)
     return InputSpec(
         name=name,
         topic=topic,
@@ -367,7 +413,18 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         sign=sign,
         per_radius=name == 'wheel_speeds' and unit in PER_RADIUS_UNITS,
         speed_factor=speed_factor,
+        axis=axis,
     )
+
+
+def forward_axis(roll: float, pitch: float, yaw: float) -> tuple[float, float, float]:
+    """The first row of the rotation body <- sensor of a sensor frame at (roll, pitch, yaw)
+    [rad] in the body frame (tf's convention, R = Rz(yaw) Ry(pitch) Rx(roll)): the body's
+    forward specific force is this row times the sensor's (x, y, z) vector."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr)
 
 
 def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
@@ -384,7 +441,7 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
         data = {}
     if not isinstance(data, Mapping):
         raise MappingError(f'{source}: expected a mapping of {", ".join(INPUTS)}')
-    keys = (*INPUTS, *SETTINGS, ENGINE_INPUT, TORQUE_SOURCE_KEY)
+    keys = (*INPUTS, *SETTINGS, ENGINE_INPUT, IMU_INPUT, TORQUE_SOURCE_KEY)
     unknown = sorted(set(data) - set(keys))
     if unknown:
         raise MappingError(f'{source}: {unknown[0]}: unknown input (use {", ".join(keys)})')
@@ -432,6 +489,14 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
             f'{source}: {ENGINE_INPUT}.type: {engine.topic} is also mapped as '
             f'{types[engine.topic]} (one topic has one type)'
         )
+    imu = (
+        _spec(IMU_INPUT, data[IMU_INPUT], f'{source}: {IMU_INPUT}') if IMU_INPUT in data else None
+    )
+    if imu is not None and types.setdefault(imu.topic, imu.msgtype) != imu.msgtype:
+        raise MappingError(
+            f'{source}: {IMU_INPUT}.type: {imu.topic} is also mapped as '
+            f'{types[imu.topic]} (one topic has one type)'
+        )
     wheels, body_speed, wheel_torques = specs
     return InputMapping(
         wheels,
@@ -442,6 +507,7 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
         max_age=max_age,
         engine_torque=engine,
         torque_source=torque_source,
+        imu=imu,
     )
 
 

@@ -55,6 +55,7 @@ from vd_msgs.msg import (
 )
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.faults import merge_reports, summarise
+from vd_observer_node.estimation.imu_grade import SOURCE_FORCE
 from vd_observer_node.estimation.rate_settings import RateMeter
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.inputs.decode import has_header
@@ -235,7 +236,14 @@ class EstimatorNode(Node):
         )
         self.pub_slope.publish(
             codec('vd_msgs/msg/Slope', frame).encode(
-                stamp_ns, [float(est.slope), bool(est.slope_valid), est.torque_source]
+                stamp_ns,
+                # no IMU here: the force balance's slope (pipeline_node fuses an IMU)
+                [
+                    float(est.slope),
+                    bool(est.slope_valid),
+                    est.torque_source,
+                    SOURCE_FORCE if est.slope_valid else 0,
+                ],
             )
         )
         if self.pub_mass is not None:

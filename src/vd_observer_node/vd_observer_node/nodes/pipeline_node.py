@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from dataclasses import replace
 from typing import Any
 
@@ -78,11 +79,13 @@ from vd_msgs.msg import (
     WheelStates,
 )
 from vd_observer_node.bag.cdr_message import MessageCodec
+from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.chain import Chain, ChainOutput, ChainSettings
 from vd_observer_node.estimation.differentiator import LevantGains
 from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import ERROR
+from vd_observer_node.estimation.imu_grade import ImuGradeConfig, vehicle_pitch_compliance
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.rate_settings import RateMeter
 from vd_observer_node.estimation.vehicle import (
@@ -90,7 +93,8 @@ from vd_observer_node.estimation.vehicle import (
     load_vehicle_params,
     vehicle_tire,
 )
-from vd_observer_node.inputs.decode import has_header
+from vd_observer_node.inputs.decode import InputDecoder, has_header
+from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import ENGINE_INPUT
 from vd_observer_node.nodes.node_params import (
     INPUT_PARAMS,
@@ -145,6 +149,8 @@ _OUTPUTS = (
 )
 #: the per-quantity outputs that ``estimate_topics: combined`` carries in one message
 _SEPARATE = ('states', 'accel', 'velocity', 'forces', 'friction', 'resistances', 'slope')
+#: IMU samples kept for the stamps to come (an IMU ahead of the wheels by up to this many)
+_IMU_HELD = 64
 _OBSERVER_KEYS = {f for f in ObserverConfig.__dataclass_fields__ if f != 'gains'}
 _GAIN_KEYS = set(LevantGains.__dataclass_fields__)
 
@@ -210,6 +216,12 @@ class PipelineNode(Node):
         settings = replace(
             settings, observer=replace(settings.observer, wheel_input=mapping.wheel_input)
         )
+        if mapping.imu is not None:
+            # the IMU fusion, with the body's pitch under the ground force from a full file
+            settings = replace(
+                settings,
+                imu=ImuGradeConfig(pitch_compliance=vehicle_pitch_compliance(vehicle_file)),
+            )
         # Builds (or loads from numba's disk cache) the compiled chain now, before any sample.
         self.chain = Chain(settings)
         max_gap_ns = round(settings.estimator.max_gap * 1e9)
@@ -266,6 +278,25 @@ class PipelineNode(Node):
                 radius=settings.vehicle.effective_radius,
             )
             self.create_subscription(cls, spec.topic, callback, STREAM_QOS, raw=True)
+        # the IMU samples received (stamp [s], forward specific force [m/s^2]), the last few:
+        # each stamp takes the newest not later than it, as the replay holds them; the
+        # fusion judges its age
+        self._imu: deque[tuple[float, float]] = deque(maxlen=_IMU_HELD)
+        if mapping.imu is not None:
+            imu_decoder = InputDecoder(mapping.imu)
+
+            def on_imu(data: bytes) -> None:
+                try:
+                    stamp, _, row = imu_decoder.decode(data, clock.now().nanoseconds)
+                except (BagFormatError, MappingError):
+                    self.counts['undecodable'] += 1
+                    return
+                self._imu.append((stamp * 1e-9, row[0]))
+
+            self.create_subscription(
+                input_message_class(mapping.imu), mapping.imu.topic, on_imu, STREAM_QOS,
+                raw=True,
+            )  # fmt: skip
         self._active = 0
         self._last_alerts = ''
         self.create_timer(1.0, self.publish_diagnostics)
@@ -285,7 +316,9 @@ class PipelineNode(Node):
         source = self.torque_source
         torques = m['wheel_torques'][1] if source == 'measured' else self._no_torque
         engine = m[ENGINE_INPUT][1] if source == 'engine' else None
-        out = self.chain.update(stamp_ns * 1e-9, angles, speed, torques, engine)
+        t = stamp_ns * 1e-9
+        imu = next((sample for sample in reversed(self._imu) if sample[0] <= t), None)
+        out = self.chain.update(t, angles, speed, torques, engine, imu)
         if self._wheel_rate is not None and self._wheel_rate.add(stamp_ns):
             # from the next stamp on, as vd replay does (rate_settings.FOLLOW_AFTER)
             speed_stamps = self.watch.first_stamps(self._speed_topic)
@@ -330,6 +363,7 @@ class PipelineNode(Node):
                         e.aero,
                         e.slope,
                         e.slope_valid,
+                        out.slope_sources,
                         e.torque_source,
                     ],
                 )
@@ -367,7 +401,9 @@ class PipelineNode(Node):
             codec('resistances', frame).encode(stamp_ns, [*e.rolling.tolist(), e.aero])
         )
         pubs['slope'].publish(
-            codec('slope', frame).encode(stamp_ns, [e.slope, e.slope_valid, e.torque_source])
+            codec('slope', frame).encode(
+                stamp_ns, [e.slope, e.slope_valid, e.torque_source, out.slope_sources]
+            )
         )
 
     def _publish_rest(self, stamp_ns: int, frame: bytes, out: ChainOutput) -> None:

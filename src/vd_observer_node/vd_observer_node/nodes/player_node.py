@@ -88,8 +88,9 @@ PARAMS = [
 
 
 def mapped_topics(mapping: InputMapping, available: dict[str, str]) -> list[str]:
-    """The input topics the mapping's torque source reads (`InputMapping.used_specs`),
-    checked against the bag's topics (name -> type).
+    """The input topics the mapping's torque source reads (`InputMapping.used_specs`), and
+    the IMU's where it is mapped and recorded (an optional input), checked against the bag's
+    topics (name -> type).
 
     Raises:
         MappingError: a mapped topic is absent from the bag or has another type (one line
@@ -109,7 +110,16 @@ def mapped_topics(mapping: InputMapping, available: dict[str, str]) -> list[str]
                 f'{origin}{spec.name}.type: {spec.topic} is {msgtype} in the bag, '
                 f'not {spec.msgtype}'
             )
-    return list(dict.fromkeys(spec.topic for spec in used))
+    topics = [spec.topic for spec in used]
+    imu = mapping.imu
+    if imu is not None and imu.topic in available:
+        if available[imu.topic] != imu.msgtype:
+            raise MappingError(
+                f'{origin}{imu.name}.type: {imu.topic} is {available[imu.topic]} in the bag, '
+                f'not {imu.msgtype}'
+            )
+        topics.append(imu.topic)
+    return list(dict.fromkeys(topics))
 
 
 _PERIOD = 0.002  # [s] publishing timer period

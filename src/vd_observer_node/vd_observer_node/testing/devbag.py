@@ -18,6 +18,7 @@ from vd_common.topics import (
     ESTIMATES_ALERTS,
     ESTIMATES_FRICTION_POTENTIAL,
     SENSORS_BODY_VELOCITY,
+    SENSORS_IMU,
     SENSORS_WHEEL_ANGLES,
     SENSORS_WHEEL_TORQUES,
     TRUTH_BODY_ACCEL,
@@ -119,12 +120,17 @@ def write_topic_arrays_bag(
         )
 
 
-def sim_topics(sim: Any, *, truth: bool = True) -> dict[str, dict[str, np.ndarray]]:
+def sim_topics(
+    sim: Any, *, truth: bool = True, imu: bool = False
+) -> dict[str, dict[str, np.ndarray]]:
     """Sensor (and truth) topic values of a simulator run, as the simulator node publishes them.
 
     Args:
         sim: a simulator run's ``SimResult`` (duck-typed: only its arrays).
         truth: include the ``/vd/truth/*`` topics.
+        imu: include the IMU (``/vd/sensors/imu``: ``sim.imu``'s specific force in
+            ``linear_acceleration`` x and z, orientation and angular velocity marked unknown
+            as REP 145 says), as the simulator node publishes it for a scenario with an IMU.
     """
     topics: dict[str, dict[str, np.ndarray]] = {
         SENSORS_WHEEL_ANGLES: {'angle': sim.wheel_angle},
@@ -136,6 +142,17 @@ def sim_topics(sim: Any, *, truth: bool = True) -> dict[str, dict[str, np.ndarra
             'gear': np.asarray(sim.gear).astype(np.int8),
         },
     }
+    if imu:
+        n = len(sim.imu)
+        unknown = np.zeros((n, 9))
+        unknown[:, 0] = -1.0
+        topics[SENSORS_IMU] = {
+            'orientation.w': np.ones(n),
+            'orientation_covariance': unknown,
+            'angular_velocity_covariance': unknown,
+            'linear_acceleration.x': sim.imu[:, 0],
+            'linear_acceleration.z': sim.imu[:, 1],
+        }
     if truth:
         topics.update(
             {

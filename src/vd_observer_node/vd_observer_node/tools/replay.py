@@ -83,6 +83,11 @@ from vd_observer_node.estimation.estimator import (
     RADIUS_MESSAGE_FIELDS,
     EstimatorConfig,
 )
+from vd_observer_node.estimation.imu_grade import (
+    SOURCE_FORCE,
+    ImuGradeConfig,
+    vehicle_pitch_compliance,
+)
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.rate_settings import (
     SPEED_STAMPS_KEPT,
@@ -336,6 +341,7 @@ def estimate_topics(
             'angle': result.slope,
             'valid': result.slope_valid,
             'torque_source': source,
+            'sources': _slope_sources(result),
         },
     }
     if config is not None and config.mass_adaptation:
@@ -347,6 +353,14 @@ def estimate_topics(
             field: getattr(result, attr) for field, attr in RADIUS_MESSAGE_FIELDS
         }
     return topics
+
+
+def _slope_sources(result: CascadeResult) -> np.ndarray:
+    """The Slope messages' ``sources`` bits (`imu_grade.SOURCE_FORCE`, `SOURCE_IMU`); a
+    result without them (an injected cascade): the force balance where the slope is valid."""
+    if result.slope_sources.shape == result.slope_valid.shape:
+        return result.slope_sources
+    return np.where(result.slope_valid, SOURCE_FORCE, 0).astype(np.uint8)
 
 
 def _stamp_ns(seconds: np.ndarray) -> np.ndarray:
@@ -539,7 +553,18 @@ def replay_bag(
             raise ReplayInputError(
                 f'{in_bag}: {spec.topic} has type {info.msgtype}, need {spec.msgtype}{origin}'
             )
-    inputs = list(dict.fromkeys(spec.topic for spec in mapping.used_specs))
+    if mapping.imu is not None:
+        info = topics.get(mapping.imu.topic)
+        if info is not None and info.msgtype != mapping.imu.msgtype:
+            raise ReplayInputError(
+                f'{in_bag}: {mapping.imu.topic} has type {info.msgtype}, need '
+                f'{mapping.imu.msgtype} ({mapping.source}: imu)'
+            )
+        if info is None or info.message_count == 0:
+            # an optional input: the slope is the force balance's, as without an IMU
+            mapping = replace(mapping, imu=None)
+    imu_topics = [mapping.imu.topic] if mapping.imu is not None else []
+    inputs = list(dict.fromkeys([*(spec.topic for spec in mapping.used_specs), *imu_topics]))
     observer_config = replace(observer_config or ObserverConfig(), wheel_input=mapping.wheel_input)
     truth = [t for t in topics if t.startswith(TRUTH_PREFIX)]
     # One read of the file gives the estimator vehicle and the tyre alike (a millisecond).
@@ -576,6 +601,11 @@ def replay_bag(
     if clash:
         raise ConfigurationError(
             f'cascade settings: {clash[0]} is set by the torque source, not the config'
+        )
+    if mapping.imu is not None and 'imu_config' not in extra:
+        # the body's pitch under the ground force, from a full vehicle file's springs
+        extra['imu_config'] = ImuGradeConfig(
+            pitch_compliance=vehicle_pitch_compliance(vehicle_file)
         )
     torque_kwargs: dict[str, Any] = {}
     if source != 'measured':  # the default call stays as it was (injected cascades)
@@ -865,6 +895,30 @@ class _Run:
         # (episodes, converged) of the last engine-torque offset written: it is written
         # where it changes, as pipeline_node publishes it
         self.offset_last: tuple[int, bool] | None = None
+        # the newest IMU sample of the blocks so far: stamp [ns], forward specific force
+        self.imu_last: tuple[int, float] | None = None
+
+    def held_imu(self, arrays: Mapping[str, TopicArrays], common: np.ndarray) -> np.ndarray:
+        """Shape (N, 2): for each stamp of ``common`` [ns] the stamp [s] of the newest IMU
+        sample not later than it (nan: none yet) and its forward specific force [m/s^2]
+        (sample and hold, as a live node sees it; the fusion judges the age)."""
+        spec = self.mapping.imu
+        assert spec is not None  # called with an IMU only
+        series = self._decode(spec, arrays)
+        order = np.argsort(series.stamp_ns, kind='stable')
+        stamps = series.stamp_ns[order]
+        values = series.values[order, 0]
+        if self.imu_last is not None:
+            stamps = np.concatenate([[self.imu_last[0]], stamps])
+            values = np.concatenate([[self.imu_last[1]], values])
+        out = np.full((common.shape[0], 2), np.nan)
+        if stamps.size:
+            idx = np.searchsorted(stamps, common, side='right') - 1
+            have = idx >= 0
+            out[have, 0] = stamps[idx[have]] * 1e-9
+            out[have, 1] = values[idx[have]]
+            self.imu_last = (int(stamps[-1]), float(values[-1]))
+        return out
 
     def _follow_rate(self, wheel_stamps: list[int]) -> None:
         """Fix the estimator's settings left to the rate, from the next stamp on."""
@@ -953,9 +1007,13 @@ class _Run:
         kwargs = dict(self.cascade_kwargs)
         if engine is not None:
             kwargs['engine'] = engine
+        if self.mapping.imu is not None:
+            kwargs['imu'] = self.held_imu(arrays, common)
+        # the inputs given per stamp, sliced with the stamps where the block is split
+        per_stamp = [key for key in ('engine', 'imu') if key in kwargs]
 
         def run(rows: slice) -> CascadeResult:
-            part = {**kwargs, 'engine': engine[rows]} if engine is not None else kwargs
+            part = {**kwargs, **{key: kwargs[key][rows] for key in per_stamp}}
             return self.cascade(
                 t[rows],
                 wheel_angle[rows],

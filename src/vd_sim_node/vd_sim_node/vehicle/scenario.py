@@ -19,6 +19,10 @@ A scenario file (``config/scenarios/*.yaml``)::
       encoder_counts_per_rev: 0  # 0 = ideal wheel angle, N > 0 = quantised encoder
       speed_noise_std: 0.0       # [m/s] Gaussian noise on the body speed, 0 = ideal
       torque_noise_std: 0.0      # [N m] Gaussian noise on the wheel torques, 0 = ideal
+      imu: false                 # publish an IMU (specific force, /vd/sensors/imu)
+      imu_noise_std: 0.0         # [m/s^2] Gaussian noise on each specific-force axis
+      imu_bias: 0.0              # [m/s^2] constant bias of the longitudinal axis
+      imu_mount_pitch_deg: 0.0   # [deg] IMU's pitch on the body (about y, REP 103: + nose down)
     true_vehicle:                # optional: the car driven is not the vehicle file
       extra_mass_kg: 0.0         # [kg] load added to the body (negative: removed)
       cg_shift_m: 0.1            # [m] rearward CG shift it causes, or instead:
@@ -108,6 +112,11 @@ class SensorSettings:
         encoder_counts_per_rev: 0 for the exact wheel angle, N > 0 for a quantised encoder.
         speed_noise_std: standard deviation of the body-speed noise, [m/s].
         torque_noise_std: standard deviation of the wheel-torque noise, [N m].
+        imu: the car carries an IMU (its specific force is published, at ``rate_hz``).
+        imu_noise_std: standard deviation of the noise on each specific-force axis, [m/s^2].
+        imu_bias: constant bias of the longitudinal specific force, [m/s^2].
+        imu_mount_pitch: pitch of the IMU's frame in the body frame, about the body's y axis
+            (REP 103: positive nose down, as an input mapping's ``mount_rpy_deg``), [rad].
     """
 
     rate_hz: float = 1000.0
@@ -115,6 +124,10 @@ class SensorSettings:
     encoder_counts_per_rev: int = 0
     speed_noise_std: float = 0.0
     torque_noise_std: float = 0.0
+    imu: bool = False
+    imu_noise_std: float = 0.0
+    imu_bias: float = 0.0
+    imu_mount_pitch: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -249,6 +262,12 @@ def parse_scenario(data: object, default_name: str = 'scenario') -> Scenario:
         encoder_counts_per_rev=sens.integer('encoder_counts_per_rev', ge=0, default=0),
         speed_noise_std=sens.number('speed_noise_std', 'm/s', ge=0.0, default=0.0),
         torque_noise_std=sens.number('torque_noise_std', 'N m', ge=0.0, default=0.0),
+        imu=sens.boolean('imu', default=False),
+        imu_noise_std=sens.number('imu_noise_std', 'm/s^2', ge=0.0, default=0.0),
+        imu_bias=sens.number('imu_bias', 'm/s^2', ge=-5.0, le=5.0, default=0.0),
+        imu_mount_pitch=math.radians(
+            sens.number('imu_mount_pitch_deg', 'deg', ge=-30.0, le=30.0, default=0.0)
+        ),
     )
     truth = r.optional_section('true_vehicle')
     true_vehicle = VehicleVariant() if truth is None else _variant(truth)

@@ -1,4 +1,4 @@
-"""Sensor models: quantised wheel encoders, noisy body speed and wheel torque.
+"""Sensor models: quantised wheel encoders, noisy body speed, wheel torque and IMU.
 
 The noise generators are seeded and consume one draw per sample in sample order, so the
 measured series do not depend on how the simulator splits the run into integration chunks.
@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 
 from vd_sim_node.vehicle.scenario import SensorSettings
 
-__all__ = ['SensorModel', 'quantise_angle']
+__all__ = ['SensorModel', 'imu_specific_force', 'quantise_angle']
 
 FloatArray = NDArray[np.float64]
 
@@ -35,6 +35,42 @@ def quantise_angle(angle: FloatArray, counts_per_rev: int) -> FloatArray:
     return out
 
 
+def imu_specific_force(
+    accel: FloatArray,
+    slope: FloatArray,
+    pitch: FloatArray,
+    mount_pitch: float,
+    gravity: float,
+    normal_accel: FloatArray | float = 0.0,
+) -> FloatArray:
+    """Specific force an IMU on the body measures, in its own x (forward) and z (up) axes.
+
+    In road axes (x along the road, z normal to it) the specific force is
+    ``(a + g sin(alpha), a_n + g cos(alpha))``; the sensor's x axis is pitched nose up by
+    ``phi = -(mount_pitch + pitch)`` from the road, so it reads
+    ``f_x = (a + g sin(alpha)) cos(phi) + (a_n + g cos(alpha)) sin(phi)`` and
+    ``f_z = -(a + g sin(alpha)) sin(phi) + (a_n + g cos(alpha)) cos(phi)``.
+
+    Args:
+        accel: acceleration along the road, shape (M,), [m/s^2].
+        slope: road slope, positive uphill, shape (M,), [rad].
+        pitch: body pitch relative to the road, nose down positive, shape (M,), [rad].
+        mount_pitch: pitch of the sensor's frame in the body frame about y (REP 103: nose
+            down positive), [rad].
+        gravity: [m/s^2].
+        normal_accel: acceleration of the sensor normal to the road, (M,) or scalar, [m/s^2].
+
+    Returns:
+        Shape (M, 2): f_x, f_z, [m/s^2].
+    """
+    phi = -(mount_pitch + np.asarray(pitch, dtype=float))
+    along = np.asarray(accel, dtype=float) + gravity * np.sin(slope)
+    normal = normal_accel + gravity * np.cos(slope)
+    c, s = np.cos(phi), np.sin(phi)
+    out: FloatArray = np.stack([along * c + normal * s, -along * s + normal * c], axis=1)
+    return out
+
+
 class SensorModel:
     """Turns true signals into measured ones, sample by sample in order."""
 
@@ -47,9 +83,11 @@ class SensorModel:
         """
         self.settings = settings
         seq = np.random.SeedSequence(settings.seed if seed is None else seed)
-        speed_seq, torque_seq = seq.spawn(2)
+        # the IMU's stream is a third child: the first two (speed, torque) stay as they were
+        speed_seq, torque_seq, imu_seq = seq.spawn(3)
         self._speed_rng = np.random.default_rng(speed_seq)
         self._torque_rng = np.random.default_rng(torque_seq)
+        self._imu_rng = np.random.default_rng(imu_seq)
 
     def measure(
         self, angle: FloatArray, speed: FloatArray, torque: FloatArray
@@ -73,3 +111,20 @@ class SensorModel:
         if s.torque_noise_std > 0.0:
             tq += s.torque_noise_std * self._torque_rng.standard_normal(tq.shape)
         return a, v, tq
+
+    def measure_imu(self, specific_force: FloatArray) -> FloatArray:
+        """The IMU's reading of a block of true specific forces (noise and bias added).
+
+        Args:
+            specific_force: shape (M, 2), f_x and f_z in the sensor's axes, [m/s^2]
+                (:func:`imu_specific_force`).
+
+        Returns:
+            Same shape: f_x + bias + noise, f_z + noise, [m/s^2].
+        """
+        s = self.settings
+        out = np.array(specific_force, dtype=float, copy=True)
+        out[:, 0] += s.imu_bias
+        if s.imu_noise_std > 0.0:
+            out += s.imu_noise_std * self._imu_rng.standard_normal(out.shape)
+        return out

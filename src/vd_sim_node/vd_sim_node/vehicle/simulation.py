@@ -42,7 +42,7 @@ from vd_sim_node.vehicle.powertrain import (
     upshift_speed,
 )
 from vd_sim_node.vehicle.scenario import Scenario
-from vd_sim_node.vehicle.sensors import SensorModel
+from vd_sim_node.vehicle.sensors import SensorModel, imu_specific_force
 from vd_sim_node.vehicle.variants import apply_variant, driven_wheel_torque_offset
 
 __all__ = [
@@ -95,6 +95,12 @@ class SimResult:
         power_sources: shape (N,), [W], power of all bond-graph sources (engine, gravity).
         power_dissipated: shape (N,), [W], power into all R elements (tyres, brakes, ...).
         energy_stored: shape (N,), [J], kinetic + spring energy of the bond graph.
+        pitch: shape (N,), [rad], body pitch relative to the road, nose down positive, from
+            the suspension and tyre deflections (0 at the level-road static equilibrium).
+        imu_true: shape (N, 2), [m/s^2], true specific force (f_x, f_z) in the IMU's axes
+            (its mounting pitch applied; the body's motion normal to the road neglected).
+        imu: shape (N, 2), [m/s^2], the IMU's reading: ``imu_true`` with the bias and noise
+            of the scenario's sensors (whether or not ``sensors.imu`` publishes it).
         events: (time [s], description) of scenario steps, gear shifts, clutch events.
     """
 
@@ -125,6 +131,9 @@ class SimResult:
     power_sources: FloatArray
     power_dissipated: FloatArray
     energy_stored: FloatArray
+    pitch: FloatArray
+    imu_true: FloatArray
+    imu: FloatArray
     events: tuple[tuple[float, str], ...]
 
 
@@ -132,7 +141,7 @@ class SimResult:
 class SampleFrame:
     """One sample of :class:`SimResult` (same field meanings, one time step).
 
-    Per-wheel fields have shape (4,), the others are scalars.
+    Per-wheel fields have shape (4,), ``imu_true`` and ``imu`` (2,), the others are scalars.
     """
 
     t: float
@@ -162,6 +171,9 @@ class SampleFrame:
     power_sources: float
     power_dissipated: float
     energy_stored: float
+    pitch: float
+    imu_true: FloatArray
+    imu: FloatArray
 
 
 _SERIES = tuple(f.name for f in fields(SampleFrame))
@@ -238,6 +250,9 @@ class Simulator:
         vp = self.model.params
         self._total_ratios = np.array(vp.gearbox.ratios) * vp.gearbox.final_drive
         self._friction_table = friction_table(vp.tire)  # truth of the friction potential
+        self._pitch_reference = self._deflection_pitch(
+            self.model.static_state(0.0, vp.engine.idle_speed)[:, None]
+        )[0]
         self._k = 0  # next sample index to compute
         self._t = 0.0  # time of the state self._x
         self._drv, self._x = self._initial_conditions()
@@ -349,6 +364,19 @@ class Simulator:
             else:
                 atol[k] = 1e-5  # [kg m/s], [kg m^2/s]: vertical and pitch momenta
         return atol
+
+    def _deflection_pitch(self, X: FloatArray) -> FloatArray:
+        """Body pitch, nose down positive, [rad], of states X (n, M), from the axles'
+        suspension + tyre extensions (absolute: subtract the level static value)."""
+        si = self.model.compiled.state_index
+        geo = self.model.geometry
+
+        def height(axle: str) -> FloatArray:
+            h: FloatArray = X[si[f'spring_c_{axle}.q']] + X[si[f'tyre_c_{axle}.q']]
+            return h
+
+        out: FloatArray = (height('rear') - height('front')) / (geo.a_s + geo.b_s)
+        return out
 
     def _scenario_events(self) -> list[tuple[float, str]]:
         s = self.scenario
@@ -556,6 +584,11 @@ class Simulator:
             ]
             engine_torque = engine_torque + self._torque_offset
         full = np.full
+        pitch = self._deflection_pitch(X) - self._pitch_reference
+        imu_true = imu_specific_force(
+            accel, full(M, u[2]), pitch, self.scenario.sensors.imu_mount_pitch,
+            vp.environment.gravity,
+        )  # fmt: skip
         potential = true_friction_potential(self._friction_table, fz, fx, full(M, u[3]))
         return {
             't': ts.copy(),
@@ -585,6 +618,9 @@ class Simulator:
             'power_sources': out[c.n_outputs - 3],
             'power_dissipated': out[c.n_outputs - 2],
             'energy_stored': np.asarray(c.stored_energy(X), dtype=float),
+            'pitch': pitch,
+            'imu_true': imu_true,
+            'imu': self._sensors.measure_imu(imu_true),
         }
 
 
@@ -592,7 +628,9 @@ def _empty_block() -> dict[str, Any]:
     four = np.empty((0, 4))
     one = np.empty(0)
     return {name: (four.copy() if name in _WHEEL_SERIES else one.copy()) for name in _SERIES} | {
-        'gear': np.empty(0, dtype=np.int64)
+        'gear': np.empty(0, dtype=np.int64),
+        'imu_true': np.empty((0, 2)),
+        'imu': np.empty((0, 2)),
     }
 
 
@@ -615,12 +653,15 @@ _WHEEL_SERIES = frozenset(
 )
 
 
+_VECTOR_SERIES = frozenset({'imu_true', 'imu'})
+
+
 def _frame(block: dict[str, Any], i: int) -> SampleFrame:
     """Sample ``i`` of a block as a :class:`SampleFrame` (per-wheel rows copied)."""
     kw: dict[str, Any] = {}
     for name in _SERIES:
         val = block[name][i]
-        if name in _WHEEL_SERIES:
+        if name in _WHEEL_SERIES or name in _VECTOR_SERIES:
             kw[name] = val.copy()
         elif name == 'gear':
             kw[name] = int(val)

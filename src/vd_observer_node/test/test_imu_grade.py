@@ -1,0 +1,223 @@
+"""The IMU fusion (`estimation.imu_grade`) on simulated everyday drives: the grade against the
+simulator's road, the mass and bias against the true car and sensor, and its behaviour when
+the IMU drops out, saturates or has a bias."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+from adaptation_setup import PARAMS, VEHICLE
+from vd_common.topics import ESTIMATES_SLOPE, SENSORS_IMU
+from vd_observer_node.bag.cdr_batch import decode_batch
+from vd_observer_node.bag.reader import BagReader
+from vd_observer_node.chain import Chain, ChainSettings
+from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.estimation.imu_grade import (
+    SOURCE_FORCE,
+    SOURCE_IMU,
+    ImuGradeConfig,
+    pitch_compliance,
+)
+from vd_observer_node.inputs.mapping import mapping_from_dict
+from vd_observer_node.situation.friction_potential import TyreCurves
+from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
+from vd_observer_node.tools.replay import replay_bag
+from vd_sim_node.vehicle.everyday import EverydaySettings, everyday_scenario
+from vd_sim_node.vehicle.simulation import SimResult, simulate
+
+RATE_HZ = 200.0
+SUSPENSION = PARAMS.suspension
+CONFIG = ImuGradeConfig(
+    pitch_compliance=pitch_compliance(
+        PARAMS.chassis.wheelbase,
+        PARAMS.chassis.cg_height,
+        SUSPENSION.stiffness_front,
+        SUSPENSION.stiffness_rear,
+        PARAMS.wheel.tyre_vertical_stiffness,
+    )
+)
+
+
+@lru_cache(maxsize=2)
+def _drive(seed: int = 0, bias: float = 0.1) -> SimResult:
+    settings = EverydaySettings(duration=90.0, rate_hz=RATE_HZ, imu_bias=bias)
+    scenario = everyday_scenario(seed, PARAMS, settings)
+    # the bias exactly as given (the generator draws it within +-bias)
+    sensors = dataclasses.replace(scenario.sensors, imu_bias=bias, imu_mount_pitch=0.0)
+    return simulate(PARAMS, dataclasses.replace(scenario, sensors=sensors))
+
+
+def _imu(sim: SimResult) -> np.ndarray:
+    return np.column_stack([sim.t, sim.imu[:, 0]])
+
+
+def _run(sim: SimResult, imu: np.ndarray | None) -> CascadeResult:
+    return run_cascade(
+        sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, VEHICLE, imu=imu,
+        imu_config=CONFIG,
+    )  # fmt: skip
+
+
+@lru_cache(maxsize=1)
+def _plain() -> CascadeResult:
+    return _run(_drive(), None)
+
+
+@lru_cache(maxsize=1)
+def _fused() -> CascadeResult:
+    return _run(_drive(), _imu(_drive()))
+
+
+def _rms_deg(x: np.ndarray) -> float:
+    return math.degrees(float(np.sqrt(np.mean(x * x))))
+
+
+def test_the_fused_grade_beats_the_force_balance_and_learns_the_bias_and_the_mass() -> None:
+    sim = _drive()
+    plain, fused = _plain(), _fused()
+    true_mass = PARAMS.chassis.mass + _drive_scenario_extra(0)
+    moving = sim.speed_true > 1.0
+    trusted = fused.imu_trusted & moving
+    assert trusted.sum() > 0.5 * moving.sum()
+    imu_error = _rms_deg((fused.slope - sim.slope)[trusted])
+    force_error = _rms_deg((plain.slope - sim.slope)[trusted])
+    assert imu_error < 0.25 and imu_error < 0.3 * force_error
+    assert np.all(fused.slope_sources[trusted] == SOURCE_FORCE | SOURCE_IMU)
+    # the bias the sensor was given, and the mass the force balance sees (its torques are
+    # divided by the file's radius, the car rolls on another: F scales by their ratio)
+    assert fused.imu_bias[-1] == pytest.approx(0.1, abs=0.015)
+    radius_scale = everyday_scenario(0, PARAMS).true_vehicle.tyre_radius_scale
+    assert fused.imu_fitted[-1]
+    assert fused.imu_mass[-1] == pytest.approx(true_mass * radius_scale, rel=0.02)
+
+
+def _drive_scenario_extra(seed: int) -> float:
+    return everyday_scenario(seed, PARAMS).true_vehicle.extra_mass_kg
+
+
+def test_the_fusion_changes_the_slope_only() -> None:
+    plain, fused = _plain(), _fused()
+    untouched = {'slope', 'slope_valid', 'slope_sources', 'slope_imu', 'imu_bias', 'imu_mass'}
+    untouched |= {'imu_mass_std', 'imu_fitted', 'imu_trusted', 'faults'}
+    for field in dataclasses.fields(CascadeResult):
+        if field.name in untouched:
+            continue
+        a, b = getattr(plain, field.name), getattr(fused, field.name)
+        np.testing.assert_array_equal(a, b, err_msg=field.name)
+    # without an IMU the sources say: the force balance where its slope is valid
+    np.testing.assert_array_equal(plain.slope_sources, np.where(plain.slope_valid, 1, 0))
+    np.testing.assert_array_equal(fused.slope_force, plain.slope)
+
+
+def test_an_imu_that_never_delivers_gives_the_force_balance_bit_for_bit() -> None:
+    sim = _drive()
+    plain = _plain()
+    silent = _run(sim, np.full((len(sim.t), 2), np.nan))
+    np.testing.assert_array_equal(silent.slope, plain.slope)
+    np.testing.assert_array_equal(silent.slope_valid, plain.slope_valid)
+    np.testing.assert_array_equal(silent.slope_sources, plain.slope_sources)
+
+
+@pytest.mark.parametrize('kind', ['dropout', 'saturation'])
+def test_a_dropout_or_saturation_falls_back_to_the_force_balance_and_recovers(kind: str) -> None:
+    sim = _drive()
+    plain, fused = _plain(), _fused()
+    imu = _imu(sim)
+    lost = (sim.t >= 60.0) & (sim.t < 65.0)
+    if kind == 'dropout':
+        imu[lost, 0] = 29.9  # the last sample before, held: stale after max_age
+        imu[lost, 1] = imu[np.searchsorted(sim.t, 29.9), 1]
+    else:
+        imu[lost, 1] = CONFIG.saturation  # the sensor's full scale
+    out = _run(sim, imu)
+    # before: the same as the full IMU; during (past max_age): the force balance's slope
+    before = sim.t < 60.0
+    np.testing.assert_array_equal(out.slope[before], fused.slope[before])
+    during = lost & (sim.t >= 60.0 + CONFIG.max_age + 1e-9)
+    np.testing.assert_array_equal(out.slope[during], plain.slope[during])
+    assert np.all(out.slope_sources[during] == np.where(plain.slope_valid[during], 1, 0))
+    # after: the filters restart (no jump from the stale state), the bias is kept
+    later = sim.t > 65.0 + 6 * CONFIG.tau + 0.5
+    np.testing.assert_array_equal(out.imu_bias[during], np.full(during.sum(), out.imu_bias[
+        np.flatnonzero(during)[0]]))  # fmt: skip
+    moving = later & (sim.speed_true > 1.0)
+    error = _rms_deg((out.slope - sim.slope)[moving])
+    assert error < 0.25
+    assert np.all(out.slope_sources[moving] & SOURCE_IMU)
+
+
+def test_a_large_bias_is_learnt_and_does_not_reach_the_grade() -> None:
+    sim = _drive(1, bias=0.4)  # 0.4 m/s^2: 2.3 deg of grade if it were not learnt
+    out = _run(sim, _imu(sim))
+    assert out.imu_bias[-1] == pytest.approx(0.4, abs=0.02)
+    trusted = out.imu_trusted & (sim.speed_true > 1.0)
+    assert trusted.sum() > 0.25 * len(sim.t)
+    assert _rms_deg((out.slope - sim.slope)[trusted]) < 0.25
+
+
+def test_the_imu_record_and_settings_are_checked() -> None:
+    sim = _drive()
+    with pytest.raises(InputShapeError, match='imu must have shape'):
+        _run(sim, np.zeros((len(sim.t), 3)))
+    with pytest.raises(ConfigurationError, match=r'imu\.tau'):
+        ImuGradeConfig(tau=0.0)
+    with pytest.raises(ConfigurationError, match=r'imu\.max_slope'):
+        ImuGradeConfig(max_slope=2.0)
+
+
+def test_the_live_chain_fuses_as_the_cascade_does() -> None:
+    sim = _drive()
+    n = int(40.0 * RATE_HZ)  # past the bias's convergence
+    imu = _imu(sim)[:n]
+    imu[2000:2100] = np.nan  # half a second without IMU messages (none held yet is nan too)
+    offline = run_cascade(
+        sim.t[:n], sim.wheel_angle[:n], sim.body_speed[:n], sim.wheel_torque[:n], VEHICLE,
+        imu=imu, imu_config=CONFIG,
+    )  # fmt: skip
+    chain = Chain(
+        ChainSettings(vehicle=VEHICLE, curves=TyreCurves.from_tire(PARAMS.tire), imu=CONFIG)
+    )
+    slope = np.empty(n)
+    sources = np.empty(n, dtype=np.uint8)
+    for k in range(n):
+        held = None if np.isnan(imu[k, 0]) else (float(imu[k, 0]), float(imu[k, 1]))
+        out = chain.update(
+            float(sim.t[k]), sim.wheel_angle[k], float(sim.body_speed[k]), sim.wheel_torque[k],
+            imu=held,
+        )  # fmt: skip
+        slope[k] = out.estimates.slope
+        sources[k] = out.slope_sources
+    np.testing.assert_array_equal(slope, offline.slope)
+    np.testing.assert_array_equal(sources, offline.slope_sources)
+    assert np.any(sources == SOURCE_FORCE | SOURCE_IMU)
+
+
+def test_replay_reads_the_mapped_imu_and_marks_the_slope_sources(tmp_path: Path) -> None:
+    sim = _drive()
+    n = int(40.0 * RATE_HZ)
+    part = SimResult(
+        **{
+            f.name: (getattr(sim, f.name)[:n] if f.name != 'events' else sim.events)
+            for f in dataclasses.fields(SimResult)
+        }
+    )
+    stamps = np.round(part.t * 1e9).astype(np.int64)
+    write_topic_arrays_bag(tmp_path / 'in', stamps, sim_topics(part, truth=False, imu=True))
+    mapping = mapping_from_dict({'imu': {'topic': SENSORS_IMU, 'type': 'sensor_msgs/msg/Imu'}})
+    replay_bag(tmp_path / 'in', tmp_path / 'out', mapping=mapping, situation=False)
+    arrays = BagReader(tmp_path / 'out').topic_arrays([ESTIMATES_SLOPE])[ESTIMATES_SLOPE]
+    slope = decode_batch('vd_msgs/msg/Slope', arrays.datas)
+    t = stamps * 1e-9  # the replay's stamps: the header's nanoseconds
+    expected = run_cascade(
+        t, part.wheel_angle, part.body_speed, part.wheel_torque, VEHICLE,
+        imu=np.column_stack([t, part.imu[:, 0]]), imu_config=CONFIG,
+    )  # fmt: skip
+    np.testing.assert_array_equal(slope.values['angle'], expected.slope)
+    np.testing.assert_array_equal(slope.values['sources'], expected.slope_sources)
+    assert np.any(slope.values['sources'] == SOURCE_FORCE | SOURCE_IMU)

@@ -1,0 +1,153 @@
+"""The ``imu`` input of the mapping (issue 27): its keys and refusals, and its decoding from
+sensor_msgs/Imu, AccelStamped and Float64MultiArray with a mounting rotation, against scipy's
+rotations."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+from vd_observer_node.bag.reader import TopicArrays
+from vd_observer_node.bag.typestore import message_class, serialize
+from vd_observer_node.inputs.decode import InputDecoder, decode_input
+from vd_observer_node.inputs.errors import MappingError
+from vd_observer_node.inputs.mapping import default_mapping, mapping_from_dict
+
+G = 9.80665
+#: the sensor's frame in the body: rolled 4, pitched -7 (nose up), yawed 90 deg (its x
+#: points to the car's left)
+RPY_DEG = [4.0, -7.0, 90.0]
+#: the body's specific force: 1.3 m/s^2 forward, 0.4 left, gravity
+BODY = np.array([1.3, 0.4, G])
+
+
+def _sensor_vector() -> np.ndarray:
+    # tf's convention: the sensor frame's orientation in the body is Rz(yaw) Ry(pitch) Rx(roll)
+    mount = Rotation.from_euler('ZYX', RPY_DEG[::-1], degrees=True)
+    vector: np.ndarray = mount.inv().apply(BODY)
+    return vector
+
+
+def _header(stamp_ns: int) -> Any:
+    time = message_class('builtin_interfaces/msg/Time')(
+        sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000
+    )
+    return message_class('std_msgs/msg/Header')(stamp=time, frame_id='imu_link')
+
+
+def _imu_message(stamp_ns: int, a: np.ndarray) -> bytes:
+    vec = message_class('geometry_msgs/msg/Vector3')
+    quat = message_class('geometry_msgs/msg/Quaternion')(x=0.0, y=0.0, z=0.0, w=1.0)
+    msg = message_class('sensor_msgs/msg/Imu')(
+        header=_header(stamp_ns),
+        orientation=quat,
+        orientation_covariance=np.zeros(9),
+        angular_velocity=vec(x=0.0, y=0.0, z=0.0),
+        angular_velocity_covariance=np.zeros(9),
+        linear_acceleration=vec(x=float(a[0]), y=float(a[1]), z=float(a[2])),
+        linear_acceleration_covariance=np.zeros(9),
+    )
+    return serialize(msg, 'sensor_msgs/msg/Imu')
+
+
+def _accel_message(stamp_ns: int, a: np.ndarray) -> bytes:
+    vec = message_class('geometry_msgs/msg/Vector3')
+    accel = message_class('geometry_msgs/msg/Accel')(
+        linear=vec(x=float(a[0]), y=float(a[1]), z=float(a[2])), angular=vec(x=0.0, y=0.0, z=0.0)
+    )
+    msg = message_class('geometry_msgs/msg/AccelStamped')(header=_header(stamp_ns), accel=accel)
+    return serialize(msg, 'geometry_msgs/msg/AccelStamped')
+
+
+def _array_message(values: list[float]) -> bytes:
+    layout = message_class('std_msgs/msg/MultiArrayLayout')(dim=[], data_offset=0)
+    msg = message_class('std_msgs/msg/Float64MultiArray')(
+        layout=layout, data=np.array(values, dtype=np.float64)
+    )
+    return serialize(msg, 'std_msgs/msg/Float64MultiArray')
+
+
+def _mapping(**imu: Any) -> Any:
+    return mapping_from_dict({'imu': {'topic': '/imu', **imu}}, source='car.yaml')
+
+
+def test_the_imu_is_optional_and_off_by_default() -> None:
+    assert default_mapping().imu is None
+    assert default_mapping().is_default
+    mapping = _mapping(type='sensor_msgs/msg/Imu')
+    assert mapping.imu is not None and not mapping.is_default
+    assert mapping.imu.axis == pytest.approx((1.0, 0.0, 0.0))
+
+
+@pytest.mark.parametrize(
+    ('imu', 'match'),
+    [
+        ({'type': 'sensor_msgs/msg/JointState'}, 'not supported'),
+        ({'type': 'sensor_msgs/msg/Imu', 'mount_rpy_deg': [0, 1]}, 'roll, pitch, yaw'),
+        ({'type': 'sensor_msgs/msg/Imu', 'unit': 'ft/s^2'}, 'unit'),
+        (
+            {'type': 'std_msgs/msg/Float64MultiArray', 'indices': [0], 'mount_rpy_deg': [0, 2, 0]},
+            'needs the 3 axes',
+        ),
+        ({'type': 'std_msgs/msg/Float64MultiArray', 'indices': [0, 1]}, 'indices must list'),
+    ],
+)
+def test_refusals(imu: dict[str, Any], match: str) -> None:
+    with pytest.raises(MappingError, match=match):
+        _mapping(**imu)
+    with pytest.raises(MappingError, match='mount_rpy_deg is for imu only'):
+        mapping_from_dict(
+            {
+                'body_speed': {
+                    'topic': '/odom',
+                    'type': 'nav_msgs/msg/Odometry',
+                    'mount_rpy_deg': [0, 0, 0],
+                }
+            }
+        )
+
+
+def test_imu_and_accel_stamped_give_the_body_forward_specific_force() -> None:
+    a = _sensor_vector()
+    for msgtype, encode in (
+        ('sensor_msgs/msg/Imu', _imu_message),
+        ('geometry_msgs/msg/AccelStamped', _accel_message),
+    ):
+        spec = _mapping(type=msgtype, mount_rpy_deg=RPY_DEG).imu
+        assert spec is not None
+        stamp, frame, row = InputDecoder(spec).decode(encode(1_500_000_000, a))
+        assert stamp == 1_500_000_000 and frame == b'imu_link'
+        assert row == pytest.approx((BODY[0],), abs=1e-12)
+        # the batch decoder of a bag gives the same
+        arrays = TopicArrays(msgtype, np.array([7], dtype=np.int64), [encode(2_000, a)])
+        series = decode_input(spec, arrays)
+        np.testing.assert_allclose(series.values, [[BODY[0]]], atol=1e-12)
+        assert series.stamp_ns.tolist() == [2_000]
+
+
+def test_float64_array_with_three_axes_in_g_or_one_forward_element() -> None:
+    a = _sensor_vector() / G
+    spec = _mapping(
+        type='std_msgs/msg/Float64MultiArray', indices=[1, 2, 0], unit='g', mount_rpy_deg=RPY_DEG
+    ).imu
+    assert spec is not None
+    # the array holds z, x, y at 0, 1, 2: indices name x, y, z's elements
+    _, _, row = InputDecoder(spec).decode(_array_message([a[2], a[0], a[1]]), receive_ns=5)
+    assert row == pytest.approx((BODY[0],), abs=1e-12)
+    forward = _mapping(type='std_msgs/msg/Float64MultiArray', indices=[1], sign=[-1]).imu
+    assert forward is not None
+    stamp, _, row = InputDecoder(forward).decode(_array_message([9.0, -0.8]), receive_ns=42)
+    assert stamp == 42 and row == pytest.approx((0.8,))
+
+
+def test_the_player_plays_a_recorded_imu_with_the_mapped_inputs() -> None:
+    from vd_observer_node.nodes.player_node import mapped_topics
+
+    mapping = _mapping(type='sensor_msgs/msg/Imu')
+    own = {spec.topic: spec.msgtype for spec in default_mapping().specs}
+    assert mapped_topics(mapping, own) == list(own)  # not recorded: not played, not refused
+    assert mapped_topics(mapping, {**own, '/imu': 'sensor_msgs/msg/Imu'}) == [*own, '/imu']
+    with pytest.raises(MappingError, match=r'imu\.type: /imu is'):
+        mapped_topics(mapping, {**own, '/imu': 'geometry_msgs/msg/AccelStamped'})

@@ -1,0 +1,596 @@
+"""Road grade from an IMU's specific force, fused with the force balance (issue 27).
+
+An accelerometer fixed to the body reads the specific force along the car (its mounting
+rotated out by the input mapping, `inputs.decode`)::
+
+    u = (1 + k) f + b,    f = dv/dt + g sin(alpha)
+
+with ``b`` its bias (sensor offset, a mounting pitch left over: ``g sin(delta)``) and ``k`` the
+body's pitch under the longitudinal force (squat and dive: the body, and the sensor on it,
+pitch by ``pitch_compliance * m f``, so ``k = g m pitch_compliance``, 6 % on the Clio). So
+``sin(alpha) = ((u - b) / (1 + k) - dv/dt) / g`` needs neither the mass nor the torque, but
+``b`` (and ``k``'s mass). The force balance of the wheel torques gives what is missing::
+
+    F - aero = m f + c_r m g cos(alpha)   =>   (F - aero) / g = m' (u / g + c_r cos(alpha)
+               (1 + k)) - m' b / g,         m' = m / (1 + k)
+
+linear in ``theta = [m', m' b / g]``: a two-state Kalman filter (`_regression`) learns the
+mass and the bias from every stamp where the torques hold and the car moves, whatever the
+grade (it is not in the equation): ordinary drives excite it through their accelerations and
+their grades alike (Vahidi et al. 2005 fuse the same two sensors). ``u``, the speed and
+``F - aero`` go through the same low-pass (``tau``, 2 stages: the vibration), ``dv/dt`` is the
+filtered speed's derivative, so every term carries the same lag.
+
+The fused slope: the force balance's slope until the filter has run ``settle`` seconds; then
+the two slopes weighted by their variances (the IMU's is its bias's, the force balance's
+``force_slope_std``) until the bias's standard deviation is below ``bias_tol``; from then on
+(latched) the IMU's grade (``sources = SOURCE_FORCE | SOURCE_IMU``: the IMU's grade with a bias
+learnt from the force balance). Without a valid force slope (no torque, standstill) the IMU's
+grade with the bias known so far (``SOURCE_IMU``). Where the IMU drops out (no sample newer
+than ``max_age``), saturates (``|f_x| >= saturation``) or gives a non-finite value, the force
+balance's slope is passed on as it is (``SOURCE_FORCE``) and the IMU's filters restart when
+it comes back (the regression is kept).
+
+`imu_grade_step` is the one per-stamp function (compiled, `kernel._jit`); `imu_grade_block`
+runs it over N stamps after `cascade_step.cascade_block` (the fusion reads the estimator's
+outputs and does not feed back into them). `ImuGrade` holds the records.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+from numpy.typing import NDArray
+from vd_common.errors import ParameterError
+from vd_common.vehicle.params import default_vehicle_file, load_vehicle
+
+from vd_observer_node.errors import ConfigurationError
+from vd_observer_node.estimation.filters import (
+    LOWPASS_META,
+    lowpass_derivative,
+    lowpass_reset,
+    lowpass_update,
+)
+from vd_observer_node.kernel._jit import jit, new_record, record_array
+
+__all__ = [
+    'GRADE_OUT',
+    'GRADE_PARAMS',
+    'GRADE_STATE',
+    'SOURCE_FORCE',
+    'SOURCE_IMU',
+    'ImuGrade',
+    'ImuGradeConfig',
+    'imu_grade_block',
+    'imu_grade_step',
+    'pitch_compliance',
+    'vehicle_pitch_compliance',
+]
+
+FloatArray = NDArray[np.float64]
+
+#: bit of ``sources``: the force balance (wheel torques, mass) contributed
+SOURCE_FORCE: Final = 1
+#: bit of ``sources``: the IMU's specific force contributed
+SOURCE_IMU: Final = 2
+_ORDER: Final = 2  # stages of the low-pass on (f_x, v, F)
+_KMH_REFERENCE: Final = 160.0  # [km/h] speed scale of paper eq. 7 (as estimator_step)
+
+GRADE_PARAMS: Final = np.dtype(
+    [
+        ('gravity', 'f8'),
+        ('tau', 'f8'),
+        ('bias_settle', 'f8'),
+        ('max_age', 'f8'),
+        ('saturation', 'f8'),
+        ('max_sine', 'f8'),
+        ('min_speed', 'f8'),
+        ('mass0', 'f8'),
+        ('mass0_std', 'f8'),
+        ('bias0_std', 'f8'),
+        ('pitch_gain', 'f8'),
+        ('force_std', 'f8'),
+        ('mass_q', 'f8'),
+        ('bias_q', 'f8'),
+        ('mass_tol', 'f8'),
+        ('bias_tol', 'f8'),
+        ('force_slope_var', 'f8'),
+        ('rolling_c0', 'f8'),
+        ('rolling_c1', 'f8'),
+    ],
+    align=True,
+)
+GRADE_STATE: Final = np.dtype(
+    [
+        ('stages', 'f8', (_ORDER, 3)),
+        ('prev', 'f8', (3,)),
+        ('lp', LOWPASS_META),
+        ('last_t', 'f8'),
+        ('since', 'f8'),  # [s] the IMU's filters have run since this stamp (nan: stopped)
+        ('bias', 'f8'),  # [-] learnt bias of the IMU's sine (b / g)
+        ('bias_time', 'f8'),  # [s] of trusted stamps in the bias
+        ('sine', 'f8'),  # last fused sine
+        ('dropouts', 'i8'),
+        ('saturated', 'i8'),
+        ('theta', 'f8', (2,)),  # the regression's [m', m' b / g] (see _regression)
+        ('cov', 'f8', (2, 2)),
+        ('fit_time', 'f8'),  # [s] of stamps in the regression
+        ('fitted', 'b1'),  # the regression's mass has converged (latched until a reset)
+        ('trusted', 'b1'),  # the regression's bias has converged (latched until a reset)
+    ],
+    align=True,
+)
+#: One stamp's fusion: the fused slope [rad] and whether it is valid, the sources it used
+#: (`SOURCE_FORCE` | `SOURCE_IMU`), the IMU's own bias-corrected slope [rad] (nan where it
+#: has none), the learnt bias of the longitudinal specific force [m/s^2], the filtered
+#: acceleration dv/dt [m/s^2].
+GRADE_OUT: Final = np.dtype(
+    [
+        ('slope', 'f8'),
+        ('slope_valid', 'b1'),
+        ('sources', 'u1'),
+        ('slope_imu', 'f8'),
+        ('bias', 'f8'),
+        ('accel', 'f8'),
+        ('mass', 'f8'),
+        ('mass_std', 'f8'),
+        ('fitted', 'b1'),
+        ('bias_std', 'f8'),
+        ('trusted', 'b1'),
+    ],
+    align=True,
+)
+
+
+@dataclass(frozen=True)
+class ImuGradeConfig:
+    """Settings of the IMU fusion.
+
+    Attributes:
+        tau: time constant of each of the 2 low-pass stages on f_x, the speed and the
+            force balance, [s] (the vibration).
+        settle: time of regression stamps before the IMU's grade may be used, [s].
+        max_age: an IMU sample older than this at a stamp is a dropout, [s].
+        saturation: |f_x| at or above this is a saturated sensor, [m/s^2].
+        max_slope: |fused slope| above this is invalid, [rad].
+        min_speed: the regression uses stamps at or above this forward speed, [m/s].
+        mass_std: prior standard deviation of the mass around the vehicle file's, [kg].
+        bias_std: prior standard deviation of the IMU's bias, [m/s^2].
+        pitch_compliance: body pitch (nose up) per newton of the longitudinal ground force,
+            [rad/N] (`pitch_compliance`; 0: a rigid body). The body squats and dives with
+            ``m (dv/dt + g sin(alpha))`` and the IMU with it, so it reads
+            ``(1 + k) (dv/dt + g sin(alpha)) + b`` with ``k = g m pitch_compliance``.
+        force_std: error of the filtered force balance per correlation time, [N].
+        mass_drift: random walk of the mass, [kg/sqrt(s)].
+        bias_drift: random walk of the bias, [m/s^2/sqrt(s)].
+        mass_tol: the regression's mass has converged when its standard deviation is below
+            this fraction of the mass, [-].
+        bias_tol: the IMU's grade is used alone once the bias's standard deviation is below
+            this (and ``settle`` has passed), [m/s^2]; before, the two slopes are weighted
+            by their variances.
+        force_slope_std: the force balance's slope error in that weighting, besides the one
+            its mass error makes (which the regression measures), [rad].
+    """
+
+    tau: float = 0.2
+    settle: float = 10.0
+    max_age: float = 0.1
+    saturation: float = 39.0
+    max_slope: float = 0.5
+    min_speed: float = 2.0
+    mass_std: float = 500.0
+    bias_std: float = 0.5
+    pitch_compliance: float = 0.0
+    force_std: float = 100.0
+    mass_drift: float = 0.05
+    bias_drift: float = 1e-4
+    mass_tol: float = 0.015
+    bias_tol: float = 0.02
+    force_slope_std: float = 0.005
+
+    def __post_init__(self) -> None:
+        for name in ('tau', 'max_age', 'saturation', 'max_slope', 'mass_std', 'bias_std',
+                     'force_std', 'mass_tol', 'bias_tol', 'force_slope_std'):  # fmt: skip
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ConfigurationError(f'imu.{name} must be finite and > 0, got {value}')
+        for name in ('settle', 'min_speed', 'mass_drift', 'bias_drift', 'pitch_compliance'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ConfigurationError(f'imu.{name} must be finite and >= 0, got {value}')
+        if self.max_slope >= math.pi / 2:
+            raise ConfigurationError(f'imu.max_slope must be < pi/2, got {self.max_slope}')
+
+
+def grade_params(
+    config: ImuGradeConfig, gravity: float, mass: float, rolling_c0: float, rolling_c1: float
+) -> np.record:
+    """The `GRADE_PARAMS` record of `config` with the vehicle file's gravity [m/s^2], mass
+    [kg] and rolling-resistance coefficients (paper eq. 7)."""
+    p = new_record(GRADE_PARAMS)
+    p.gravity = gravity
+    p.tau = config.tau
+    p.bias_settle = config.settle
+    p.max_age = config.max_age
+    p.saturation = config.saturation
+    p.max_sine = math.sin(config.max_slope)
+    p.min_speed = config.min_speed
+    p.mass0 = mass
+    p.mass0_std = config.mass_std
+    p.bias0_std = config.bias_std
+    p.pitch_gain = gravity * config.pitch_compliance
+    p.force_std = config.force_std
+    p.mass_q = config.mass_drift**2
+    p.bias_q = config.bias_drift**2
+    p.mass_tol = config.mass_tol
+    p.bias_tol = config.bias_tol
+    p.force_slope_var = config.force_slope_std**2
+    p.rolling_c0 = rolling_c0
+    p.rolling_c1 = rolling_c1
+    return p
+
+
+@jit
+def imu_grade_reset(p: np.record, s: np.record) -> None:
+    """Forget everything: filters, regression (back to its prior), counts."""
+    lowpass_reset(s.lp)
+    s.last_t = math.nan
+    s.since = math.nan
+    s.bias = 0.0
+    s.bias_time = 0.0
+    s.sine = 0.0
+    s.dropouts = 0
+    s.saturated = 0
+    s.theta[0] = p.mass0 / (1.0 + p.pitch_gain * p.mass0)
+    s.theta[1] = 0.0
+    s.cov[:, :] = 0.0
+    s.cov[0, 0] = p.mass0_std**2
+    s.cov[1, 1] = (p.mass0 * p.bias0_std / p.gravity) ** 2
+    s.fit_time = 0.0
+    s.fitted = False
+    s.trusted = False
+
+
+@jit
+def _force_only(out: np.record, slope_force: float, force_valid: bool) -> None:
+    out.slope = slope_force
+    out.slope_valid = force_valid
+    out.sources = SOURCE_FORCE if force_valid else 0
+    out.slope_imu = math.nan
+
+
+@jit
+def _regression(p: np.record, s: np.record, dt: float, u: float, y: float, speed: float) -> None:
+    """One Kalman update of ``theta = [m', m' b / g]`` from the filtered balance
+
+    ``y = (F - aero) / g = m' (u / g + c_r cos(alpha) (1 + k)) - m' b / g``
+
+    where ``F - aero = m f + c_r m g cos(alpha)`` (``f = dv/dt + g sin(alpha)``), the IMU
+    reads ``u = (1 + k) f + b`` and ``m' = m / (1 + k)``, ``k = pitch_gain m``.
+    """
+    s.cov[0, 0] += p.mass_q * dt
+    s.cov[1, 1] += p.bias_q * dt * (s.theta[0] / p.gravity) ** 2
+    c_roll = p.rolling_c0 * (1.0 + p.rolling_c1 * abs(speed) / _KMH_REFERENCE)
+    cos_grade = math.sqrt(max(1.0 - s.sine * s.sine, 0.0))
+    phi0 = u / p.gravity + c_roll * cos_grade * (1.0 + p.pitch_gain * _mass(p, s))
+    phi1 = -1.0
+    # successive stamps see the same filtered error: one independent value per 2 order tau
+    inflation = max(1.0, 2.0 * _ORDER * p.tau / dt)
+    r = (p.force_std / p.gravity) ** 2 * inflation
+    c = s.cov
+    pf0 = c[0, 0] * phi0 + c[0, 1] * phi1
+    pf1 = c[1, 0] * phi0 + c[1, 1] * phi1
+    innovation_var = phi0 * pf0 + phi1 * pf1 + r
+    k0 = pf0 / innovation_var
+    k1 = pf1 / innovation_var
+    e = y - (phi0 * s.theta[0] + phi1 * s.theta[1])
+    s.theta[0] += k0 * e
+    s.theta[1] += k1 * e
+    c00 = c[0, 0] - k0 * pf0
+    c01 = c[0, 1] - k0 * pf1
+    c11 = c[1, 1] - k1 * pf1
+    c[0, 0] = c00
+    c[0, 1] = c01
+    c[1, 0] = c01
+    c[1, 1] = c11
+    s.fit_time += dt
+
+
+@jit
+def _mass(p: np.record, s: np.record) -> float:
+    """The mass [kg] of the regression's m' = m / (1 + pitch_gain m)."""
+    reduced = s.theta[0]
+    den = 1.0 - p.pitch_gain * reduced
+    return reduced / den if den > 0.0 else math.inf
+
+
+@jit
+def _bias(p: np.record, s: np.record) -> tuple[float, float]:
+    """The IMU's bias b [m/s^2] of the regression's m' b / g, and its standard deviation
+    (first order in both parameters)."""
+    reduced = s.theta[0]
+    if not reduced > 0.0:
+        return 0.0, math.inf
+    b = s.theta[1] * p.gravity / reduced
+    # d b = g / m' d theta1 - b / m' d m'
+    j0 = -b / reduced
+    j1 = p.gravity / reduced
+    c = s.cov
+    var = j0 * j0 * c[0, 0] + 2.0 * j0 * j1 * c[0, 1] + j1 * j1 * c[1, 1]
+    return b, math.sqrt(max(var, 0.0))
+
+
+@jit
+def _mass_std(p: np.record, s: np.record) -> float:
+    """Standard deviation [kg] of `_mass` (its derivative times that of m')."""
+    den = 1.0 - p.pitch_gain * s.theta[0]
+    std = math.sqrt(max(s.cov[0, 0], 0.0))
+    return std / (den * den) if den > 0.0 else math.inf
+
+
+@jit
+def imu_grade_step(
+    p: np.record,
+    s: np.record,
+    t: float,
+    imu_stamp: float,
+    f_x: float,
+    speed: float,
+    slope_force: float,
+    force_valid: bool,
+    force: float,
+    force_ok: bool,
+    mass_used: float,
+    out: np.record,
+) -> None:
+    """One stamp of the fusion.
+
+    Args:
+        p: `GRADE_PARAMS` record.
+        s: `GRADE_STATE` record, advanced.
+        t: stamp [s].
+        imu_stamp: stamp of the newest IMU sample at `t` [s] (nan: none yet).
+        f_x: its longitudinal specific force in body axes [m/s^2].
+        speed: body speed [m/s].
+        slope_force: the force balance's slope [rad] (`estimator_step`).
+        force_valid: whether that slope is valid.
+        force: the longitudinal force balance without gravity and rolling, sum(Fx) -
+            aero [N] (signed).
+        force_ok: the wheel torques held at the stamp (the regression may use it).
+        mass_used: the mass [kg] the force balance's slope used (`Estimates.mass_used`).
+        out: `GRADE_OUT` record, written.
+    """
+    dt = 0.0 if math.isnan(s.last_t) else t - s.last_t
+    if dt < 0.0:  # a stamp out of order: the estimator rejected it too
+        dt = 0.0
+    s.last_t = t
+    fresh = not math.isnan(imu_stamp) and t - imu_stamp <= p.max_age
+    saturated = abs(f_x) >= p.saturation
+    ok = fresh and not saturated and math.isfinite(f_x) and math.isfinite(speed)
+    m = _mass(p, s)
+    out.mass = m
+    out.mass_std = _mass_std(p, s)
+    out.fitted = s.fitted
+    out.trusted = s.trusted
+    out.bias, out.bias_std = _bias(p, s)
+    out.accel = math.nan
+    if not ok:
+        if not math.isnan(s.since):
+            s.dropouts += 1
+        if saturated and math.isfinite(f_x):
+            s.saturated += 1
+        lowpass_reset(s.lp)
+        s.since = math.nan
+        _force_only(out, slope_force, force_valid)
+        return
+    if math.isnan(s.since):
+        s.since = t
+    usable = force_ok and math.isfinite(force)
+    x = np.empty(3)
+    x[0] = f_x
+    x[1] = speed
+    # the force balance is filtered with the others; where it has none, its last value
+    x[2] = force if usable else s.stages[-1, 2] if s.lp.started else 0.0
+    y = np.empty(3)
+    lowpass_update(p.tau, s.stages, s.prev, s.lp, dt, x, y)
+    dy = np.empty(3)
+    lowpass_derivative(s.stages, s.prev, s.lp, dy)
+    accel = dy[1]
+    out.accel = accel
+    # the filters' start-up: the derivative needs a few time constants
+    if t - s.since < 3.0 * _ORDER * p.tau:
+        _force_only(out, slope_force, force_valid)
+        return
+    # forward only: the rolling resistance's sign is the speed's (and reversing is rare)
+    if usable and speed >= p.min_speed and dt > 0.0:
+        _regression(p, s, dt, y[0], y[2] / p.gravity, speed)
+        m = _mass(p, s)
+        out.mass = m
+        out.mass_std = _mass_std(p, s)
+        out.bias, out.bias_std = _bias(p, s)
+        if s.fit_time >= p.bias_settle:
+            s.fitted = s.fitted or out.mass_std <= p.mass_tol * m
+            s.trusted = s.trusted or out.bias_std <= p.bias_tol
+        out.fitted = s.fitted
+        out.trusted = s.trusted
+    bias = out.bias
+    scale = 1.0 + p.pitch_gain * m
+    sine = ((y[0] - bias) / scale - accel) / p.gravity
+    valid = abs(sine) <= p.max_sine
+    slope_imu = math.asin(max(-1.0, min(1.0, sine)))
+    s.sine = sine
+    out.slope_imu = slope_imu
+    if s.trusted:
+        out.slope = slope_imu
+        out.slope_valid = valid
+        out.sources = SOURCE_IMU | SOURCE_FORCE
+    elif not force_valid:
+        # no force balance to lean on: the IMU's grade with the bias known so far
+        out.slope = slope_imu
+        out.slope_valid = valid
+        out.sources = SOURCE_IMU
+    else:
+        # both, weighted by their variances: the IMU's is its bias's (while it is learnt),
+        # the force balance's grows with the mass error the regression sees in it (its
+        # slope is off by (m / m_used - 1) f / g) and the regression's own uncertainty
+        imu_var = (out.bias_std / p.gravity) ** 2
+        load = y[0] / p.gravity
+        mass_error = (m - mass_used) / mass_used if mass_used > 0.0 else 0.0
+        force_var = p.force_slope_var + (mass_error * load) ** 2
+        force_var += (out.mass_std / m * load) ** 2 if m > 0.0 else 0.0
+        weight = force_var / (force_var + imu_var)
+        out.slope = weight * slope_imu + (1.0 - weight) * slope_force
+        out.slope_valid = True
+        out.sources = (SOURCE_IMU if weight > 0.01 else 0) | (SOURCE_FORCE if weight < 0.99 else 0)
+
+
+@jit
+def imu_grade_block(
+    p_: np.ndarray,
+    s_: np.ndarray,
+    t: FloatArray,
+    imu: FloatArray,
+    speeds: FloatArray,
+    slope: FloatArray,
+    slope_valid: NDArray[np.bool_],
+    force: FloatArray,
+    force_ok: NDArray[np.bool_],
+    mass_used: FloatArray,
+    out: np.ndarray,
+) -> None:
+    """`imu_grade_step` over N stamps (the state carries on from block to block).
+
+    Args:
+        p_, s_: the `GRADE_PARAMS` and `GRADE_STATE` records as 1-element arrays.
+        t: shape (N,), [s].
+        imu: shape (N, 2): stamp of the newest IMU sample [s] (nan: none), f_x [m/s^2].
+        speeds: shape (N,), [m/s].
+        slope: shape (N,), [rad] the force balance's slope; slope_valid (N,).
+        force: shape (N,), [N] sum(Fx) - aero; force_ok (N,): the torques held.
+        mass_used: shape (N,), [kg] the mass of the force balance's slope.
+        out: shape (N,) `GRADE_OUT` records, written.
+    """
+    p = p_[0]
+    s = s_[0]
+    for k in range(t.shape[0]):
+        imu_grade_step(
+            p, s, t[k], imu[k, 0], imu[k, 1], speeds[k], slope[k], slope_valid[k], force[k],
+            force_ok[k], mass_used[k], out[k],
+        )  # fmt: skip
+
+
+def pitch_compliance(
+    wheelbase: float,
+    cg_height: float,
+    front_stiffness: float,
+    rear_stiffness: float,
+    tyre_stiffness: float,
+) -> float:
+    """Body pitch per newton of longitudinal ground force [rad/N] of a car on its springs.
+
+    The ground force ``F`` acts ``cg_height`` below the CG: a moment ``h F`` taken up by the
+    axles as ``+-h F / L``; each axle's corner springs (two per axle, the suspension in series
+    with the tyre) deflect by that over their stiffness, and the body pitches by the
+    difference over the wheelbase: ``h (1/k_f + 1/k_r) / L^2``.
+
+    Args:
+        wheelbase: L [m].
+        cg_height: h [m].
+        front_stiffness, rear_stiffness: one corner's suspension spring [N/m].
+        tyre_stiffness: one tyre's vertical stiffness [N/m].
+    """
+    front = 1.0 / (0.5 / front_stiffness + 0.5 / tyre_stiffness)
+    rear = 1.0 / (0.5 / rear_stiffness + 0.5 / tyre_stiffness)
+    return cg_height * (1.0 / front + 1.0 / rear) / wheelbase**2
+
+
+def vehicle_pitch_compliance(path: str | os.PathLike[str] | None) -> float:
+    """`pitch_compliance` [rad/N] of a full vehicle file's suspension and tyres; 0 (a rigid
+    body) for a file that has none (an estimation-only file), None: the shipped Clio."""
+    try:
+        vp = load_vehicle(Path(path) if path is not None else default_vehicle_file())
+    except ParameterError:
+        return 0.0
+    s = vp.suspension
+    return pitch_compliance(
+        vp.chassis.wheelbase, vp.chassis.cg_height, s.stiffness_front, s.stiffness_rear,
+        vp.wheel.tyre_vertical_stiffness,
+    )  # fmt: skip
+
+
+class ImuGrade:
+    """The fusion's records: settings, state; `run` over a block of stamps.
+
+    Attributes:
+        config: the settings.
+        params: `GRADE_PARAMS` record.
+        state: `GRADE_STATE` record.
+    """
+
+    def __init__(
+        self,
+        config: ImuGradeConfig | None,
+        gravity: float,
+        mass: float,
+        rolling_c0: float,
+        rolling_c1: float,
+    ) -> None:
+        """Create the records (a fresh state) with the vehicle file's values (see
+        `grade_params`)."""
+        self.config = config or ImuGradeConfig()
+        self.params = grade_params(self.config, gravity, mass, rolling_c0, rolling_c1)
+        self.state = new_record(GRADE_STATE)
+        imu_grade_reset(self.params, self.state)
+
+    def run(
+        self,
+        t: FloatArray,
+        imu: FloatArray,
+        speeds: FloatArray,
+        slope: FloatArray,
+        slope_valid: NDArray[np.bool_],
+        force: FloatArray,
+        force_ok: NDArray[np.bool_],
+        mass_used: FloatArray,
+    ) -> np.recarray:
+        """The `GRADE_OUT` records of N stamps (see `imu_grade_block`)."""
+        n = t.shape[0]
+        out = np.zeros(n, GRADE_OUT)
+        imu_grade_block(
+            record_array(self.params),
+            record_array(self.state),
+            np.ascontiguousarray(t, dtype=np.float64),
+            np.ascontiguousarray(imu, dtype=np.float64).reshape(n, 2),
+            np.ascontiguousarray(speeds, dtype=np.float64),
+            np.ascontiguousarray(slope, dtype=np.float64),
+            np.ascontiguousarray(slope_valid, dtype=np.bool_),
+            np.ascontiguousarray(force, dtype=np.float64),
+            np.ascontiguousarray(force_ok, dtype=np.bool_),
+            np.ascontiguousarray(mass_used, dtype=np.float64),
+            out,
+        )
+        return out.view(np.recarray)
+
+    def step(
+        self,
+        t: float,
+        imu_stamp: float,
+        f_x: float,
+        speed: float,
+        slope_force: float,
+        force_valid: bool,
+        force: float,
+        force_ok: bool,
+        mass_used: float,
+        out: np.record,
+    ) -> None:
+        """One stamp (the live nodes), see `imu_grade_step`."""
+        imu_grade_step(
+            self.params, self.state, t, imu_stamp, f_x, speed, slope_force, force_valid,
+            force, force_ok, mass_used, out,
+        )  # fmt: skip
