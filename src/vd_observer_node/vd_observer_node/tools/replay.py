@@ -1013,7 +1013,8 @@ class _Run:
         per_stamp = [key for key in ('engine', 'imu') if key in kwargs]
 
         def run(rows: slice) -> CascadeResult:
-            part = {**kwargs, **{key: kwargs[key][rows] for key in per_stamp}}
+            part: dict[str, Any] = dict(kwargs)
+            part.update({key: kwargs[key][rows] for key in per_stamp})
             return self.cascade(
                 t[rows],
                 wheel_angle[rows],
