@@ -18,6 +18,7 @@ from vd_observer_node.bag.reader import BagReader
 from vd_observer_node.chain import Chain, ChainSettings
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.imu_grade import (
     SOURCE_FORCE,
     SOURCE_IMU,
@@ -210,13 +211,22 @@ def test_replay_reads_the_mapped_imu_and_marks_the_slope_sources(tmp_path: Path)
     stamps = np.round(part.t * 1e9).astype(np.int64)
     write_topic_arrays_bag(tmp_path / 'in', stamps, sim_topics(part, truth=False, imu=True))
     mapping = mapping_from_dict({'imu': {'topic': SENSORS_IMU, 'type': 'sensor_msgs/msg/Imu'}})
-    replay_bag(tmp_path / 'in', tmp_path / 'out', mapping=mapping, situation=False)
+    # the slope filter set: left unset, the replay follows the bag's rate after 200 stamps
+    # (rate_settings; tested in test_bag_replay)
+    fixed = EstimatorConfig(slope_filter_tau=0.1)
+    replay_bag(
+        tmp_path / 'in',
+        tmp_path / 'out',
+        mapping=mapping,
+        situation=False,
+        estimator_config=fixed,
+    )
     arrays = BagReader(tmp_path / 'out').topic_arrays([ESTIMATES_SLOPE])[ESTIMATES_SLOPE]
     slope = decode_batch('vd_msgs/msg/Slope', arrays.datas)
     t = stamps * 1e-9  # the replay's stamps: the header's nanoseconds
     expected = run_cascade(
         t, part.wheel_angle, part.body_speed, part.wheel_torque, VEHICLE,
-        imu=np.column_stack([t, part.imu[:, 0]]), imu_config=CONFIG,
+        estimator_config=fixed, imu=np.column_stack([t, part.imu[:, 0]]), imu_config=CONFIG,
     )  # fmt: skip
     np.testing.assert_array_equal(slope.values['angle'], expected.slope)
     np.testing.assert_array_equal(slope.values['sources'], expected.slope_sources)

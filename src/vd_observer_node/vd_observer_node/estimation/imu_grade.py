@@ -108,7 +108,7 @@ GRADE_PARAMS: Final = np.dtype(
 GRADE_STATE: Final = np.dtype(
     [
         ('stages', 'f8', (_ORDER, 3)),
-        ('prev', 'f8', (3,)),
+        ('prev', 'f8', (2, 3)),  # filters.lowpass_update: last output and last input
         ('lp', LOWPASS_META),
         ('last_t', 'f8'),
         ('since', 'f8'),  # [s] the IMU's filters have run since this stamp (nan: stopped)
