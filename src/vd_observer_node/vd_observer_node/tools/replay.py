@@ -57,6 +57,7 @@ from vd_common.topics import (
     SENSORS,
     TRUTH_NAMESPACE,
 )
+from vd_common.vehicle.estimation import EstimationVehicleParams
 
 from vd_observer_node.bag.alerts_cdr import encode_alerts_packed
 from vd_observer_node.bag.cdr_batch import encode_packed, upgrade_batch
@@ -66,6 +67,7 @@ from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.alignment import BlockAligner
+from vd_observer_node.estimation.brakes import Brakes
 from vd_observer_node.estimation.cascade import (
     CascadeResult,
     CascadeState,
@@ -88,12 +90,14 @@ from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_p
 from vd_observer_node.inputs.decode import (
     InputSeries,
     InputStats,
+    decode_brake,
     decode_engine,
     decode_input,
     has_header,
 )
 from vd_observer_node.inputs.health import StreamHealth
 from vd_observer_node.inputs.mapping import (
+    BRAKE_INPUT,
     ENGINE_INPUT,
     InputMapping,
     InputSpec,
@@ -497,6 +501,7 @@ def replay_bag(
     estimator_vehicle = vehicle or EstimatorVehicle.from_params(params)
     if source == 'engine' and drivetrain is None:
         drivetrain = Drivetrain.from_params(params)
+    brakes = replay_brakes(mapping, params)
     notes: list[str] = []
     if situation and params.tire is None:
         # an estimation-only vehicle file: everything but the friction potential and alerts
@@ -522,7 +527,9 @@ def replay_bag(
         )
 
     extra = dict(cascade_kwargs or {})
-    clash = sorted({'torque_source', 'engine', 'drivetrain', 'state'} & set(extra))
+    clash = sorted(
+        {'torque_source', 'engine', 'drivetrain', 'state', 'brake', 'brakes'} & set(extra)
+    )
     if clash:
         raise ConfigurationError(
             f'cascade settings: {clash[0]} is set by the torque source, not the config'
@@ -530,6 +537,8 @@ def replay_bag(
     torque_kwargs: dict[str, Any] = {}
     if source != 'measured':  # the default call stays as it was (injected cascades)
         torque_kwargs = {'torque_source': source, 'drivetrain': drivetrain}
+    if brakes is not None:
+        torque_kwargs['brakes'] = brakes
 
     def new_run() -> _Run:
         return _Run(
@@ -596,6 +605,18 @@ def replay_bag(
         vehicle=f'{params.name} ({params.source})',
         notes=tuple(notes),
     )
+
+
+def replay_brakes(mapping: InputMapping, params: EstimationVehicleParams) -> Brakes | None:
+    """The brake input of a mapping with the vehicle file's gains (None: no brake input, or
+    no torque to take it from).
+
+    Raises:
+        ConfigurationError: a pressure without the file's gains (`Brakes.from_params`).
+    """
+    if mapping.brake is None or mapping.torque_source == 'none':
+        return None
+    return Brakes.from_params(mapping.brake.signal, params, mapping.source)
 
 
 class _OutOfOrderError(Exception):
@@ -834,12 +855,14 @@ class _Run:
     def _decode(self, spec: InputSpec, arrays: Mapping[str, TopicArrays]) -> InputSeries:
         arr = arrays.get(spec.topic)
         if arr is None or not arr.datas:
-            width = 3 if spec.name == ENGINE_INPUT else spec.width
+            width = spec.width
             return InputSeries(
                 np.zeros(0, dtype=np.int64), np.zeros((0, width)), np.zeros(0, dtype=np.bytes_)
             )
         if spec.name == ENGINE_INPUT:
             return decode_engine(spec, arr)
+        if spec.name == BRAKE_INPUT:
+            return decode_brake(spec, arr)
         return decode_input(spec, arr, self.vehicle.effective_radius)
 
     def block(
@@ -883,6 +906,8 @@ class _Run:
         kwargs = dict(self.cascade_kwargs)
         if engine is not None:
             kwargs['engine'] = engine
+        if self.mapping.brake is not None and len(picked) > 3:
+            kwargs['brake'] = picked[3]['v']
         result = self.cascade(
             t,
             wheel_angle,
@@ -898,8 +923,9 @@ class _Run:
         self.result = result
         self.samples += n
         self.torque_valid += int(np.count_nonzero(result.torque_valid))
-        if engine is not None and result.wheel_torque_used.shape[0] == n:
-            # the situation monitor gets the torques the engine path gave the estimator
+        braked = 'brake' in kwargs
+        if (engine is not None or braked) and result.wheel_torque_used.shape[0] == n:
+            # the situation monitor gets the torques the engine path and brakes gave the estimator
             # (0 where the path had none: a gear the box lacks)
             given = result.wheel_torque_used
             wheel_torque = np.where(np.isfinite(given), given, 0.0)
