@@ -19,7 +19,8 @@ import pytest
 from scipy.optimize import brentq
 from vd_common.vehicle.estimation import EstimationConverter, parse_estimation_vehicle
 from vd_observer_node.errors import ConfigurationError
-from vd_observer_node.estimation.brakes import Brakes, brake_torques
+from vd_observer_node.estimation.brakes import Brakes, brake_gains, brake_torques, new_brake_state
+from vd_observer_node.estimation.cascade import CascadeState, run_cascade
 from vd_observer_node.estimation.drivetrain import Drivetrain, engine_torques
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
@@ -115,34 +116,103 @@ def test_the_vehicle_file_gives_the_automatic_gearbox_and_brakes() -> None:
     line = Drivetrain.from_params(params)
     assert line.driven_axle == 'all' and line.front_share == 0.7
     assert line.gear_efficiency == (0.9, 0.95) and line.converter is not None
-    assert Brakes.from_params('pressure', params).params_array().tolist() == [
-        2.0, 30.0, 30.0, 12.0, 12.0,
+    assert Brakes.from_params('pressure', params).params_array()[:6].tolist() == [
+        2.0, 30.0, 30.0, 12.0, 12.0, 0.0,
     ]  # fmt: skip
     data['torque_converter']['torque_ratio'] = [2.0, 1.0]  # type: ignore[index]
     with pytest.raises(Exception, match=r'torque_converter\.torque_ratio must have one value'):
         parse_estimation_vehicle(data)
     del data['brakes']
-    with pytest.raises(ConfigurationError, match=r'brakes\.gain_front and brakes\.gain_rear'):
-        Brakes.from_params(
-            'pressure', parse_estimation_vehicle({**data, 'torque_converter': None})
-        )
+    # no gain in the file: learnt online
+    no_gain = parse_estimation_vehicle({**data, 'torque_converter': None})
+    assert Brakes.from_params('pressure', no_gain).learn
+    with pytest.raises(ConfigurationError, match='brake signal must be switch or pressure'):
+        Brakes.from_params('pedal', no_gain)
 
 
 def test_brake_pressure_opposes_each_wheel_and_a_switch_makes_the_torque_unknown() -> None:
     bprm = Brakes('pressure', 40.0, 15.0).params_array()
+    gains = np.empty(4)
+    brake_gains(bprm, new_brake_state(), gains)
+    assert gains.tolist() == [40.0, 40.0, 15.0, 15.0]
     used = np.array([300.0, 300.0, 0.0, 0.0])
     omega = np.array([20.0, 20.0, -20.0, 20.0])
-    assert brake_torques(bprm, np.array([10.0, 10.0, 4.0, 4.0]), omega, used)
+    assert brake_torques(bprm, gains, np.array([10.0, 10.0, 4.0, 4.0]), omega, used)
     np.testing.assert_allclose(used, [300.0 - 400.0, 300.0 - 400.0, 60.0, -60.0])
     used = np.zeros(4)
-    assert brake_torques(bprm, np.array([0.0, math.nan, 0.0, 0.0]), omega, used)
+    assert brake_torques(bprm, gains, np.array([0.0, math.nan, 0.0, 0.0]), omega, used)
     assert np.isnan(used[1]) and np.isfinite(used[[0, 2, 3]]).all()
     # a braked wheel at a standstill: a reaction, not held
-    assert not brake_torques(bprm, np.full(4, 5.0), np.zeros(4), np.zeros(4))
+    assert not brake_torques(bprm, gains, np.full(4, 5.0), np.zeros(4), np.zeros(4))
+    # a gain still to be learnt: no brake torque known while the pressure is on
+    learn = Brakes('pressure', learn=True).params_array()
+    brake_gains(learn, new_brake_state(), gains)
+    assert np.isnan(gains).all()
+    assert brake_torques(learn, gains, np.zeros(4), omega, np.zeros(4))
+    assert not brake_torques(learn, gains, np.full(4, 3.0), omega, np.zeros(4))
     switch = Brakes('switch').params_array()
-    assert brake_torques(switch, np.array([0.0, 0.0, 0.0, 0.0]), omega, used)
-    assert not brake_torques(switch, np.array([1.0, 1.0, 1.0, 1.0]), omega, used)
-    assert not brake_torques(switch, np.full(4, math.nan), omega, used)
+    assert brake_torques(switch, gains, np.array([0.0, 0.0, 0.0, 0.0]), omega, used)
+    assert not brake_torques(switch, gains, np.array([1.0, 1.0, 1.0, 1.0]), omega, used)
+    assert not brake_torques(switch, gains, np.full(4, math.nan), omega, used)
+
+
+def _braking_drive(gain: float, grade: float, vehicle: EstimatorVehicle) -> dict[str, np.ndarray]:
+    """100 Hz of a car cruising at 20 m/s on a constant grade with the drive torque that
+    holds its speed, braking with 20 bar on every wheel (``gain`` N m/bar) and no drive
+    from 10 to 12 s and from 22 to 24 s, cruising again between: integrated at 1 kHz with
+    the wheels rolling without slip (the balance the estimator inverts, written out)."""
+    m, r, g = vehicle.mass, vehicle.effective_radius, vehicle.gravity
+    j = 2.0 * (vehicle.inertia_front + vehicle.inertia_rear)
+    dt = 1e-3
+    v, angle = 20.0, 0.0
+    rows: list[list[float]] = []
+    for k in range(int(30.0 / dt)):
+        t = k * dt
+        braking = 10.0 <= t < 12.0 or 22.0 <= t < 24.0
+        rolling = (
+            vehicle.rolling_c0 * (1.0 + vehicle.rolling_c1 * v / 160.0) * m * g * math.cos(grade)
+        )
+        resist = rolling + vehicle.drag_factor * v * v + m * g * math.sin(grade)
+        pressure = 20.0 if braking else 0.0
+        # cruise: the torque that holds the speed; back to 20 m/s smoothly after a braking
+        drive = 0.0 if braking else (resist + m * 0.5 * (20.0 - v)) * r / 4.0
+        wheel_torque = drive - gain * pressure
+        a = (4.0 * wheel_torque / r - resist) / (m + j / (r * r))
+        if k % 10 == 0:
+            rows.append([t, angle, v, drive, pressure])
+        v += a * dt
+        angle += v / r * dt
+    x = np.array(rows)
+    return {
+        't': x[:, 0], 'angle': np.repeat(x[:, 1:2], 4, axis=1), 'speed': x[:, 2],
+        'torque': np.repeat(x[:, 3:4], 4, axis=1), 'brake': np.repeat(x[:, 4:5], 4, axis=1),
+    }  # fmt: skip
+
+
+def test_the_brake_gain_is_learnt_from_the_decelerations() -> None:
+    """No gain in the vehicle file: the first braking teaches it (the slope before it held
+    through it; the brake torque unknown until it has converged, after 1 s of braking), the
+    second is then estimated with it: its slope valid and right."""
+    vehicle = EstimatorVehicle(1600.0, 2.6, 1.1, 0.6, 1.5, 1.4, 0.34, 0.33, 2.6, 1.2,
+                               0.01, 3.6, 9.81)  # fmt: skip
+    grade = math.radians(2.0)
+    drive = _braking_drive(30.0, grade, vehicle)
+    state = CascadeState()
+    result = run_cascade(
+        drive['t'], drive['angle'], drive['speed'], drive['torque'], vehicle,
+        brake=drive['brake'], brakes=Brakes('pressure', learn=True), state=state,
+    )  # fmt: skip
+    assert state.parts is not None
+    gain, _var, braking_time, converged = state.parts.brake_state[:4]
+    assert converged == 1.0 and braking_time >= 1.0
+    assert gain == pytest.approx(30.0, rel=0.03)
+    t = drive['t']
+    first = (t >= 10.0) & (t < 12.0)
+    second = (t >= 22.5) & (t < 24.0)
+    # not learnt yet (less than min_braking_time of braking): unknown, invalid
+    assert not result.slope_valid[first][:100].any()
+    assert result.slope_valid[second].all()
+    np.testing.assert_allclose(result.slope[second], grade, atol=math.radians(0.3))
 
 
 def test_a_nan_torque_is_never_held() -> None:

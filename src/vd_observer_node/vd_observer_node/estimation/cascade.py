@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.estimation.brakes import Brakes, no_brakes
+from vd_observer_node.estimation.brakes import Brakes, new_brake_state, no_brakes
 from vd_observer_node.estimation.cascade_step import cascade_block
 from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.drivetrain import (
@@ -295,6 +295,7 @@ class CascadeParts:
         engine_faults: the engine path's own fault counter where it learns the offset.
         brakes: the brake input (`brakes.Brakes`; kind 'none' without one).
         bprm: its `Brakes.params_array`.
+        brake_state: shape (13,), the learnt brake gain (`brakes.BRAKE_GAIN_SLOTS`).
     """
 
     def __init__(
@@ -351,6 +352,7 @@ class CascadeParts:
         # without torque there is nothing to take a brake torque from
         self.brakes = brakes if brakes is not None and self.source != TORQUE_NONE else Brakes()
         self.bprm = self.brakes.params_array()
+        self.brake_state = new_brake_state()
         self._args: tuple[Any, ...] | None = None
 
     @property
@@ -374,7 +376,7 @@ class CascadeParts:
             a(wp), wlip, a(ws), wplain, a(sp), slip_, a(ss), splain,
             a(self.estimator.params), a(es), fst, sst, vst, self.measured, self.engine_on,
             self.dprm, self.engine_state, self.offset_on, a(self.offset_params),
-            a(self.offset_state), a(self.offset_estimate), self.bprm,
+            a(self.offset_state), a(self.offset_estimate), self.bprm, self.brake_state,
         )  # fmt: skip
         return self._args
 

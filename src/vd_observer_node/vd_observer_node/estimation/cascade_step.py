@@ -13,7 +13,12 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from vd_observer_node.estimation.brakes import BRAKE_NONE, brake_torques
+from vd_observer_node.estimation.brakes import (
+    BRAKE_NONE,
+    brake_gain_update,
+    brake_gains,
+    brake_torques,
+)
 from vd_observer_node.estimation.drivetrain import engine_torques
 from vd_observer_node.estimation.estimator_step import estimator_update
 from vd_observer_node.estimation.levant_step import levant_update
@@ -36,7 +41,7 @@ def cascade_step(
     sp: np.record, slip_: FloatArray, ss: np.record, sch: np.recarray,
     ep: np.record, es: np.record, fst: FloatArray, sst: FloatArray, vst: FloatArray,
     measured: bool, engine_on: bool, dprm: FloatArray, escl: FloatArray, offset_on: bool,
-    op: np.record, os_: np.record, oout: np.record, bprm: FloatArray,
+    op: np.record, os_: np.record, oout: np.record, bprm: FloatArray, bst: FloatArray,
     t: float, angle: FloatArray, speed: float, torque: FloatArray, engine: FloatArray,
     brake: FloatArray, wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray,
     body_valid: BoolArray, used: FloatArray, est: np.record,
@@ -55,7 +60,9 @@ def cascade_step(
             gear changed (-inf before), the last gear (nan before).
         offset_on: the engine path learns the engine-torque offset and subtracts it.
         op, os_, oout: the offset estimator's settings, state and estimate records.
-        bprm: shape (5,), the brake input (`brake_torques`; kind `BRAKE_NONE`: none).
+        bprm: shape (11,), the brake input (`brakes.Brakes.params_array`; kind
+            `BRAKE_NONE`: none).
+        bst: shape (13,), the learnt brake gain's state (`brakes.new_brake_state`).
         t: stamp [s].
         angle: shape (4,), [rad] wheel angles (or speeds [rad/s], as the observer takes).
         speed: [m/s] measured body speed.
@@ -96,11 +103,19 @@ def cascade_step(
         torque_ok = engaged and t - escl[0] >= dprm[CLUTCH_SETTLE]
     else:
         used[:] = torque
-    if bprm[0] != BRAKE_NONE:
-        torque_ok = brake_torques(bprm, brake, wheel[1], used) and torque_ok
+    braked = bprm[0] != BRAKE_NONE
+    learn = braked and bprm[5] > 0.0
+    path_ok = torque_ok
+    drive = used.copy() if learn else used
+    if braked:
+        gains = np.empty(4)
+        brake_gains(bprm, bst, gains)
+        torque_ok = brake_torques(bprm, gains, brake, wheel[1], used) and torque_ok
     estimator_update(
         ep, es, fst, sst, vst, t, wheel[1], wheel[2], v_est, body[1, 0], used, torque_ok, est
     )
+    if learn:
+        brake_gain_update(bprm, bst, t, brake, wheel[1], drive, ep, v_est, path_ok, est)
     return torque_ok
 
 
@@ -110,7 +125,7 @@ def cascade_block(
     sp_: np.ndarray, slip_: FloatArray, ss_: np.ndarray, sch: np.recarray,
     ep_: np.ndarray, es_: np.ndarray, fst: FloatArray, sst: FloatArray, vst: FloatArray,
     measured: bool, engine_on: bool, dprm: FloatArray, escl: FloatArray, offset_on: bool,
-    op_: np.ndarray, os__: np.ndarray, oout_: np.ndarray, bprm: FloatArray,
+    op_: np.ndarray, os__: np.ndarray, oout_: np.ndarray, bprm: FloatArray, bst: FloatArray,
     t: FloatArray, angles: FloatArray, speeds: FloatArray, torques: FloatArray,
     engine: FloatArray, brakes: FloatArray, wheel: FloatArray, wheel_valid: BoolArray,
     body: FloatArray,
@@ -139,7 +154,8 @@ def cascade_block(
     for k in range(t.shape[0]):
         torque_valid[k] = cascade_step(
             wp, wlip, ws, wch, sp, slip_, ss, sch, ep, es, fst, sst, vst, measured, engine_on,
-            dprm, escl, offset_on, op, os_, oout, bprm, t[k], angles[k], speeds[k], torques[k],
+            dprm, escl, offset_on, op, os_, oout, bprm, bst, t[k], angles[k], speeds[k],
+            torques[k],
             engine[k], brakes[k], wheel[k], wheel_valid[k], body1, valid1, used[k], est[k],
         )  # fmt: skip
         if offsets.shape[0] > 0:

@@ -600,6 +600,13 @@ def replay_bag(
         clear()
         raise
     wall = time.perf_counter() - started
+    parts = run.state.parts
+    if brakes is not None and brakes.learn and parts is not None:
+        gain, _var, braking, converged = parts.brake_state[:4].tolist()
+        notes.append(
+            f'brake gain learnt online: {gain:.3g} N m per unit of the brake pressure after '
+            f'{braking:.1f} s of braking ({"converged" if converged else "not converged"})'
+        )
     return replace(
         run.report(written, wall),
         vehicle=f'{params.name} ({params.source})',
