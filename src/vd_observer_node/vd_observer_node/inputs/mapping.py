@@ -478,17 +478,6 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
                 f'{source}: {spec.name}.type: {spec.topic} is also mapped as '
                 f'{types[spec.topic]} (one topic has one type)'
             )
-    # 'latest' rides through lost messages; a headerless input (stamped on receipt) can only be
-    # held at its latest value, which 'exact' does
-    headerless = any(spec.msgtype == FLOAT64_ARRAY for spec in specs)
-    alignment = data.get('alignment', 'exact' if headerless else default.alignment)
-    if alignment not in ALIGNMENTS:
-        raise MappingError(
-            f'{source}: alignment {alignment!r} is unknown (use one of {", ".join(ALIGNMENTS)})'
-        )
-    max_age = _number(f'{source}: max_age', data.get('max_age', default.max_age))
-    if max_age <= 0.0:
-        raise MappingError(f'{source}: max_age must be > 0 s, got {max_age}')
     engine = (
         _spec(ENGINE_INPUT, data[ENGINE_INPUT], f'{source}: {ENGINE_INPUT}')
         if ENGINE_INPUT in data
@@ -509,6 +498,25 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
             f'{source}: {BRAKE_INPUT}.type: {brake.topic} is also mapped as '
             f'{types[brake.topic]} (one topic has one type)'
         )
+    # 'latest' rides through lost messages; a headerless input (stamped on receipt) can only be
+    # held at its latest value, which 'exact' does (the inputs the torque source reads, the
+    # brake included)
+    read = [*specs[:2]]
+    if torque_source == 'measured':
+        read.append(specs[2])
+    elif torque_source == 'engine' and engine is not None:
+        read.append(engine)
+    if brake is not None and torque_source != 'none':
+        read.append(brake)
+    headerless = any(spec.msgtype == FLOAT64_ARRAY for spec in read)
+    alignment = data.get('alignment', 'exact' if headerless else default.alignment)
+    if alignment not in ALIGNMENTS:
+        raise MappingError(
+            f'{source}: alignment {alignment!r} is unknown (use one of {", ".join(ALIGNMENTS)})'
+        )
+    max_age = _number(f'{source}: max_age', data.get('max_age', default.max_age))
+    if max_age <= 0.0:
+        raise MappingError(f'{source}: max_age must be > 0 s, got {max_age}')
     wheels, body_speed, wheel_torques = specs
     return InputMapping(
         wheels,

@@ -974,6 +974,8 @@ class _Run:
                 worker.join()
         if failure:
             raise failure[0]
+        if n == 0:  # a block that aligned no stamp (a headerless input held, 'exact')
+            situation_values.clear()
         for topic, values in situation_values.items():
             msgtype = ALERT_TOPICS[topic]
             if topic == ESTIMATES_ALERTS:
