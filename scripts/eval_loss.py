@@ -10,9 +10,10 @@ it lose sensor messages:
 * ``gap200``: 200 ms of every second, on every topic.
 
 Each is replayed (compiled cascade) with the default alignment of vd's own topics and with
-``latest`` (``--max-age``); printed per case: wheel stamps in the bag, stamps estimated, and
-slope RMS [deg] against the truth over the evaluation mask of eval_estimators.py, where the
-estimate is valid, with its ratio to the lossless run. Asserts nothing.
+``latest`` (``--max-age``); printed per case: wheel stamps in the bag, stamps estimated, the
+share of those whose slope is valid, and slope RMS [deg] against the truth over the
+evaluation mask of eval_estimators.py, where the estimate is valid, with its ratio to the
+lossless run. Asserts nothing.
 
     python scripts/eval_loss.py [--duration 30] [--max-age 0.05] [--seed 1]
 """
@@ -74,8 +75,9 @@ def lossy_bag(path: Path, sim: Any, keep: dict[str, np.ndarray]) -> None:
     write_topic_arrays_bag(path, stamp_ns, topics, stamps=stamps)
 
 
-def slope_figure(bag: Path, sim: Any, mask: np.ndarray) -> tuple[int, float]:
-    """(stamps estimated, slope RMS [deg] over `mask` where estimated and valid)."""
+def slope_figure(bag: Path, sim: Any, mask: np.ndarray) -> tuple[int, int, float]:
+    """(stamps estimated, of which with a valid slope, slope RMS [deg] over `mask` where
+    estimated and valid)."""
     arrays = BagReader(bag).topic_arrays([ESTIMATES_SLOPE])[ESTIMATES_SLOPE]
     batch = decode_batch('vd_msgs/msg/Slope', arrays.datas)
     index = np.round(batch.stamp_ns * 1e-9 * RATE_HZ).astype(np.int64)
@@ -83,7 +85,8 @@ def slope_figure(bag: Path, sim: Any, mask: np.ndarray) -> tuple[int, float]:
     valid = batch.values['valid'].astype(bool)
     take = valid & mask[index]
     err = angle[take] - sim.slope[index[take]]
-    return index.shape[0], float(np.degrees(np.sqrt(np.mean(err**2))))
+    rms = float(np.degrees(np.sqrt(np.mean(err**2))))
+    return index.shape[0], int(valid.sum()), rms
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -122,19 +125,23 @@ def main(argv: list[str] | None = None) -> int:
             for name, mapping in alignments.items():
                 out = Path(tmp) / f'{case}-{name.split()[0]}'
                 replay_bag(bag, out, progress=False, mapping=mapping)
-                estimated, slope = slope_figure(out, sim, mask)
+                estimated, valid, slope = slope_figure(out, sim, mask)
                 base.setdefault(name, slope)
                 rows.append(
-                    (case, name, int(keep[SENSORS_WHEEL_ANGLES].sum()), estimated, slope,
-                     slope / base[name])
+                    (case, name, int(keep[SENSORS_WHEEL_ANGLES].sum()), estimated, valid,
+                     slope, slope / base[name])
                 )  # fmt: skip
-    print('\n| loss | alignment | wheel stamps in the bag | estimated | slope RMS | / lossless |')
-    print('|---|---|---|---|---|---|')
-    for case, name, wheels, estimated, slope, ratio in rows:
+    print(
+        '\n| loss | alignment | wheel stamps in the bag | estimated | slope valid'
+        ' | slope RMS | / lossless |'
+    )
+    print('|---|---|---|---|---|---|---|')
+    for case, name, wheels, estimated, valid, slope, ratio in rows:
         share = 100 * estimated / max(wheels, 1)
+        valid_share = 100 * valid / max(estimated, 1)
         print(
             f'| {case} | {name} | {wheels} | {estimated} ({share:.0f} %)'
-            f' | {slope:.3f}° | {ratio:.2f}× |'
+            f' | {valid_share:.1f} % | {slope:.3f}° | {ratio:.2f}× |'
         )
     return 0
 

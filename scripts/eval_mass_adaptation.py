@@ -239,7 +239,7 @@ def figures(
     samples after the mass of 'both' (where it never converged, of 'mass') has converged.
     """
     _, _, _, est_kw = SENSORS[sensors]
-    filter_tau = est_kw.get('slope_filter_tau', EstimatorConfig().slope_filter_tau)
+    filter_tau = est_kw.get('slope_filter_tau', EstimatorConfig().slope_tau)
     mass_cfg = dataclasses.replace(config, filter_tau=filter_tau)
     m_true = true_vp.chassis.mass
     r_true = true_vp.wheel.effective_radius

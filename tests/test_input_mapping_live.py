@@ -23,6 +23,7 @@ from vd_common.topics import (
     ESTIMATES_TORQUE_OFFSET,
     OBSERVER_WHEEL_STATES,
 )
+from vd_observer_node.estimation.rate_settings import slope_filter_tau_for_rate
 
 NS = 1_000_000_000
 ROOT = Path(__file__).resolve().parents[1]
@@ -101,6 +102,9 @@ def test_pipeline_node_runs_on_standard_types_and_reports_a_stopped_topic(
         *(str(s) for s in PAUSE_S),
     )
     publisher.wait_for('DONE', timeout=90)
+    # the slope filter left unset follows the rate the node measured on its first stamps
+    tau = slope_filter_tau_for_rate(RATE_HZ)
+    pipe.wait_for(f'settings: slope_filter_tau={tau:.3g} (input rate {RATE_HZ:g} Hz)', timeout=5)
     assert _wait_exit(collector, 60) == 0
     lines = collector.output().splitlines()
     msgs = [line.split() for line in lines if line.startswith('MSG ')]
@@ -380,9 +384,12 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     write_standard_bag(bag, sim, CarSensors(torques_in_joint_states=True))
     mapping_file = tmp_path / 'car.yaml'
     mapping_file.write_text(yaml.safe_dump(JOINT_TORQUES), encoding='utf-8')
-    replay_bag(
+    # the slope filter left to the rate: live and offline follow it from the same stamp on
+    report = replay_bag(
         bag, tmp_path / 'replayed', progress=False, mapping=mapping_from_dict(JOINT_TORQUES)
     )
+    tau = slope_filter_tau_for_rate(50.0)  # the odometry's rate, slower than the wheels'
+    assert report.rate_settings == {'slope_filter_tau': tau}
     datas = BagReader(tmp_path / 'replayed').topic_arrays([ESTIMATES_SLOPE])[ESTIMATES_SLOPE]
     offline = decode_batch(ESTIMATE_TOPICS[ESTIMATES_SLOPE], datas.datas)
     expected = dict(zip(offline.stamp_ns.tolist(), offline.values['angle'].tolist(), strict=True))
@@ -409,6 +416,7 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     assert set(live) <= set(expected)
     # the same sets in the same order through the same compiled chain: the same bits
     assert all(live[t] == expected[t] for t in live)
+    pipeline.wait_for(f'settings: slope_filter_tau={tau:.3g} (input rate 50 Hz)', timeout=5)
 
 
 @pytest.mark.slow

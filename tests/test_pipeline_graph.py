@@ -24,6 +24,7 @@ from test_graph import (
 )
 from vd_common.topics import (
     ESTIMATES_ALERTS,
+    ESTIMATES_COMBINED,
     ESTIMATES_FRICTION,
     ESTIMATES_FRICTION_POTENTIAL,
     ESTIMATES_RESISTANCES,
@@ -53,16 +54,36 @@ OUTPUTS = {
 }
 
 
+#: (per-quantity topic, its field, the combined message's field)
+COMBINED_FIELDS = (
+    (OBSERVER_WHEEL_STATES, 'angle', 'angle'),
+    (OBSERVER_WHEEL_STATES, 'omega', 'omega'),
+    (OBSERVER_WHEEL_STATES, 'omega_dot', 'omega_dot'),
+    (ESTIMATES_TIRE_FORCES, 'fx', 'fx'),
+    (ESTIMATES_TIRE_FORCES, 'fz', 'fz'),
+    (ESTIMATES_TIRE_FORCES, 'torque_source', 'torque_source'),
+    (ESTIMATES_FRICTION, 'mu', 'mu'),
+    (ESTIMATES_FRICTION, 'slip', 'slip'),
+    (ESTIMATES_FRICTION, 'valid', 'mu_valid'),
+    (ESTIMATES_RESISTANCES, 'rolling', 'rolling'),
+    (ESTIMATES_RESISTANCES, 'aero', 'aero'),
+    (ESTIMATES_SLOPE, 'angle', 'slope'),
+    (ESTIMATES_SLOPE, 'valid', 'slope_valid'),
+)
+
+
 @pytest.mark.ros
 def test_pipeline_node_publishes_what_offline_replay_computes(
     procs: RosProcessGroup, tmp_path: Path
 ) -> None:
     bag = tmp_path / 'live'
     rec = procs.node('recorder', 'vd_observer_node', 'recorder_node', output=str(bag))
-    pipe = procs.node('pipeline', 'vd_observer_node', 'pipeline_node')
+    # both layouts: the per-quantity topics and the one combined message per stamp
+    pipe = procs.node('pipeline', 'vd_observer_node', 'pipeline_node', estimate_topics='both')
     for proc, text in ((rec, 'recording to'), (pipe, 'pipeline ready')):
         proc.wait_for(text, timeout=60)
-    wait_recording(rec, [*OUTPUTS, ESTIMATES_ALERTS])  # the pipeline's publishers, connected
+    # the pipeline's publishers, connected
+    wait_recording(rec, [*OUTPUTS, ESTIMATES_ALERTS, ESTIMATES_COMBINED])
     waiter = wait_for_last_stamp(
         procs,
         'waiter',
@@ -88,11 +109,18 @@ def test_pipeline_node_publishes_what_offline_replay_computes(
         assert proc.stop() == 0, proc.output()[-3000:]
     assert 'Traceback' not in pipe.output(), pipe.output()[-3000:]
 
-    live = by_topic(bag, [SENSORS_WHEEL_ANGLES, *OUTPUTS, ESTIMATES_ALERTS])
+    live = by_topic(bag, [SENSORS_WHEEL_ANGLES, *OUTPUTS, ESTIMATES_ALERTS, ESTIMATES_COMBINED])
     stamps = sorted(live[SENSORS_WHEEL_ANGLES])
     assert len(stamps) == N_SAMPLES, 'the recorder lost sensor samples'
-    for topic in (*OUTPUTS, ESTIMATES_ALERTS):
+    for topic in (*OUTPUTS, ESTIMATES_ALERTS, ESTIMATES_COMBINED):
         assert sorted(live[topic]) == stamps, topic
+    # the combined message carries what the per-quantity messages of its stamp carry
+    for s in stamps:
+        c = live[ESTIMATES_COMBINED][s]
+        for topic, field, name in COMBINED_FIELDS:
+            a = np.asarray(getattr(c, name), dtype=float)
+            b = np.asarray(getattr(live[topic][s], field), dtype=float)
+            np.testing.assert_array_equal(a, b, err_msg=f'{name} vs {topic}.{field}')
 
     offline_bag = tmp_path / 'offline'
     replay_bag(bag, offline_bag, progress=False)

@@ -46,6 +46,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from vd_common.errors import VdError
 from vd_common.params_file import params_file_problem
+from vd_common.settings_log import settings_line
 
 __all__ = [
     'CLOCK_QOS',
@@ -68,7 +69,9 @@ __all__ = [
     'deliver_pending',
     'diagnostic_array',
     'finish',
+    'given_parameters',
     'header_stamp_ns',
+    'log_settings',
     'node_status',
     'ns_to_time',
     'ros_message_class',
@@ -381,6 +384,29 @@ def declare_parameters(node: Node, specs: Sequence[ParamSpec]) -> dict[str, Any]
             )
         values[spec.name] = value
     return values
+
+
+def given_parameters(specs: Sequence[ParamSpec], values: Mapping[str, Any]) -> dict[str, Any]:
+    """The parameters of `values` (`declare_parameters`' result) that are not their defaults,
+    by name: what a params file or ``-p`` set (a value equal to its default counts as the
+    default; an unset parameter without default is left out), for the node's start-up log."""
+    given: dict[str, Any] = {}
+    for spec in specs:
+        if spec.name not in values:
+            continue
+        value = values[spec.name]
+        if spec.default is None:
+            if value is not None:
+                given[spec.name] = value
+        elif value != spec.default:
+            given[spec.name] = value
+    return given
+
+
+def log_settings(node: Node, specs: Sequence[ParamSpec], values: Mapping[str, Any]) -> None:
+    """Log (INFO) the parameters that are not their defaults (`given_parameters`)."""
+    line = settings_line(given_parameters(specs, values), 'parameters')
+    node.get_logger().info(f'settings: {line}')
 
 
 def diagnostic_array(

@@ -14,9 +14,11 @@ from typing import Final
 
 __all__ = [
     'ALERTS',
+    'COMBINED',
     'CONTRACT',
     'ESTIMATES',
     'ESTIMATES_ALERTS',
+    'ESTIMATES_COMBINED',
     'ESTIMATES_FRICTION',
     'ESTIMATES_FRICTION_POTENTIAL',
     'ESTIMATES_MASS',
@@ -79,6 +81,8 @@ ESTIMATES_SLOPE: Final = '/vd/estimates/slope'
 ESTIMATES_MASS: Final = '/vd/estimates/mass'
 ESTIMATES_ROLLING_RADIUS: Final = '/vd/estimates/rolling_radius'
 ESTIMATES_TORQUE_OFFSET: Final = '/vd/estimates/torque_offset'
+# Every per-stamp estimate in one message (pipeline_node's estimate_topics 'combined' or 'both').
+ESTIMATES_COMBINED: Final = '/vd/estimates/combined'
 # The alerts node's outputs.
 ESTIMATES_ALERTS: Final = '/vd/estimates/alerts'
 ESTIMATES_FRICTION_POTENTIAL: Final = '/vd/estimates/friction_potential'
@@ -124,6 +128,11 @@ TRUTH: Final = {
     TRUTH_RESISTANCES: 'vd_msgs/msg/Resistances',
     TRUTH_SLOPE: 'vd_msgs/msg/Slope',
     TRUTH_FRICTION_POTENTIAL: 'vd_msgs/msg/FrictionPotential',
+}
+#: Optional: one message per stamp with what the per-quantity topics above carry (not in
+#: CONTRACT: the recorder records it where it is published, discovered like a user's topic).
+COMBINED: Final = {
+    ESTIMATES_COMBINED: 'vd_msgs/msg/Estimates',
 }
 # The recorder's progress: the newest stamp up to which every per-sample topic it records has
 # been written (std_msgs/Header: stamp, frame_id ''), for sim_node's lockstep mode.

@@ -27,7 +27,8 @@ from vd_common.topics import (
 from vd_common.vehicle.params import default_vehicle_file
 from vd_observer_node.bag import BagReader, BagWriter, ReplayInputError
 from vd_observer_node.bag.cdr_batch import decode_batch
-from vd_observer_node.estimation.cascade import run_cascade
+from vd_observer_node.estimation.cascade import CascadeResult, CascadeState, run_cascade
+from vd_observer_node.estimation.rate_settings import FOLLOW_AFTER
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.inputs.mapping import default_mapping
 from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
@@ -72,6 +73,30 @@ def test_inputs_and_truth_copied_raw(replayed: tuple[Path, Path, object]) -> Non
     assert set(result) - set(source) == set(DEFAULT_ESTIMATES) | set(ALERT_TOPICS)
 
 
+def _following_rate(
+    t: np.ndarray,
+    angle: np.ndarray,
+    speed: np.ndarray,
+    torque: np.ndarray,
+    vehicle: object,
+    rate_hz: float,
+) -> CascadeResult:
+    """run_cascade as the replay runs it with the slope filter left to the rate: the first
+    FOLLOW_AFTER stamps at the reference rate's value, the rest at `rate_hz`'s."""
+    state = CascadeState()
+    k = FOLLOW_AFTER
+    head = run_cascade(t[:k], angle[:k], speed[:k], torque[:k], vehicle, state=state)
+    assert state.parts is not None
+    state.parts.estimator.follow_rate(rate_hz)
+    tail = run_cascade(t[k:], angle[k:], speed[k:], torque[k:], vehicle, state=state)
+    joined = {}
+    for f in dataclasses.fields(head):
+        a, b = getattr(head, f.name), getattr(tail, f.name)
+        if isinstance(a, np.ndarray) and a.shape[:1] == (k,):
+            joined[f.name] = np.concatenate([a, b])
+    return dataclasses.replace(tail, **joined)
+
+
 def test_estimates_equal_run_cascade_on_the_same_arrays(
     replayed: tuple[Path, Path, object],
 ) -> None:
@@ -80,12 +105,15 @@ def test_estimates_equal_run_cascade_on_the_same_arrays(
     angles = decode_batch('vd_msgs/msg/WheelAngles', raw[SENSORS_WHEEL_ANGLES].datas)
     speed = decode_batch('geometry_msgs/msg/TwistStamped', raw[SENSORS_BODY_VELOCITY].datas)
     torque = decode_batch('vd_msgs/msg/WheelTorques', raw[SENSORS_WHEEL_TORQUES].datas)
-    expected = run_cascade(
+    # a 100 Hz bag: the replay's slope filter followed the rate after FOLLOW_AFTER stamps
+    assert report.input_rate_hz == 100.0  # type: ignore[attr-defined]
+    expected = _following_rate(
         angles.stamp_ns * 1e-9,
         angles.values['angle'],
         speed.values['twist.linear.x'],
         torque.values['torque'],
         load_estimator_vehicle(default_vehicle_file()),
+        100.0,
     )
     out = BagReader(out_bag).topic_arrays(DEFAULT_ESTIMATES)
     log_angles = raw[SENSORS_WHEEL_ANGLES].log_time_ns
@@ -283,7 +311,8 @@ def _expected_situation(in_bag: Path, vehicle_file: Path) -> list[object]:
     vehicle = load_estimator_vehicle(vehicle_file)
     t = angles.stamp_ns * 1e-9
     v = speed.values['twist.linear.x']
-    est = run_cascade(t, angles.values['angle'], v, torque.values['torque'], vehicle)
+    # the replay's slope filter follows the bag's 200 Hz after FOLLOW_AFTER stamps
+    est = _following_rate(t, angles.values['angle'], v, torque.values['torque'], vehicle, 200.0)
     monitor = SituationMonitor(
         TyreCurves.from_tire(load_vehicle(vehicle_file).tire),
         vehicle.static_wheel_loads[[0, 2]],

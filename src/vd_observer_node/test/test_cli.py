@@ -89,8 +89,24 @@ def test_replay_with_config_file(
 ) -> None:
     good = tmp_path / 'good.yaml'
     good.write_text('observer:\n  speed_lipschitz: 40.0\n')
-    argv = ['replay', '--no-progress', '--config', str(good), str(drive_bag), str(tmp_path / 'a')]
+    # 3 s at 100 Hz: longer than the stamps after which the slope filter follows the rate
+    longer = tmp_path / 'longer'
+    write_synthetic_drive_bag(longer, duration_s=3.0, rate_hz=100.0)
+    argv = ['replay', '--no-progress', '--config', str(good), str(longer), str(tmp_path / 'a')]
     assert main(argv) == 0
+    # what the run used and where each setting came from: the file, and the 100 Hz bag's rate
+    settings = [x for x in capsys.readouterr().out.splitlines() if x.startswith('settings: ')]
+    assert settings == [
+        'settings: observer.speed_lipschitz=40 (good.yaml); '
+        'estimator.slope_filter_tau=0.178 (input rate 100 Hz); the rest defaults'
+    ]
+    fixed = tmp_path / 'fixed.yaml'
+    fixed.write_text('estimator:\n  slope_filter_tau: 0.1\n')
+    argv = ['replay', '--no-progress', '--config', str(fixed), str(drive_bag), str(tmp_path / 'c')]
+    assert main(argv) == 0
+    assert 'settings: estimator.slope_filter_tau=0.1 (fixed.yaml); the rest defaults\n' in (
+        capsys.readouterr().out
+    )
     bad = tmp_path / 'bad.yaml'
     bad.write_text('observer: [1, 2]\n')
     argv = ['replay', '--no-progress', '--config', str(bad), str(drive_bag), str(tmp_path / 'b')]

@@ -38,7 +38,7 @@ def _py(fn: Any) -> Any:
 def test_lowpass_step_on_arrays_equals_the_wrapper() -> None:
     rng = np.random.default_rng(1)
     lp = LowPass(0.05, order=3)
-    stages, prev, meta = np.zeros((3, 2)), np.zeros(2), new_record(LOWPASS_META)
+    stages, prev, meta = np.zeros((3, 2)), np.zeros((2, 2)), new_record(LOWPASS_META)
     out, rate = np.empty(2), np.empty(2)
     for k in range(200):
         dt = 0.001 + 0.004 * rng.random()

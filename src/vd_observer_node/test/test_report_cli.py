@@ -235,48 +235,64 @@ def test_truth_only_bag_says_there_is_nothing_to_compare(tmp_path: Path) -> None
     assert any('nothing to compare' in note for note in report.notes)
 
 
-def test_estimates_with_foreign_stamps_are_reported_not_crashed(
+def test_a_reference_on_another_clock_is_interpolated_onto_the_estimates(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    # An estimator stamping with its own clock: no stamp in common with the truth.
+    # An estimator stamping with its own clock, 1.23 ms off the reference: the reference is
+    # interpolated onto the estimates' stamps. Fx of the reference ramps, the estimate is the
+    # ramp at its own stamps plus 5 N: the error is 5 N exactly, wherever the reference is.
     t = np.arange(300) / RATE
     stamp = np.round(t * 1e9).astype(np.int64)
-    forces = {'fx': np.ones((t.size, 4)), 'fz': np.full((t.size, 4), 3000.0)}
+    offset_ns = 1_234_567
+    ramp = 100.0 * t[:, None] * np.ones(4)
+    reference = {'fx': ramp, 'fz': np.full((t.size, 4), 3000.0)}
+    estimate = {'fx': 100.0 * (t + offset_ns * 1e-9)[:, None] * np.ones(4) + 5.0,
+                'fz': np.full((t.size, 4), 3000.0)}  # fmt: skip
     bag = tmp_path / 'foreign'
     write_topic_arrays_bag(
         bag,
         stamp,
-        {TRUTH_TIRE_FORCES: forces, ESTIMATES_TIRE_FORCES: forces},
-        stamps={ESTIMATES_TIRE_FORCES: stamp + 1_234_567},
+        {TRUTH_TIRE_FORCES: reference, ESTIMATES_TIRE_FORCES: estimate},
+        stamps={ESTIMATES_TIRE_FORCES: stamp + offset_ns},
     )
     out = tmp_path / 'out'
     assert _vd(['report', str(bag), '--out', str(out), '--no-progress']) == 0
     data = json.loads((out / 'metrics.json').read_text())
-    assert _quantity(data, 'fx')['overall']['samples'] == 0  # type: ignore[index]
-    assert any('no common stamps' in note for note in data['notes'])
-    assert 'no common stamps' in capsys.readouterr().out
+    fx = _quantity(data, 'fx')['overall']  # type: ignore[index]
+    # from 1 s on (settle) to the last estimate inside the reference: 299 - 100 stamps
+    assert fx['samples'] == 4 * 199
+    assert fx['rms'] == pytest.approx(5.0, abs=1e-6)
+    assert any('own clock' in note and 'interpolated' in note for note in data['notes'])
+    assert 'own clock' in capsys.readouterr().out
 
 
-def test_a_reference_on_its_own_clock_is_reported_not_crashed(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    # A real reference (a pose's grade) runs on its own clock: with a slope step in it, the
-    # convergence section had no common stamp to index (IndexError in _convergence).
+def test_a_reference_with_gaps_is_not_interpolated_across_them(tmp_path: Path) -> None:
+    from vd_observer_node.tools.report.evaluate import EvaluationSettings, build_comparisons
+
     t = np.arange(400) / RATE
     stamp = np.round(t * 1e9).astype(np.int64)
-    slope = {'angle': np.radians(np.where(t < 2.0, 0.0, 5.0)), 'valid': np.ones(t.size, bool)}
-    bag = tmp_path / 'own_clock'
+    keep = (t < 1.5) | (t > 2.5)  # a 1 s hole in the reference (a GNSS outage)
+    slope = {'angle': np.radians(0.5 * t), 'valid': np.ones(t.size, bool)}
+    # the estimate is exact at its own stamps, 2 ms after the reference's
+    estimate = {'angle': np.radians(0.5 * (t + 0.002)), 'valid': np.ones(t.size, bool)}
+    bag = tmp_path / 'holes'
     write_topic_arrays_bag(
         bag,
         stamp,
-        {TRUTH_SLOPE: slope, ESTIMATES_SLOPE: slope},
-        stamps={TRUTH_SLOPE: stamp + 3_000_000},
+        {ESTIMATES_SLOPE: estimate, TRUTH_SLOPE: {k: v[keep] for k, v in slope.items()}},
+        stamps={ESTIMATES_SLOPE: stamp + 2_000_000, TRUTH_SLOPE: stamp[keep]},
     )
-    out = tmp_path / 'out'
-    assert _vd(['report', str(bag), '--out', str(out), '--no-progress']) == 0
-    data = json.loads((out / 'metrics.json').read_text())
-    assert any('slope convergence skipped' in note for note in data['notes'])
-    assert 'no common stamps' in capsys.readouterr().out
+    series = load_bag_series(bag, progress=False)
+    comparisons, _, _, _ = build_comparisons(series, EvaluationSettings(reference_max_gap_s=0.5))
+    c = next(c for c in comparisons if c.key == 'slope')
+    assert c.truth is not None and c.estimate is not None
+    assert 'reference' in c.truth_label
+    hole = (c.t > 1.49) & (c.t < 2.51)  # between the reference's samples around its hole
+    assert np.isnan(c.truth[hole]).all() and not c.mask[hole].any()
+    inside = ~hole & (c.t < 3.98)
+    np.testing.assert_allclose(c.truth[inside], c.estimate[inside], atol=1e-9)
+    wide = build_comparisons(series, EvaluationSettings(reference_max_gap_s=2.0))[0]
+    assert np.isfinite(next(c for c in wide if c.key == 'slope').truth[hole]).all()  # type: ignore[index]
 
 
 def test_static_loads_from_the_vehicle_file(known_bag: Path, tmp_path: Path) -> None:

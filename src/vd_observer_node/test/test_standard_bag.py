@@ -10,6 +10,7 @@ from vd_common.topics import ESTIMATES_SLOPE
 from vd_common.vehicle.params import load_vehicle
 from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.cdr_batch import decode_batch
+from vd_observer_node.estimation.rate_settings import slope_filter_tau_for_rate
 from vd_observer_node.inputs.mapping import load_input_mapping, mapping_from_dict
 from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
 from vd_observer_node.testing.standard_bags import (
@@ -67,12 +68,13 @@ def test_a_standard_types_bag_replays_with_the_shipped_files_near_vds_own(tmp_pa
     write_topic_arrays_bag(tmp_path / 'vd', stamp_ns, sim_topics(sim, truth=False))
     write_standard_bag(tmp_path / 'car', sim, CarSensors(seed=5))
     settings = load_replay_config(REPLAY_FILE)
+    report_mapping = load_input_mapping(MAPPING_FILE)
     replay_bag(tmp_path / 'vd', tmp_path / 'vd_out', progress=False)
     report = replay_bag(
         tmp_path / 'car',
         tmp_path / 'car_out',
         progress=False,
-        mapping=load_input_mapping(MAPPING_FILE),
+        mapping=report_mapping,
         observer_config=settings.observer,
         estimator_config=settings.estimator,
     )
@@ -83,3 +85,13 @@ def test_a_standard_types_bag_replays_with_the_shipped_files_near_vds_own(tmp_pa
     # 150 s: 0.17 deg on vd's topics, 0.23 deg on the standard bag (docs/bags.md)
     assert ours < 0.3
     assert theirs < 1.5 * max(ours, 0.2)
+    # Without the settings file the slope filter follows the measured rate: the odometry's
+    # 50 Hz, the slower of wheels (100 Hz) and speed; issue 26's target is 1.15x the file.
+    plain = replay_bag(
+        tmp_path / 'car', tmp_path / 'plain_out', progress=False, mapping=report_mapping
+    )
+    assert abs(plain.input_rate_hz - 50.0) < 0.5
+    assert plain.rate_settings == {'slope_filter_tau': slope_filter_tau_for_rate(50.0)}
+    assert report.rate_settings == {}  # the file sets it
+    default, _ = _slope_rms_deg(tmp_path / 'plain_out', sim)
+    assert default <= 1.15 * theirs

@@ -47,6 +47,7 @@ from vd_common.ros_common import (
     diagnostic_array,
     finish,
     header_stamp_ns,
+    log_settings,
     ns_to_time,
     ros_message_class,
     run_node,
@@ -232,6 +233,7 @@ class SimNode(Node):
     def __init__(self) -> None:
         super().__init__('sim_node')
         v = declare_parameters(self, PARAMS)
+        log_settings(self, PARAMS, v)
         # '' = the shipped Clio file (vd_common's); a name is looked up as before the file
         # moved to vd_common, in vd_sim_node's config/ first
         vehicle_path = (

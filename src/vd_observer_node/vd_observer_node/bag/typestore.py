@@ -40,6 +40,7 @@ BASE_STORE = Stores.ROS2_JAZZY
 _MAX_TAIL = 8
 
 VD_MSG_TYPES = (
+    'vd_msgs/msg/Estimates',
     'vd_msgs/msg/Friction',
     'vd_msgs/msg/MassEstimate',
     'vd_msgs/msg/Resistances',

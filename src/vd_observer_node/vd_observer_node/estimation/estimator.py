@@ -48,7 +48,7 @@ does the cascade loop (`cascade_step.cascade_block`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any, Final
 
 import numpy as np
@@ -66,6 +66,10 @@ from vd_observer_node.estimation.estimator_step import (
 )
 from vd_observer_node.estimation.faults import ESTIMATOR_FAULTS, FaultCounter
 from vd_observer_node.estimation.mass_grade import MassGradeConfig, mass_params
+from vd_observer_node.estimation.rate_settings import (
+    REFERENCE_SLOPE_FILTER_TAU,
+    slope_filter_tau_for_rate,
+)
 from vd_observer_node.estimation.rolling_radius import RollingRadiusConfig, radius_params
 from vd_observer_node.estimation.torque_offset import TorqueOffsetConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
@@ -134,7 +138,10 @@ class EstimatorConfig:
         force_filter_tau: time constant [s] of the low-pass on Fx and G (0 = off); it delays
             Fx, Fz and mu by filter_order * tau.
         slope_filter_tau: time constant [s] of the low-pass on the slope force balance
-            (0 = off); it delays the slope by filter_order * tau.
+            (0 = off); it delays the slope by filter_order * tau. Unset (default): it follows
+            the rate f of the slower of the wheel and body-speed inputs, 0.1 s at and above
+            1 kHz and 0.1 s * (1000 Hz / f)^(1/4) below (0.178 s at 100 Hz), from the first
+            stamps on (0.1 s until the rate is measured); docs/estimation.md.
         slope_accel_source: 'speed' (default) takes the filtered m*v_dot of the slope
             balance as the derivative of the SAME low-pass applied to the speed, so the
             force and inertia terms carry the same filter and noise on v is never
@@ -173,7 +180,7 @@ class EstimatorConfig:
 
     load_transfer_source: str = 'tire_forces'
     force_filter_tau: float = 0.0
-    slope_filter_tau: float = 0.1
+    slope_filter_tau: float | None = None
     slope_accel_source: str = 'speed'
     filter_order: int = 2
     min_load_ratio: float = 0.1
@@ -202,6 +209,14 @@ class EstimatorConfig:
                 f'unknown slope_accel_source {self.slope_accel_source!r}; '
                 f'use one of {SLOPE_ACCEL_SOURCES}'
             )
+        if isinstance(self.slope_filter_tau, int) and not isinstance(self.slope_filter_tau, bool):
+            # a YAML or ROS parameter 1 means 1.0 (frozen: set through object)
+            object.__setattr__(self, 'slope_filter_tau', float(self.slope_filter_tau))
+        if self.slope_filter_tau is not None and not isinstance(self.slope_filter_tau, float):
+            raise ConfigurationError(
+                f'slope_filter_tau must be a number of seconds or unset, got '
+                f'{self.slope_filter_tau!r}'
+            )
         for f in fields(self):
             value = getattr(self, f.name)
             if isinstance(value, float) and not (math.isfinite(value) and value >= 0.0):
@@ -213,6 +228,30 @@ class EstimatorConfig:
                 raise ConfigurationError(f'{name} must be > 0, got {getattr(self, name)}')
         if not 0.0 < self.max_slope < math.pi / 2:
             raise ConfigurationError(f'max_slope must be in (0, pi/2), got {self.max_slope}')
+
+    @property
+    def slope_tau(self) -> float:
+        """[s] the slope low-pass time constant in use: ``slope_filter_tau``, or the
+        reference rate's value while it is left to a rate not known yet."""
+        if self.slope_filter_tau is None:
+            return REFERENCE_SLOPE_FILTER_TAU
+        return self.slope_filter_tau
+
+    def at_rate(self, rate_hz: float) -> tuple[EstimatorConfig, dict[str, float]]:
+        """These settings for inputs at `rate_hz`: the ones left unset follow the rate.
+
+        Args:
+            rate_hz: [Hz] the rate of the slower of the wheel and body-speed inputs
+                (`rate_settings.sample_rate_hz`); nan: unknown, nothing changes.
+
+        Returns:
+            The settings with every rate-dependent one fixed, and the ones fixed here by
+            name with their values (empty where the user set them all).
+        """
+        if self.slope_filter_tau is not None or not math.isfinite(rate_hz):
+            return self, {}
+        tau = slope_filter_tau_for_rate(rate_hz)
+        return replace(self, slope_filter_tau=tau), {'slope_filter_tau': tau}
 
     @classmethod
     def setting_keys(cls) -> frozenset[str]:
@@ -322,7 +361,7 @@ def estimator_params(
     p.wheelbase = vehicle.wheelbase
     p.load_transfer = LOAD_TRANSFER_SOURCES.index(config.load_transfer_source)
     p.force_tau = config.force_filter_tau
-    p.slope_tau = config.slope_filter_tau
+    p.slope_tau = config.slope_tau
     p.slope_accel = SLOPE_ACCEL_SOURCES.index(config.slope_accel_source)
     p.min_load = config.min_load_ratio * float(np.min(static))
     p.min_excitation = config.min_excitation_ratio
@@ -468,6 +507,22 @@ class Estimator:
         """Forget the history (slope back to 0, filters empty); fault counters stay."""
         estimator_reset(self.params, self.state.record)
         self._last = None
+
+    def follow_rate(self, rate_hz: float) -> dict[str, float]:
+        """Fix the settings left to the inputs' rate, now that it is known (a live node
+        measures it over its first stamps); the filters keep their state.
+
+        Args:
+            rate_hz: [Hz] rate of the slower of the wheel and body-speed inputs.
+
+        Returns:
+            The settings fixed here, by name, with their values (empty: none was left
+            unset, or they were fixed before).
+        """
+        self.config, fixed = self.config.at_rate(rate_hz)
+        if fixed:
+            self.params.slope_tau = self.config.slope_tau
+        return fixed
 
     @property
     def mass_adaptation(self) -> bool:

@@ -26,7 +26,10 @@ from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_NONE
 from vd_observer_node.estimation.faults import ESTIMATOR_FAULTS
 from vd_observer_node.estimation.filters import (
     LOWPASS_META,
+    lowpass_bridge,
     lowpass_derivative,
+    lowpass_gap,
+    lowpass_input,
     lowpass_reset,
     lowpass_update,
 )
@@ -51,6 +54,7 @@ __all__ = [
     'ESTIMATES',
     'ESTIMATOR_PARAMS',
     'ESTIMATOR_STATE',
+    'GAP_FORCE_CHANGE',
     'REJECTED_SLOT',
     'estimator_reset',
     'estimator_update',
@@ -138,10 +142,17 @@ assert ESTIMATOR_FAULTS[_RADIUS_CLAMPED] == 'radius_clamped'
 assert ESTIMATOR_FAULTS[_NON_FINITE_OUTPUT] == 'non_finite_output'
 _M_CLAMPED: Final = 6  # 'mass_clamped' in MASS_GRADE_FAULTS, 'radius_clamped' likewise
 _KMH_REFERENCE: Final = 160.0  # [km/h] speed scale of paper eq. 7 (estimation.formulas)
+#: A gap the slope low-pass bridges (`filters.lowpass_gap`) after which the balance's input
+#: (the forces, or forces - m*dv/dt) is further than this share of the weight [-] from the
+#: trend before the gap hid a transient the bridge could only interpolate: the slope is then
+#: invalid (held) until the filter has forgotten the bridge, (order + 1) * slope_filter_tau
+#: after the gap.
+GAP_FORCE_CHANGE: Final = 0.05
 
 #: The estimator's memory: last stamp (nan: none), slope [rad], whether ``last`` holds an
-#: estimate, the radius of the last stamp's Fx (nan: none), the last finite inputs (omega,
-#: omega_dot, torque (4 each), v, accel), the three low-passes' previous outputs and
+#: estimate, the radius of the last stamp's Fx (nan: none), the stamp until which the slope
+#: settles after a gap (`GAP_FORCE_CHANGE`; -inf: none), the last finite inputs (omega,
+#: omega_dot, torque (4 each), v, accel), the three low-passes' previous output and input and
 #: bookkeeping, the online mass's and radius's states and the fault counts.
 ESTIMATOR_STATE: Final = np.dtype(
     [
@@ -149,10 +160,11 @@ ESTIMATOR_STATE: Final = np.dtype(
         ('slope', 'f8'),
         ('has_last', 'b1'),
         ('radius_prev', 'f8'),
+        ('settle_until', 'f8'),
         ('held', 'f8', (14,)),
-        ('force_prev', 'f8', (5,)),
-        ('slope_prev', 'f8', (1,)),
-        ('speed_prev', 'f8', (1,)),
+        ('force_prev', 'f8', (2, 5)),
+        ('slope_prev', 'f8', (2, 1)),
+        ('speed_prev', 'f8', (2, 1)),
         ('force_lp', LOWPASS_META),
         ('slope_lp', LOWPASS_META),
         ('speed_lp', LOWPASS_META),
@@ -173,6 +185,7 @@ def estimator_reset(p: np.record, s: np.record) -> None:
     s.slope = 0.0
     s.has_last = False
     s.radius_prev = math.nan
+    s.settle_until = -math.inf
     s.held[:] = 0.0
     lowpass_reset(s.force_lp)
     lowpass_reset(s.slope_lp)
@@ -288,6 +301,35 @@ def _online_mass(
 
 
 @jit
+def _bridge_speed(
+    tau: float, s: np.record, v_stages: FloatArray, s_stages: FloatArray, dt: float,
+    forces: float, mass: float,
+) -> float:  # fmt: skip
+    """Across a gap (`filters.lowpass_gap`), advance the speed low-pass with the speed the
+    forces make at the slope of before the gap; return the rest of the step [s].
+
+    The forces' low-pass bridges the gap with its input interpolated linearly to ``forces``;
+    the speed's would bridge with a straight line to the new sample, whose noise then sets
+    dv/dt over the whole gap. Instead the speed follows m dv/dt = F(s) - N, with F that same
+    line and N the balance's force before the gap (the filtered forces minus m dv/dt): the
+    slope holds across the gap, and the new sample enters over one sample period, as any.
+    """
+    span = lowpass_gap(tau, s.speed_lp, dt)
+    if span <= 0.0:
+        return dt
+    level, _ = lowpass_input(tau, v_stages, s.speed_prev, s.speed_lp, 0)
+    accel_f = np.zeros(1)
+    lowpass_derivative(v_stages, s.speed_prev, s.speed_lp, accel_f)
+    balance = s_stages[-1, 0] - mass * accel_f[0]
+    f0 = s.slope_prev[1, 0]
+    x0 = np.full(1, level)
+    rate = np.full(1, (f0 - balance) / mass)
+    curve = np.full(1, (forces - f0) / (2.0 * mass * dt))
+    lowpass_bridge(tau, v_stages, s.speed_prev, span, dt - span, x0, rate, curve)
+    return dt - span
+
+
+@jit
 def _estimate(
     p: np.record, s: np.record, f_stages: FloatArray, s_stages: FloatArray,
     v_stages: FloatArray, t: float, dt: float, x: FloatArray, wheel_ok: BoolArray,
@@ -378,17 +420,23 @@ def _estimate(
     forces = fx_sum - direction * rolling_sum - aero_signed
     one = np.empty(1)
     net_out = np.empty(1)
-    if p.slope_accel == 0 and p.slope_tau > 0.0:
+    by_speed = p.slope_accel == 0 and p.slope_tau > 0.0
+    one[0] = forces if by_speed else forces - mass * accel
+    if lowpass_gap(p.slope_tau, s.slope_lp, dt) > 0.0:
+        # the input the trend before the gap predicts (the bridge is exact for that line)
+        _, trend = lowpass_input(p.slope_tau, s_stages, s.slope_prev, s.slope_lp, 0)
+        if abs(one[0] - s.slope_prev[1, 0] - trend * dt) > GAP_FORCE_CHANGE * weight:
+            s.settle_until = t + (s_stages.shape[0] + 1) * p.slope_tau
+    if by_speed:
         # m*dv/dt as the derivative of the same low-pass applied to the speed
-        one[0] = v
-        lowpass_update(p.slope_tau, v_stages, s.speed_prev, s.speed_lp, dt, one, net_out)
+        dt_v = _bridge_speed(p.slope_tau, s, v_stages, s_stages, dt, forces, mass)
+        speed_in = np.full(1, v)
+        lowpass_update(p.slope_tau, v_stages, s.speed_prev, s.speed_lp, dt_v, speed_in, net_out)
         lowpass_derivative(v_stages, s.speed_prev, s.speed_lp, net_out)
         accel_f = net_out[0]
-        one[0] = forces
         lowpass_update(p.slope_tau, s_stages, s.slope_prev, s.slope_lp, dt, one, net_out)
         net_f = net_out[0] - mass * accel_f
     else:
-        one[0] = forces - mass * accel
         lowpass_update(p.slope_tau, s_stages, s.slope_prev, s.slope_lp, dt, one, net_out)
         net_f = net_out[0]
     sine = net_f / weight
@@ -397,7 +445,7 @@ def _estimate(
     if usable and not in_range:
         # |N| > m g has no arcsin at all; below that the slope is only implausible
         s.counts[_ARCSIN if abs(sine) > 1.0 else _SLOPE_RANGE] += 1
-    slope_valid = in_range and usable
+    slope_valid = in_range and usable and t >= s.settle_until
     if p.torque_source == TORQUE_ENGINE and usable and not in_range:
         # the balance needs a force the engine path cannot know of (the brakes): the
         # torques are wrong, so is mu

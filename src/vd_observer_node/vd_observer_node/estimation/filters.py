@@ -2,8 +2,18 @@
 
 `lowpass_update` and `lowpass_derivative` are the compiled step (what the estimator runs per
 stamp); `LowPass` keeps one filter's state and calls them. The state of a filter of ``order``
-stages over ``d`` channels: ``stages`` (order, d), ``prev`` (d,) the last output before the
-latest step, and a `LOWPASS_META` record.
+stages over ``d`` channels: ``stages`` (order, d), ``prev`` (2, d) (row 0: the output before
+the latest (sub-)step; row 1: the latest input) and a `LOWPASS_META` record.
+
+A step is exact for an input held at its new value over the step, which is what a sampled
+signal looks like at the sampling rate. Over a gap (lost messages: a step longer than
+``BRIDGE_FROM`` time constants, `lowpass_gap`) that is wrong: a ramp held at its end value
+for 200 ms is a step, whose derivative the slope's m*dv/dt would see as a spike. The state
+is carried across such a gap (only the caller's ``max_gap`` restarts a filter): all of the
+step but its last sample period is bridged (`lowpass_bridge`), run as the lost samples with
+the input interpolated linearly from the previous sample to the new one (or along a
+polynomial the caller knows better: the estimator's speed), then the new sample is taken
+over one sample period as any other (docs/faults.md, loss).
 """
 
 from __future__ import annotations
@@ -18,17 +28,28 @@ from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.kernel._jit import jit, new_record
 
 __all__ = [
+    'BRIDGE_FROM',
+    'BRIDGE_MAX_STEPS',
     'LOWPASS_META',
     'LowPass',
+    'lowpass_bridge',
     'lowpass_derivative',
+    'lowpass_gap',
+    'lowpass_input',
     'lowpass_reset',
     'lowpass_update',
 ]
 
 FloatArray = NDArray[np.float64]
 
+#: A step longer than this [time constants] is a gap: bridged in sub-steps (module docstring).
+BRIDGE_FROM: Final = 0.2
+#: At most this many sub-steps (a longer gap takes longer ones: 0.5 s, vd's ``max_gap``, is
+#: 500 steps at 1 kHz).
+BRIDGE_MAX_STEPS: Final = 1000
+
 #: A filter's bookkeeping: its stages hold a signal, ``prev`` holds the output before the
-#: latest step, and that step's length [s].
+#: latest (sub-)step, and that step's length [s].
 LOWPASS_META: Final = np.dtype(
     [('started', 'b1'), ('has_prev', 'b1'), ('last_dt', 'f8')], align=True
 )
@@ -40,6 +61,75 @@ def lowpass_reset(meta: np.record) -> None:
     meta.started = False
     meta.has_prev = False
     meta.last_dt = 0.0
+
+
+@jit
+def lowpass_gap(tau: float, meta: np.record, dt: float) -> float:
+    """The part of a step of ``dt`` [s] that is a gap to bridge [s], else 0.
+
+    A step longer than ``BRIDGE_FROM * tau`` after at least two inputs is a gap: all of it but
+    its last sample period (the step before it, ``meta.last_dt``), over which the new input
+    is then taken as usual.
+    """
+    if not (tau > 0.0 and meta.has_prev and dt > BRIDGE_FROM * tau):
+        return 0.0
+    period: float = meta.last_dt
+    if not 0.0 < period < dt:
+        return 0.0
+    return dt - period
+
+
+@jit
+def lowpass_bridge(
+    tau: float,
+    stages: FloatArray,
+    prev: FloatArray,
+    span: float,
+    period: float,
+    x0: FloatArray,
+    rate: FloatArray,
+    curve: FloatArray,
+) -> None:
+    """Advance over a gap of ``span`` [s] with the input x0 + rate * s + curve * s^2 (d,).
+
+    The gap is run as the samples it lost: in equal sub-steps as near ``period`` as divide
+    it (at most ``BRIDGE_MAX_STEPS``), each holding its end value as a sample does, so a
+    ramp leaves the filter where the lost samples would have. ``prev[1]`` becomes the input
+    at the end. The output and its derivative are those of the step that follows (the
+    sample after the gap, `lowpass_update` over ``period``).
+
+    Args:
+        tau: time constant of each stage [s], > 0.
+        stages: (order, d), advanced in place.
+        prev: (2, d), its row 1 written.
+        span: [s], > 0.
+        period: the sample period [s] of the filter's input before the gap, > 0.
+        x0, rate, curve: (d,), the input's polynomial in the time s [s] since the gap began.
+    """
+    n_sub = min(max(round(span / period), 1), BRIDGE_MAX_STEPS)
+    h = span / n_sub
+    alpha = -math.expm1(-h / tau)
+    for i in range(stages.shape[1]):
+        for k in range(n_sub):
+            s = (k + 1) * h
+            signal = x0[i] + (rate[i] + curve[i] * s) * s
+            for j in range(stages.shape[0]):
+                stages[j, i] += alpha * (signal - stages[j, i])
+                signal = stages[j, i]
+        prev[1, i] = x0[i] + (rate[i] + curve[i] * span) * span
+
+
+@jit
+def lowpass_input(
+    tau: float, stages: FloatArray, prev: FloatArray, meta: np.record, i: int
+) -> tuple[float, float]:
+    """The filter's estimate of channel ``i``'s input now and of its rate [unit, unit/s]: a
+    ramp through ``order`` stages lags by ``order * tau``, so the input is the output plus
+    that lag times the output's rate (the rate 0 before two inputs)."""
+    rate = 0.0
+    if meta.started and meta.has_prev and meta.last_dt > 0.0:
+        rate = (stages[-1, i] - prev[0, i]) / meta.last_dt
+    return stages[-1, i] + stages.shape[0] * tau * rate, rate
 
 
 @jit
@@ -55,7 +145,18 @@ def lowpass_update(
     """Advance by ``dt`` [s] with the (finite) input ``x`` (d,) and write the output to ``out``.
 
     Each stage y <- y + (1 - exp(-dt / tau)) * (x - y); tau = 0 passes ``x`` through. The
-    first input after a reset initialises every stage (a steady start).
+    first input after a reset initialises every stage (a steady start). A gap
+    (`lowpass_gap`) is bridged with the input interpolated linearly from the last one
+    (``prev[1]``) to ``x`` (`lowpass_bridge`), then ``x`` taken over the sample period.
+
+    Args:
+        tau: time constant of each stage [s], >= 0.
+        stages: (order, d), advanced in place.
+        prev: (2, d), written: the output before the last step, and ``x``.
+        meta: `LOWPASS_META` record, advanced in place.
+        dt: step [s] (negative counts as 0).
+        x: (d,), the input at the end of the step.
+        out: (d,), written: the output.
     """
     if tau == 0.0:
         out[:] = x
@@ -63,36 +164,46 @@ def lowpass_update(
     if not meta.started:
         for j in range(stages.shape[0]):
             stages[j, :] = x
+        prev[1, :] = x
         meta.started = True
         out[:] = x
         return
-    alpha = -math.expm1(-max(dt, 0.0) / tau)
-    prev[:] = stages[-1]
-    meta.has_prev = True
-    meta.last_dt = dt
+    step = max(dt, 0.0)
+    span = lowpass_gap(tau, meta, step)
+    if span > 0.0:
+        x0 = prev[1].copy()
+        rate = (x - x0) / step  # the line through the two samples
+        lowpass_bridge(tau, stages, prev, span, meta.last_dt, x0, rate, np.zeros_like(x))
+        step = step - span
+    alpha = -math.expm1(-step / tau)
+    prev[0, :] = stages[-1]
     for i in range(x.shape[0]):
         signal = x[i]
         for j in range(stages.shape[0]):
             stages[j, i] += alpha * (signal - stages[j, i])
             signal = stages[j, i]
         out[i] = signal
+    prev[1, :] = x
+    meta.has_prev = True
+    meta.last_dt = step
 
 
 @jit
 def lowpass_derivative(
     stages: FloatArray, prev: FloatArray, meta: np.record, out: FloatArray
 ) -> None:
-    """Rate of change of the output over the last step, (y_k - y_(k-1)) / dt, into ``out``
-    (d,); zeros before the second update (or with tau = 0: never updated)."""
+    """Rate of change of the output over the last (sub-)step, (y_k - y_(k-1)) / dt, into
+    ``out`` (d,); zeros before the second update (or with tau = 0: never updated)."""
     if not (meta.started and meta.has_prev and meta.last_dt > 0.0):
         out[:] = 0.0
         return
     for i in range(out.shape[0]):
-        out[i] = (stages[-1, i] - prev[i]) / meta.last_dt
+        out[i] = (stages[-1, i] - prev[0, i]) / meta.last_dt
 
 
 class LowPass:
-    """Cascade of `order` identical first-order lags, exact for piecewise-constant input.
+    """Cascade of `order` identical first-order lags, exact for piecewise-constant input
+    (a gap bridged as `lowpass_update` says).
 
     Each stage y <- y + (1 - exp(-dt / tau)) * (x - y). With order 2 the filter is critically
     damped (no overshoot on steps) with a group delay of order * tau at low frequency.
@@ -119,7 +230,7 @@ class LowPass:
         # sized by the first input (any shape, filtered element-wise)
         self._shape: tuple[int, ...] = ()
         self._stages = np.zeros((order, 1))
-        self._prev = np.zeros(1)
+        self._prev = np.zeros((2, 1))
 
     @property
     def delay(self) -> float:
@@ -140,7 +251,7 @@ class LowPass:
         """
         if not self._meta.started:
             return np.zeros(())
-        out = np.empty(self._prev.shape[0])
+        out = np.empty(self._prev.shape[1])
         lowpass_derivative(self._stages, self._prev, self._meta, out)
         return out.reshape(self._shape)
 
@@ -153,7 +264,7 @@ class LowPass:
         if not self._meta.started and value.shape != self._shape:
             self._shape = value.shape
             self._stages = np.zeros((self._order, flat.shape[0]))
-            self._prev = np.zeros(flat.shape[0])
+            self._prev = np.zeros((2, flat.shape[0]))
         out = np.empty(flat.shape[0])
         lowpass_update(self._tau, self._stages, self._prev, self._meta, float(dt), flat, out)
         return out.reshape(value.shape)

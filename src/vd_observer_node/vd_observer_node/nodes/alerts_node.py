@@ -29,6 +29,7 @@ from vd_common.ros_common import (
     STREAM_QOS,
     PublishRefusals,
     declare_parameters,
+    log_settings,
     node_status,
     run_node,
 )
@@ -115,6 +116,7 @@ class AlertsNode(Node):
         super().__init__('alerts_node')
         self.refusals = PublishRefusals(self)  # a refused publish is counted, not fatal
         values = declare_parameters(self, PARAMS)
+        log_settings(self, PARAMS, values)
         mapping = take_input_mapping(values, undeclared_inputs(self), estimates=True)
         sensors = {key: getattr(mapping, name) for key, name in _SENSORS.items()}
         classes = {key: input_message_class(spec) for key, spec in sensors.items()}

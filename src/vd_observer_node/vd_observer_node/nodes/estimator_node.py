@@ -27,6 +27,7 @@ from vd_common.ros_common import (
     STREAM_QOS,
     PublishRefusals,
     declare_parameters,
+    log_settings,
     node_status,
     run_node,
 )
@@ -54,6 +55,7 @@ from vd_msgs.msg import (
 )
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.faults import merge_reports, summarise
+from vd_observer_node.estimation.rate_settings import RateMeter
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.inputs.decode import has_header
 from vd_observer_node.inputs.mapping import InputMapping
@@ -68,6 +70,7 @@ from vd_observer_node.nodes.raw_io import (
     Encoders,
     InputWatch,
     aligned_input,
+    follow_input_rate,
     input_matcher,
     mapped_input,
     mass_values,
@@ -109,6 +112,7 @@ class EstimatorNode(Node):
         super().__init__('estimator_node')
         self.refusals = PublishRefusals(self)  # a refused publish is counted, not fatal
         values = declare_parameters(self, PARAMS)
+        log_settings(self, PARAMS, values)
         mapping = take_input_mapping(values, undeclared_inputs(self), estimates=True)
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')
@@ -131,6 +135,11 @@ class EstimatorNode(Node):
             mapping, TOPICS, capacity, max_gap_ns, max_gap_ns, held=held_inputs(mapping)
         )
         self.watch = InputWatch([spec.topic for spec in sensors.values()], max_gap_ns)
+        # the wheel stamps (the observer's) and a measured speed's set what follows the rate
+        self._wheel_rate: RateMeter | None = RateMeter()
+        self._speed_topic = (
+            mapping.body_speed.topic if measured and has_header(mapping.body_speed) else None
+        )
         # the matcher's queue per input topic, reported against its capacity
         self._queue_topics = {key: spec.topic for key, spec in sensors.items()}
         self._capacity = capacity
@@ -199,6 +208,11 @@ class EstimatorNode(Node):
             float(m['accel'][1][0]),  # accel.linear.x
             np.array(m['torques'][1], dtype=np.float64),  # mapped, SI [N m]
         )
+        if self._wheel_rate is not None and self._wheel_rate.add(stamp_ns):
+            # from the next stamp on, as vd replay does (rate_settings.FOLLOW_AFTER)
+            speed_stamps = self.watch.first_stamps(self._speed_topic)
+            follow_input_rate(self.estimator, self._wheel_rate.stamps, speed_stamps, self)
+            self._wheel_rate = None
         self.counts['estimates'] += 1
         self.counts['mu_invalid_wheel_samples'] += int(4 - np.count_nonzero(est.mu_valid))
         self.counts['slope_invalid'] += int(not est.slope_valid)

@@ -57,6 +57,8 @@ from vd_observer_node.situation.monitor import SituationConfig
 __all__ = [
     'ALERTS_PARAMS',
     'ALIGN_CAPACITY',
+    'ESTIMATE_TOPICS_PARAM',
+    'ESTIMATE_TOPIC_LAYOUTS',
     'ESTIMATOR_PARAMS',
     'INPUT_MAPPING',
     'INPUT_PARAMS',
@@ -270,7 +272,21 @@ _SITUATION_CORE: Final = [
 
 ALERTS_PARAMS: Final = [VEHICLE_FILE, ALIGN_CAPACITY, *_SITUATION_CORE]
 
+#: choices of pipeline_node's ``estimate_topics``
+ESTIMATE_TOPIC_LAYOUTS: Final = ('separate', 'combined', 'both')
+ESTIMATE_TOPICS_PARAM: Final = ParamSpec(
+    'estimate_topics',
+    'separate',
+    "'separate': one topic per quantity (/vd/observer/*, /vd/estimates/*, what vd replay "
+    "writes and vd report reads); 'combined': the per-stamp estimates in one "
+    'vd_msgs/Estimates message on /vd/estimates/combined instead (one message per stamp '
+    "instead of seven); 'both'. Mass, radius, torque offset, friction potential and alerts "
+    'keep their own topics.',
+    choices=ESTIMATE_TOPIC_LAYOUTS,
+)
+
 PIPELINE_PARAMS: Final = [
+    ESTIMATE_TOPICS_PARAM,
     *ESTIMATOR_PARAMS,
     *(p for p in OBSERVER_PARAMS if p.name != 'max_gap'),
     *_SITUATION_CORE,

@@ -30,6 +30,7 @@ from vd_common.ros_common import (
     STREAM_QOS,
     PublishRefusals,
     declare_parameters,
+    log_settings,
     node_status,
     run_node,
 )
@@ -71,6 +72,7 @@ class ObserverNode(Node):
         super().__init__('observer_node')
         self.refusals = PublishRefusals(self)  # a refused publish is counted, not fatal
         values = declare_parameters(self, PARAMS)
+        log_settings(self, PARAMS, values)
         mapping = take_input_mapping(values, undeclared_inputs(self))
         angles_spec, speed_spec = mapping.wheels, mapping.body_speed
         classes = [input_message_class(spec) for spec in (angles_spec, speed_spec)]

@@ -43,11 +43,13 @@ from vd_common.ros_common import (
     STREAM_QOS,
     PublishRefusals,
     declare_parameters,
+    log_settings,
     node_status,
     run_node,
 )
 from vd_common.topics import (
     ESTIMATES_ALERTS,
+    ESTIMATES_COMBINED,
     ESTIMATES_FRICTION,
     ESTIMATES_FRICTION_POTENTIAL,
     ESTIMATES_MASS,
@@ -64,6 +66,7 @@ from vd_common.vehicle.params import default_vehicle_file
 
 from vd_msgs.msg import (
     Alerts,
+    Estimates,
     Friction,
     FrictionPotential,
     MassEstimate,
@@ -82,11 +85,13 @@ from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import ERROR
 from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.estimation.rate_settings import RateMeter
 from vd_observer_node.estimation.vehicle import (
     EstimatorVehicle,
     load_vehicle_params,
     vehicle_tire,
 )
+from vd_observer_node.inputs.decode import has_header
 from vd_observer_node.inputs.mapping import BRAKE_INPUT, ENGINE_INPUT
 from vd_observer_node.nodes.node_params import (
     INPUT_PARAMS,
@@ -98,6 +103,7 @@ from vd_observer_node.nodes.node_params import (
 from vd_observer_node.nodes.raw_io import (
     Encoders,
     InputWatch,
+    follow_input_rate,
     input_matcher,
     mapped_input,
     mass_values,
@@ -136,7 +142,10 @@ _OUTPUTS = (
     ),
     ('alerts', Alerts, ESTIMATES_ALERTS, 'vd_msgs/msg/Alerts'),
     ('offset', TorqueOffsetEstimate, ESTIMATES_TORQUE_OFFSET, 'vd_msgs/msg/TorqueOffsetEstimate'),
+    ('combined', Estimates, ESTIMATES_COMBINED, 'vd_msgs/msg/Estimates'),
 )
+#: the per-quantity outputs that ``estimate_topics: combined`` carries in one message
+_SEPARATE = ('states', 'accel', 'velocity', 'forces', 'friction', 'resistances', 'slope')
 _OBSERVER_KEYS = {f for f in ObserverConfig.__dataclass_fields__ if f != 'gains'}
 _GAIN_KEYS = set(LevantGains.__dataclass_fields__)
 
@@ -194,12 +203,14 @@ class PipelineNode(Node):
         super().__init__('pipeline_node')
         self.refusals = PublishRefusals(self)  # a refused publish is counted, not fatal
         values = declare_parameters(self, PARAMS)
+        log_settings(self, PARAMS, values)
         mapping = take_input_mapping(
             values, undeclared_inputs(self), estimates=True, torque_paths=True
         )
         specs = mapping.used_specs  # wheels, body speed, and the torque path's input if any
         classes = [input_message_class(spec) for spec in specs]
         capacity = values.pop('align_capacity')
+        layout = values.pop('estimate_topics')
         settings, vehicle_file = _settings(
             values, mapping.torque_source, mapping.brake.signal if mapping.brake else ''
         )
@@ -218,6 +229,9 @@ class PipelineNode(Node):
             mapping, names, capacity, max_jump_back_ns=max_gap_ns, max_age_ns=max_gap_ns
         )
         self.watch = InputWatch([spec.topic for spec in specs], max_gap_ns)
+        # the wheel stamps and a stamped body speed's set what follows the rate
+        self._wheel_rate: RateMeter | None = RateMeter()
+        self._speed_topic = mapping.body_speed.topic if has_header(mapping.body_speed) else None
         # the matcher's queue per input topic, reported against its capacity
         self._queue_topics = {spec.name: spec.topic for spec in specs}
         self._capacity = capacity
@@ -229,6 +243,8 @@ class PipelineNode(Node):
             'radius': settings.estimator.radius_adaptation,
             'offset': self.torque_source == 'engine'
             and settings.estimator.torque_offset_adaptation,
+            'combined': layout != 'separate',
+            **dict.fromkeys(_SEPARATE, layout != 'combined'),
         }
         self.pubs = {
             key: self.refusals.publisher(cls, topic, STATE_QOS if key == 'offset' else STREAM_QOS)
@@ -279,6 +295,13 @@ class PipelineNode(Node):
         engine = m[ENGINE_INPUT][1] if source == 'engine' else None
         brake = m[BRAKE_INPUT][1] if BRAKE_INPUT in m else None
         out = self.chain.update(stamp_ns * 1e-9, angles, speed, torques, engine, brake)
+        if self._wheel_rate is not None and self._wheel_rate.add(stamp_ns):
+            # from the next stamp on, as vd replay does (rate_settings.FOLLOW_AFTER)
+            speed_stamps = self.watch.first_stamps(self._speed_topic)
+            follow_input_rate(
+                self.chain.parts.estimator, self._wheel_rate.stamps, speed_stamps, self
+            )
+            self._wheel_rate = None
         self.counts['estimates'] += 1
         if not self._finite(out):
             self.counts['withheld_non_finite'] += 1
@@ -295,7 +318,37 @@ class PipelineNode(Node):
         return math.isfinite(total)
 
     def _publish(self, stamp_ns: int, frame: bytes, out: ChainOutput) -> None:
-        w, s, e, sit = out.wheel, out.speed, out.estimates, out.situation
+        w, s, e = out.wheel, out.speed, out.estimates
+        pubs, codec = self.pubs, self._codec
+        if 'combined' in pubs:
+            pubs['combined'].publish(
+                codec('combined', frame).encode(
+                    stamp_ns,
+                    [
+                        *w.angle.tolist(),
+                        *w.omega.tolist(),
+                        *w.omega_dot.tolist(),
+                        s.speed,
+                        s.accel,
+                        *e.fx.tolist(),
+                        *e.fz.tolist(),
+                        *e.mu.tolist(),
+                        *e.slip.tolist(),
+                        *e.mu_valid.tolist(),
+                        *e.rolling.tolist(),
+                        e.aero,
+                        e.slope,
+                        e.slope_valid,
+                        e.torque_source,
+                    ],
+                )
+            )
+        if 'states' in pubs:
+            self._publish_separate(stamp_ns, frame, out)
+        self._publish_rest(stamp_ns, frame, out)
+
+    def _publish_separate(self, stamp_ns: int, frame: bytes, out: ChainOutput) -> None:
+        w, s, e = out.wheel, out.speed, out.estimates
         pubs, codec = self.pubs, self._codec
         pubs['states'].publish(
             codec('states', frame).encode(
@@ -325,6 +378,10 @@ class PipelineNode(Node):
         pubs['slope'].publish(
             codec('slope', frame).encode(stamp_ns, [e.slope, e.slope_valid, e.torque_source])
         )
+
+    def _publish_rest(self, stamp_ns: int, frame: bytes, out: ChainOutput) -> None:
+        e, sit = out.estimates, out.situation
+        pubs, codec = self.pubs, self._codec
         if 'mass' in pubs:
             pubs['mass'].publish(codec('mass', frame).encode(stamp_ns, mass_values(e)))
         if 'radius' in pubs:

@@ -33,6 +33,7 @@ from vd_common.ros_common import (
     declare_parameters,
     deliver_pending,
     finish,
+    log_settings,
     node_status,
     ns_to_time,
     ros_message_class,
@@ -120,6 +121,7 @@ class PlayerNode(Node):
     def __init__(self) -> None:
         super().__init__('player_node')
         v = declare_parameters(self, PARAMS)
+        log_settings(self, PARAMS, v)
         mapping = take_input_mapping(v, undeclared_inputs(self))
         if not v['bag']:
             raise ReplayInputError("parameter 'bag' is required: -p bag:=PATH")

@@ -18,6 +18,8 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
+from vd_common.settings_log import settings_line
+
 from vd_observer_node.bag.cdr_message import AlertsCodec, MessageCodec
 from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.estimation.alignment import LatestAligner, StampAligner
@@ -25,8 +27,14 @@ from vd_observer_node.estimation.estimator import (
     MASS_MESSAGE_FIELDS,
     RADIUS_MESSAGE_FIELDS,
     Estimates,
+    Estimator,
 )
 from vd_observer_node.estimation.faults import ERROR, OK, WARN
+from vd_observer_node.estimation.rate_settings import (
+    SPEED_STAMPS_KEPT,
+    RateMeter,
+    follow_rate_hz,
+)
 from vd_observer_node.estimation.torque_offset import OFFSET_MESSAGE_FIELDS, TorqueOffset
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
@@ -39,6 +47,7 @@ __all__ = [
     'InputWatch',
     'LatestMatcher',
     'aligned_input',
+    'follow_input_rate',
     'input_matcher',
     'mapped_input',
     'mass_values',
@@ -296,6 +305,7 @@ class InputWatch:
         self._last: dict[str, int] = {}
         self._problem: dict[str, str] = {}
         self._health: dict[str, StreamHealth] = {}
+        self._first: dict[str, RateMeter] = {}
 
     def seen(self, topic: str, now_ns: int) -> None:
         """Note a message of `topic` received at `now_ns` (monotonic clock)."""
@@ -308,7 +318,15 @@ class InputWatch:
         health = self._health.get(topic)
         if health is None:
             health = self._health[topic] = StreamHealth()
+            self._first[topic] = RateMeter(SPEED_STAMPS_KEPT)
         health.add(stamp_ns, lag_ns)
+        self._first[topic].add(stamp_ns)
+
+    def first_stamps(self, topic: str | None) -> list[int] | None:
+        """[ns] the first header stamps of a stamped input (`SPEED_STAMPS_KEPT`), in arrival
+        order; None for an input stamped on receipt, not heard from, or no topic."""
+        meter = self._first.get(topic) if topic is not None else None
+        return meter.stamps if meter is not None else None
 
     def unfit(self, topic: str, problem: str) -> None:
         """Note a message of `topic` the mapping cannot read (the last problem is reported)."""
@@ -380,6 +398,28 @@ def queued_by_topic(
     input name -> topic; inputs not in the matcher are left out)."""
     queued = matcher.queued()
     return {topics[name]: n for name, n in queued.items() if name in topics}
+
+
+def follow_input_rate(
+    estimator: Estimator,
+    wheel_stamps: list[int],
+    speed_stamps: list[int] | None,
+    node: Any,
+) -> None:
+    """Fix the estimator's settings left to the inputs' rate, after its `FOLLOW_AFTER`-th
+    wheel stamp, as `vd replay` does at the same stamp (`rate_settings.follow_rate_hz`).
+
+    Args:
+        estimator: the node's estimator (`Estimator.follow_rate`).
+        wheel_stamps: [ns] the first `FOLLOW_AFTER` wheel stamps estimated.
+        speed_stamps: [ns] the body speed's first header stamps (`InputWatch.first_stamps`);
+            None where the speed has none of its own.
+        node: logs what was fixed (INFO, once).
+    """
+    rate = follow_rate_hz(wheel_stamps, speed_stamps)
+    fixed = estimator.follow_rate(rate)
+    if fixed:
+        node.get_logger().info(f'settings: {settings_line({}, "", fixed, rate, rest=False)}')
 
 
 def mapped_input(

@@ -46,6 +46,7 @@ from vd_common.ros_common import (
     PublishRefusals,
     declare_parameters,
     header_stamp_ns,
+    log_settings,
     node_status,
     ns_to_time,
     ros_message_class,
@@ -104,6 +105,7 @@ class RecorderNode(Node):
         #: [s] run_node spins this long after a stop signal, so what was delivered is written
         self.drain_on_stop_s = 0.3
         v = declare_parameters(self, PARAMS)
+        log_settings(self, PARAMS, v)
         output = v['output'] or time.strftime('vd_%Y%m%d_%H%M%S')
         self.pattern = re.compile(v['topic_regex'])
         self.extra = {

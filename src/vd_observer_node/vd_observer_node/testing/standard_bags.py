@@ -207,8 +207,12 @@ def write_standard_bag(path: str | os.PathLike[str], sim: Any, sensors: CarSenso
     rows: list[tuple[int, str, bytes]] = []
     for k, stamp in enumerate(np.round(wheel_t * _NS).astype(np.int64).tolist()):
         velocity = [0.0 if i < 0 else float(speeds[k, i] * sign[i]) for i in _ORDER]
-        effort = [0.0 if i < 0 else float(torque[k, i] * sign[i]) for i in _ORDER]
-        msg = joint_state(stamp, [*_PUBLISHED], (), velocity, effort if in_joints else ())
+        # only joint states carry the torques at the wheel stamps; on their own clock the
+        # torque samples need not be as many as the wheel stamps
+        effort = (
+            [0.0 if i < 0 else float(torque[k, i] * sign[i]) for i in _ORDER] if in_joints else []
+        )
+        msg = joint_state(stamp, [*_PUBLISHED], (), velocity, effort)
         rows.append((stamp, '/joint_states', serialize(msg)))
     for k, stamp in enumerate(np.round(odom_t * _NS).astype(np.int64).tolist()):
         rows.append((stamp, '/odom', serialize(odometry(stamp, float(body[k])))))

@@ -79,6 +79,8 @@ def _repair(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
+    from vd_common.settings_log import settings_line
+
     from vd_observer_node.inputs.mapping import load_input_mapping
     from vd_observer_node.tools.replay import ReplayConfig, load_replay_config, replay_bag
 
@@ -119,6 +121,9 @@ def _replay(args: argparse.Namespace) -> int:
         print(f'  input {stats.text()}')
     print(f'torque path: {path}')
     print(f'vehicle: {report.vehicle}')
+    derived = {f'estimator.{k}': v for k, v in report.rate_settings.items()}
+    origin = Path(config.source).name if config.source else ''
+    print(f'settings: {settings_line(config.given, origin, derived, report.input_rate_hz)}')
     for note in report.notes:
         print(f'note: {note}')
     return EXIT_OK

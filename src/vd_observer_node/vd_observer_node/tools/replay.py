@@ -25,6 +25,7 @@ copied: the output holds the replayed ones only.
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import sys
@@ -85,6 +86,11 @@ from vd_observer_node.estimation.estimator import (
     EstimatorConfig,
 )
 from vd_observer_node.estimation.observer import ObserverConfig
+from vd_observer_node.estimation.rate_settings import (
+    SPEED_STAMPS_KEPT,
+    RateMeter,
+    follow_rate_hz,
+)
 from vd_observer_node.estimation.torque_offset import OFFSET_MESSAGE_FIELDS, publish_mask
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.decode import (
@@ -168,6 +174,11 @@ class ReplayReport:
             measured, 0 with none, below 1 on the engine path while the clutch slipped).
         vehicle: the vehicle file's name and path, e.g. 'clio_rl_1_1 (/.../clio_rl_1_1.yaml)'.
         notes: what the replay left out and why (one line each).
+        input_rate_hz: [Hz] rate of the slower of the wheel and body-speed inputs, measured
+            on the first `rate_settings.FOLLOW_AFTER` wheel stamps (nan if none was left
+            to the rate, or the bag had fewer stamps).
+        rate_settings: the estimator settings left unset that followed `input_rate_hz` from
+            the next stamp on, by name (``'slope_filter_tau'``), with the value used.
     """
 
     samples: int
@@ -185,6 +196,8 @@ class ReplayReport:
     torque_valid_fraction: float = 1.0
     vehicle: str = ''
     notes: tuple[str, ...] = ()
+    input_rate_hz: float = math.nan
+    rate_settings: dict[str, float] = field(default_factory=dict)
 
     @property
     def real_time_factor(self) -> float:
@@ -204,7 +217,13 @@ class ReplayReport:
 
 @dataclass(frozen=True)
 class ReplayConfig:
-    """Cascade and alert settings of an offline replay (None: the defaults)."""
+    """Cascade and alert settings of an offline replay (None: the defaults).
+
+    Attributes:
+        given: what the file set, by ``section.key`` (nested sections flattened, e.g.
+            ``'estimator.mass.mass_tau'``), for the log of where each setting came from.
+        source: the file's path ('' when not read from a file).
+    """
 
     observer: ObserverConfig | None = None
     estimator: EstimatorConfig | None = None
@@ -212,6 +231,18 @@ class ReplayConfig:
     alerts: AlertConfig | None = None
     friction: FrictionPotentialConfig | None = None
     situation: SituationConfig | None = None
+    given: dict[str, Any] = field(default_factory=dict)
+    source: str = ''
+
+
+def _flat(prefix: str, section: Mapping[str, Any]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in section.items():
+        if isinstance(value, dict):
+            out.update(_flat(f'{prefix}{key}.', value))
+        else:
+            out[f'{prefix}{key}'] = value
+    return out
 
 
 _SECTIONS = ('observer', 'estimator', 'cascade', 'alerts', 'friction_potential', 'situation')
@@ -257,6 +288,13 @@ def load_replay_config(path: str | os.PathLike[str]) -> ReplayConfig:
         situation=SituationConfig.from_mapping(sections['situation'])
         if sections['situation'] is not None
         else None,
+        given={
+            k: v
+            for key, section in sections.items()
+            if section is not None
+            for k, v in _flat(f'{key}.', section).items()
+        },
+        source=str(path),
     )
 
 
@@ -331,6 +369,18 @@ def _rows(result: CascadeResult, start: int, stop: int) -> CascadeResult:
         if isinstance(value := getattr(result, f.name), np.ndarray) and value.shape[:1] == (n,)
     }
     return replace(result, **sliced)
+
+
+def _joined(first: CascadeResult, second: CascadeResult) -> CascadeResult:
+    """Two consecutive blocks' results as one (per-stamp arrays joined; the totals, e.g.
+    the fault counts, are the second's)."""
+    n, m = first.t.shape[0], second.t.shape[0]
+    joined: dict[str, Any] = {}
+    for f in fields(first):
+        a, b = getattr(first, f.name), getattr(second, f.name)
+        if isinstance(a, np.ndarray) and a.shape[:1] == (n,) and b.shape[:1] == (m,):
+            joined[f.name] = np.concatenate([a, b])
+    return replace(second, **joined)
 
 
 def situation_topics(
@@ -833,9 +883,27 @@ class _Run:
         self.cascade_time = 0.0
         self.situation_time = 0.0
         self.result: CascadeResult | None = None
+        self.input_rate_hz = math.nan
+        self.rate_settings: dict[str, float] = {}
+        # what the settings left to the rate follow (rate_settings.follow_rate_hz)
+        unset = (estimator_config or EstimatorConfig()).slope_filter_tau is None
+        self.wheel_meter: RateMeter | None = RateMeter() if unset else None
+        speed = self.used[1]
+        self.speed_meter = RateMeter(SPEED_STAMPS_KEPT) if unset and has_header(speed) else None
         # (episodes, converged) of the last engine-torque offset written: it is written
         # where it changes, as pipeline_node publishes it
         self.offset_last: tuple[int, bool] | None = None
+
+    def _follow_rate(self, wheel_stamps: list[int]) -> None:
+        """Fix the estimator's settings left to the rate, from the next stamp on."""
+        speed = self.speed_meter.stamps if self.speed_meter is not None else None
+        self.input_rate_hz = follow_rate_hz(wheel_stamps, speed)
+        self.wheel_meter = None
+        config = self.estimator_config or EstimatorConfig()
+        self.estimator_config, self.rate_settings = config.at_rate(self.input_rate_hz)
+        parts = self.state.parts
+        if parts is not None:  # None for an injected cascade that keeps no parts
+            parts.estimator.follow_rate(self.input_rate_hz)
 
     def offset_messages(
         self, result: CascadeResult, stamp_ns: np.ndarray
@@ -902,6 +970,8 @@ class _Run:
         n = len(common)
         if n and self.frame_id is None:
             self.frame_id = picked[0]['frame'][0].decode()
+        if self.speed_meter is not None:
+            self.speed_meter.add_many(decoded[1].stamp_ns)
         frame_id = self.frame_id or ''
         cascade_start = time.perf_counter()
         t = common.astype(np.float64) * 1e-9
@@ -913,24 +983,43 @@ class _Run:
         kwargs = dict(self.cascade_kwargs)
         if engine is not None:
             kwargs['engine'] = engine
-        if self.mapping.brake is not None and len(picked) > 3:
-            kwargs['brake'] = picked[3]['v']
-        result = self.cascade(
-            t,
-            wheel_angle,
-            body_speed,
-            wheel_torque,
-            self.vehicle,
-            self.observer_config,
-            self.estimator_config,
-            state=self.state,
-            **kwargs,
-        )
+        brake = picked[3]['v'] if self.mapping.brake is not None and len(picked) > 3 else None
+
+        def run(rows: slice) -> CascadeResult:
+            part = {**kwargs, 'engine': engine[rows]} if engine is not None else dict(kwargs)
+            if brake is not None:
+                part['brake'] = brake[rows]
+            return self.cascade(
+                t[rows],
+                wheel_angle[rows],
+                body_speed[rows],
+                wheel_torque[rows],
+                self.vehicle,
+                self.observer_config,
+                self.estimator_config,
+                state=self.state,
+                **part,
+            )
+
+        meter = self.wheel_meter
+        k = meter.size - meter.count if meter is not None else n + 1
+        if meter is None or k > n:
+            result = run(slice(0, n))
+        else:
+            # the settings left to the rate follow it after the FOLLOW_AFTER-th stamp, as
+            # the live nodes do (rate_settings)
+            result = run(slice(0, k))
+            meter.add_many(common[:k])
+            self._follow_rate(meter.stamps)
+            if k < n:
+                result = _joined(result, run(slice(k, n)))
+        if meter is not None and self.wheel_meter is not None:
+            meter.add_many(common)
         self.cascade_time += time.perf_counter() - cascade_start
         self.result = result
         self.samples += n
         self.torque_valid += int(np.count_nonzero(result.torque_valid))
-        braked = 'brake' in kwargs
+        braked = brake is not None
         if (engine is not None or braked) and result.wheel_torque_used.shape[0] == n:
             # the situation monitor gets the torques the engine path and brakes gave the estimator
             # (0 where the path had none: a gear the box lacks)
@@ -1004,4 +1093,6 @@ class _Run:
             inputs=tuple(g.stats() for g in self.gaps),
             torque_source=TORQUE_SOURCES[result.torque_source],
             torque_valid_fraction=self.torque_valid / self.samples if self.samples else 0.0,
+            input_rate_hz=self.input_rate_hz,
+            rate_settings=dict(self.rate_settings),
         )

@@ -65,7 +65,8 @@ def add_report_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentPa
         type=Path,
         default=None,
         help='vehicle YAML: static wheel loads for the Fz percentage (default: '
-        'median true Fz over the first second)',
+        'median true Fz over the first second), and the vehicle of the replay of a bag '
+        'without estimates (default: the Clio file)',
     )
     parser.add_argument(
         '--mapping',
@@ -73,6 +74,13 @@ def add_report_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentPa
         default=None,
         help='input mapping YAML of a bag with your own topics and types (docs/bags.md): '
         'its inputs are summarised, and a bag without estimates is replayed with it first',
+    )
+    parser.add_argument(
+        '--config',
+        type=Path,
+        default=None,
+        help='replay settings YAML (as vd replay --config) for the replay of a bag without '
+        'estimates',
     )
     parser.add_argument('--no-figures', action='store_true', help='metrics only')
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
@@ -91,23 +99,62 @@ def run_report(args: argparse.Namespace) -> int:
         return EXIT_ERROR
 
 
-def _load_mapped(bag: Path, mapping_file: Path, scratch: Path, progress: bool) -> BagSeries:
+def _load_mapped(
+    bag: Path,
+    mapping_file: Path,
+    scratch: Path,
+    progress: bool,
+    vehicle_file: Path | None,
+    config_file: Path | None,
+) -> BagSeries:
     """The report's series of a user's bag: replayed with the mapping first if it has no
-    estimates (the replay copies the mapped inputs and the truth to its output)."""
+    estimates (the replay copies the mapped inputs and the truth to its output), with the
+    vehicle file and replay settings given (else the defaults)."""
+    from vd_common.settings_log import settings_line
+    from vd_common.vehicle.params import default_vehicle_file
+
     from vd_observer_node.bag.reader import BagReader
     from vd_observer_node.estimation.observer import ObserverConfig
+    from vd_observer_node.estimation.vehicle import load_estimator_vehicle
     from vd_observer_node.inputs.mapping import load_input_mapping
-    from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
+    from vd_observer_node.tools.replay import (
+        ESTIMATE_TOPICS,
+        ReplayConfig,
+        load_replay_config,
+        replay_bag,
+    )
     from vd_observer_node.tools.report.load import load_bag_series
 
     mapping = load_input_mapping(mapping_file)
+    config = load_replay_config(config_file) if config_file else ReplayConfig()
     source = bag
     if not any(topic in ESTIMATE_TOPICS for topic in BagReader(bag).topics):
         source = scratch / 'replayed'
-        replay_bag(bag, source, mapping=mapping, progress=progress)
+        replayed = replay_bag(
+            bag,
+            source,
+            mapping=mapping,
+            progress=progress,
+            vehicle_file=vehicle_file,
+            observer_config=config.observer,
+            estimator_config=config.estimator,
+            cascade_kwargs=config.cascade_kwargs,
+            alert_config=config.alerts,
+            friction_config=config.friction,
+            situation_config=config.situation,
+        )
+        derived = {f'estimator.{k}': v for k, v in replayed.rate_settings.items()}
+        origin = Path(config.source).name if config.source else ''
         print(f'{bag} has no estimates: replayed it with {mapping_file} first')
+        print(f'  vehicle: {replayed.vehicle}')
+        line = settings_line(config.given, origin, derived, replayed.input_rate_hz)
+        print(f'  settings: {line}')
+        for note in replayed.notes:
+            print(f'  note: {note}')
+    radius = load_estimator_vehicle(vehicle_file or default_vehicle_file()).effective_radius
+    max_gap = (config.observer or ObserverConfig()).max_gap
     return load_bag_series(
-        source, progress=progress, mapping=mapping, max_gap_s=ObserverConfig().max_gap
+        source, progress=progress, mapping=mapping, max_gap_s=max_gap, radius=radius
     )
 
 
@@ -128,7 +175,14 @@ def _run(args: argparse.Namespace) -> int:
         series = load_bag_series(args.bag, progress=progress)
     else:
         with tempfile.TemporaryDirectory(prefix='vd-report-') as scratch:
-            series = _load_mapped(args.bag, Path(mapping_file), Path(scratch), progress)
+            series = _load_mapped(
+                args.bag,
+                Path(mapping_file),
+                Path(scratch),
+                progress,
+                getattr(args, 'vehicle', None),
+                getattr(args, 'config', None),
+            )
         series.path = args.bag
     report, comparisons = evaluate(series, static_loads=static)
     out = args.out if args.out is not None else default_out_dir(args.bag)

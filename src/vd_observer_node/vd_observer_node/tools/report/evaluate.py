@@ -94,6 +94,10 @@ class EvaluationSettings:
         convergence_hold_s: [s] the error must stay below the bound this long.
         mu_excitation: mu is evaluated only where |Fx_true| > mu_excitation * Fz_true.
         omega_min: [rad/s] omega relative error only where |omega_true| exceeds this.
+        reference_max_gap_s: [s] a reference on its own clock (a real car's, not the
+            simulator's: fewer than half of the estimates' stamps found in it) is
+            interpolated linearly onto the estimates' stamps between two of its samples at
+            most this far apart; elsewhere it is absent and the stamp is not evaluated.
     """
 
     settle_s: float = 1.0
@@ -103,6 +107,7 @@ class EvaluationSettings:
     convergence_hold_s: float = 1.0
     mu_excitation: float = 0.05
     omega_min: float = 5.0
+    reference_max_gap_s: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -269,6 +274,58 @@ def _common(a: TopicSeries, b: TopicSeries) -> tuple[np.ndarray, np.ndarray, np.
     return common, ia, ib
 
 
+def _on_own_clock(est: TopicSeries, truth: TopicSeries) -> bool:
+    """The reference does not share the estimates' stamps: fewer than half are found in it
+    (the simulator's truth carries every one of them)."""
+    found = np.isin(est.stamp_ns, truth.stamp_ns)
+    return 2 * int(np.count_nonzero(found)) < est.stamp_ns.size
+
+
+def _interpolated(
+    truth: TopicSeries, field: str, stamps_ns: np.ndarray, max_gap_s: float
+) -> FloatArray:
+    """The reference's `field` linearly interpolated at `stamps_ns`.
+
+    Args:
+        truth: the reference topic (sorted by stamp).
+        field: its field, shape (N,) or (N, K).
+        stamps_ns: shape (M,), [ns], where it is wanted.
+        max_gap_s: [s] interpolate only between samples at most this far apart (an exact
+            stamp always counts).
+
+    Returns:
+        shape (M,) or (M, K), nan where the reference is absent (before its first sample,
+        after its last one, across a longer gap or at a non-finite sample).
+    """
+    t_ref = truth.stamp_ns
+    values = truth.values[field].astype(np.float64)
+    if values.ndim == 1:
+        return _interp_column(t_ref, values, stamps_ns, max_gap_s)
+    columns = [_interp_column(t_ref, column, stamps_ns, max_gap_s) for column in values.T]
+    return np.stack(columns, axis=1)
+
+
+def _interp_column(
+    t_ref: np.ndarray, values: FloatArray, stamps_ns: np.ndarray, max_gap_s: float
+) -> FloatArray:
+    keep = np.isfinite(values)
+    t_ref, values = t_ref[keep], values[keep]
+    out = np.full(stamps_ns.shape, np.nan)
+    if t_ref.size == 0:
+        return out
+    right = np.searchsorted(t_ref, stamps_ns, side='left')
+    exact = (right < t_ref.size) & (t_ref[np.minimum(right, t_ref.size - 1)] == stamps_ns)
+    inside = (right > 0) & (right < t_ref.size)
+    lo = np.maximum(right - 1, 0)
+    hi = np.minimum(right, t_ref.size - 1)
+    close = inside & ((t_ref[hi] - t_ref[lo]) * 1e-9 <= max_gap_s)
+    # float64 seconds from the first reference stamp: ns since the epoch lose precision
+    base = t_ref[0]
+    out[close] = np.interp((stamps_ns[close] - base) * 1e-9, (t_ref - base) * 1e-9, values)
+    out[exact] = values[hi[exact]]
+    return out
+
+
 def _first_stamp(series: BagSeries) -> int:
     return min(int(s.stamp_ns[0]) for s in series.topics.values())
 
@@ -316,18 +373,25 @@ def build_comparisons(
         if est is None and truth is None:
             continue
         ie: np.ndarray | None = None
-        if est is not None and truth is not None:
+        truth_label = spec.truth_label
+        if est is not None and truth is not None and _on_own_clock(est, truth):
+            # a real car's reference: its own clock, interpolated onto the estimates
+            stamps, ie = est.stamp_ns, np.arange(est.stamp_ns.size)
+            estimate = est.values[spec.field].astype(np.float64) * spec.factor
+            true = _interpolated(truth, spec.field, stamps, cfg.reference_max_gap_s) * spec.factor
+            truth_label = f'reference ({spec.truth_topic}, interpolated)'
+            covered = np.isfinite(true) if true.ndim == 1 else np.isfinite(true).all(axis=1)
+            notes.append(
+                f'{spec.title}: the reference {spec.truth_topic} runs on its own clock: '
+                f"interpolated onto the estimates' stamps (gaps up to "
+                f'{cfg.reference_max_gap_s:g} s), {100 * covered.mean():.0f} % of them covered'
+            )
+        elif est is not None and truth is not None:
             stamps, ie, it = _common(est, truth)
-            if stamps.size == 0:
-                notes.append(
-                    f'{spec.title}: no common stamps between {spec.est_topic} and '
-                    f'{spec.truth_topic} (estimates must carry the measurement stamp; a '
-                    'reference on its own clock is not interpolated onto them yet)'
-                )
             estimate = est.values[spec.field][ie].astype(np.float64) * spec.factor
             true = truth.values[spec.field][it].astype(np.float64) * spec.factor
         elif est is not None:
-            notes.append(f'{spec.title}: no truth ({spec.truth_topic} missing), plotted only')
+            notes.append(f'{spec.title}: no reference ({spec.truth_topic} missing), plotted only')
             stamps = est.stamp_ns
             estimate, true = est.values[spec.field].astype(np.float64) * spec.factor, None
         else:
@@ -339,6 +403,9 @@ def build_comparisons(
         mask = evaluation_mask(
             t, start=cfg.settle_s, events=events, half_width=cfg.exclusion_half_width_s
         )
+        if true is not None:  # a reference absent there (own clock, beyond its gaps)
+            finite = np.isfinite(true)
+            mask = mask & (finite if mask.ndim == finite.ndim else finite.all(axis=1))
         if spec.key == 'mu' and estimate is not None and true is not None:
             mask = _mu_mask(series, stamps, mask, cfg, notes)
         elif spec.key == 'slope' and est is not None and true is not None:
@@ -353,7 +420,7 @@ def build_comparisons(
                 true,
                 mask,
                 spec.estimate_label,
-                spec.truth_label,
+                truth_label,
                 spec.symbol,
                 _validity(est, ie),
             )
@@ -582,7 +649,7 @@ def closing_notes(
         notes.append(torque)
     missing_truth = [t for t in TRUTH_TOPICS if t not in present]
     if missing_truth:
-        notes.append('truth topics missing: ' + ', '.join(missing_truth))
+        notes.append('reference topics missing: ' + ', '.join(missing_truth))
     notes.extend(f'{name} skipped: {why}' for name, why in skipped.items())
     notes.extend(f'input {stats.text()}' for stats in inputs)
     return notes

@@ -121,6 +121,7 @@ def load_bag_series(
     progress: bool = True,
     mapping: InputMapping | None = None,
     max_gap_s: float = 0.5,
+    radius: float | None = None,
 ) -> BagSeries:
     """Read and decode the vd sensor, observer, estimate, alerts and truth topics of a bag.
 
@@ -130,6 +131,7 @@ def load_bag_series(
         mapping: the user's input topics (:mod:`vd_observer_node.inputs.mapping`): each one
             present is decoded for its summary (:attr:`BagSeries.inputs`).
         max_gap_s: [s] the observers' ``max_gap`` the inputs' gaps are counted against.
+        radius: [m] effective rolling radius, for mapped wheel speeds in m/s or km/h.
 
     Raises:
         BagError: the bag cannot be read (see :mod:`vd_observer_node.bag.errors`).
@@ -169,7 +171,7 @@ def load_bag_series(
         ]
         inputs = reader.topic_arrays([spec.topic for spec in mapped])
         for spec in mapped:
-            decoded = decode_input(spec, inputs[spec.topic])
+            decoded = decode_input(spec, inputs[spec.topic], radius)
             series.inputs.append(input_stats(spec, decoded, max_gap_s))
         series.skipped.update(
             {

@@ -27,7 +27,10 @@ bag's length.
 Figures equal the reference's exactly where they are counts, times, maxima or per-sample
 decisions; means and RMS values add the samples in another order (blocks, not numpy's pairwise
 summation of the whole record) and agree to ~1e-12 relative. Not produced: the comparisons
-(whole time series) for the figures, and the mapped inputs' summary (``vd report --mapping``).
+(whole time series) for the figures, the mapped inputs' summary (``vd report --mapping``), and
+a reference on its own clock interpolated onto the estimates (a real car's; ``vd report``
+does it, ``EvaluationSettings.reference_max_gap_s``): here estimate and truth pair by stamp
+only, as a simulator's recordings do.
 Header stamps must not go backwards within a topic (:class:`StampOrderError` otherwise: the
 caller falls back to the whole-bag path, which sorts).
 """
@@ -1135,7 +1138,7 @@ def _the_pass(
                 notes.append(f'μ: {TRUTH_TIRE_FORCES} missing, cannot select excited samples')
             quantities.append(q.result())
         elif has_est:
-            notes.append(f'{spec.title}: no truth ({spec.truth_topic} missing), plotted only')
+            notes.append(f'{spec.title}: no reference ({spec.truth_topic} missing), plotted only')
         elif has_truth:
             notes.append(f'{spec.title}: no estimate ({spec.est_topic} missing)')
     slope = next((q for _, qs in joins.values() for q in qs if q.spec.key == 'slope'), None)
