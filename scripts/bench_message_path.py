@@ -12,7 +12,9 @@ Prints, per message [us] (median of repeated runs, CPU of this one process):
    JointState, Odometry and Float64MultiArray through rosbags and the replay's extractors);
 5. receive: the executor's cost per delivered message (wait set, take, callback), typed and
    raw subscriptions, SingleThreadedExecutor and the experimental EventsExecutor: K messages
-   are published first, then the executor is timed until it has delivered all of them.
+   are published first, then the executor is timed until it has delivered all of them;
+6. one stamp of pipeline_node's estimates published as its seven per-quantity messages
+   against one vd_msgs/Estimates (``estimate_topics: combined``), raw, CPU per stamp.
 
 Run inside ``. ./env.sh``; takes about 20 s.
 """
@@ -162,6 +164,60 @@ def publish_and_receive_figures() -> None:
             print(f'receive {label} {kind:16s} {statistics.median(costs):6.2f} us CPU per message')
 
 
+def stamp_layout_figures() -> None:
+    """One stamp of pipeline_node's estimates: the seven per-quantity messages against the
+    one vd_msgs/Estimates (``estimate_topics``), raw bytes, one subscriber per topic."""
+    from geometry_msgs.msg import AccelStamped, TwistStamped
+    from vd_observer_node.bag.cdr_message import MessageCodec
+
+    from vd_msgs.msg import Estimates, Friction, Resistances, Slope, TireForces
+
+    node = rclpy.create_node('bench_stamp_layout')
+    four = [1.0, 2.0, 3.0, 4.0]
+    separate = [
+        (WheelStates, 'vd_msgs/msg/WheelStates', [*four, *four, *four]),
+        (AccelStamped, 'geometry_msgs/msg/AccelStamped', [0.5, 0, 0, 0, 0, 0]),
+        (TwistStamped, 'geometry_msgs/msg/TwistStamped', [10.0, 0, 0, 0, 0, 0]),
+        (TireForces, 'vd_msgs/msg/TireForces', [*four, *four, 0]),
+        (Friction, 'vd_msgs/msg/Friction', [*four, *four, True, True, True, True, 0]),
+        (Resistances, 'vd_msgs/msg/Resistances', [*four, 1.0]),
+        (Slope, 'vd_msgs/msg/Slope', [0.01, True, 0]),
+    ]
+    combined = [*four, *four, *four, 10.0, 0.5, *four, *four, *four, *four]
+    combined += [True] * 4 + [*four, 1.0, 0.01, True, 0]
+    layouts = {
+        'separate (7 messages)': [
+            (cls, MessageCodec(name, 'base_link').encode(1, values))
+            for cls, name, values in separate
+        ],
+        'combined (1 message) ': [
+            (Estimates, MessageCodec('vd_msgs/msg/Estimates', 'base_link').encode(1, combined))
+        ],
+    }
+    n = 2000
+    for label, messages in layouts.items():
+        pubs = []
+        for k, (cls, data) in enumerate(messages):
+            topic = f'/bench/layout_{len(messages)}_{k}'
+            pub = node.create_publisher(cls, topic, QOS)
+            node.create_subscription(cls, topic, lambda _: None, QOS, raw=True)
+            wait_for_one_subscriber(pub)
+            pubs.append((pub, data))
+        runs = []
+        for _ in range(REPEATS):
+            start = time.process_time()
+            for _ in range(n):
+                for pub, data in pubs:
+                    pub.publish(data)
+            runs.append((time.process_time() - start) / n * 1e6)
+        size = sum(len(d) for _, d in messages)
+        print(
+            f'publish one stamp of estimates, {label}: {statistics.median(runs):6.1f} us CPU '
+            f'({size} bytes)'
+        )
+    node.destroy_node()
+
+
 def receive_cost(raw: bool, make: Callable[[], object], n: int, data: bytes) -> float:
     """CPU [us] per message the executor spends delivering n queued messages."""
     node = rclpy.create_node('bench_receive')
@@ -196,6 +252,7 @@ def main() -> None:
     rclpy.init()
     try:
         publish_and_receive_figures()
+        stamp_layout_figures()
     finally:
         rclpy.try_shutdown()
 

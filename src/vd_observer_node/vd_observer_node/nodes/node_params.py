@@ -18,7 +18,14 @@ from collections.abc import Sequence
 from typing import Any, Final
 
 from vd_common.ros_common import ParamSpec, dataclass_param_specs, ros_message_class
-from vd_common.topics import OBSERVER_BODY_VELOCITY, SENSORS_BODY_VELOCITY, SENSORS_NAMESPACE
+from vd_common.topics import (
+    ESTIMATES_COMBINED,
+    ESTIMATES_NAMESPACE,
+    OBSERVER_BODY_VELOCITY,
+    OBSERVER_NAMESPACE,
+    SENSORS_BODY_VELOCITY,
+    SENSORS_NAMESPACE,
+)
 
 from vd_observer_node.chain import ESTIMATOR_SPEEDS
 from vd_observer_node.estimation.differentiator import (
@@ -277,9 +284,9 @@ ESTIMATE_TOPIC_LAYOUTS: Final = ('separate', 'combined', 'both')
 ESTIMATE_TOPICS_PARAM: Final = ParamSpec(
     'estimate_topics',
     'separate',
-    "'separate': one topic per quantity (/vd/observer/*, /vd/estimates/*, what vd replay "
-    "writes and vd report reads); 'combined': the per-stamp estimates in one "
-    'vd_msgs/Estimates message on /vd/estimates/combined instead (one message per stamp '
+    f"'separate': one topic per quantity ({OBSERVER_NAMESPACE}*, {ESTIMATES_NAMESPACE}*, "
+    "what vd replay writes and vd report reads); 'combined': the per-stamp estimates in one "
+    f'vd_msgs/Estimates message on {ESTIMATES_COMBINED} instead (one message per stamp '
     "instead of seven); 'both'. Mass, radius, torque offset, friction potential and alerts "
     'keep their own topics.',
     choices=ESTIMATE_TOPIC_LAYOUTS,
