@@ -530,3 +530,113 @@ def test_pipeline_node_on_the_engine_and_no_torque_paths_computes_what_the_repla
         int(f[2]): float(f[4]) for f in lines if f[0] == 'MSG' and f[1] == ESTIMATES_TORQUE_OFFSET
     }
     assert live_offsets == expected_offsets
+
+
+@pytest.mark.slow
+@pytest.mark.ros
+def test_pipeline_node_takes_a_brake_switch_as_the_replay_does(
+    procs: RosProcessGroup, tmp_path: Path
+) -> None:
+    """A mapping with a ``brake`` switch (a headerless Float64MultiArray logged with each
+    wheel stamp, on from 11 to 12.5 s of a drive; 'exact' alignment, the default with a
+    headerless input, holds it at its latest value): the live pipeline subscribes to it and
+    flags the slope invalid while braking, as the replay does; away from the switch's edges
+    (where a headerless input's receive order decides) its validity equals the replay's
+    stamp for stamp."""
+    import dataclasses
+
+    from vd_common.vehicle.params import default_vehicle_file, load_vehicle
+    from vd_observer_node.bag import BagReader, BagWriter
+    from vd_observer_node.bag.cdr_batch import decode_batch
+    from vd_observer_node.bag.typestore import serialize
+    from vd_observer_node.inputs.mapping import mapping_from_dict
+    from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
+    from vd_observer_node.testing.standard_bags import float64_array
+    from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
+    from vd_sim_node.vehicle.scenario import load_scenario
+    from vd_sim_node.vehicle.simulation import simulate
+
+    scenario = load_scenario(
+        ROOT / 'src' / 'vd_sim_node' / 'config' / 'scenarios' / 'paper_table1.yaml'
+    )
+    sim = simulate(  # the launch at 8 s, moving from there
+        load_vehicle(default_vehicle_file()),
+        dataclasses.replace(
+            scenario, duration=14.0, sensors=dataclasses.replace(scenario.sensors, rate_hz=100.0)
+        ),
+    )
+    stamps = np.round(sim.t * 1e9).astype(np.int64) + NS
+    own = tmp_path / 'own'
+    write_topic_arrays_bag(own, stamps, sim_topics(sim, truth=False))
+    brake_topic = '/can/brake'
+    brake_stamps = stamps
+    t_brake = (brake_stamps - NS) * 1e-9
+    switch = ((t_brake >= 11.0) & (t_brake < 12.5)).astype(float)
+    arrays = BagReader(own).topic_arrays()
+    rows = [
+        (int(log), topic, bytes(data))
+        for topic, a in arrays.items()
+        for log, data in zip(a.log_time_ns.tolist(), a.datas, strict=True)
+    ] + [
+        (int(s), brake_topic, serialize(float64_array([v])))
+        for s, v in zip(brake_stamps.tolist(), switch.tolist(), strict=True)
+    ]
+    rows.sort(key=lambda r: r[0])
+    bag = tmp_path / 'car'
+    with BagWriter(bag) as writer:
+        for topic, a in arrays.items():
+            writer.add_topic(topic, a.msgtype)
+        writer.add_topic(brake_topic, 'std_msgs/msg/Float64MultiArray')
+        for log, topic, data in rows:
+            writer.write(topic, data, log)
+    data = {
+        'brake': {
+            'topic': brake_topic,
+            'type': 'std_msgs/msg/Float64MultiArray',
+            'signal': 'switch',
+            'indices': [0],
+        }
+    }
+    mapping_file = tmp_path / 'car.yaml'
+    mapping_file.write_text(yaml.safe_dump(data), encoding='utf-8')
+    replay_bag(bag, tmp_path / 'replayed', progress=False, mapping=mapping_from_dict(data))
+    datas = BagReader(tmp_path / 'replayed').topic_arrays([ESTIMATES_SLOPE])[ESTIMATES_SLOPE]
+    offline = decode_batch(ESTIMATE_TOPICS[ESTIMATES_SLOPE], datas.datas)
+    expected = dict(
+        zip(offline.stamp_ns.tolist(), offline.values['valid'].astype(int).tolist(), strict=True)
+    )
+    t_est = (np.array(list(expected)) - NS) * 1e-9
+    valid = np.array(list(expected.values()), dtype=bool)
+    braking = (t_est >= 11.0) & (t_est < 12.5)
+    assert not valid[braking].any() and valid[(t_est > 10.0) & (t_est < 11.0)].all()
+
+    params = params_file(tmp_path / 'p.yaml', {}, input_mapping=str(mapping_file))
+    pipeline = _start(procs, 'pipeline', 'pipeline_node', params)
+    pipeline.wait_for('pipeline ready', timeout=90)
+    collector = procs.python(
+        'collector', SCRIPTS / 'collect_outputs.py', '25', f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope'
+    )
+    collector.wait_for('SUBSCRIBED', timeout=60)
+    player_params = params_file(
+        tmp_path / 'player.yaml', {}, input_mapping=str(mapping_file), bag=str(bag)
+    )
+    player = _start(procs, 'player', 'player_node', player_params)
+    assert _wait_exit(player, 60) == 0, player.output()
+    assert _wait_exit(collector, 60) == 0
+    live = {
+        int(f[2]): int(f[5])
+        for f in (line.split() for line in collector.output().splitlines())
+        if f[0] == 'MSG'
+    }
+    assert len(live) > 0.9 * len(expected), (len(live), len(expected))
+    edges = np.array([11.0, 12.5])
+    away = {
+        s: v
+        for s, v in live.items()
+        if np.min(np.abs((s - NS) * 1e-9 - edges)) > 0.2 and s in expected
+    }
+    assert len(away) > 0.8 * len(live)
+    assert all(v == expected[s] for s, v in away.items())
+    live_t = (np.array(list(live)) - NS) * 1e-9
+    live_valid = np.array(list(live.values()), dtype=bool)
+    assert not live_valid[(live_t >= 11.2) & (live_t < 12.3)].any()

@@ -86,11 +86,11 @@ def test_mapping_refusals_name_the_key() -> None:
     )
     refused(
         {'engine_torque': {**engine, 'indices': [0]}},
-        r'engine_torque.indices must list 2 or 3 element indices',
+        r'engine_torque.indices must list 2 or 3 or 4 element indices',
     )
     refused(
-        {'engine_torque': {**engine, 'indices': [0, 1, 2, 3]}},
-        r'engine_torque.indices must list 2 or 3',
+        {'engine_torque': {**engine, 'indices': [0, 1, 2, 3, 4]}},
+        r'engine_torque.indices must list 2 or 3 or 4',
     )
     refused({'engine_torque': {**engine, 'speed_unit': 'Hz'}}, r"speed_unit 'Hz' is unknown")
     refused({'engine_torque': {**engine, 'unit': 'lbf ft'}}, r"engine_torque.unit 'lbf ft'")
@@ -125,10 +125,21 @@ def test_engine_decoder_units_and_missing_elements() -> None:
     series = decode_engine(spec, arrays)
     np.testing.assert_array_equal(series.stamp_ns, [5, 7])  # log times: no header
     np.testing.assert_allclose(
-        series.values, [[80.0, 3.0, 100.0 * math.pi], [-10.0, 0.0, 30.0 * math.pi]], rtol=1e-12
+        series.values[:, :3],
+        [[80.0, 3.0, 100.0 * math.pi], [-10.0, 0.0, 30.0 * math.pi]],
+        rtol=1e-12,
     )
+    assert np.isnan(series.values[:, 3]).all()  # no turbine speed mapped
     two = dataclasses.replace(spec, indices=(1, 0))
-    assert np.isnan(decode_engine(two, arrays).values[:, 2]).all()
+    assert np.isnan(decode_engine(two, arrays).values[:, 2:]).all()
+    # a turbine speed (rpm, as the engine speed) and a gear offset
+    four = dataclasses.replace(spec, indices=(1, 0, 2, 2), gear_offset=1)
+    np.testing.assert_allclose(
+        decode_engine(four, arrays).values,
+        [[80.0, 4.0, 100.0 * math.pi, 100.0 * math.pi], [-10.0, 1.0, 30.0 * math.pi,
+                                                         30.0 * math.pi]],
+        rtol=1e-12,
+    )  # fmt: skip
     short = dataclasses.replace(spec, indices=(1, 0, 5))
     with pytest.raises(MappingError, match=r'engine_torque\.indices: element 5 is beyond'):
         decode_engine(short, arrays)

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimation.brakes import Brakes, no_brakes
 from vd_observer_node.estimation.cascade import CascadeBlock, CascadeParts
 from vd_observer_node.estimation.cascade_step import cascade_block
 from vd_observer_node.estimation.drivetrain import (
@@ -81,6 +82,7 @@ class ChainSettings:
         drivetrain: the vehicle's driveline; needed by the engine path only.
         imu: the IMU fusion's settings (`imu_grade`); None: no IMU, the force balance's
             slope as it is.
+        brakes: the brake input's kind and gains (`estimation.brakes.Brakes`); None: none.
     """
 
     vehicle: EstimatorVehicle
@@ -94,6 +96,7 @@ class ChainSettings:
     torque_source: str = 'measured'
     drivetrain: Drivetrain | None = None
     imu: ImuGradeConfig | None = None
+    brakes: Brakes | None = None
 
     def __post_init__(self) -> None:
         if self.estimator_speed not in ESTIMATOR_SPEEDS:
@@ -114,16 +117,19 @@ class ChainSettings:
 
 
 def engine_row(engine: ArrayLike | None) -> NDArray[np.float64]:
-    """The engine argument of `Chain.update` as a (3,) float64 array.
+    """The engine argument of `Chain.update` as a (4,) float64 array (a (3,) one gets a
+    turbine speed of nan).
 
     Raises:
-        InputShapeError: missing (None on the engine path) or not of shape (3,).
+        InputShapeError: missing (None on the engine path) or not of shape (3,) or (4,).
     """
     if engine is None:
         raise InputShapeError('the engine path needs engine (torque, gear, engine speed)')
     row = np.ascontiguousarray(engine, dtype=np.float64)
-    if row.shape != (3,):
-        raise InputShapeError(f'engine must have shape (3,), got {row.shape}')
+    if row.shape == (3,):
+        row = np.append(row, np.nan)
+    if row.shape != (4,):
+        raise InputShapeError(f'engine must have shape (3,) or (4,), got {row.shape}')
     return row
 
 
@@ -170,6 +176,7 @@ class Chain:
             settings.estimator_speed,
             settings.torque_source,
             settings.drivetrain,
+            settings.brakes,
         )
         self.monitor = SituationMonitor(
             settings.curves,
@@ -187,7 +194,8 @@ class Chain:
         #: Python attribute lookup (the live chain reads them every stamp)
         self._est_fields = self._out.est.view(np.ndarray)
         self._situation = SituationBlock.empty(1)
-        self._no_engine = np.zeros((1, 3))
+        self._no_engine = np.zeros((1, 4))
+        self._no_brake = no_brakes(1)
         self._grade = self.parts.grade(settings.imu) if settings.imu is not None else None
         self._grade_out = np.zeros(1, GRADE_OUT).view(np.recarray)[0]
 
@@ -199,6 +207,7 @@ class Chain:
         wheel_torque: ArrayLike,
         engine: ArrayLike | None = None,
         imu: tuple[float, float] | None = None,
+        brake: ArrayLike | None = None,
     ) -> ChainOutput:
         """Advance to stamp t.
 
@@ -209,10 +218,13 @@ class Chain:
             speed: measured body speed [m/s].
             wheel_torque: shape (4,), [N m] drive minus brake torque (read on the measured
                 path only).
-            engine: shape (3,): engine torque [N m], gear, engine speed [rad/s] (nan if not
-                measured); read on the engine path only, where it is required.
+            engine: shape (3,) or (4,): engine torque [N m], gear, engine speed [rad/s] (nan
+                if not measured), turbine speed [rad/s] (nan or absent if not logged); read
+                on the engine path only, where it is required.
             imu: the newest IMU sample: its stamp [s] and forward specific force [m/s^2]
                 (read with ``settings.imu`` only; None: none yet).
+            brake: shape (4,): the brake input (`estimation.brakes.brake_torques`; nan where
+                unknown); None: nothing known at this stamp (with a brake input: invalid).
 
         Raises:
             InputShapeError: an array input has the wrong shape, or no engine on the engine
@@ -233,10 +245,16 @@ class Chain:
         speeds = np.array([float(speed)])
         out = self._out
         block: Any = cascade_block  # its arguments come as tuples
-        block(*parts.args(), stamp, angles[None], speeds, torques[None], row, *out.outputs())
+        brakes = self._no_brake
+        if brake is not None:
+            brakes = np.ascontiguousarray(brake, dtype=np.float64).reshape(1, 4)
+        block(
+            *parts.args(), stamp, angles[None], speeds, torques[None], row, brakes,
+            *out.outputs(),
+        )  # fmt: skip
         est = out.est[0]
-        if parts.engine_on:
-            # the torques the engine path gave the estimator (0 where it had none)
+        if parts.engine_on or parts.bprm[0] != 0.0:
+            # the torques the engine path and brakes gave the estimator (0 where none)
             torques = np.where(np.isfinite(out.used[0]), out.used[0], 0.0)
         wheel = out.wheel[0]
         fields = self._est_fields

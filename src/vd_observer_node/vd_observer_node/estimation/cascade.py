@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimation.brakes import Brakes, new_brake_state, no_brakes
 from vd_observer_node.estimation.cascade_step import cascade_block
 from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.drivetrain import (
@@ -46,6 +47,7 @@ __all__ = [
     'CascadeState',
     'OffsetRecord',
     'cascade_result',
+    'checked_brake',
     'checked_engine',
     'checked_record',
     'offset_result_name',
@@ -258,24 +260,44 @@ def checked_record(
 def checked_engine(
     n: int, torque_source: str, engine: ArrayLike | None, drivetrain: Drivetrain | None
 ) -> tuple[int, FloatArray]:
-    """The torque source's code and the engine record (N, 3), checked.
+    """The torque source's code and the engine record (N, 4), checked.
+
+    Args:
+        engine: shape (N, 3) or (N, 4): engine torque, gear, engine speed and (if logged)
+            turbine speed; a record of 3 columns gets a turbine speed of nan.
 
     Raises:
         ConfigurationError: unknown source, or the engine path without engine or drivetrain.
-        InputShapeError: engine is not of shape (N, 3).
+        InputShapeError: engine is not of shape (N, 3) or (N, 4).
     """
     code = torque_source_code(torque_source)
     if code != TORQUE_ENGINE:
-        return code, np.zeros((n, 3))
+        return code, np.zeros((n, 4))
     if engine is None or drivetrain is None:
         raise ConfigurationError('torque_source engine needs the engine record and a drivetrain')
     record = np.ascontiguousarray(engine, dtype=np.float64)
-    if record.shape != (n, 3):
+    if record.ndim == 2 and record.shape == (n, 3):
+        record = np.concatenate([record, np.full((n, 1), np.nan)], axis=1)
+    if record.shape != (n, 4):
         raise InputShapeError(
-            f'engine must have shape ({n}, 3) (engine torque, gear, engine speed), '
-            f'got {record.shape}'
+            f'engine must have shape ({n}, 3) or ({n}, 4) (engine torque, gear, engine speed, '
+            f'turbine speed), got {record.shape}'
         )
     return code, record
+
+
+def checked_brake(n: int, brake: ArrayLike | None) -> FloatArray:
+    """The brake record (N, 4) (`brakes.brake_torques`), nan without one.
+
+    Raises:
+        InputShapeError: brake is not of shape (N, 4).
+    """
+    if brake is None:
+        return no_brakes(n)
+    record = np.ascontiguousarray(brake, dtype=np.float64)
+    if record.shape != (n, 4):
+        raise InputShapeError(f'brake must have shape ({n}, 4), got {record.shape}')
+    return record
 
 
 class CascadeParts:
@@ -292,6 +314,9 @@ class CascadeParts:
         offset_on: the engine path learns the engine-torque offset.
         offset_params, offset_state, offset_estimate: the offset estimator's records.
         engine_faults: the engine path's own fault counter where it learns the offset.
+        brakes: the brake input (`brakes.Brakes`; kind 'none' without one).
+        bprm: its `Brakes.params_array`.
+        brake_state: shape (13,), the learnt brake gain (`brakes.BRAKE_GAIN_SLOTS`).
     """
 
     def __init__(
@@ -302,6 +327,7 @@ class CascadeParts:
         estimator_speed: str = 'measured',
         torque_source: str = 'measured',
         drivetrain: Drivetrain | None = None,
+        brakes: Brakes | None = None,
     ) -> None:
         """Create the parts (compiled, or loaded from numba's cache, by their wrappers).
 
@@ -347,6 +373,10 @@ class CascadeParts:
         #: the IMU fusion (`imu_grade`), made by the first block that has an IMU
         self.imu_grade: ImuGrade | None = None
         self._vehicle = vehicle
+        # without torque there is nothing to take a brake torque from
+        self.brakes = brakes if brakes is not None and self.source != TORQUE_NONE else Brakes()
+        self.bprm = self.brakes.params_array()
+        self.brake_state = new_brake_state()
         self._args: tuple[Any, ...] | None = None
 
     def grade(self, config: ImuGradeConfig | None) -> ImuGrade:
@@ -377,7 +407,7 @@ class CascadeParts:
             a(wp), wlip, a(ws), wplain, a(sp), slip_, a(ss), splain,
             a(self.estimator.params), a(es), fst, sst, vst, self.measured, self.engine_on,
             self.dprm, self.engine_state, self.offset_on, a(self.offset_params),
-            a(self.offset_state), a(self.offset_estimate),
+            a(self.offset_state), a(self.offset_estimate), self.bprm, self.brake_state,
         )  # fmt: skip
         return self._args
 
@@ -457,6 +487,8 @@ def run_cascade(
     state: CascadeState | None = None,
     imu: ArrayLike | None = None,
     imu_config: ImuGradeConfig | None = None,
+    brake: ArrayLike | None = None,
+    brakes: Brakes | None = None,
 ) -> CascadeResult:
     """Run observers and estimator over a record sampled at common stamps.
 
@@ -477,8 +509,9 @@ def run_cascade(
             omega_dot for the engine-inertia term; invalid where the clutch is not engaged
             and for `Drivetrain.clutch_settle_time` after it was, or after a gear change) or
             'none' (wheel_torque ignored; Fx 0, mu and slope invalid).
-        engine: shape (N, 3): engine torque [N m], gear (0 neutral, -1 reverse), engine speed
-            [rad/s] (nan if not measured); needed by the engine path only.
+        engine: shape (N, 3) or (N, 4): engine torque [N m], gear (0 neutral, -1 reverse),
+            engine speed [rad/s] (nan if not measured), turbine speed [rad/s] (an automatic
+            gearbox's; nan or absent if not logged); needed by the engine path only.
         drivetrain: the vehicle's driveline; needed by the engine path only.
         state: carried from the previous block of the record (`CascadeState`); None: the
             record is whole. ``faults`` are then the totals since the first block.
@@ -486,6 +519,9 @@ def run_cascade(
             its longitudinal specific force in body axes [m/s^2]; the slope is then the
             fusion of `imu_grade` (None: the force balance's slope, as without an IMU).
         imu_config: the fusion's settings (defaults if None).
+        brake: shape (N, 4): the brake input per wheel (`brakes.brake_torques`: pressures,
+            or the switch in column 0; nan where unknown); None: no brake input.
+        brakes: what ``brake`` is and its gains (`brakes.Brakes`); None: no brake input.
 
     Raises:
         InputShapeError: inconsistent shapes.
@@ -497,6 +533,7 @@ def run_cascade(
     )
     n = stamps.shape[0]
     source, engine_record = checked_engine(n, torque_source, engine, drivetrain)
+    brake_record = checked_brake(n, brake)
     if source == TORQUE_NONE:
         torques = np.zeros((n, 4))  # no torque topic: zeros everywhere
     if state is not None and state.parts is not None:
@@ -504,13 +541,16 @@ def run_cascade(
     else:
         parts = CascadeParts(
             vehicle, observer_config, estimator_config, estimator_speed, torque_source,
-            drivetrain,
+            drivetrain, brakes,
         )  # fmt: skip
         if state is not None:
             state.parts = parts
     out = CascadeBlock.empty(n, parts.offset_on)
     block: Any = cascade_block  # its arguments come as tuples
-    block(*parts.args(), stamps, angles, speeds, torques, engine_record, *out.outputs())
+    block(
+        *parts.args(), stamps, angles, speeds, torques, engine_record, brake_record,
+        *out.outputs(),
+    )  # fmt: skip
     if source == TORQUE_NONE:
         out.torque_valid[:] = False
     result = cascade_result(stamps, source, parts, out)

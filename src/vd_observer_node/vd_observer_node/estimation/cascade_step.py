@@ -13,6 +13,12 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from vd_observer_node.estimation.brakes import (
+    BRAKE_NONE,
+    brake_gain_update,
+    brake_gains,
+    brake_torques,
+)
 from vd_observer_node.estimation.drivetrain import engine_torques
 from vd_observer_node.estimation.estimator_step import estimator_update
 from vd_observer_node.estimation.levant_step import levant_update
@@ -35,10 +41,10 @@ def cascade_step(
     sp: np.record, slip_: FloatArray, ss: np.record, sch: np.recarray,
     ep: np.record, es: np.record, fst: FloatArray, sst: FloatArray, vst: FloatArray,
     measured: bool, engine_on: bool, dprm: FloatArray, escl: FloatArray, offset_on: bool,
-    op: np.record, os_: np.record, oout: np.record,
+    op: np.record, os_: np.record, oout: np.record, bprm: FloatArray, bst: FloatArray,
     t: float, angle: FloatArray, speed: float, torque: FloatArray, engine: FloatArray,
-    wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray, body_valid: BoolArray,
-    used: FloatArray, est: np.record,
+    brake: FloatArray, wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray,
+    body_valid: BoolArray, used: FloatArray, est: np.record,
 ) -> bool:  # fmt: skip
     """One stamp: wheel and speed observers, the torque path, then the estimator.
 
@@ -54,11 +60,16 @@ def cascade_step(
             gear changed (-inf before), the last gear (nan before).
         offset_on: the engine path learns the engine-torque offset and subtracts it.
         op, os_, oout: the offset estimator's settings, state and estimate records.
+        bprm: shape (11,), the brake input (`brakes.Brakes.params_array`; kind
+            `BRAKE_NONE`: none).
+        bst: shape (13,), the learnt brake gain's state (`brakes.new_brake_state`).
         t: stamp [s].
         angle: shape (4,), [rad] wheel angles (or speeds [rad/s], as the observer takes).
         speed: [m/s] measured body speed.
         torque: shape (4,), [N m] measured wheel torques (read off the engine path only).
-        engine: shape (3,), engine torque [N m], gear, engine speed [rad/s] (engine path).
+        engine: shape (4,), engine torque [N m], gear, engine speed [rad/s], turbine speed
+            [rad/s] (engine path; the speeds nan where not logged).
+        brake: shape (4,), the brake input (`brake_torques`).
         wheel: shape (3, 4), written: angle, omega, omega_dot.
         wheel_valid: shape (4,), written.
         body: shape (3, 1), written: speed, accel, jerk of the speed observer.
@@ -67,7 +78,8 @@ def cascade_step(
         est: `estimator_step.ESTIMATES` record, written.
 
     Returns:
-        Whether the torque path held (the engine path: clutch engaged, gear known, settled).
+        Whether the torque path held (the engine path: clutch engaged, gear known, settled;
+        the brakes: not braking with a switch only, the pressure's torque known).
     """
     levant_update(wp, wlip, ws, wch, t, angle, wheel, wheel_valid)
     sample = np.empty(1)
@@ -83,7 +95,7 @@ def cascade_step(
             )
             engine_torque = engine_torque - oout.used
         engaged = engine_torques(
-            dprm, engine_torque, engine[1], engine[2], wheel[1], wheel[2], used
+            dprm, engine_torque, engine[1], engine[2], engine[3], wheel[1], wheel[2], used
         )
         if not engaged or engine[1] != escl[1]:
             escl[0] = t
@@ -91,9 +103,19 @@ def cascade_step(
         torque_ok = engaged and t - escl[0] >= dprm[CLUTCH_SETTLE]
     else:
         used[:] = torque
+    braked = bprm[0] != BRAKE_NONE
+    learn = braked and bprm[5] > 0.0
+    path_ok = torque_ok
+    drive = used.copy() if learn else used
+    if braked:
+        gains = np.empty(4)
+        brake_gains(bprm, bst, gains)
+        torque_ok = brake_torques(bprm, gains, brake, wheel[1], used) and torque_ok
     estimator_update(
         ep, es, fst, sst, vst, t, wheel[1], wheel[2], v_est, body[1, 0], used, torque_ok, est
     )
+    if learn:
+        brake_gain_update(bprm, bst, t, brake, wheel[1], drive, ep, v_est, path_ok, est)
     return torque_ok
 
 
@@ -103,9 +125,10 @@ def cascade_block(
     sp_: np.ndarray, slip_: FloatArray, ss_: np.ndarray, sch: np.recarray,
     ep_: np.ndarray, es_: np.ndarray, fst: FloatArray, sst: FloatArray, vst: FloatArray,
     measured: bool, engine_on: bool, dprm: FloatArray, escl: FloatArray, offset_on: bool,
-    op_: np.ndarray, os__: np.ndarray, oout_: np.ndarray,
+    op_: np.ndarray, os__: np.ndarray, oout_: np.ndarray, bprm: FloatArray, bst: FloatArray,
     t: FloatArray, angles: FloatArray, speeds: FloatArray, torques: FloatArray,
-    engine: FloatArray, wheel: FloatArray, wheel_valid: BoolArray, body: FloatArray,
+    engine: FloatArray, brakes: FloatArray, wheel: FloatArray, wheel_valid: BoolArray,
+    body: FloatArray,
     body_valid: BoolArray, used: FloatArray, est: np.ndarray, torque_valid: BoolArray,
     offsets: np.ndarray,
 ) -> None:  # fmt: skip
@@ -115,7 +138,8 @@ def cascade_block(
         (parts): as `cascade_step`, each record as the 1-element array it lives in
             (`kernel._jit.record_array`: numba types arrays on its fast path, records not).
         t: shape (N,), [s].
-        angles: shape (N, 4); speeds (N,); torques (N, 4); engine (N, 3) (as `cascade_step`).
+        angles: shape (N, 4); speeds (N,); torques (N, 4); engine (N, 4); brakes (N, 4)
+            (as `cascade_step`).
         wheel: shape (N, 3, 4), written; wheel_valid (N, 4); body (N, 3); body_valid (N,).
         used: shape (N, 4), written: the wheel torques the estimator got.
         est: shape (N,) `estimator_step.ESTIMATES` records, written.
@@ -130,8 +154,9 @@ def cascade_block(
     for k in range(t.shape[0]):
         torque_valid[k] = cascade_step(
             wp, wlip, ws, wch, sp, slip_, ss, sch, ep, es, fst, sst, vst, measured, engine_on,
-            dprm, escl, offset_on, op, os_, oout, t[k], angles[k], speeds[k], torques[k],
-            engine[k], wheel[k], wheel_valid[k], body1, valid1, used[k], est[k],
+            dprm, escl, offset_on, op, os_, oout, bprm, bst, t[k], angles[k], speeds[k],
+            torques[k],
+            engine[k], brakes[k], wheel[k], wheel_valid[k], body1, valid1, used[k], est[k],
         )  # fmt: skip
         if offsets.shape[0] > 0:
             offsets[k] = oout

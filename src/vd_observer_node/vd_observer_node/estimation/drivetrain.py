@@ -38,7 +38,7 @@ from typing import Final
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from vd_common.errors import ParameterError
-from vd_common.vehicle.estimation import EstimationVehicleParams
+from vd_common.vehicle.estimation import EstimationConverter, EstimationVehicleParams
 from vd_common.vehicle.params import VehicleParams
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
@@ -53,6 +53,7 @@ __all__ = [
     'TORQUE_SOURCES',
     'Drivetrain',
     'clutch_engaged',
+    'converter_speed_ratio',
     'engine_torques',
     'engine_wheel_torques',
     'gear_number',
@@ -127,6 +128,9 @@ class Drivetrain:
     engine_inertia: float = 0.0
     max_clutch_slip: float = 2.0
     clutch_settle_time: float = 0.3
+    gear_efficiency: tuple[float, ...] = ()
+    front_share: float = 0.5
+    converter: EstimationConverter | None = None
 
     def __post_init__(self) -> None:
         numbers = {
@@ -152,46 +156,74 @@ class Drivetrain:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ConfigurationError(f'Drivetrain.{name} must be >= 0, got {value}')
+        if self.gear_efficiency and (
+            len(self.gear_efficiency) != len(self.ratios)
+            or not all(math.isfinite(e) and 0.0 < e <= 1.0 for e in self.gear_efficiency)
+        ):
+            raise ConfigurationError(
+                f'Drivetrain.gear_efficiency must list one value in (0, 1] per gear, got '
+                f'{self.gear_efficiency}'
+            )
+        if not (math.isfinite(self.front_share) and 0.0 < self.front_share < 1.0):
+            raise ConfigurationError(
+                f'Drivetrain.front_share must be in (0, 1), got {self.front_share}'
+            )
 
     @classmethod
     def from_params(
         cls,
         params: VehicleParams | EstimationVehicleParams,
         *,
-        efficiency: float = 1.0,
-        driven_axle: str = 'front',
+        efficiency: float | None = None,
+        driven_axle: str | None = None,
     ) -> Drivetrain:
         """The drivetrain of the vehicle file (``gearbox.ratios``, ``gearbox.final_drive``
-        and ``engine.inertia``).
+        and ``engine.inertia``; from an estimation file also ``gearbox.efficiency`` per gear,
+        ``gearbox.reverse_ratio``, ``driveline.layout`` / ``front_share`` and the
+        ``torque_converter``).
 
-        The file has no efficiency, driven axle or reverse ratio: the simulator models a
-        lossless front-wheel drive with an open differential, hence the defaults; pass
-        other values for another car.
+        Where the file says nothing (the simulator's file: a lossless front-wheel drive with
+        an open differential and a clutch) the defaults are eta 1, the front axle, the
+        first gear's ratio in reverse; the arguments override the file.
 
         Args:
             params: the parsed vehicle file (the estimators' or the simulator's).
-            efficiency: eta in (0, 1].
-            driven_axle: one of :data:`DRIVEN_AXLES`.
+            efficiency: eta in (0, 1] for every gear; None: the file's (else 1).
+            driven_axle: one of :data:`DRIVEN_AXLES`; None: the file's layout (else front).
 
         Raises:
             ConfigurationError: the file has no gearbox (one line naming it).
         """
+        converter = None
+        gear_efficiency: tuple[float, ...] = ()
+        axle, share = 'front', 0.5
         if isinstance(params, EstimationVehicleParams):
             try:
                 line = params.require_driveline()
             except ParameterError as exc:
                 raise ConfigurationError(str(exc)) from exc
             ratios, final, inertia = line.ratios, line.final_drive, line.engine_inertia
+            reverse = line.reverse_ratio or ratios[0]
+            gear_efficiency = line.efficiency
+            axle = {'FWD': 'front', 'RWD': 'rear', 'AWD': 'all'}[line.layout]
+            share = line.front_share if line.layout == 'AWD' else 0.5
+            converter = line.converter
         else:
             ratios = tuple(params.gearbox.ratios)
             final, inertia = params.gearbox.final_drive, params.engine.inertia
+            reverse = ratios[0]
+        if efficiency is not None:
+            gear_efficiency = ()
         return cls(
             ratios=tuple(ratios),
             final_drive=final,
-            reverse_ratio=ratios[0],
-            efficiency=efficiency,
-            driven_axle=driven_axle,
+            reverse_ratio=reverse,
+            efficiency=1.0 if efficiency is None else efficiency,
+            driven_axle=driven_axle or axle,
             engine_inertia=inertia,
+            gear_efficiency=gear_efficiency,
+            front_share=share,
+            converter=converter,
         )
 
     @property
@@ -212,9 +244,28 @@ class Drivetrain:
             return self.ratios[gear - 1] * self.final_drive
         return math.nan
 
+    @property
+    def shares(self) -> FloatArray:
+        """shape (4,), [-]: each wheel's share of the drive torque (sums to 1): half an
+        axle's on a driven axle; with all four driven, ``front_share`` on the front."""
+        if self.driven_axle == 'front':
+            return np.array([0.5, 0.5, 0.0, 0.0])
+        if self.driven_axle == 'rear':
+            return np.array([0.0, 0.0, 0.5, 0.5])
+        f = self.front_share
+        return np.array([0.5 * f, 0.5 * f, 0.5 * (1.0 - f), 0.5 * (1.0 - f)])
+
     def params_array(self) -> FloatArray:
         """The parameters of `engine_torques` (an array: the number of gears varies):
-        [n, final, reverse, eta, J_e, max slip, settle time, driven (4), ratios (n)]."""
+        [n, final, reverse, eta, J_e, max slip, settle time, driven (4), ratios (n),
+        eta per gear (n), torque shares (4), converter (0/1), m, speed ratios (m), torque
+        ratios (m), capacity factors (m) [rpm/sqrt(N m)]]."""
+        etas = self.gear_efficiency or (self.efficiency,) * len(self.ratios)
+        c = self.converter
+        table: list[float] = [0.0, 0.0]
+        if c is not None:
+            table = [1.0, float(len(c.speed_ratio)), *c.speed_ratio, *c.torque_ratio,
+                     *c.capacity_factor]  # fmt: skip
         return np.array(
             [
                 float(len(self.ratios)),
@@ -226,8 +277,51 @@ class Drivetrain:
                 self.clutch_settle_time,
                 *self.driven.tolist(),
                 *self.ratios,
+                *etas,
+                *self.shares.tolist(),
+                *table,
             ]
         )
+
+
+@jit
+def _table(dprm: FloatArray, x0: int, y0: int, m: int, x: float) -> float:
+    """Linear interpolation in the table ``dprm[x0:x0+m]`` -> ``dprm[y0:y0+m]``, held at
+    both ends."""
+    if x <= dprm[x0]:
+        return float(dprm[y0])
+    for k in range(1, m):
+        if x <= dprm[x0 + k]:
+            w = (x - dprm[x0 + k - 1]) / (dprm[x0 + k] - dprm[x0 + k - 1])
+            return float(dprm[y0 + k - 1] + w * (dprm[y0 + k] - dprm[y0 + k - 1]))
+    return float(dprm[y0 + m - 1])
+
+
+@jit
+def converter_speed_ratio(
+    dprm: FloatArray, c0: int, pump_torque: float, turbine_speed: float
+) -> float:
+    """The speed ratio turbine/pump at which the converter of ``dprm`` (its table from slot
+    ``c0``: m, speed ratios, torque ratios, capacity factors) absorbs ``pump_torque`` [N m]
+    with the turbine at ``turbine_speed`` [rad/s]: the root of
+    ``turbine_rpm / SR = K(SR) * sqrt(pump_torque)`` by bisection; 1 where even SR -> 1
+    needs less torque (coupling, overrun) or the torque is not positive."""
+    m = int(dprm[c0])
+    if not (pump_torque > 0.0 and turbine_speed > 0.0):
+        return 1.0
+    rpm = turbine_speed * 30.0 / math.pi
+    root = math.sqrt(pump_torque)
+    hi = dprm[c0 + m]  # the table's last speed ratio: from there on, coupling
+    if rpm / hi - _table(dprm, c0 + 1, c0 + 1 + 2 * m, m, hi) * root >= 0.0:
+        return 1.0
+    lo = 1e-3
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        if rpm / mid - _table(dprm, c0 + 1, c0 + 1 + 2 * m, m, mid) * root > 0.0:
+            lo = mid
+        else:
+            hi = mid
+    return float(0.5 * (lo + hi))
 
 
 @jit
@@ -236,32 +330,45 @@ def engine_torques(
     engine_torque: float,
     gear_value: float,
     engine_speed: float,
+    turbine_speed: float,
     omega: FloatArray,
     omega_dot: FloatArray,
     out: FloatArray,
 ) -> bool:
     """Wheel torques from the engine torque into ``out`` (4,) [N m]; returns whether the
-    clutch is engaged (the compiled step of `engine_wheel_torques` and `clutch_engaged`).
+    path holds (the compiled step of `engine_wheel_torques` and `clutch_engaged`).
+
+    With a clutch (no converter in ``dprm``) the path holds where the engine turns at i
+    times the driven wheels (the clutch is closed). With a torque converter the pump
+    torque ``T_e - J_e * omega_dot_e`` is multiplied by the converter's torque ratio at
+    the speed ratio turbine/engine: the turbine speed logged, else i times the driven
+    wheels; the engine speed logged, else the one at which the converter absorbs the
+    torque (its capacity factor K). The path then holds where the logged turbine speed is
+    i times the driven wheels (the gear is engaged, not shifting).
 
     Args:
         dprm: `Drivetrain.params_array`.
         engine_torque: net engine torque [N m].
         gear_value: the gear as a float (`gear_number` rules: no gear gives nan torques).
         engine_speed: [rad/s], nan if not measured (then only the gear is checked).
+        turbine_speed: [rad/s] the converter's turbine (gearbox input), nan if not logged.
         omega: shape (4,), [rad/s] wheel speeds.
         omega_dot: shape (4,), [rad/s^2] wheel accelerations (the engine-inertia term).
         out: shape (4,), written.
     """
     n_gears = int(dprm[0])
     ratio = math.nan
+    eta = dprm[3]
     if math.isfinite(gear_value) and gear_value == round(gear_value) and abs(gear_value) < 2.0**31:
         gear = int(gear_value)
         if gear == 0:
             ratio = 0.0
         elif gear == -1:
             ratio = -dprm[2] * dprm[1]
+            eta = dprm[11 + n_gears]
         elif 1 <= gear <= n_gears:
             ratio = dprm[11 + gear - 1] * dprm[1]
+            eta = dprm[11 + n_gears + gear - 1]
     if not math.isfinite(ratio):
         out[:] = math.nan
         return False
@@ -269,25 +376,48 @@ def engine_torques(
         out[:] = 0.0  # neutral: nothing reaches the wheels, whatever the engine does
         return True
     n_driven = dprm[7] + dprm[8] + dprm[9] + dprm[10]
+    shares = 11 + 2 * n_gears
+    c0 = shares + 5  # the converter's table: m, then its three columns
+    has_converter = dprm[shares + 4] > 0.0
     carrier_accel = 0.0
     carrier_speed = 0.0
     for i in range(4):
         carrier_accel += dprm[7 + i] * omega_dot[i]
         carrier_speed += dprm[7 + i] * omega[i]
+    carrier_accel /= n_driven
+    carrier_speed /= n_driven
+    gearbox_in = ratio * carrier_speed  # the turbine's (clutch's) speed the wheels give
+    torque_ratio = 1.0
+    speed_ratio = 1.0
+    if has_converter:
+        turbine = turbine_speed if math.isfinite(turbine_speed) else gearbox_in
+        if math.isfinite(engine_speed) and engine_speed > 0.0:
+            speed_ratio = turbine / engine_speed
+        elif math.isfinite(engine_torque):
+            speed_ratio = converter_speed_ratio(dprm, c0, engine_torque, abs(turbine))
+        m = int(dprm[c0])
+        if speed_ratio < dprm[c0 + m]:  # overrun and coupling: 1
+            torque_ratio = _table(dprm, c0 + 1, c0 + 1 + m, m, speed_ratio)
     if math.isfinite(engine_torque):
-        clutch = engine_torque - dprm[4] * ratio * (carrier_accel / n_driven)
-        total = ratio * clutch
-        # The engine turns forward in every gear: a positive clutch torque sends power to
+        # the engine's own acceleration: i * the driven wheels' over the speed ratio (a
+        # steady converter slip; exact with the clutch or a locked converter)
+        spin = ratio * carrier_accel / max(speed_ratio, 0.5)
+        pump = engine_torque - dprm[4] * spin
+        total = ratio * torque_ratio * pump
+        # The engine turns forward in every gear: a positive pump torque sends power to
         # the wheels (losses take eta of it), a negative one (engine braking) draws it.
-        eta = dprm[3]
-        total = total * eta if clutch >= 0.0 else total / eta
+        total = total * eta if pump >= 0.0 else total / eta
         for i in range(4):
-            out[i] = total * dprm[7 + i] / n_driven
+            out[i] = total * dprm[shares + i]
     else:
         out[:] = math.nan
+    if has_converter:
+        if not math.isfinite(turbine_speed):
+            return True
+        return bool(abs(turbine_speed - gearbox_in) <= dprm[5])
     if not math.isfinite(engine_speed):
         return True
-    return bool(abs(engine_speed - ratio * (carrier_speed / n_driven)) <= dprm[5])
+    return bool(abs(engine_speed - gearbox_in) <= dprm[5])
 
 
 def engine_wheel_torques(
@@ -322,8 +452,8 @@ def engine_wheel_torques(
             raise InputShapeError(f'wheel_omega_dot must have shape (4,), got {accel.shape}')
     out = np.empty(4)
     engine_torques(
-        drivetrain.params_array(), float(engine_torque), float(gear), math.nan, np.zeros(4),
-        accel, out,
+        drivetrain.params_array(), float(engine_torque), float(gear), math.nan, math.nan,
+        np.zeros(4), accel, out,
     )  # fmt: skip
     return out
 
@@ -352,7 +482,7 @@ def clutch_engaged(
     if omega.shape != (4,):
         raise InputShapeError(f'wheel_omega must have shape (4,), got {omega.shape}')
     engaged = engine_torques(
-        drivetrain.params_array(), 0.0, float(gear), float(engine_speed), omega, np.zeros(4),
-        np.empty(4),
+        drivetrain.params_array(), 0.0, float(gear), float(engine_speed), math.nan, omega,
+        np.zeros(4), np.empty(4),
     )  # fmt: skip
     return bool(engaged)

@@ -32,10 +32,12 @@ The speed sensor's scale and R_eff are not separable from v and omega: the radiu
 one the speed sensor sees (see docs/estimation.md section 7.1).
 
 All outputs are finite always: a non-finite input is replaced by its last finite value and
-the affected validity flags are cleared; a non-finite, repeated or slightly older stamp
-returns the previous estimates unchanged (counted in `rejected_count`); a stamp older by more
-than `max_gap` (a looped bag) or a gap longer than `max_gap` resets the estimator; a wheel
-lifting off, mu or slope outside their plausible range clear the flags. Every case is counted
+the affected validity flags are cleared, except a wheel torque, which is never held (Fx 0,
+the load transfer from the acceleration, mu and slope invalid at that stamp); a non-finite,
+repeated or slightly older stamp returns the previous estimates unchanged (counted in
+`rejected_count`); a stamp older by more than `max_gap` (a looped bag) or a gap longer than
+`max_gap` resets the estimator; a wheel lifting off, mu or slope outside their plausible range
+clear the flags. Every case is counted
 per kind in `Estimator.faults` (see docs/faults.md).
 
 The per-stamp math is compiled, in `estimator_step` (`estimator_update` over named records);

@@ -333,13 +333,15 @@ def _bridge_speed(
 def _estimate(
     p: np.record, s: np.record, f_stages: FloatArray, s_stages: FloatArray,
     v_stages: FloatArray, t: float, dt: float, x: FloatArray, wheel_ok: BoolArray,
-    body_ok: bool, est: np.record,
+    body_ok: bool, torque_known: bool, est: np.record,
 ) -> None:  # fmt: skip
-    """Every estimate of an accepted stamp from the packed inputs ``x`` (14,)."""
+    """Every estimate of an accepted stamp from the packed inputs ``x`` (14,); without
+    ``torque_known`` (a torque not finite at this stamp) no Fx is computed from an old one:
+    Fx 0 and the load transfer from the acceleration, as without torque."""
     gravity = p.gravity
     v = x[12]
     accel = x[13]
-    no_torque = p.torque_source == TORQUE_NONE
+    no_torque = p.torque_source == TORQUE_NONE or not torque_known
     all_ok = body_ok and wheel_ok[0] and wheel_ok[1] and wheel_ok[2] and wheel_ok[3]
     # the online radius first: Fx and the slip use radius_used
     _online_radius(p, s, t, x, all_ok, est)
@@ -523,6 +525,7 @@ def estimator_update(
     for j in range(14):
         ok[j] = math.isfinite(packed[j])
         all_ok = all_ok and ok[j]
+    torque_known = ok[8] and ok[9] and ok[10] and ok[11]
     wheel_ok = np.ones(4, dtype=np.bool_)
     body_ok = True
     if not all_ok:
@@ -537,7 +540,9 @@ def estimator_update(
     if not torque_ok:
         wheel_ok[:] = False
         body_ok = False
-    _estimate(p, s, f_stages, s_stages, v_stages, t, dt, packed, wheel_ok, body_ok, est)
+    _estimate(
+        p, s, f_stages, s_stages, v_stages, t, dt, packed, wheel_ok, body_ok, torque_known, est
+    )
     # one sum is the cheapest check: NaN/Inf anywhere makes it non-finite
     total = est.aero + est.slope
     for i in range(4):

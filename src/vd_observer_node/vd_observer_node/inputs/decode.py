@@ -14,6 +14,7 @@ replay, so a mapping means one thing offline and live.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -29,6 +30,7 @@ from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.health import StreamHealth
 from vd_observer_node.inputs.mapping import (
     ACCEL_STAMPED,
+    BRAKE_INPUT,
     ENGINE_INPUT,
     FLOAT64_ARRAY,
     IMU_INPUT,
@@ -45,6 +47,8 @@ __all__ = [
     'InputDecoder',
     'InputSeries',
     'InputStats',
+    'brake_row',
+    'decode_brake',
     'decode_engine',
     'decode_input',
     'has_header',
@@ -199,10 +203,23 @@ def _extractor(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[floa
     raise MappingError(f'{spec.name}: no decoder for {spec.msgtype}')
 
 
-def _engine_gain(spec: InputSpec) -> tuple[float, float, float]:
+def _engine_gain(spec: InputSpec) -> tuple[float, float, float, float]:
     """The engine input's factors to SI: the torque's unit, scale and sign, 1 for the gear,
-    the engine speed's unit."""
-    return (spec.factor * spec.sign[0], 1.0, spec.speed_factor)
+    the engine and turbine speeds' unit."""
+    return (spec.factor * spec.sign[0], 1.0, spec.speed_factor, spec.speed_factor)
+
+
+def brake_row(spec: InputSpec, values: Sequence[float]) -> tuple[float, float, float, float]:
+    """The brake input's value of each wheel (FL, FR, RL, RR) from its mapped elements: one
+    (every wheel; a switch), two (front, rear) or four; a pressure in the mapping's unit,
+    scale and sign (to bar, or as it is for '-')."""
+    gain = 1.0 if spec.signal == 'switch' else spec.factor * spec.sign[0]
+    v = [float(x) * gain for x in values]
+    if len(v) == 1:
+        return (v[0], v[0], v[0], v[0])
+    if len(v) == 2:
+        return (v[0], v[0], v[1], v[1])
+    return (v[0], v[1], v[2], v[3])
 
 
 class InputDecoder:
@@ -235,6 +252,10 @@ class InputDecoder:
         self._codec: MessageCodec | None = None
         self._extract: Callable[[Any, int], tuple[int, Sequence[float], bytes]] | None = None
         self._engine: tuple[int, ...] = ()  # the engine fields' places in the codec's
+        if spec.name == BRAKE_INPUT:
+            self._extract = _brake_array(spec)
+            self._gain: tuple[float, ...] | None = None
+            return
         if spec.name == ENGINE_INPUT:
             if spec.msgtype == WHEEL_TORQUES_TYPE:
                 self._codec = MessageCodec(spec.msgtype)
@@ -243,7 +264,7 @@ class InputDecoder:
                 self._extract = _engine_array(spec)
             else:  # the mapping refuses every other type
                 raise MappingError(f'{spec.name}: no decoder for {spec.msgtype}')
-            self._gain: tuple[float, ...] | None = _engine_gain(spec)
+            self._gain = _engine_gain(spec)
             return
         if spec.msgtype in _BATCH_FIELD:
             self._codec = MessageCodec(spec.msgtype)
@@ -272,7 +293,7 @@ class InputDecoder:
             stamp, frame, fields = self._codec.decode(data)
             row: tuple[float, ...]
             if self._engine:
-                row = tuple(float(fields[i]) for i in self._engine)
+                row = (*(float(fields[i]) for i in self._engine), float('nan'))
             else:
                 raw = fields[self._field]
                 row = tuple(raw) if isinstance(raw, tuple) else (raw,)
@@ -283,6 +304,8 @@ class InputDecoder:
             row = tuple(values)
         if self._gain is not None:
             row = tuple(v * g for v, g in zip(row, self._gain, strict=True))
+        if self.spec.gear_offset and math.isfinite(row[1]):
+            row = (row[0], row[1] + self.spec.gear_offset, *row[2:])
         return stamp, frame, row
 
 
@@ -323,9 +346,9 @@ def decode_engine(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
         arrays: the topic's raw messages, of type ``spec.msgtype``.
 
     Returns:
-        values of shape (N, 3): engine torque [N m] (unit, scale and sign applied), gear
-        (as a float, 0 neutral, -1 reverse) and engine speed [rad/s] (nan when the mapping
-        has no element for it).
+        values of shape (N, 4): engine torque [N m] (unit, scale and sign applied), gear
+        (as a float, 0 neutral, -1 reverse; the mapping's ``gear_offset`` added), engine
+        speed and turbine speed [rad/s] (nan when the mapping has no element for them).
 
     Raises:
         MappingError: a mapped element is absent from the messages.
@@ -337,15 +360,48 @@ def decode_engine(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
     if spec.msgtype == WHEEL_TORQUES_TYPE:
         fields = decode_batch(spec.msgtype, arrays.datas)
         values = np.stack(
-            [fields.values[f].astype(np.float64) for f in _ENGINE_FIELDS], axis=1
-        ).reshape(n, 3)
+            [
+                *(fields.values[f].astype(np.float64) for f in _ENGINE_FIELDS),
+                np.full(n, np.nan),
+            ],
+            axis=1,
+        ).reshape(n, 4)
         stamps, frames = fields.stamp_ns, fields.frame_id
     elif spec.msgtype == FLOAT64_ARRAY:
         stamps, values, frames = _per_message(spec, arrays, _engine_array(spec))
     else:  # the mapping refuses every other type
         raise MappingError(f'{spec.name}: no decoder for {spec.msgtype}')
     values = values * np.asarray(_engine_gain(spec))  # InputDecoder's factors, live
+    if spec.gear_offset:
+        values[:, 1] += spec.gear_offset
     return InputSeries(stamps.astype(np.int64), values, frames)
+
+
+def decode_brake(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
+    """Decode the brake input (``brake`` of the mapping) to stamped values per wheel.
+
+    Returns:
+        values of shape (N, 4): each wheel's pressure (bar, or the raw unit for '-') or the
+        switch (on every wheel), as `brake_row` gives them.
+
+    Raises:
+        MappingError: a mapped element is absent from the messages.
+        BagFormatError: a message cannot be decoded.
+    """
+    if spec.name != BRAKE_INPUT:
+        raise MappingError(f'{spec.name}: not the {BRAKE_INPUT} input')
+    stamps, values, frames = _per_message(spec, arrays, _brake_array(spec))
+    return InputSeries(stamps.astype(np.int64), values, frames)
+
+
+def _brake_array(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[float], bytes]]:
+    elements = _float64_array(spec)
+
+    def extract(msg: Any, log: int) -> tuple[int, Sequence[float], bytes]:
+        stamp, values, frame = elements(msg, log)
+        return stamp, brake_row(spec, values), frame
+
+    return extract
 
 
 def _engine_array(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[float], bytes]]:
@@ -357,7 +413,7 @@ def _engine_array(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[f
                 f'{len(data)} values of the messages on {spec.topic}'
             )
         row = [float(data[i]) for i in spec.indices]
-        return log, row if len(row) == 3 else [*row, float('nan')], b''
+        return log, [*row, *([float('nan')] * (4 - len(row)))], b''
 
     return extract
 

@@ -72,7 +72,24 @@ sensor's vector::
       unit: m/s^2                   # m/s^2 | g
 
 ``engine_torque`` from ``vd_msgs/msg/WheelTorques`` reads its ``engine_torque``, ``gear`` and
-``engine_speed`` (the default: vd's own ``/vd/sensors/wheel_torques``).
+``engine_speed`` (the default: vd's own ``/vd/sensors/wheel_torques``). A fourth element of
+``indices`` is an automatic gearbox's turbine speed (``speed_unit`` too); ``gear_offset``
+(an integer, default 0) is added to the logged gear where the bus counts its gears otherwise
+than the vehicle file's ``gearbox.ratios`` (the RAV4's SFTOUT: 2 in third gear).
+
+``brake`` (optional; on the measured and engine paths): the brakes as a pressure or a switch
+(:mod:`vd_observer_node.estimation.brakes`)::
+
+    brake:
+      topic: /can/brake
+      type: std_msgs/msg/Float64MultiArray
+      signal: pressure        # pressure | switch
+      indices: [0, 1]         # pressure: 1 (one for all wheels), 2 (front, rear) or 4
+      unit: bar               # bar | kPa | MPa | Pa | psi | '-' (uncalibrated); per unit of
+                              # this the vehicle file's brakes.gain_front / gain_rear [N m]
+
+With ``signal: switch`` (one index; 0 is off, anything else on) the brake torque is unknown
+while braking: Fx, mu and slope are flagged invalid there.
 
 
 Supported types per input (:data:`SUPPORTED_TYPES`): wheel angles from
@@ -110,6 +127,8 @@ from vd_observer_node.inputs.errors import MappingError
 
 __all__ = [
     'ALIGNMENTS',
+    'BRAKE_INPUT',
+    'BRAKE_SIGNALS',
     'ENGINE_INPUT',
     'IMU_INPUT',
     'INPUTS',
@@ -137,6 +156,10 @@ SETTINGS: Final = ('alignment', 'max_age')
 ENGINE_INPUT: Final = 'engine_torque'
 #: Optional input: an accelerometer's longitudinal specific force (the grade fusion).
 IMU_INPUT: Final = 'imu'
+#: Optional input of the brakes: a pressure (per wheel, per axle or one) or a switch.
+BRAKE_INPUT: Final = 'brake'
+#: What the brake input is (its ``signal`` key).
+BRAKE_SIGNALS: Final = ('pressure', 'switch')
 #: Where the wheel torques come from (`drivetrain.TORQUE_SOURCES`): a top-level key of the
 #: file (replay, report and pipeline_node; not a node parameter of its own).
 TORQUE_SOURCE_KEY: Final = 'torque_source'
@@ -158,6 +181,7 @@ SUPPORTED_TYPES: Final[dict[str, tuple[str, ...]]] = {
     'wheel_torques': (WHEEL_TORQUES_TYPE, JOINT_STATE, FLOAT64_ARRAY),
     ENGINE_INPUT: (WHEEL_TORQUES_TYPE, FLOAT64_ARRAY),
     IMU_INPUT: (IMU_TYPE, ACCEL_STAMPED, FLOAT64_ARRAY),
+    BRAKE_INPUT: (FLOAT64_ARRAY,),
 }
 
 #: Factor to the SI unit of each input, by unit name; the first is the SI unit (the default).
@@ -174,6 +198,15 @@ UNITS: Final[dict[str, dict[str, float]]] = {
     'wheel_torques': {'N m': 1.0, 'kN m': 1000.0},
     ENGINE_INPUT: {'N m': 1.0, 'kN m': 1000.0},
     IMU_INPUT: {'m/s^2': 1.0, 'g': 9.80665},
+    # to bar; '-' an uncalibrated pressure, taken as it is (the gain is then per its unit)
+    BRAKE_INPUT: {
+        'bar': 1.0,
+        'kPa': 0.01,
+        'MPa': 10.0,
+        'Pa': 1e-5,
+        'psi': 0.0689475729,
+        '-': 1.0,
+    },
 }
 #: Units of the engine speed (``speed_unit`` of ``engine_torque``) and their factor to rad/s.
 SPEED_UNITS: Final = {'rad/s': 1.0, 'rpm': math.pi / 30.0}
@@ -183,8 +216,8 @@ PER_RADIUS_UNITS: Final = frozenset({'m/s', 'km/h'})
 _PER_WHEEL: Final = frozenset({'wheel_angles', 'wheel_speeds', 'wheel_torques'})
 #: The settings of one input, in the order of a mapping file.
 INPUT_KEYS: Final = ('topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign')
-_KEYS: Final = frozenset((*INPUT_KEYS, 'speed_unit', 'mount_rpy_deg'))
-# speed_unit: engine_torque only; mount_rpy_deg: imu only
+# speed_unit and gear_offset: engine_torque only; signal: brake only; mount_rpy_deg: imu only
+_KEYS: Final = frozenset((*INPUT_KEYS, 'speed_unit', 'gear_offset', 'signal', 'mount_rpy_deg'))
 
 
 @dataclass(frozen=True)
@@ -205,6 +238,8 @@ class InputSpec:
         axis: ``imu`` only: shape (3,), the body's forward axis in the sensor's frame (the
             first row of the mounting rotation): f_x = axis . (f_sx, f_sy, f_sz); () for a
             Float64MultiArray with one element (already the forward specific force).
+        gear_offset: ``engine_torque`` only: added to the logged gear.
+        signal: ``brake`` only: 'pressure' or 'switch'.
     """
 
     name: str
@@ -217,14 +252,17 @@ class InputSpec:
     per_radius: bool = False
     speed_factor: float = 1.0
     axis: tuple[float, ...] = ()
+    gear_offset: int = 0
+    signal: str = ''
 
     @property
     def width(self) -> int:
-        """Values per sample: 4 for the per-wheel inputs, 1 for the body speed and the IMU
-        (its forward specific force), 3 for the engine (torque, gear, engine speed)."""
+        """Values per sample: 4 for the per-wheel inputs and the brake (its value of each
+        wheel, or the switch), 1 for the body speed and the IMU (its forward specific force),
+        4 for the engine (torque, gear, engine speed, turbine speed)."""
         if self.name == ENGINE_INPUT:
-            return 3
-        return 4 if self.name in _PER_WHEEL else 1
+            return 4
+        return 4 if self.name in _PER_WHEEL or self.name == BRAKE_INPUT else 1
 
 
 @dataclass(frozen=True)
@@ -244,6 +282,7 @@ class InputMapping:
         torque_source: 'measured' (``wheel_torques``), 'engine' (``engine_torque`` through
             the drivetrain) or 'none' (no torque).
         imu: the accelerometer (forward specific force [m/s^2] after conversion), or None.
+        brake: the brake input (None: none).
     """
 
     wheels: InputSpec
@@ -255,6 +294,7 @@ class InputMapping:
     engine_torque: InputSpec | None = None
     torque_source: str = 'measured'
     imu: InputSpec | None = None
+    brake: InputSpec | None = None
 
     @property
     def engine(self) -> InputSpec:
@@ -264,12 +304,13 @@ class InputMapping:
     @property
     def used_specs(self) -> tuple[InputSpec, ...]:
         """The inputs the torque source reads: wheel angles, body speed, and the wheel
-        torques (measured), the engine input (engine) or nothing more (none)."""
-        if self.torque_source == 'engine':
-            return (self.wheels, self.body_speed, self.engine)
+        torques (measured), the engine input (engine) or nothing more (none); then the
+        brake input where mapped (not with none)."""
         if self.torque_source == 'none':
             return (self.wheels, self.body_speed)
-        return self.specs
+        torque = self.engine if self.torque_source == 'engine' else self.wheel_torques
+        brake = (self.brake,) if self.brake is not None else ()
+        return (self.wheels, self.body_speed, torque, *brake)
 
     @property
     def specs(self) -> tuple[InputSpec, InputSpec, InputSpec]:
@@ -296,6 +337,7 @@ class InputMapping:
             and self.torque_source == 'measured'
             and self.engine_torque is None
             and self.imu is None
+            and self.brake is None
         )
 
 
@@ -337,6 +379,25 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         raise MappingError(f'{where}.type {msgtype!r} is not supported (use one of {allowed})')
     width = 4 if name in _PER_WHEEL else 1
     speed_factor = 1.0
+    gear_offset = 0
+    signal = ''
+    if name == BRAKE_INPUT:
+        signal = data.get('signal', '')
+        if signal not in BRAKE_SIGNALS:
+            raise MappingError(
+                f'{where}.signal {signal!r} is unknown (use one of {", ".join(BRAKE_SIGNALS)})'
+            )
+        if signal == 'switch' and ('unit' in data or 'scale' in data):
+            raise MappingError(f'{where}.unit and scale are for a pressure, not a switch')
+    elif 'signal' in data:
+        raise MappingError(f'{where}.signal is for {BRAKE_INPUT} only')
+    if name == ENGINE_INPUT:
+        raw_offset = data.get('gear_offset', 0)
+        if isinstance(raw_offset, bool) or not isinstance(raw_offset, int):
+            raise MappingError(f'{where}.gear_offset must be an integer, got {raw_offset!r}')
+        gear_offset = raw_offset
+    elif 'gear_offset' in data:
+        raise MappingError(f'{where}.gear_offset is for {ENGINE_INPUT} only')
     if name == ENGINE_INPUT:
         speed_unit = data.get('speed_unit', 'rad/s')
         if speed_unit not in SPEED_UNITS:
@@ -364,15 +425,23 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
     elif 'joints' in data:
         raise MappingError(f'{where}.joints is for sensor_msgs/msg/JointState only')
     if msgtype == FLOAT64_ARRAY:
-        raw = data.get('indices', list(range(width)))
-        # the engine input: torque and gear, and the engine speed if the array has it
-        sizes = (2, 3) if name == ENGINE_INPUT else (1, 3) if name == IMU_INPUT else (width,)
+        # the engine input: torque and gear, and the engine and turbine speeds if logged;
+        # the brake: one pressure (or the switch), one per axle, or one per wheel; the IMU:
+        # x, y, z, or one element already the forward specific force
+        sizes = {
+            ENGINE_INPUT: (2, 3, 4),
+            BRAKE_INPUT: (1,) if signal == 'switch' else (1, 2, 4),
+            IMU_INPUT: (1, 3),
+        }
+        sizes_here = sizes.get(name, (width,))
+        default = {ENGINE_INPUT: 3, BRAKE_INPUT: 1}.get(name, width)
+        raw = data.get('indices', list(range(default)))
         if (
             not isinstance(raw, list)
-            or len(raw) not in sizes
+            or len(raw) not in sizes_here
             or not all(isinstance(i, int) and not isinstance(i, bool) and i >= 0 for i in raw)
         ):
-            count = ' or '.join(str(k) for k in sizes)
+            count = ' or '.join(str(k) for k in sizes_here)
             raise MappingError(f'{where}.indices must list {count} element indices >= 0')
         indices = tuple(raw)
     elif 'indices' in data:
@@ -414,6 +483,8 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         per_radius=name == 'wheel_speeds' and unit in PER_RADIUS_UNITS,
         speed_factor=speed_factor,
         axis=axis,
+        gear_offset=gear_offset,
+        signal=signal,
     )
 
 
@@ -441,7 +512,7 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
         data = {}
     if not isinstance(data, Mapping):
         raise MappingError(f'{source}: expected a mapping of {", ".join(INPUTS)}')
-    keys = (*INPUTS, *SETTINGS, ENGINE_INPUT, IMU_INPUT, TORQUE_SOURCE_KEY)
+    keys = (*INPUTS, *SETTINGS, ENGINE_INPUT, BRAKE_INPUT, IMU_INPUT, TORQUE_SOURCE_KEY)
     unknown = sorted(set(data) - set(keys))
     if unknown:
         raise MappingError(f'{source}: {unknown[0]}: unknown input (use {", ".join(keys)})')
@@ -468,17 +539,6 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
                 f'{source}: {spec.name}.type: {spec.topic} is also mapped as '
                 f'{types[spec.topic]} (one topic has one type)'
             )
-    # 'latest' rides through lost messages; a headerless input (stamped on receipt) can only be
-    # held at its latest value, which 'exact' does
-    headerless = any(spec.msgtype == FLOAT64_ARRAY for spec in specs)
-    alignment = data.get('alignment', 'exact' if headerless else default.alignment)
-    if alignment not in ALIGNMENTS:
-        raise MappingError(
-            f'{source}: alignment {alignment!r} is unknown (use one of {", ".join(ALIGNMENTS)})'
-        )
-    max_age = _number(f'{source}: max_age', data.get('max_age', default.max_age))
-    if max_age <= 0.0:
-        raise MappingError(f'{source}: max_age must be > 0 s, got {max_age}')
     engine = (
         _spec(ENGINE_INPUT, data[ENGINE_INPUT], f'{source}: {ENGINE_INPUT}')
         if ENGINE_INPUT in data
@@ -497,6 +557,35 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
             f'{source}: {IMU_INPUT}.type: {imu.topic} is also mapped as '
             f'{types[imu.topic]} (one topic has one type)'
         )
+    brake = (
+        _spec(BRAKE_INPUT, data[BRAKE_INPUT], f'{source}: {BRAKE_INPUT}')
+        if BRAKE_INPUT in data
+        else None
+    )
+    if brake is not None and types.setdefault(brake.topic, brake.msgtype) != brake.msgtype:
+        raise MappingError(
+            f'{source}: {BRAKE_INPUT}.type: {brake.topic} is also mapped as '
+            f'{types[brake.topic]} (one topic has one type)'
+        )
+    # 'latest' rides through lost messages; a headerless input (stamped on receipt) can only be
+    # held at its latest value, which 'exact' does (the inputs the torque source reads, the
+    # brake included)
+    read = [*specs[:2]]
+    if torque_source == 'measured':
+        read.append(specs[2])
+    elif torque_source == 'engine' and engine is not None:
+        read.append(engine)
+    if brake is not None and torque_source != 'none':
+        read.append(brake)
+    headerless = any(spec.msgtype == FLOAT64_ARRAY for spec in read)
+    alignment = data.get('alignment', 'exact' if headerless else default.alignment)
+    if alignment not in ALIGNMENTS:
+        raise MappingError(
+            f'{source}: alignment {alignment!r} is unknown (use one of {", ".join(ALIGNMENTS)})'
+        )
+    max_age = _number(f'{source}: max_age', data.get('max_age', default.max_age))
+    if max_age <= 0.0:
+        raise MappingError(f'{source}: max_age must be > 0 s, got {max_age}')
     wheels, body_speed, wheel_torques = specs
     return InputMapping(
         wheels,
@@ -508,6 +597,7 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
         engine_torque=engine,
         torque_source=torque_source,
         imu=imu,
+        brake=brake,
     )
 
 

@@ -182,6 +182,11 @@ def take_input_mapping(
             'vd replay and vd report; this node reads measured wheel_torques only (run '
             'pipeline_node instead)'
         )
+    if estimates and not torque_paths and mapping.brake is not None:
+        raise MappingError(
+            f'{mapping.source}: brake runs in pipeline_node, vd replay and vd report; this '
+            'node reads measured wheel_torques only (run pipeline_node instead)'
+        )
     return mapping
 
 

@@ -81,6 +81,7 @@ from vd_msgs.msg import (
 from vd_observer_node.bag.cdr_message import MessageCodec
 from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.chain import Chain, ChainOutput, ChainSettings
+from vd_observer_node.estimation.brakes import Brakes
 from vd_observer_node.estimation.differentiator import LevantGains
 from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
@@ -95,7 +96,7 @@ from vd_observer_node.estimation.vehicle import (
 )
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
-from vd_observer_node.inputs.mapping import ENGINE_INPUT
+from vd_observer_node.inputs.mapping import BRAKE_INPUT, ENGINE_INPUT
 from vd_observer_node.nodes.node_params import (
     INPUT_PARAMS,
     PIPELINE_PARAMS,
@@ -156,7 +157,7 @@ _GAIN_KEYS = set(LevantGains.__dataclass_fields__)
 
 
 def _settings(
-    values: dict[str, Any], torque_source: str = 'measured'
+    values: dict[str, Any], torque_source: str = 'measured', brake_signal: str = ''
 ) -> tuple[ChainSettings, str]:
     """Chain settings from the declared parameters and the mapping's torque source (the
     engine path takes the vehicle file's drivetrain); also the vehicle file used."""
@@ -188,6 +189,11 @@ def _settings(
         estimator_speed=speed_source,
         torque_source=torque_source,
         drivetrain=Drivetrain.from_params(params) if torque_source == 'engine' else None,
+        brakes=(
+            Brakes.from_params(brake_signal, params)
+            if brake_signal and torque_source != 'none'
+            else None
+        ),
     )
     return settings, vehicle_file
 
@@ -211,7 +217,9 @@ class PipelineNode(Node):
         classes = [input_message_class(spec) for spec in specs]
         capacity = values.pop('align_capacity')
         layout = values.pop('estimate_topics')
-        settings, vehicle_file = _settings(values, mapping.torque_source)
+        settings, vehicle_file = _settings(
+            values, mapping.torque_source, mapping.brake.signal if mapping.brake else ''
+        )
         # what the wheel sensors are (angles or ABS speeds) follows from the mapping
         settings = replace(
             settings, observer=replace(settings.observer, wheel_input=mapping.wheel_input)
@@ -316,9 +324,10 @@ class PipelineNode(Node):
         source = self.torque_source
         torques = m['wheel_torques'][1] if source == 'measured' else self._no_torque
         engine = m[ENGINE_INPUT][1] if source == 'engine' else None
+        brake = m[BRAKE_INPUT][1] if BRAKE_INPUT in m else None
         t = stamp_ns * 1e-9
         imu = next((sample for sample in reversed(self._imu) if sample[0] <= t), None)
-        out = self.chain.update(t, angles, speed, torques, engine, imu)
+        out = self.chain.update(t, angles, speed, torques, engine, imu=imu, brake=brake)
         if self._wheel_rate is not None and self._wheel_rate.add(stamp_ns):
             # from the next stamp on, as vd replay does (rate_settings.FOLLOW_AFTER)
             speed_stamps = self.watch.first_stamps(self._speed_topic)

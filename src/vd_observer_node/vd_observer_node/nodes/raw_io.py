@@ -150,7 +150,8 @@ def matched_inputs(mapping: InputMapping, names: Sequence[str]) -> tuple[str, ..
     (Float64MultiArray, stamped with its receive time) matches nothing: it is held (its
     latest value joins each matched set); so is every other input when the driver has none.
     """
-    specs = {s.name: s for s in (*mapping.specs, mapping.engine)}
+    brake = (mapping.brake,) if mapping.brake is not None else ()
+    specs = {s.name: s for s in (*mapping.specs, mapping.engine, *brake)}
     if not has_header(specs[names[0]]):
         return (names[0],)
     return tuple(n for n in names if has_header(specs[n]))

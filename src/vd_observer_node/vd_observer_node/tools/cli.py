@@ -100,10 +100,13 @@ def _replay(args: argparse.Namespace) -> int:
         mapping=mapping,
         torque_source=args.torque_source,
     )
+    # the torque is known where the clutch (or the converter's turbine) is engaged and
+    # settled, and not while a brake switch is on
+    known = f'{100 * report.torque_valid_fraction:.1f} % of samples with the torque known'
     path = {
-        'measured': 'measured wheel torques',
-        'engine': f'engine torque and gear ({100 * report.torque_valid_fraction:.1f} % of '
-        'samples with the clutch closed)',
+        'measured': 'measured wheel torques'
+        + (f' ({known})' if report.torque_valid_fraction < 1.0 else ''),
+        'engine': f'engine torque and gear ({known})',
         'none': 'none (Fx, mu and slope invalid)',
     }[report.torque_source]
     print(

@@ -58,6 +58,7 @@ from vd_common.topics import (
     SENSORS,
     TRUTH_NAMESPACE,
 )
+from vd_common.vehicle.estimation import EstimationVehicleParams
 
 from vd_observer_node.bag.alerts_cdr import encode_alerts_packed
 from vd_observer_node.bag.cdr_batch import encode_packed, upgrade_batch
@@ -67,6 +68,7 @@ from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.alignment import BlockAligner
+from vd_observer_node.estimation.brakes import Brakes
 from vd_observer_node.estimation.cascade import (
     CascadeResult,
     CascadeState,
@@ -99,12 +101,14 @@ from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_p
 from vd_observer_node.inputs.decode import (
     InputSeries,
     InputStats,
+    decode_brake,
     decode_engine,
     decode_input,
     has_header,
 )
 from vd_observer_node.inputs.health import StreamHealth
 from vd_observer_node.inputs.mapping import (
+    BRAKE_INPUT,
     ENGINE_INPUT,
     InputMapping,
     InputSpec,
@@ -572,6 +576,7 @@ def replay_bag(
     estimator_vehicle = vehicle or EstimatorVehicle.from_params(params)
     if source == 'engine' and drivetrain is None:
         drivetrain = Drivetrain.from_params(params)
+    brakes = replay_brakes(mapping, params)
     notes: list[str] = []
     if situation and params.tire is None:
         # an estimation-only vehicle file: everything but the friction potential and alerts
@@ -597,7 +602,9 @@ def replay_bag(
         )
 
     extra = dict(cascade_kwargs or {})
-    clash = sorted({'torque_source', 'engine', 'drivetrain', 'state'} & set(extra))
+    clash = sorted(
+        {'torque_source', 'engine', 'drivetrain', 'state', 'brake', 'brakes'} & set(extra)
+    )
     if clash:
         raise ConfigurationError(
             f'cascade settings: {clash[0]} is set by the torque source, not the config'
@@ -610,6 +617,8 @@ def replay_bag(
     torque_kwargs: dict[str, Any] = {}
     if source != 'measured':  # the default call stays as it was (injected cascades)
         torque_kwargs = {'torque_source': source, 'drivetrain': drivetrain}
+    if brakes is not None:
+        torque_kwargs['brakes'] = brakes
 
     def new_run() -> _Run:
         return _Run(
@@ -671,11 +680,30 @@ def replay_bag(
         clear()
         raise
     wall = time.perf_counter() - started
+    parts = run.state.parts
+    if brakes is not None and brakes.learn and parts is not None:
+        gain, _var, braking, converged = parts.brake_state[:4].tolist()
+        notes.append(
+            f'brake gain learnt online: {gain:.3g} N m per unit of the brake pressure after '
+            f'{braking:.1f} s of braking ({"converged" if converged else "not converged"})'
+        )
     return replace(
         run.report(written, wall),
         vehicle=f'{params.name} ({params.source})',
         notes=tuple(notes),
     )
+
+
+def replay_brakes(mapping: InputMapping, params: EstimationVehicleParams) -> Brakes | None:
+    """The brake input of a mapping with the vehicle file's gains (None: no brake input, or
+    no torque to take it from).
+
+    Raises:
+        ConfigurationError: a pressure without the file's gains (`Brakes.from_params`).
+    """
+    if mapping.brake is None or mapping.torque_source == 'none':
+        return None
+    return Brakes.from_params(mapping.brake.signal, params, mapping.source)
 
 
 class _OutOfOrderError(Exception):
@@ -956,12 +984,14 @@ class _Run:
     def _decode(self, spec: InputSpec, arrays: Mapping[str, TopicArrays]) -> InputSeries:
         arr = arrays.get(spec.topic)
         if arr is None or not arr.datas:
-            width = 3 if spec.name == ENGINE_INPUT else spec.width
+            width = spec.width
             return InputSeries(
                 np.zeros(0, dtype=np.int64), np.zeros((0, width)), np.zeros(0, dtype=np.bytes_)
             )
         if spec.name == ENGINE_INPUT:
             return decode_engine(spec, arr)
+        if spec.name == BRAKE_INPUT:
+            return decode_brake(spec, arr)
         return decode_input(spec, arr, self.vehicle.effective_radius)
 
     def block(
@@ -1007,10 +1037,13 @@ class _Run:
         kwargs = dict(self.cascade_kwargs)
         if engine is not None:
             kwargs['engine'] = engine
+        brake = picked[3]['v'] if self.mapping.brake is not None and len(picked) > 3 else None
+        if brake is not None:
+            kwargs['brake'] = brake
         if self.mapping.imu is not None:
             kwargs['imu'] = self.held_imu(arrays, common)
         # the inputs given per stamp, sliced with the stamps where the block is split
-        per_stamp = [key for key in ('engine', 'imu') if key in kwargs]
+        per_stamp = [key for key in ('engine', 'brake', 'imu') if key in kwargs]
 
         def run(rows: slice) -> CascadeResult:
             part: dict[str, Any] = dict(kwargs)
@@ -1045,8 +1078,9 @@ class _Run:
         self.result = result
         self.samples += n
         self.torque_valid += int(np.count_nonzero(result.torque_valid))
-        if engine is not None and result.wheel_torque_used.shape[0] == n:
-            # the situation monitor gets the torques the engine path gave the estimator
+        braked = brake is not None
+        if (engine is not None or braked) and result.wheel_torque_used.shape[0] == n:
+            # the situation monitor gets the torques the engine path and brakes gave the estimator
             # (0 where the path had none: a gear the box lacks)
             given = result.wheel_torque_used
             wheel_torque = np.where(np.isfinite(given), given, 0.0)
@@ -1088,6 +1122,8 @@ class _Run:
                 worker.join()
         if failure:
             raise failure[0]
+        if n == 0:  # a block that aligned no stamp (a headerless input held, 'exact')
+            situation_values.clear()
         for topic, values in situation_values.items():
             msgtype = ALERT_TOPICS[topic]
             if topic == ESTIMATES_ALERTS:
