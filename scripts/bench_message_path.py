@@ -109,8 +109,8 @@ def mapped_input_figures() -> None:
     odom.twist.twist.linear.x = 10.0
     array = Float64MultiArray(data=[1.0, 2.0, 3.0, 4.0])
     for spec, msg in (
-        (default_mapping().wheel_angles, angles),
-        (user.wheel_angles, states),
+        (default_mapping().wheels, angles),
+        (user.wheels, states),
         (user.body_speed, odom),
         (user.wheel_torques, array),
     ):
