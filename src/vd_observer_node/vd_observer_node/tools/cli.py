@@ -90,12 +90,7 @@ def _replay(args: argparse.Namespace) -> int:
         args.in_bag,
         args.out_bag,
         vehicle_file=args.vehicle,  # the estimator vehicle and the tyre, from one read
-        observer_config=config.observer,
-        estimator_config=config.estimator,
-        cascade_kwargs=config.cascade_kwargs,
-        alert_config=config.alerts,
-        friction_config=config.friction,
-        situation_config=config.situation,
+        **config.replay_kwargs(),
         progress=not args.no_progress,
         mapping=mapping,
         torque_source=args.torque_source,

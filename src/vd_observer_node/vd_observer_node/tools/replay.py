@@ -239,6 +239,17 @@ class ReplayConfig:
     given: dict[str, Any] = field(default_factory=dict)
     source: str = ''
 
+    def replay_kwargs(self) -> dict[str, Any]:
+        """These settings as `replay_bag`'s keyword arguments."""
+        return {
+            'observer_config': self.observer,
+            'estimator_config': self.estimator,
+            'cascade_kwargs': self.cascade_kwargs,
+            'alert_config': self.alerts,
+            'friction_config': self.friction,
+            'situation_config': self.situation,
+        }
+
 
 def _flat(prefix: str, section: Mapping[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {}

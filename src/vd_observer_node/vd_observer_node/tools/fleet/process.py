@@ -312,12 +312,7 @@ def _replay(bag: str, target: Path, settings: FleetSettings) -> Any:
         bag,
         target,
         vehicle_file=settings.vehicle_file,
-        observer_config=config.observer,
-        estimator_config=config.estimator,
-        cascade_kwargs=config.cascade_kwargs,
-        alert_config=config.alerts,
-        friction_config=config.friction,
-        situation_config=config.situation,
+        **config.replay_kwargs(),
         progress=False,
         mapping=mapping,
     )

@@ -136,12 +136,7 @@ def _load_mapped(
             mapping=mapping,
             progress=progress,
             vehicle_file=vehicle_file,
-            observer_config=config.observer,
-            estimator_config=config.estimator,
-            cascade_kwargs=config.cascade_kwargs,
-            alert_config=config.alerts,
-            friction_config=config.friction,
-            situation_config=config.situation,
+            **config.replay_kwargs(),
         )
         derived = {f'estimator.{k}': v for k, v in replayed.rate_settings.items()}
         origin = Path(config.source).name if config.source else ''
