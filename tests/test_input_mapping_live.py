@@ -352,13 +352,33 @@ def test_messages_serialized_by_rclpy_decode_like_the_replays() -> None:
     )
 
 
+def _drop_windows(src: Path, dst: Path, start_s: float, length_s: float) -> None:
+    """Copy a bag without the messages logged in [start_s, start_s + length_s) of every
+    second (from its first log time): a link that goes silent on every topic at once."""
+    from vd_observer_node.bag import BagReader, BagWriter
+
+    reader = BagReader(src)
+    messages = list(reader.raw_messages())
+    first = min(m.log_time_ns for m in messages)
+    with BagWriter(dst) as writer:
+        for name, info in reader.topics.items():
+            qos = info.qos_profiles_yaml
+            writer.add_topic(name, info.msgtype, qos, definition=info.definition)
+        for m in messages:
+            if not start_s <= ((m.log_time_ns - first) * 1e-9) % 1.0 < start_s + length_s:
+                writer.write(m.topic, m.data, m.log_time_ns, m.publish_time_ns)
+
+
 @pytest.mark.slow
 @pytest.mark.ros
+@pytest.mark.parametrize('gaps', [False, True], ids=['lossless', 'gaps_200ms'])
 def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
-    procs: RosProcessGroup, tmp_path: Path
+    procs: RosProcessGroup, tmp_path: Path, gaps: bool
 ) -> None:
     """ABS wheel speeds, odometry at 50 Hz and torques on their own clocks ('latest'
-    alignment): the live pipeline's slope estimates equal the replay's, stamp for stamp."""
+    alignment): the live pipeline's slope estimates equal the replay's, stamp for stamp; also
+    with 200 ms of every second lost on every topic (issue 28: the gaps bridged live as
+    offline)."""
     import dataclasses
 
     from vd_common.vehicle.params import default_vehicle_file, load_vehicle
@@ -382,6 +402,9 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     bag = tmp_path / 'car'
     # every input with a header: the live stamps are the recorded ones (no receive time)
     write_standard_bag(bag, sim, CarSensors(torques_in_joint_states=True))
+    if gaps:
+        full, bag = bag, tmp_path / 'car_gaps'
+        _drop_windows(full, bag, 0.5, 0.2)
     mapping_file = tmp_path / 'car.yaml'
     mapping_file.write_text(yaml.safe_dump(JOINT_TORQUES), encoding='utf-8')
     # the slope filter left to the rate: live and offline follow it from the same stamp on
@@ -390,6 +413,9 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     )
     tau = slope_filter_tau_for_rate(50.0)  # the odometry's rate, slower than the wheels'
     assert report.rate_settings == {'slope_filter_tau': tau}
+    if gaps:  # the holes are there, each shorter than max_gap: bridged, not restarted
+        wheels = report.inputs[0]
+        assert 0.19 < wheels.longest_gap_s < 0.5 and wheels.long_gaps == 0, wheels
     datas = BagReader(tmp_path / 'replayed').topic_arrays([ESTIMATES_SLOPE])[ESTIMATES_SLOPE]
     offline = decode_batch(ESTIMATE_TOPICS[ESTIMATES_SLOPE], datas.datas)
     expected = dict(zip(offline.stamp_ns.tolist(), offline.values['angle'].tolist(), strict=True))
