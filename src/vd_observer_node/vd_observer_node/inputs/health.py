@@ -28,7 +28,8 @@ class HealthLimits:
     """When an input is reported (WARN).
 
     Attributes:
-        min_share: below this share of expected stamps in a window, [0, 1].
+        min_share: below this share of expected stamps in a window, [0, 1] (issue 28: a
+            WARN whenever less than 99 % of a 1 kHz stream arrives).
         max_lag: [s] above this mean lag in a window; none by default: the lag is the node
             clock minus the stamp, meaningful only where both run on one time base at one
             rate (not a simulator in lockstep or faster than real time, not a bag played at
@@ -36,7 +37,7 @@ class HealthLimits:
         max_queue_share: above this share of the matcher's capacity waiting for one input.
     """
 
-    min_share: float = 0.95
+    min_share: float = 0.99
     max_lag: float = math.inf
     max_queue_share: float = 0.8
 
