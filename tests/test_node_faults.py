@@ -152,7 +152,9 @@ def _last_diag(diag: list[dict[str, Any]], name: str) -> dict[str, Any]:
 @pytest.mark.ros
 def test_sensor_faults_through_the_live_nodes(procs: RosProcessGroup, tmp_path: Path) -> None:
     obs = procs.node('observer', 'vd_observer_node', 'observer_node')
-    est = procs.node('estimator', 'vd_observer_node', 'estimator_node')
+    # the slope filter set: left unset it would follow the feed's rate from the 200th stamp
+    # on (rate_settings), which the offline comparison below would have to repeat
+    est = procs.node('estimator', 'vd_observer_node', 'estimator_node', slope_filter_tau=0.1)
     for proc, text in ((obs, 'observer ready'), (est, 'estimator ready')):
         proc.wait_for(text, timeout=60)
     script = tmp_path / 'feed_and_capture.py'

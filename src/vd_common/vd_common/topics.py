@@ -35,6 +35,7 @@ __all__ = [
     'OBSERVER_NAMESPACE',
     'OBSERVER_WHEEL_STATES',
     'ON_CHANGE',
+    'OPTIONAL_SENSORS',
     'SENSORS',
     'SENSORS_BODY_VELOCITY',
     'SENSORS_IMU',
@@ -103,6 +104,10 @@ SENSORS: Final = {
     SENSORS_WHEEL_ANGLES: 'vd_msgs/msg/WheelAngles',
     SENSORS_BODY_VELOCITY: 'geometry_msgs/msg/TwistStamped',
     SENSORS_WHEEL_TORQUES: 'vd_msgs/msg/WheelTorques',
+}
+#: Sensors a scenario or a car may add (the simulator's IMU where its scenario says ``imu``):
+#: in the contract, but not among the three every drive has.
+OPTIONAL_SENSORS: Final = {
     SENSORS_IMU: 'sensor_msgs/msg/Imu',
 }
 OBSERVER: Final = {
@@ -144,6 +149,14 @@ STATUS_RECORDER_PROGRESS: Final = '/vd/status/recorder_progress'
 STATUS: Final = {
     STATUS_RECORDER_PROGRESS: 'std_msgs/msg/Header',
 }
-CONTRACT: Final = {**SENSORS, **OBSERVER, **ESTIMATES, **ALERTS, **TRUTH, **STATUS}
+CONTRACT: Final = {
+    **SENSORS,
+    **OPTIONAL_SENSORS,
+    **OBSERVER,
+    **ESTIMATES,
+    **ALERTS,
+    **TRUTH,
+    **STATUS,
+}
 #: Topics published only where their value changes, not once per sample.
 ON_CHANGE: Final = frozenset({ESTIMATES_TORQUE_OFFSET})
