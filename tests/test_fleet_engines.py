@@ -169,7 +169,8 @@ def test_a_bag_that_kills_its_worker_is_a_failed_row(
     assert run.lost == [] and sorted(rows) == sorted(bags)
     assert rows[str(killer)]['status'] == 'failed'
     assert rows[str(killer)]['error'].startswith('WorkerDied: ')
-    assert all(rows[b]['status'] == 'ok' for b in bags if b != str(killer))
+    others = {b: (rows[b]['status'], rows[b].get('error')) for b in bags if b != str(killer)}
+    assert all(status == 'ok' for status, _ in others.values()), others
     assert run.failed == 1
 
 

@@ -15,6 +15,7 @@ from vd_common.topics import (
     ESTIMATES,
     NAMESPACE,
     OBSERVER,
+    OPTIONAL_SENSORS,
     SENSORS,
     STATUS,
     TRUTH,
@@ -25,7 +26,7 @@ TOPICS_FILE = ROOT / 'src' / 'vd_common' / 'vd_common' / 'topics.py'
 #: Folders whose Python files must name topics by the constants of topics.py.
 SCANNED = ('src', 'tests', 'scripts')
 GROUPS = {
-    topics.SENSORS_NAMESPACE: [SENSORS],
+    topics.SENSORS_NAMESPACE: [SENSORS, OPTIONAL_SENSORS],
     topics.OBSERVER_NAMESPACE: [OBSERVER],
     topics.ESTIMATES_NAMESPACE: [ESTIMATES, ALERTS],
     topics.TRUTH_NAMESPACE: [TRUTH],
@@ -65,7 +66,7 @@ def literal_topic_names(source: str, filename: str = '<source>') -> list[tuple[i
 
 
 def test_every_topic_is_in_one_group_only_and_in_the_group_namespace() -> None:
-    groups = [SENSORS, OBSERVER, ESTIMATES, ALERTS, TRUTH, STATUS]
+    groups = [SENSORS, OPTIONAL_SENSORS, OBSERVER, ESTIMATES, ALERTS, TRUTH, STATUS]
     assert sum(len(g) for g in groups) == len(CONTRACT), 'a topic name is in two groups'
     for namespace, members in GROUPS.items():
         assert namespace.startswith(NAMESPACE) and namespace.endswith('/')

@@ -17,6 +17,7 @@ import numpy as np
 from vd_common.topics import (
     ESTIMATES_ALERTS,
     ESTIMATES_FRICTION_POTENTIAL,
+    OPTIONAL_SENSORS,
     SENSORS_BODY_VELOCITY,
     SENSORS_IMU,
     SENSORS_WHEEL_ANGLES,
@@ -59,7 +60,7 @@ __all__ = [
 #: topic -> {dotted field name: array of shape (N,) or (N, K)}; fields not given are zero.
 TopicValues = Mapping[str, Mapping[str, np.ndarray]]
 
-_TYPES = {**SENSOR_TOPICS, **ESTIMATE_TOPICS, **ALERT_TOPICS, **TRUTH_TOPICS}
+_TYPES = {**SENSOR_TOPICS, **OPTIONAL_SENSORS, **ESTIMATE_TOPICS, **ALERT_TOPICS, **TRUTH_TOPICS}
 
 
 def _full_fields(msgtype: str, n: int, given: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:

@@ -226,16 +226,24 @@ def _dask_results(
             "engine 'dask' needs Dask distributed: pip install 'vd_observer_node[fleet]' "
             '(or: pip install distributed)'
         ) from exc
+    import dask
+
     cluster = None
     try:
         if scheduler is None:
-            cluster = LocalCluster(
-                n_workers=workers,
-                threads_per_worker=1,  # the replay holds the GIL: one bag per process
-                processes=True,
-                host='127.0.0.1',
-                dashboard_address=None,
-            )
+            # One bag per worker at a time, none queued behind it: when a bag kills its worker
+            # (out of memory), Dask counts every bag assigned to that worker as suspect and
+            # gives up on one after three deaths; with the default saturation (1.1, i.e. two
+            # bags per one-thread worker) an innocent bag queued behind the killer could be
+            # failed with it.
+            with dask.config.set({'distributed.scheduler.worker-saturation': 1.0}):
+                cluster = LocalCluster(
+                    n_workers=workers,
+                    threads_per_worker=1,  # the replay holds the GIL: one bag per process
+                    processes=True,
+                    host='127.0.0.1',
+                    dashboard_address=None,
+                )
         client = Client(cluster if cluster is not None else scheduler, timeout='30s')
     except (OSError, TimeoutError) as exc:
         if cluster is not None:
