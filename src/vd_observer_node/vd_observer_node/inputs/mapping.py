@@ -533,40 +533,26 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
         )
     ]
     types: dict[str, str] = {}
-    for spec in specs:
+
+    def one_type(spec: InputSpec) -> None:
         if types.setdefault(spec.topic, spec.msgtype) != spec.msgtype:
             raise MappingError(
                 f'{source}: {spec.name}.type: {spec.topic} is also mapped as '
                 f'{types[spec.topic]} (one topic has one type)'
             )
-    engine = (
-        _spec(ENGINE_INPUT, data[ENGINE_INPUT], f'{source}: {ENGINE_INPUT}')
-        if ENGINE_INPUT in data
-        else None
-    )
-    if engine is not None and types.setdefault(engine.topic, engine.msgtype) != engine.msgtype:
-        raise MappingError(
-            f'{source}: {ENGINE_INPUT}.type: {engine.topic} is also mapped as '
-            f'{types[engine.topic]} (one topic has one type)'
-        )
-    imu = (
-        _spec(IMU_INPUT, data[IMU_INPUT], f'{source}: {IMU_INPUT}') if IMU_INPUT in data else None
-    )
-    if imu is not None and types.setdefault(imu.topic, imu.msgtype) != imu.msgtype:
-        raise MappingError(
-            f'{source}: {IMU_INPUT}.type: {imu.topic} is also mapped as '
-            f'{types[imu.topic]} (one topic has one type)'
-        )
-    brake = (
-        _spec(BRAKE_INPUT, data[BRAKE_INPUT], f'{source}: {BRAKE_INPUT}')
-        if BRAKE_INPUT in data
-        else None
-    )
-    if brake is not None and types.setdefault(brake.topic, brake.msgtype) != brake.msgtype:
-        raise MappingError(
-            f'{source}: {BRAKE_INPUT}.type: {brake.topic} is also mapped as '
-            f'{types[brake.topic]} (one topic has one type)'
-        )
+
+    def optional(name: str) -> InputSpec | None:
+        if name not in data:
+            return None
+        spec = _spec(name, data[name], f'{source}: {name}')
+        one_type(spec)
+        return spec
+
+    for spec in specs:
+        one_type(spec)
+    engine = optional(ENGINE_INPUT)
+    imu = optional(IMU_INPUT)
+    brake = optional(BRAKE_INPUT)
     # 'latest' rides through lost messages; a headerless input (stamped on receipt) can only be
     # held at its latest value, which 'exact' does (the inputs the torque source reads, the
     # brake included)
