@@ -78,13 +78,16 @@ FloatArray = NDArray[np.float64]
 SOURCE_FORCE: Final = 1
 #: bit of ``sources``: the IMU's specific force contributed
 SOURCE_IMU: Final = 2
-_ORDER: Final = 2  # stages of the low-pass on (f_x, v, F)
+_ORDER: Final = 3  # stages of the low-pass on (f_x, v, F)
+_SETTLE: Final = 3.0  # [tau per stage] the filters' start is forgotten after this
 _KMH_REFERENCE: Final = 160.0  # [km/h] speed scale of paper eq. 7 (as estimator_step)
 
 GRADE_PARAMS: Final = np.dtype(
     [
         ('gravity', 'f8'),
         ('tau', 'f8'),
+        ('lead', 'f8'),
+        ('warmup', 'f8'),
         ('bias_settle', 'f8'),
         ('max_age', 'f8'),
         ('saturation', 'f8'),
@@ -115,6 +118,8 @@ GRADE_STATE: Final = np.dtype(
         ('bias', 'f8'),  # [-] learnt bias of the IMU's sine (b / g)
         ('bias_time', 'f8'),  # [s] of trusted stamps in the bias
         ('sine', 'f8'),  # last fused sine
+        ('grade', 'f8'),  # [m/s^2] last filtered f_x - dv/dt before the lead (nan: none)
+        ('start', 'f8', (6,)),  # start-up sums: n, t, t^2, v, t v, f_x (see _collect)
         ('dropouts', 'i8'),
         ('saturated', 'i8'),
         ('theta', 'f8', (2,)),  # the regression's [m', m' b / g] (see _regression)
@@ -177,8 +182,10 @@ class ImuGradeConfig:
             its mass error makes (which the regression measures), [rad].
     """
 
-    tau: float = 0.2
-    settle: float = 10.0
+    tau: float = 0.3
+    lag_compensation: bool = True
+    warmup: float = 0.3
+    settle: float = 3.0
     max_age: float = 0.1
     saturation: float = 39.0
     max_slope: float = 0.5
@@ -190,8 +197,8 @@ class ImuGradeConfig:
     mass_drift: float = 0.05
     bias_drift: float = 1e-4
     mass_tol: float = 0.015
-    bias_tol: float = 0.02
-    force_slope_std: float = 0.005
+    bias_tol: float = 0.05
+    force_slope_std: float = 0.05
 
     def __post_init__(self) -> None:
         for name in ('tau', 'max_age', 'saturation', 'max_slope', 'mass_std', 'bias_std',
@@ -199,7 +206,8 @@ class ImuGradeConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ConfigurationError(f'imu.{name} must be finite and > 0, got {value}')
-        for name in ('settle', 'min_speed', 'mass_drift', 'bias_drift', 'pitch_compliance'):
+        for name in ('settle', 'min_speed', 'mass_drift', 'bias_drift', 'pitch_compliance',
+                     'warmup'):  # fmt: skip
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ConfigurationError(f'imu.{name} must be finite and >= 0, got {value}')
@@ -215,6 +223,8 @@ def grade_params(
     p = new_record(GRADE_PARAMS)
     p.gravity = gravity
     p.tau = config.tau
+    p.warmup = config.warmup
+    p.lead = _ORDER * config.tau if config.lag_compensation else 0.0
     p.bias_settle = config.settle
     p.max_age = config.max_age
     p.saturation = config.saturation
@@ -244,6 +254,7 @@ def imu_grade_reset(p: np.record, s: np.record) -> None:
     s.bias = 0.0
     s.bias_time = 0.0
     s.sine = 0.0
+    s.grade = math.nan
     s.dropouts = 0
     s.saturated = 0
     s.theta[0] = p.mass0 / (1.0 + p.pitch_gain * p.mass0)
@@ -254,6 +265,31 @@ def imu_grade_reset(p: np.record, s: np.record) -> None:
     s.fit_time = 0.0
     s.fitted = False
     s.trusted = False
+
+
+@jit
+def _collect(sums: FloatArray, t: float, v: float, u: float) -> None:
+    """Add a start-up stamp (``t`` [s] since the start, speed ``v``, specific force ``u``)."""
+    sums[0] += 1.0
+    sums[1] += t
+    sums[2] += t * t
+    sums[3] += v
+    sums[4] += t * v
+    sums[5] += u
+
+
+@jit
+def _line(sums: FloatArray, t: float, v: float, u: float) -> tuple[float, float, float]:
+    """The start-up's least-squares line through the speed, at ``t`` [s] since the start
+    (speed [m/s] and rate [m/s^2]), and the mean specific force [m/s^2] (with the stamp
+    ``t``, ``v``, ``u`` added)."""
+    _collect(sums, t, v, u)
+    n = sums[0]
+    t_mean = sums[1] / n
+    var = sums[2] / n - t_mean * t_mean
+    v_mean = sums[3] / n
+    rate = (sums[4] / n - t_mean * v_mean) / var if n >= 3.0 and var > 0.0 else 0.0
+    return v_mean + rate * (t - t_mean), rate, sums[5] / n
 
 
 @jit
@@ -386,28 +422,46 @@ def imu_grade_step(
             s.saturated += 1
         lowpass_reset(s.lp)
         s.since = math.nan
+        s.grade = math.nan
         _force_only(out, slope_force, force_valid)
         return
     if math.isnan(s.since):
         s.since = t
+        s.start[:] = 0.0
     usable = force_ok and math.isfinite(force)
-    x = np.empty(3)
-    x[0] = f_x
-    x[1] = speed
-    # the force balance is filtered with the others; where it has none, its last value
-    x[2] = force if usable else s.stages[-1, 2] if s.lp.started else 0.0
-    y = np.empty(3)
-    lowpass_update(p.tau, s.stages, s.prev, s.lp, dt, x, y)
-    dy = np.empty(3)
-    lowpass_derivative(s.stages, s.prev, s.lp, dy)
-    accel = dy[1]
-    out.accel = accel
-    # the filters' start-up: the derivative needs a few time constants
-    if t - s.since < 3.0 * _ORDER * p.tau:
+    if t - s.since < p.warmup:
+        # the start-up: a line through the speed and the mean specific force, so that the
+        # filters start on the ramp the car is on (a steady start would see no acceleration)
+        _collect(s.start, t - s.since, speed, f_x)
         _force_only(out, slope_force, force_valid)
         return
-    # forward only: the rolling resistance's sign is the speed's (and reversing is rare)
-    if usable and speed >= p.min_speed and dt > 0.0:
+    x = np.empty(3)
+    y = np.empty(3)
+    dy = np.empty(3)
+    if not s.lp.started:
+        v_now, v_rate, u_mean = _line(s.start, t - s.since, speed, f_x)
+        x[0] = u_mean
+        x[1] = v_now
+        x[2] = force if usable else 0.0
+        lowpass_update(p.tau, s.stages, s.prev, s.lp, dt, x, y)
+        # a ramp through the stages: stage j lags (j + 1) tau behind the speed
+        for j in range(_ORDER):
+            s.stages[j, 1] = v_now - (j + 1) * p.tau * v_rate
+        dy[:] = 0.0
+        dy[1] = v_rate
+    else:
+        x[0] = f_x
+        x[1] = speed
+        # the force balance is filtered with the others; where it has none, its last value
+        x[2] = force if usable else s.stages[-1, 2]
+        lowpass_update(p.tau, s.stages, s.prev, s.lp, dt, x, y)
+        lowpass_derivative(s.stages, s.prev, s.lp, dy)
+    v_dot = dy[1]
+    out.accel = v_dot
+    # forward only: the rolling resistance's sign is the speed's (and reversing is rare);
+    # not before the filters have forgotten the force balance's value at their start
+    settled = t - s.since >= p.warmup + _SETTLE * _ORDER * p.tau
+    if usable and settled and speed >= p.min_speed and dt > 0.0:
         _regression(p, s, dt, y[0], y[2] / p.gravity, speed)
         m = _mass(p, s)
         out.mass = m
@@ -420,7 +474,15 @@ def imu_grade_step(
         out.trusted = s.trusted
     bias = out.bias
     scale = 1.0 + p.pitch_gain * m
-    sine = ((y[0] - bias) / scale - accel) / p.gravity
+    lagged = y[0] / scale - v_dot
+    # the lead: a ramp through the stages lags by order tau; adding that times the rate
+    # makes the grade's filter (1 + order tau s) / (1 + tau s)^order, without lag on ramps
+    # (the rate of the filtered signals only: the bias's steps are no grade's rate)
+    rate = 0.0
+    if dt > 0.0 and not math.isnan(s.grade):
+        rate = (lagged - s.grade) / dt
+    s.grade = lagged
+    sine = (lagged + p.lead * rate - bias / scale) / p.gravity
     valid = abs(sine) <= p.max_sine
     slope_imu = math.asin(max(-1.0, min(1.0, sine)))
     s.sine = sine
