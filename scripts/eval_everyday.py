@@ -7,8 +7,9 @@ tyre radius -3..+1 %, 96 counts/rev encoders, 0.05 m/s speed noise, an IMU with 
 noise, a bias of up to 0.1 m/s^2 and a mounting pitch of up to 1 deg the mapping does not
 know). The simulator drives the TRUE car; the compiled cascade runs with the NOMINAL vehicle
 file in two configurations, adaptation off and mass + radius adaptation on, and each of them
-with and without the IMU fusion (`estimation.imu_grade`, applied to the same cascade run: it
-does not feed back). Printed over the drives, median and 90th percentile:
+with and without the IMU fusion (`estimation.imu_grade`, in the cascade: its mass, once
+fitted, is the estimator's; ``--set mass_feedback=0`` keeps the estimator's own). Printed over
+the drives, median and 90th percentile:
 
 * slope RMS [deg] over the drive (t >= 1 s, speed > 1 m/s), truth the simulator's road;
 * the share of drives whose mass converged within 120 s (without IMU: the online mass's
@@ -42,14 +43,9 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
 from vd_common.vehicle.params import default_vehicle_file, load_vehicle  # noqa: E402
-from vd_observer_node.estimation.cascade import (  # noqa: E402
-    CascadeResult,
-    run_cascade,
-    with_imu_grade,
-)
+from vd_observer_node.estimation.cascade import CascadeResult, run_cascade  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.estimation.imu_grade import (  # noqa: E402
-    ImuGrade,
     ImuGradeConfig,
     vehicle_pitch_compliance,
 )
@@ -101,10 +97,10 @@ def evaluate(seed: int, params: Any, vehicle: EstimatorVehicle, settings: Everyd
         plain = run_cascade(
             sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, vehicle, None, config
         )
-        grade = ImuGrade(
-            imu_config, vehicle.gravity, vehicle.mass, vehicle.rolling_c0, vehicle.rolling_c1
-        )
-        fused = with_imu_grade(plain, grade, imu, sim.body_speed)
+        fused = run_cascade(
+            sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, vehicle, None, config,
+            imu=imu, imu_config=imu_config,
+        )  # fmt: skip
         figures.slope_rms[name] = _slope_rms(plain, sim)
         figures.slope_rms[f'{name}+imu'] = _slope_rms(fused, sim)
         if config.mass_adaptation:

@@ -58,10 +58,12 @@ def _imu(sim: SimResult) -> np.ndarray:
     return np.column_stack([sim.t, sim.imu[:, 0]])
 
 
-def _run(sim: SimResult, imu: np.ndarray | None) -> CascadeResult:
+def _run(
+    sim: SimResult, imu: np.ndarray | None, config: ImuGradeConfig = CONFIG
+) -> CascadeResult:
     return run_cascade(
         sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, VEHICLE, imu=imu,
-        imu_config=CONFIG,
+        imu_config=config,
     )  # fmt: skip
 
 
@@ -102,18 +104,48 @@ def _drive_scenario_extra(seed: int) -> float:
     return everyday_scenario(seed, PARAMS).true_vehicle.extra_mass_kg
 
 
-def test_the_fusion_changes_the_slope_only() -> None:
-    plain, fused = _plain(), _fused()
+def test_without_feedback_the_fusion_changes_the_slope_and_the_published_mass_only() -> None:
+    sim = _drive()
+    plain = _plain()
+    fused = _run(sim, _imu(sim), dataclasses.replace(CONFIG, mass_feedback=False))
     untouched = {'slope', 'slope_valid', 'slope_sources', 'slope_imu', 'imu_bias', 'imu_mass'}
     untouched |= {'imu_mass_std', 'imu_fitted', 'imu_trusted', 'faults'}
+    # the published mass is the regression's once it has data
+    untouched |= {'mass', 'mass_std', 'mass_converged'}
     for field in dataclasses.fields(CascadeResult):
         if field.name in untouched:
             continue
         a, b = getattr(plain, field.name), getattr(fused, field.name)
         np.testing.assert_array_equal(a, b, err_msg=field.name)
+    np.testing.assert_array_equal(fused.mass[fused.imu_fitted], fused.imu_mass[fused.imu_fitted])
+    np.testing.assert_array_equal(fused.mass_converged, fused.imu_fitted)
     # without an IMU the sources say: the force balance where its slope is valid
     np.testing.assert_array_equal(plain.slope_sources, np.where(plain.slope_valid, 1, 0))
     np.testing.assert_array_equal(fused.slope_force, plain.slope)
+
+
+def test_the_imu_mass_feeds_the_force_balance_when_the_file_is_wrong() -> None:
+    sim = _drive()
+    plain, fused = _plain(), _fused()
+    true_mass = PARAMS.chassis.mass + _drive_scenario_extra(0)
+    assert abs(VEHICLE.mass / true_mass - 1.0) > 0.1  # the file is off by a load
+    fitted = np.flatnonzero(fused.imu_fitted)
+    assert fitted.size > 0.3 * len(sim.t)  # fitted within 60 s
+    first = fitted[0]
+    # before the regression's mass is fitted the estimator has its own; from the next stamp
+    # on, the regression's of the stamp before
+    np.testing.assert_array_equal(fused.mass_used[: first + 1], plain.mass_used[: first + 1])
+    np.testing.assert_array_equal(fused.mass_used[first + 1 :], fused.imu_mass[first:-1])
+    # against the simulator's truth: the force balance's slope and the tyre loads
+    later = np.zeros(len(sim.t), dtype=bool)
+    later[first + int(5.0 * RATE_HZ) :] = True  # its filters past the change of mass
+    rated = later & fused.torque_valid & (sim.speed_true > 2.0)
+    with_imu = _rms_deg((fused.slope_force - sim.slope)[rated])
+    without = _rms_deg((plain.slope - sim.slope)[rated])
+    assert with_imu < 0.5 * without
+    fz_with = np.sqrt(np.mean((fused.fz - sim.fz)[rated] ** 2))
+    fz_without = np.sqrt(np.mean((plain.fz - sim.fz)[rated] ** 2))
+    assert fz_with < 0.5 * fz_without
 
 
 def test_an_imu_that_never_delivers_gives_the_force_balance_bit_for_bit() -> None:
@@ -140,9 +172,12 @@ def test_a_dropout_or_saturation_falls_back_to_the_force_balance_and_recovers(ki
     # before: the same as the full IMU; during (past max_age): the force balance's slope
     before = sim.t < 60.0
     np.testing.assert_array_equal(out.slope[before], fused.slope[before])
+    # (the force balance with the regression's mass, which it keeps)
     during = lost & (sim.t >= 60.0 + CONFIG.max_age + 1e-9)
-    np.testing.assert_array_equal(out.slope[during], plain.slope[during])
-    assert np.all(out.slope_sources[during] == np.where(plain.slope_valid[during], 1, 0))
+    np.testing.assert_array_equal(out.slope[during], out.slope_force[during])
+    assert np.all(out.slope_sources[during] == np.where(out.slope_valid[during], 1, 0))
+    assert np.all(out.imu_fitted[during])
+    np.testing.assert_array_equal(out.mass_used[during], out.imu_mass[np.flatnonzero(during)[0]])
     # after: the filters restart (no jump from the stale state), the bias is kept
     later = sim.t > 65.0 + 6 * CONFIG.tau + 0.5
     np.testing.assert_array_equal(out.imu_bias[during], np.full(during.sum(), out.imu_bias[
@@ -185,6 +220,7 @@ def test_the_live_chain_fuses_as_the_cascade_does() -> None:
         ChainSettings(vehicle=VEHICLE, curves=TyreCurves.from_tire(PARAMS.tire), imu=CONFIG)
     )
     slope = np.empty(n)
+    mass_used = np.empty(n)
     sources = np.empty(n, dtype=np.uint8)
     for k in range(n):
         held = None if np.isnan(imu[k, 0]) else (float(imu[k, 0]), float(imu[k, 1]))
@@ -193,8 +229,10 @@ def test_the_live_chain_fuses_as_the_cascade_does() -> None:
             imu=held,
         )  # fmt: skip
         slope[k] = out.estimates.slope
+        mass_used[k] = out.estimates.mass_used
         sources[k] = out.slope_sources
     np.testing.assert_array_equal(slope, offline.slope)
+    np.testing.assert_array_equal(mass_used, offline.mass_used)  # the IMU's mass fed back
     np.testing.assert_array_equal(sources, offline.slope_sources)
     assert np.any(sources == SOURCE_FORCE | SOURCE_IMU)
 

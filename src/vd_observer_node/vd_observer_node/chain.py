@@ -34,7 +34,7 @@ from vd_observer_node.estimation.drivetrain import (
 )
 from vd_observer_node.estimation.estimator import Estimates, EstimatorConfig, estimates_from_record
 from vd_observer_node.estimation.faults import FaultCounter, FaultReport, merge_reports
-from vd_observer_node.estimation.imu_grade import GRADE_OUT, SOURCE_FORCE, ImuGradeConfig
+from vd_observer_node.estimation.imu_grade import SOURCE_FORCE, ImuGradeConfig
 from vd_observer_node.estimation.observer import ObserverConfig, SpeedState, WheelState
 from vd_observer_node.estimation.torque_offset import TorqueOffset, offset_from_record
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params, vehicle_tire
@@ -196,8 +196,9 @@ class Chain:
         self._situation = SituationBlock.empty(1)
         self._no_engine = np.zeros((1, 4))
         self._no_brake = no_brakes(1)
-        self._grade = self.parts.grade(settings.imu) if settings.imu is not None else None
-        self._grade_out = np.zeros(1, GRADE_OUT).view(np.recarray)[0]
+        if settings.imu is not None:
+            self.parts.grade(settings.imu)
+        self._imu = np.full((1, 2), np.nan)
 
     def update(
         self,
@@ -248,8 +249,10 @@ class Chain:
         brakes = self._no_brake
         if brake is not None:
             brakes = np.ascontiguousarray(brake, dtype=np.float64).reshape(1, 4)
+        imu_row = self._imu
+        imu_row[0, :] = imu if imu is not None else (math.nan, math.nan)
         block(
-            *parts.args(), stamp, angles[None], speeds, torques[None], row, brakes,
+            *parts.args(), stamp, angles[None], speeds, torques[None], row, brakes, imu_row,
             *out.outputs(),
         )  # fmt: skip
         est = out.est[0]
@@ -280,9 +283,11 @@ class Chain:
                 self.engine_faults.count('torque_offset_clamped')
         estimates = estimates_from_record(est)
         sources = SOURCE_FORCE if estimates.slope_valid else 0
-        if self._grade is not None:
-            ok = bool(out.torque_valid[0])
-            estimates, sources = self._fuse(estimates, float(t), float(speed), imu, ok)
+        if parts.imu_on:
+            # the IMU fusion's slope (`imu_grade`, run in the cascade step)
+            g = out.grade[0]
+            estimates = replace(estimates, slope=float(g.slope), slope_valid=bool(g.slope_valid))
+            sources = int(g.sources)
         return ChainOutput(
             WheelState(
                 wheel[0].copy(), wheel[1].copy(), wheel[2].copy(), out.wheel_valid[0].copy()
@@ -293,24 +298,6 @@ class Chain:
             offset,
             sources,
         )
-
-    def _fuse(
-        self,
-        e: Estimates,
-        t: float,
-        speed: float,
-        imu: tuple[float, float] | None,
-        torque_ok: bool,
-    ) -> tuple[Estimates, int]:
-        """The estimates with the IMU fusion's slope (`imu_grade`), and its sources."""
-        assert self._grade is not None  # called with an IMU only
-        stamp, f_x = imu if imu is not None else (math.nan, math.nan)
-        force = float(np.sum(e.fx)) - math.copysign(e.aero, speed)
-        ok = torque_ok and not self._none and math.isfinite(force)
-        g = self._grade_out
-        self._grade.step(t, stamp, f_x, speed, e.slope, e.slope_valid, force, ok, e.mass_used, g)
-        fused = replace(e, slope=float(g.slope), slope_valid=bool(g.slope_valid))
-        return fused, int(g.sources)
 
     def fault_report(self) -> FaultReport:
         """Faults since the previous call, per part ('wheel', 'speed', 'estimator', and

@@ -28,7 +28,12 @@ from vd_observer_node.estimation.drivetrain import (
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.estimator_step import ESTIMATES
 from vd_observer_node.estimation.faults import ENGINE_FAULTS, FaultCounter
-from vd_observer_node.estimation.imu_grade import SOURCE_FORCE, ImuGrade, ImuGradeConfig
+from vd_observer_node.estimation.imu_grade import (
+    GRADE_OUT,
+    SOURCE_FORCE,
+    ImuGrade,
+    ImuGradeConfig,
+)
 from vd_observer_node.estimation.observer import WHEEL_INPUTS, ObserverConfig
 from vd_observer_node.estimation.torque_offset import (
     OFFSET_ESTIMATE_DTYPE,
@@ -52,7 +57,6 @@ __all__ = [
     'checked_record',
     'offset_result_name',
     'run_cascade',
-    'with_imu_grade',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -370,8 +374,10 @@ class CascadeParts:
         self.offset_state = new_offset_state()
         self.offset_estimate = new_offset_estimate()
         self.engine_faults = FaultCounter(ENGINE_FAULTS) if self.offset_on else None
-        #: the IMU fusion (`imu_grade`), made by the first block that has an IMU
-        self.imu_grade: ImuGrade | None = None
+        #: the IMU fusion (`imu_grade`): its records, on from the first block with an IMU
+        self.imu_on = False
+        self.imu_grade = ImuGrade(None, vehicle.gravity, vehicle.mass, vehicle.rolling_c0,
+                                  vehicle.rolling_c1)  # fmt: skip
         self._vehicle = vehicle
         # without torque there is nothing to take a brake torque from
         self.brakes = brakes if brakes is not None and self.source != TORQUE_NONE else Brakes()
@@ -380,10 +386,13 @@ class CascadeParts:
         self._args: tuple[Any, ...] | None = None
 
     def grade(self, config: ImuGradeConfig | None) -> ImuGrade:
-        """The IMU fusion's records (made on the first call, with `config`)."""
-        if self.imu_grade is None:
+        """Turn the IMU fusion on (on the first call, with `config`; defaults if None) and
+        return its records."""
+        if not self.imu_on:
             v = self._vehicle
             self.imu_grade = ImuGrade(config, v.gravity, v.mass, v.rolling_c0, v.rolling_c1)
+            self.imu_on = True
+            self._args = None
         return self.imu_grade
 
     @property
@@ -408,6 +417,7 @@ class CascadeParts:
             a(self.estimator.params), a(es), fst, sst, vst, self.measured, self.engine_on,
             self.dprm, self.engine_state, self.offset_on, a(self.offset_params),
             a(self.offset_state), a(self.offset_estimate), self.bprm, self.brake_state,
+            self.imu_on, a(self.imu_grade.params), a(self.imu_grade.state),
         )  # fmt: skip
         return self._args
 
@@ -441,6 +451,7 @@ class CascadeBlock:
         est: shape (N,) `estimator_step.ESTIMATES` records.
         torque_valid: shape (N,).
         offsets: shape (N,) `OFFSET_ESTIMATE_DTYPE` records where learnt, else (0,).
+        grade: shape (N,) `imu_grade.GRADE_OUT` records (written with the IMU fusion on).
     """
 
     wheel: FloatArray
@@ -451,6 +462,7 @@ class CascadeBlock:
     est: np.recarray
     torque_valid: BoolArray
     offsets: np.recarray
+    grade: np.recarray
 
     @classmethod
     def empty(cls, n: int, offsets: bool) -> CascadeBlock:
@@ -460,6 +472,7 @@ class CascadeBlock:
             np.zeros(n, dtype=np.bool_), np.zeros((n, 4)),
             np.zeros(n, ESTIMATES).view(np.recarray), np.zeros(n, dtype=np.bool_),
             np.zeros(n if offsets else 0, OFFSET_ESTIMATE_DTYPE).view(np.recarray),
+            np.zeros(n, GRADE_OUT).view(np.recarray),
         )  # fmt: skip
 
     def outputs(self) -> tuple[Any, ...]:
@@ -468,6 +481,7 @@ class CascadeBlock:
         return (
             self.wheel, self.wheel_valid, self.body, self.body_valid, self.used,
             self.est.view(np.ndarray), self.torque_valid, self.offsets.view(np.ndarray),
+            self.grade.view(np.ndarray),
         )  # fmt: skip
 
 
@@ -545,54 +559,29 @@ def run_cascade(
         )  # fmt: skip
         if state is not None:
             state.parts = parts
+    imu_record = no_imu(n)
+    if imu is not None:
+        imu_record = np.ascontiguousarray(imu, dtype=np.float64)
+        if imu_record.shape != (n, 2):
+            raise InputShapeError(
+                f'imu must have shape ({n}, 2) (sample stamp, specific force), got '
+                f'{imu_record.shape}'
+            )
+        parts.grade(imu_config)
     out = CascadeBlock.empty(n, parts.offset_on)
     block: Any = cascade_block  # its arguments come as tuples
     block(
         *parts.args(), stamps, angles, speeds, torques, engine_record, brake_record,
-        *out.outputs(),
+        imu_record, *out.outputs(),
     )  # fmt: skip
     if source == TORQUE_NONE:
         out.torque_valid[:] = False
-    result = cascade_result(stamps, source, parts, out)
-    if imu is None:
-        return result
-    return with_imu_grade(result, parts.grade(imu_config), imu, speeds)
+    return cascade_result(stamps, source, parts, out)
 
 
-def with_imu_grade(
-    result: CascadeResult, grade: ImuGrade, imu: ArrayLike, speeds: FloatArray
-) -> CascadeResult:
-    """`result` with its slope fused with the IMU's grade (`imu_grade`).
-
-    Raises:
-        InputShapeError: imu is not of shape (N, 2).
-    """
-    n = result.t.shape[0]
-    record = np.ascontiguousarray(imu, dtype=np.float64)
-    if record.shape != (n, 2):
-        raise InputShapeError(
-            f'imu must have shape ({n}, 2) (sample stamp, specific force), got {record.shape}'
-        )
-    # the longitudinal balance without gravity and rolling: what the regression explains
-    force = result.fx.sum(axis=1) - np.copysign(result.aero, speeds)
-    force_ok = result.torque_valid & np.isfinite(force)
-    fused = grade.run(
-        result.t, record, speeds, result.slope, result.slope_valid, force, force_ok,
-        result.mass_used,
-    )  # fmt: skip
-    return replace(
-        result,
-        slope=fused.slope.copy(),
-        slope_valid=fused.slope_valid.copy(),
-        slope_sources=fused.sources.copy(),
-        slope_force=result.slope,
-        slope_imu=fused.slope_imu.copy(),
-        imu_bias=fused.bias.copy(),
-        imu_mass=fused.mass.copy(),
-        imu_mass_std=fused.mass_std.copy(),
-        imu_fitted=fused.fitted.copy(),
-        imu_trusted=fused.trusted.copy(),
-    )
+def no_imu(n: int) -> FloatArray:
+    """The IMU input of N stamps without an IMU (no sample: nan), shape (N, 2)."""
+    return np.full((n, 2), np.nan)
 
 
 def cascade_result(
@@ -605,7 +594,7 @@ def cascade_result(
         offsets.offset.copy(), offsets.offset_std.copy(), offsets.converged.copy(),
         offsets.used.copy(), offsets.episodes.copy(), offsets.clamped.copy(),
     )  # fmt: skip
-    return CascadeResult(
+    result = CascadeResult(
         t=stamps.copy(),
         omega=out.wheel[:, 1, :].copy(),
         omega_dot=out.wheel[:, 2, :].copy(),
@@ -640,3 +629,19 @@ def cascade_result(
         slope_sources=np.where(est.slope_valid, SOURCE_FORCE, 0).astype(np.uint8),
         slope_force=est.slope.copy(),
     )
+    return replace(result, **_imu_fields(out.grade)) if parts.imu_on else result
+
+
+def _imu_fields(grade: np.recarray) -> dict[str, Any]:
+    """The `CascadeResult` fields of the IMU fusion's outputs (copies)."""
+    return {
+        'slope': grade.slope.copy(),
+        'slope_valid': grade.slope_valid.copy(),
+        'slope_sources': grade.sources.copy(),
+        'slope_imu': grade.slope_imu.copy(),
+        'imu_bias': grade.bias.copy(),
+        'imu_mass': grade.mass.copy(),
+        'imu_mass_std': grade.mass_std.copy(),
+        'imu_fitted': grade.fitted.copy(),
+        'imu_trusted': grade.trusted.copy(),
+    }

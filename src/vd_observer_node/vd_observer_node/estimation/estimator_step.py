@@ -153,7 +153,9 @@ GAP_FORCE_CHANGE: Final = 0.05
 #: estimate, the radius of the last stamp's Fx (nan: none), the stamp until which the slope
 #: settles after a gap (`GAP_FORCE_CHANGE`; -inf: none), the last finite inputs (omega,
 #: omega_dot, torque (4 each), v, accel), the three low-passes' previous output and input and
-#: bookkeeping, the online mass's and radius's states and the fault counts.
+#: bookkeeping, the online mass's and radius's states, the fault counts, and a mass known from
+#: elsewhere that replaces the file's or the online mass's (nan: none; `cascade_step` sets it
+#: from the IMU's regression, `imu_grade`).
 ESTIMATOR_STATE: Final = np.dtype(
     [
         ('t', 'f8'),
@@ -172,6 +174,7 @@ ESTIMATOR_STATE: Final = np.dtype(
         ('radius_s', RADIUS_STATE),
         ('last', ESTIMATES),
         ('counts', 'i8', (len(ESTIMATOR_FAULTS) + 1,)),
+        ('mass_known', 'f8'),
     ],
     align=True,
 )
@@ -192,6 +195,7 @@ def estimator_reset(p: np.record, s: np.record) -> None:
     lowpass_reset(s.speed_lp)
     mass_reset(p.mass_p, s.mass_s)
     radius_reset(p.radius_p, s.radius_s)
+    s.mass_known = math.nan
 
 
 @jit
@@ -362,6 +366,9 @@ def _estimate(
     fx_sum = fx_raw[0] + fx_raw[1] + fx_raw[2] + fx_raw[3]
     # then the online mass: the rest uses mass_used
     _online_mass(p, s, t, fx_sum, v, all_ok, waiting, est)
+    if s.mass_known > 0.0:
+        # a mass known from elsewhere (the IMU's regression) is the balance's
+        est.mass_used = s.mass_known
     mass = est.mass_used
     # the simulator's smooth sign of the rolling resistance; drag is exactly k*v*|v|
     reg = p.rolling_reg
