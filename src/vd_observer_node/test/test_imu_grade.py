@@ -160,7 +160,7 @@ def test_an_imu_that_never_delivers_gives_the_force_balance_bit_for_bit() -> Non
 @pytest.mark.parametrize('kind', ['dropout', 'saturation'])
 def test_a_dropout_or_saturation_falls_back_to_the_force_balance_and_recovers(kind: str) -> None:
     sim = _drive()
-    plain, fused = _plain(), _fused()
+    fused = _fused()
     imu = _imu(sim)
     lost = (sim.t >= 60.0) & (sim.t < 65.0)
     if kind == 'dropout':
