@@ -1,10 +1,14 @@
 #!/usr/bin/env python3
 """`make demo`: the whole graph on a scenario, recorded to an MCAP bag, then the report.
 
-Starts recorder_node, observer_node, estimator_node, alerts_node and sim_node as separate
-processes over the real middleware (the same graph as `launch/demo.launch.py` for a system
-ROS 2), shows the simulation's progress, stops every process cleanly with SIGINT, keeps the
-bag and runs `vd report` on it. Run inside the workspace environment (`make demo` sources env.sh).
+Starts recorder_node, pipeline_node and sim_node as separate processes over the real
+middleware, the simulator publishing its IMU and the pipeline mapping it
+(``config/input_mapping_sim_imu.yaml``): the slope is the IMU's grade fused with the force
+balance (docs/estimation.md, IMU fusion). ``--no-imu`` runs the graph of
+`launch/demo.launch.py` instead (observer_node, estimator_node, alerts_node: the force
+balance's slope, no IMU). Shows the simulation's progress, stops every process cleanly with
+SIGINT, keeps the bag and runs `vd report` on it. Run inside the workspace environment (`make
+demo` sources env.sh).
 
 By default the simulator runs in lockstep with the estimator, the alerts node and the recorder
 (it waits for their progress, at most 0.5 s of sample time ahead, the real-time factor a cap):
@@ -54,6 +58,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--out', type=Path, default=ROOT / 'out' / 'demo', help='output folder')
     parser.add_argument('--encoder-counts', type=int, default=-1, help='-1: scenario setting')
     parser.add_argument('--speed-noise', type=float, default=-1.0, help='-1: scenario setting')
+    parser.add_argument(
+        '--imu-noise', type=float, default=0.05, help="the IMU's noise per axis [m/s^2]"
+    )
+    parser.add_argument(
+        '--no-imu',
+        action='store_true',
+        help='no IMU: the split observer, estimator and alerts nodes (launch/demo.launch.py)',
+    )
     parser.add_argument('--no-report', action='store_true', help='skip vd report')
     return parser.parse_args(argv)
 
@@ -87,14 +99,28 @@ def main(argv: list[str] | None = None) -> int:
         os.environ['FASTDDS_DEFAULT_PROFILES_FILE'] = str(
             share / 'config' / 'fastdds_lockstep.xml'
         )
+    from ament_index_python.packages import get_package_share_directory
+
+    share = Path(get_package_share_directory('vd_observer_node'))
+    if args.no_imu:
+        estimation = [
+            NodeSpec('vd_observer_node', 'observer_node', 'observer'),
+            NodeSpec('vd_observer_node', 'estimator_node', 'estimator'),
+            NodeSpec('vd_observer_node', 'alerts_node', 'alerts'),
+        ]
+    else:
+        mapping = share / 'config' / 'input_mapping_sim_imu.yaml'
+        estimation = [
+            NodeSpec(
+                'vd_observer_node', 'pipeline_node', 'pipeline', {'input_mapping': str(mapping)}
+            )
+        ]
     started = time.monotonic()
     with GraphLauncher(args.out / 'logs') as graph:
         graph.start_all(
             [
                 NodeSpec('vd_observer_node', 'recorder_node', 'recorder', {'output': str(bag)}),
-                NodeSpec('vd_observer_node', 'observer_node', 'observer'),
-                NodeSpec('vd_observer_node', 'estimator_node', 'estimator'),
-                NodeSpec('vd_observer_node', 'alerts_node', 'alerts'),
+                *estimation,
             ],
             settle_s=3.0,
         )
@@ -113,6 +139,7 @@ def main(argv: list[str] | None = None) -> int:
                     'real_time_factor': args.real_time_factor,
                     'encoder_counts_per_rev': args.encoder_counts,
                     'speed_noise_std': args.speed_noise,
+                    'imu_noise_std': -1.0 if args.no_imu else args.imu_noise,
                     'progress_period': 1.0,
                     **lockstep,
                 },

@@ -38,6 +38,10 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade  # noqa: E402
 from vd_observer_node.estimation.drivetrain import Drivetrain  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
+from vd_observer_node.estimation.imu_grade import (  # noqa: E402
+    ImuGradeConfig,
+    vehicle_pitch_compliance,
+)
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_estimator_vehicle  # noqa: E402
 
@@ -163,6 +167,11 @@ def main() -> None:
     parser.add_argument('--force-tau', type=float, default=None)
     parser.add_argument('--load-transfer', default=None)
     parser.add_argument('--torque-paths', default='measured,engine,none')
+    parser.add_argument(
+        '--imu', action='store_true',
+        help='the car carries an IMU (0.05 m/s^2 noise, 0.08 m/s^2 bias) and the cascade '
+        'fuses it (estimation.imu_grade)',
+    )  # fmt: skip
     args = parser.parse_args()
 
     from vd_common.vehicle.params import load_vehicle
@@ -191,15 +200,24 @@ def main() -> None:
         sensors = dataclasses.replace(
             scenario.sensors, encoder_counts_per_rev=counts, speed_noise_std=noise
         )
+        if args.imu:
+            sensors = dataclasses.replace(sensors, imu=True, imu_noise_std=0.05, imu_bias=0.08)
         t0 = time.perf_counter()
         sim = simulate(sim_vehicle, dataclasses.replace(scenario, sensors=sensors))
         t_sim = time.perf_counter() - t0
         obs_cfg = ObserverConfig(**obs_kw)
         est_cfg = EstimatorConfig(**est_kw)
         t0 = time.perf_counter()
+        imu: dict[str, Any] = {}
+        if args.imu:
+            imu['imu'] = np.column_stack([sim.t, sim.imu[:, 0]])
+            imu['imu_config'] = ImuGradeConfig(
+                pitch_compliance=vehicle_pitch_compliance(args.vehicle)
+            )
         est = run_cascade(
-            sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, vehicle, obs_cfg, est_cfg
-        )
+            sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, vehicle, obs_cfg, est_cfg,
+            **imu,
+        )  # fmt: skip
         t_est = time.perf_counter() - t0
         mask = evaluation_mask(sim.t, sim.events)
         result = figures(sim, est, vehicle, mask)

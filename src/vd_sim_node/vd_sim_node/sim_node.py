@@ -121,6 +121,14 @@ PARAMS = [
         low=-1.0,
         high=100.0,
     ),
+    ParamSpec(
+        'imu_noise_std',
+        -1.0,
+        'publish the IMU (/vd/sensors/imu) with this noise per axis [m/s^2] and the '
+        "scenario's IMU bias and mounting (-1 = scenario setting)",
+        low=-1.0,
+        high=100.0,
+    ),
     ParamSpec('seed', -1, 'noise seed (-1 = scenario setting)', low=-1, high=2**31 - 1),
     ParamSpec('publish_truth', True, f'publish the {TRUTH_NAMESPACE}* topics'),
     ParamSpec('frame_id', 'base_link', 'frame_id of every header'),
@@ -224,6 +232,9 @@ def _with_sensor_overrides(scenario: Scenario, values: dict[str, Any]) -> Scenar
         changes['encoder_counts_per_rev'] = values['encoder_counts_per_rev']
     if values['speed_noise_std'] >= 0.0:
         changes['speed_noise_std'] = values['speed_noise_std']
+    if values['imu_noise_std'] >= 0.0:
+        changes['imu'] = True
+        changes['imu_noise_std'] = values['imu_noise_std']
     if values['seed'] >= 0:
         changes['seed'] = values['seed']
     return dataclasses.replace(scenario, sensors=dataclasses.replace(sensors, **changes))
