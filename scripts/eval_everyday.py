@@ -12,6 +12,9 @@ fitted, is the estimator's; ``--set mass_feedback=0`` keeps the estimator's own)
 the drives, median and 90th percentile:
 
 * slope RMS [deg] over the drive (t >= 1 s, speed > 1 m/s), truth the simulator's road;
+* the force balance's own slope in the IMU runs (``+imu:force``: the estimator's, with the
+  IMU regression's mass fed back once fitted; what the slope falls back on when the IMU
+  drops out);
 * the share of drives whose mass converged within 120 s (without IMU: the online mass's
   ``mass_converged``; with: the IMU regression's ``imu_fitted``) and the mass error after
   convergence (the worst |error| from the converged flag on, in % of the true mass).
@@ -103,6 +106,10 @@ def evaluate(seed: int, params: Any, vehicle: EstimatorVehicle, settings: Everyd
         )  # fmt: skip
         figures.slope_rms[name] = _slope_rms(plain, sim)
         figures.slope_rms[f'{name}+imu'] = _slope_rms(fused, sim)
+        # the force balance's own slope with the IMU's mass fed back (what it falls back on)
+        figures.slope_rms[f'{name}+imu:force'] = _slope_rms(
+            dataclasses.replace(fused, slope=fused.slope_force), sim
+        )
         if config.mass_adaptation:
             conv, err = _mass(plain.mass_converged, plain.mass, true_mass, sim.t)
             figures.converged[name], figures.mass_error[name] = conv, err
@@ -156,18 +163,20 @@ def main(argv: list[str] | None = None) -> int:
         figures, line = evaluate(seed, params, vehicle, settings, imu_config)
         drives.append(figures)
         print(line, flush=True)
-    names = ['off', 'adapt', 'off+imu', 'adapt+imu']
-    print(f'\n{"configuration":<14} slope RMS [deg]   mass converged   mass error [%]')
-    print(f'{"":<14} median   p90      within {CONVERGE_WITHIN:.0f} s        median  p90')
+    names = ['off', 'adapt', 'off+imu', 'adapt+imu', 'off+imu:force', 'adapt+imu:force']
+    print(f'\n{"configuration":<15} slope RMS [deg]   mass converged   mass error [%]')
+    print(f'{"":<15} median   p90      within {CONVERGE_WITHIN:.0f} s        median  p90')
     for name in names:
         slopes = [d.slope_rms[name] for d in drives]
         if name in drives[0].converged:
             share = np.mean([d.converged[name] for d in drives]) * 100.0
             errors = [d.mass_error[name] for d in drives if d.converged[name]]
             mass = f'{share:5.0f} %          {_pct(errors, 50)}  {_pct(errors, 90)}'
+        elif name.endswith(':force'):
+            mass = '    - (the IMU run above)'
         else:
             mass = "    - (the file's mass)"
-        print(f'{name:<14} {_pct(slopes, 50)}   {_pct(slopes, 90)}    {mass}')
+        print(f'{name:<15} {_pct(slopes, 50)}   {_pct(slopes, 90)}    {mass}')
     print(f'\n({len(drives)} drives in {time.perf_counter() - start:.0f} s)')
     return 0
 

@@ -251,7 +251,8 @@ class PipelineNode(Node):
         # add two 1 kHz streams to a graph that is at its limit on two cores.
         # The engine-torque offset only where learnt, and only where it changes (STATE_QOS).
         adapted = {
-            'mass': settings.estimator.mass_adaptation,
+            # with an IMU the mass is the IMU regression's (`imu_grade`)
+            'mass': settings.estimator.mass_adaptation or settings.imu is not None,
             'radius': settings.estimator.radius_adaptation,
             'offset': self.torque_source == 'engine'
             and settings.estimator.torque_offset_adaptation,

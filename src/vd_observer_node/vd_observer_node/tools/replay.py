@@ -318,7 +318,8 @@ def estimate_topics(
     result: CascadeResult, angles: np.ndarray, config: EstimatorConfig | None = None
 ) -> dict[str, dict[str, np.ndarray]]:
     """The estimate topics of a cascade result, as the live nodes publish them: the online
-    mass and radius only where `config` adapts them (the nodes publish no constants)."""
+    mass and radius only where `config` adapts them (the nodes publish no constants), the
+    mass also where the result has the IMU's regression."""
     n = result.t.shape[0]
     zeros = np.zeros(n)
     source = np.full(n, result.torque_source, dtype=np.uint8)
@@ -359,7 +360,8 @@ def estimate_topics(
             'sources': _slope_sources(result),
         },
     }
-    if config is not None and config.mass_adaptation:
+    # the online mass where adapted; with an IMU the regression's (`imu_grade`, in the fields)
+    if (config is not None and config.mass_adaptation) or result.imu_mass.shape[0] > 0:
         topics[ESTIMATES_MASS] = {
             field: getattr(result, attr) for field, attr in MASS_MESSAGE_FIELDS
         }
