@@ -58,9 +58,7 @@ def _imu(sim: SimResult) -> np.ndarray:
     return np.column_stack([sim.t, sim.imu[:, 0]])
 
 
-def _run(
-    sim: SimResult, imu: np.ndarray | None, config: ImuGradeConfig = CONFIG
-) -> CascadeResult:
+def _run(sim: SimResult, imu: np.ndarray | None, config: ImuGradeConfig = CONFIG) -> CascadeResult:
     return run_cascade(
         sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, VEHICLE, imu=imu,
         imu_config=config,
