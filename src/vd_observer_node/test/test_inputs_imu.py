@@ -11,6 +11,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 from vd_observer_node.bag.reader import TopicArrays
 from vd_observer_node.bag.typestore import message_class, serialize
+from vd_observer_node.errors import ConfigurationError
+from vd_observer_node.estimation.imu_grade import ImuGradeConfig, imu_grade_config
 from vd_observer_node.inputs.decode import InputDecoder, decode_input
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import default_mapping, mapping_from_dict
@@ -92,6 +94,8 @@ def test_the_imu_is_optional_and_off_by_default() -> None:
             'needs the 3 axes',
         ),
         ({'type': 'std_msgs/msg/Float64MultiArray', 'indices': [0, 1]}, 'indices must list'),
+        ({'type': 'sensor_msgs/msg/Imu', 'fusion': {'bandwidth': 3.0}}, 'not a setting'),
+        ({'type': 'sensor_msgs/msg/Imu', 'fusion': [1.0]}, 'must map settings'),
     ],
 )
 def test_refusals(imu: dict[str, Any], match: str) -> None:
@@ -107,6 +111,21 @@ def test_refusals(imu: dict[str, Any], match: str) -> None:
                 }
             }
         )
+
+
+def test_the_mapping_carries_the_sensor_s_fusion_settings() -> None:
+    mapping = _mapping(
+        type='sensor_msgs/msg/Imu', fusion={'lag_compensation': False, 'tau': 0.2, 'step_tau': 0}
+    )
+    assert mapping.imu is not None
+    config = imu_grade_config(1e-6, mapping.imu.fusion)
+    assert config.lag_compensation is False
+    assert (config.tau, config.step_tau, config.pitch_compliance) == (0.2, 0.0, 1e-6)
+    assert imu_grade_config(0.0) == ImuGradeConfig()
+    negative = _mapping(type='sensor_msgs/msg/Imu', fusion={'tau': -1}).imu
+    assert negative is not None
+    with pytest.raises(ConfigurationError, match=r'imu\.tau'):
+        imu_grade_config(0.0, negative.fusion)
 
 
 def test_imu_and_accel_stamped_give_the_body_forward_specific_force() -> None:

@@ -124,8 +124,8 @@ PARAMS = [
     ParamSpec(
         'imu_noise_std',
         -1.0,
-        'publish the IMU (/vd/sensors/imu) with this noise per axis [m/s^2] and the '
-        "scenario's IMU bias and mounting (-1 = scenario setting)",
+        'publish the IMU (the imu topic of the sensors) with this noise per axis [m/s^2] '
+        "and the scenario's IMU bias and mounting (-1 = scenario setting)",
         low=-1.0,
         high=100.0,
     ),

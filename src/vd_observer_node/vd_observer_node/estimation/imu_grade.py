@@ -40,11 +40,12 @@ records.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
@@ -68,6 +69,7 @@ __all__ = [
     'SOURCE_IMU',
     'ImuGrade',
     'ImuGradeConfig',
+    'imu_grade_config',
     'imu_grade_step',
     'pitch_compliance',
     'vehicle_pitch_compliance',
@@ -79,7 +81,7 @@ FloatArray = NDArray[np.float64]
 SOURCE_FORCE: Final = 1
 #: bit of ``sources``: the IMU's specific force contributed
 SOURCE_IMU: Final = 2
-_ORDER: Final = 3  # stages of the grade's low-pass on (f_x, v)
+_ORDER: Final = 3  # stages of the grade's low-pass on (f_x, v) (the lead reads 3)
 _FIT_ORDER: Final = 2  # stages of the regression's low-pass on (f_x, v, F)
 _KMH_REFERENCE: Final = 160.0  # [km/h] speed scale of paper eq. 7 (as estimator_step)
 
@@ -125,12 +127,13 @@ GRADE_STATE: Final = np.dtype(
         ('step_stages', 'f8', (_ORDER, 2)),  # the short low-pass of (f_x, v), no lead
         ('step_prev', 'f8', (2, 2)),
         ('step_lp', LOWPASS_META),
+        ('step_accel', 'f8'),  # [m/s^2] its last dv/dt
+        ('accel', 'f8'),  # [m/s^2] the grade's filter's last dv/dt
         ('last_t', 'f8'),
         ('since', 'f8'),  # [s] the IMU's filters have run since this stamp (nan: stopped)
         ('bias', 'f8'),  # [-] learnt bias of the IMU's sine (b / g)
         ('bias_time', 'f8'),  # [s] of trusted stamps in the bias
         ('sine', 'f8'),  # last fused sine
-        ('grade', 'f8', (2,)),  # [m/s^2] last filtered f_x and dv/dt (nan: none)
         ('start', 'f8', (6,)),  # start-up sums: n, t, t^2, v, t v, f_x (see _collect)
         ('dropouts', 'i8'),
         ('saturated', 'i8'),
@@ -255,6 +258,22 @@ class ImuGradeConfig:
             raise ConfigurationError(f'imu.max_slope must be < pi/2, got {self.max_slope}')
 
 
+def imu_grade_config(
+    pitch_compliance: float, settings: tuple[tuple[str, float], ...] = ()
+) -> ImuGradeConfig:
+    """The settings of a vehicle (`vehicle_pitch_compliance`) and of a sensor (the input
+    mapping's ``imu.fusion``: field, value; the boolean fields as 0 or 1).
+
+    Raises:
+        ConfigurationError: a value out of its range (unknown fields the mapping rejects).
+    """
+    kinds = {f.name: f.type for f in dataclasses.fields(ImuGradeConfig)}
+    changes: dict[str, Any] = {
+        key: bool(value) if kinds.get(key) in (bool, 'bool') else value for key, value in settings
+    }
+    return ImuGradeConfig(pitch_compliance=pitch_compliance, **changes)
+
+
 def grade_params(
     config: ImuGradeConfig, gravity: float, mass: float, rolling_c0: float, rolling_c1: float
 ) -> np.record:
@@ -301,7 +320,6 @@ def imu_grade_reset(p: np.record, s: np.record) -> None:
     s.bias = 0.0
     s.bias_time = 0.0
     s.sine = 0.0
-    s.grade[:] = math.nan
     s.stepping = False
     s.dropouts = 0
     s.saturated = 0
@@ -472,7 +490,6 @@ def imu_grade_step(
         lowpass_reset(s.fit_lp)
         lowpass_reset(s.step_lp)
         s.since = math.nan
-        s.grade[:] = math.nan
         s.stepping = False
         _force_only(out, slope_force, force_valid)
         return
@@ -512,6 +529,14 @@ def imu_grade_step(
         for j in range(_FIT_ORDER):
             s.fit_stages[j, 1] = v_now - (j + 1) * p.fit_tau * v_rate
         dy[1] = dyf[1] = dys[1] = v_rate
+    elif dt <= 0.0:
+        # a repeated stamp: no time has passed, the filters hold (a derivative over no time
+        # would be 0, and the lead would take the step back as a rate)
+        y[:] = s.stages[-1]
+        yf[:] = s.fit_stages[-1]
+        ys[:] = s.step_stages[-1]
+        dy[1] = s.accel
+        dys[1] = s.step_accel
     else:
         xf[0] = x[0] = f_x
         xf[1] = x[1] = speed
@@ -524,6 +549,8 @@ def imu_grade_step(
         lowpass_update(p.step_tau, s.step_stages, s.step_prev, s.step_lp, dt, x, ys)
         lowpass_derivative(s.step_stages, s.step_prev, s.step_lp, dys)
     v_dot = dy[1]
+    s.step_accel = dys[1]
+    s.accel = v_dot
     out.accel = v_dot
     # forward only: the rolling resistance's sign is the speed's (and reversing is rare);
     # not before the filters have forgotten the force balance's value at their start
@@ -543,14 +570,13 @@ def imu_grade_step(
     scale = 1.0 + p.pitch_gain * m
     lagged = y[0] / scale - v_dot
     # the lead: a ramp through the stages lags by order tau; adding that times the rate
-    # makes the grade's filter (1 + order tau s) / (1 + tau s)^order, without lag on ramps
-    # (the rate of the filtered signals only: a step of the learnt bias or mass is no
-    # grade's rate)
-    rate = 0.0
-    if dt > 0.0 and not math.isnan(s.grade[0]):
-        rate = ((y[0] - s.grade[0]) / scale - (v_dot - s.grade[1])) / dt
-    s.grade[0] = y[0]
-    s.grade[1] = v_dot
+    # makes the grade's filter (1 + order tau s) / (1 + tau s)^order, without lag on ramps.
+    # The rate from the stages (each stage's rate is its input minus itself over tau), not
+    # by differencing the output: no noise from irregular stamps (a real log's 0.2 ms after
+    # 20 ms), and a step of the learnt bias or mass is no rate.
+    st = s.stages
+    rate = (st[1, 0] - st[2, 0]) / scale - (st[0, 1] - 2.0 * st[1, 1] + st[2, 1]) / p.tau
+    rate /= p.tau
     sine = (lagged + p.lead * rate - bias / scale) / p.gravity
     # a step of the grade: the lead overshoots it for a few tau, the short low-pass
     # (`step_tau`, no lead) has followed it; from where they differ by more than the short

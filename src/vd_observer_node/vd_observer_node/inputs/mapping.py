@@ -109,7 +109,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Final
 
@@ -123,6 +123,7 @@ from vd_common.topics import (
 
 from vd_observer_node.estimation.alignment import ALIGNMENTS
 from vd_observer_node.estimation.drivetrain import TORQUE_SOURCES
+from vd_observer_node.estimation.imu_grade import ImuGradeConfig
 from vd_observer_node.inputs.errors import MappingError
 
 __all__ = [
@@ -216,8 +217,11 @@ PER_RADIUS_UNITS: Final = frozenset({'m/s', 'km/h'})
 _PER_WHEEL: Final = frozenset({'wheel_angles', 'wheel_speeds', 'wheel_torques'})
 #: The settings of one input, in the order of a mapping file.
 INPUT_KEYS: Final = ('topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign')
-# speed_unit and gear_offset: engine_torque only; signal: brake only; mount_rpy_deg: imu only
-_KEYS: Final = frozenset((*INPUT_KEYS, 'speed_unit', 'gear_offset', 'signal', 'mount_rpy_deg'))
+# speed_unit and gear_offset: engine_torque only; signal: brake only; mount_rpy_deg and
+# fusion: imu only
+_KEYS: Final = frozenset(
+    (*INPUT_KEYS, 'speed_unit', 'gear_offset', 'signal', 'mount_rpy_deg', 'fusion')
+)
 
 
 @dataclass(frozen=True)
@@ -240,6 +244,9 @@ class InputSpec:
             Float64MultiArray with one element (already the forward specific force).
         gear_offset: ``engine_torque`` only: added to the logged gear.
         signal: ``brake`` only: 'pressure' or 'switch'.
+        fusion: ``imu`` only: settings of the IMU fusion for this sensor (field of
+            `estimation.imu_grade.ImuGradeConfig`, value), e.g. a vibrating phone-class
+            sensor's ``lag_compensation: false``.
     """
 
     name: str
@@ -254,6 +261,7 @@ class InputSpec:
     axis: tuple[float, ...] = ()
     gear_offset: int = 0
     signal: str = ''
+    fusion: tuple[tuple[str, float], ...] = ()
 
     @property
     def width(self) -> int:
@@ -410,6 +418,8 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         raise MappingError(f'{where}.speed_unit is for {ENGINE_INPUT} only')
     if 'mount_rpy_deg' in data and name != IMU_INPUT:
         raise MappingError(f'{where}.mount_rpy_deg is for {IMU_INPUT} only')
+    if 'fusion' in data and name != IMU_INPUT:
+        raise MappingError(f'{where}.fusion is for {IMU_INPUT} only')
     joints: tuple[str, ...] = ()
     indices: tuple[int, ...] = ()
     if msgtype == JOINT_STATE:
@@ -472,6 +482,7 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
                 f'{where}.mount_rpy_deg needs the 3 axes (indices of x, y, z), not one element'
             )
         axis = () if one_element else forward_axis(*angles)
+    fusion = _fusion(where, data.get('fusion', {}))
     return InputSpec(
         name=name,
         topic=topic,
@@ -485,7 +496,25 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         axis=axis,
         gear_offset=gear_offset,
         signal=signal,
+        fusion=fusion,
     )
+
+
+def _fusion(where: str, raw: Any) -> tuple[tuple[str, float], ...]:
+    """The ``imu.fusion`` settings: a mapping of `ImuGradeConfig` fields to numbers or
+    booleans (checked by the config when it is made)."""
+    if not isinstance(raw, dict):
+        raise MappingError(f'{where}.fusion must map settings to values')
+    known = {f.name for f in fields(ImuGradeConfig)} - {'pitch_compliance'}
+    items = []
+    for key, value in raw.items():
+        if key not in known:
+            raise MappingError(f'{where}.fusion.{key} is not a setting: {sorted(known)}')
+        if isinstance(value, bool):
+            items.append((str(key), float(value)))
+        else:
+            items.append((str(key), _number(f'{where}.fusion.{key}', value)))
+    return tuple(items)
 
 
 def forward_axis(roll: float, pitch: float, yaw: float) -> tuple[float, float, float]:

@@ -86,7 +86,7 @@ from vd_observer_node.estimation.differentiator import LevantGains
 from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import ERROR
-from vd_observer_node.estimation.imu_grade import ImuGradeConfig, vehicle_pitch_compliance
+from vd_observer_node.estimation.imu_grade import imu_grade_config, vehicle_pitch_compliance
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.rate_settings import RateMeter
 from vd_observer_node.estimation.vehicle import (
@@ -228,7 +228,7 @@ class PipelineNode(Node):
             # the IMU fusion, with the body's pitch under the ground force from a full file
             settings = replace(
                 settings,
-                imu=ImuGradeConfig(pitch_compliance=vehicle_pitch_compliance(vehicle_file)),
+                imu=imu_grade_config(vehicle_pitch_compliance(vehicle_file), mapping.imu.fusion),
             )
         # Builds (or loads from numba's disk cache) the compiled chain now, before any sample.
         self.chain = Chain(settings)

@@ -87,7 +87,7 @@ from vd_observer_node.estimation.estimator import (
 )
 from vd_observer_node.estimation.imu_grade import (
     SOURCE_FORCE,
-    ImuGradeConfig,
+    imu_grade_config,
     vehicle_pitch_compliance,
 )
 from vd_observer_node.estimation.observer import ObserverConfig
@@ -624,8 +624,9 @@ def replay_bag(
         )
     if mapping.imu is not None and 'imu_config' not in extra:
         # the body's pitch under the ground force, from a full vehicle file's springs
-        extra['imu_config'] = ImuGradeConfig(
-            pitch_compliance=vehicle_pitch_compliance(vehicle_file)
+        # and the sensor's own settings from the mapping
+        extra['imu_config'] = imu_grade_config(
+            vehicle_pitch_compliance(vehicle_file), mapping.imu.fusion
         )
     torque_kwargs: dict[str, Any] = {}
     if source != 'measured':  # the default call stays as it was (injected cascades)
