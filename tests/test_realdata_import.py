@@ -261,8 +261,8 @@ def test_the_real_drive_meets_its_plausibility_figures(tmp_path: Path) -> None:
     assert 0.45 < f['slope_valid_share'] < 0.73  # braking (27 % of the drive) is invalid
     assert f['force_rms_n'] < 200.0
     # With the windscreen IMU fused (issue 27): its grade covers the braking, and its bias
-    # (the device's -4.2 deg pitch) is learnt where the torque is known. Today 0.82 deg
-    # (bias +0.03) over every moving sample; without the torque the bias stays: 4.25 deg.
+    # (the device's -4.2 deg pitch) is learnt where the torque is known. Today 0.88 deg
+    # (bias +0.01) over every moving sample; without the torque the bias stays: 4.25 deg.
     config = REPO_ROOT / 'src' / 'vd_observer_node' / 'config'
     fused = module.evaluate(
         segment, config / 'replay_100hz_example.yaml', tmp_path / 'imu',
