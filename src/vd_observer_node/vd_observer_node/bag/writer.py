@@ -12,12 +12,15 @@ same bound holds for power loss. ``vd bag repair`` restores the summary and meta
 from __future__ import annotations
 
 import errno
+import functools
 import itertools
 import os
 import struct
 import time
 import zlib
+from collections import deque
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
@@ -68,6 +71,8 @@ _MESSAGE_DTYPE = np.dtype(
     ]
 )  # unaligned: the same 31 bytes as _MESSAGE_HEAD
 _DISK_FULL = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
+# Chunks a background writer may hold before the producer waits (about 16 MB uncompressed).
+_MAX_PENDING = 64
 
 
 @dataclass
@@ -104,6 +109,12 @@ class BagWriter:
         clock: monotonic clock [s] for the chunk age, injectable for tests.
         file_name: MCAP file name inside the folder; default ``<folder name>_0.mcap`` like
             rosbag2.
+        background: compress, checksum and write the chunks on a thread of their own
+            (offline tools: zstd, zlib and the file write release the GIL, so they run on a
+            second core while the caller builds the next chunks). The file is the same byte
+            for byte; a write error is raised by the next call after it (or by
+            :meth:`close`). A recorder keeps the default, so a chunk is in the file when
+            :meth:`flush` returns.
 
     Raises:
         BagExistsError: ``path`` exists and is not an empty folder.
@@ -120,6 +131,7 @@ class BagWriter:
         fsync: bool = False,
         clock: Callable[[], float] = time.monotonic,
         file_name: str | None = None,
+        background: bool = False,
     ) -> None:
         if compression not in ('zstd', ''):
             raise BagUsageError(f"compression must be 'zstd' or '', not {compression!r}")
@@ -147,6 +159,9 @@ class BagWriter:
         self._file = self._create()
         self._write_out(fmt.MAGIC + fmt.encode_header('ros2', _LIBRARY))
         self._file.flush()
+        # one worker: the jobs run in the order they were given, as the file needs
+        self._worker = ThreadPoolExecutor(1, 'bag-writer') if background else None
+        self._pending: deque[Future[None]] = deque()
 
     # -- creation and raw output ---------------------------------------------------------
 
@@ -175,6 +190,10 @@ class BagWriter:
         self._crc = zlib.crc32(data, self._crc)
         self._offset += len(data)
 
+    def _write_synced(self, data: bytes) -> None:
+        self._write_out(data)
+        self._sync()
+
     def _sync(self) -> None:
         try:
             self._file.flush()
@@ -189,8 +208,36 @@ class BagWriter:
     def _check_open(self) -> None:
         if self._closed:
             raise BagUsageError(f'{self.path}: writer is closed')
+        self._collect(keep=_MAX_PENDING)
         if self._failed:
             raise BagUsageError(f'{self.path}: writer failed earlier; run `vd bag repair`')
+
+    def _output(self, job: Callable[[], None]) -> None:
+        """Run one piece of file output now, or queue it on the background worker."""
+        if self._worker is None:
+            job()
+            return
+        self._pending.append(self._worker.submit(job))
+        self._collect(keep=_MAX_PENDING)
+
+    def _collect(self, keep: int) -> None:
+        """Forget the finished background jobs, waiting until at most `keep` are left.
+
+        Raises:
+            BagError: the first job that failed (the rest are cancelled).
+        """
+        pending = self._pending
+        while pending and (len(pending) > keep or pending[0].done()):
+            error = pending.popleft().exception()  # waits for the job if it runs
+            if error is not None:
+                self._cancel_pending()
+                raise error
+
+    def _cancel_pending(self) -> None:
+        self._failed = True
+        for job in self._pending:
+            job.cancel()
+        self._pending.clear()
 
     # -- topics ------------------------------------------------------------------------------
 
@@ -243,8 +290,7 @@ class BagWriter:
         self._channel_records.append(channel)
         self._topics[name] = _Topic(channel_id, name, msgtype, qos)
         # Straight to the file, outside chunks, so a repair finds every topic declared so far.
-        self._write_out(out + channel)
-        self._sync()
+        self._output(functools.partial(self._write_synced, out + channel))
 
     @property
     def topics(self) -> dict[str, str]:
@@ -362,6 +408,15 @@ class BagWriter:
         index: dict[int, list[tuple[int, int]]] | dict[int, bytes],
     ) -> None:
         """Write one chunk of message records and its per-channel message indexes."""
+        self._output(functools.partial(self._write_chunk, raw, start_ns, end_ns, index))
+
+    def _write_chunk(
+        self,
+        raw: bytes | memoryview,
+        start_ns: int,
+        end_ns: int,
+        index: dict[int, list[tuple[int, int]]] | dict[int, bytes],
+    ) -> None:
         compressed = self._compressor.compress(raw) if self._compressor else bytes(raw)
         chunk_record = fmt.encode_chunk(start_ns, end_ns, raw, self._compression, compressed)
         chunk_offset = self._offset
@@ -523,10 +578,13 @@ class BagWriter:
             return
         if self._failed:
             self._closed = True
+            self._stop_worker()
             self._file.close()
             return
         try:
             self.flush()
+            self._collect(keep=0)  # every chunk in the file before the summary
+            self._stop_worker()
             summary = self.summary()
             metadata_offset = self._offset
             metadata_record = fmt.encode_metadata(
@@ -576,9 +634,18 @@ class BagWriter:
         except OSError as exc:
             raise BagPathError(f'{self.path}: cannot finish bag: {exc.strerror or exc}') from exc
         finally:
+            self._stop_worker()
             if not self._file.closed:
                 self._file.close()
             self._closed = True
+
+    def _stop_worker(self) -> None:
+        if self._worker is not None:
+            for job in self._pending:  # only after a failure: the output stops there
+                job.cancel()
+            self._pending.clear()
+            self._worker.shutdown(wait=True)
+            self._worker = None
 
     def __enter__(self) -> BagWriter:
         return self

@@ -64,6 +64,7 @@ from vd_observer_node.bag.alerts_cdr import encode_alerts_packed
 from vd_observer_node.bag.cdr_batch import encode_packed, upgrade_batch
 from vd_observer_node.bag.errors import BagExistsError, ReplayInputError
 from vd_observer_node.bag.packed import PackedMessages, PackedParts
+from vd_observer_node.bag.read_ahead import read_ahead
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.errors import ConfigurationError
@@ -736,11 +737,13 @@ def _stream(
         _OutOfOrderError: the bag's files are not in log-time order (with more than one block).
     """
     topics = reader.topics
-    with BagWriter(out_bag) as writer:
+    with BagWriter(out_bag, background=True) as writer:
         merged = _MergedWriter(writer, topics, len(raw_topics), bar)
         for topic in raw_topics:
             merged.declare(topic, topics[topic].msgtype)
-        for arrays in reader.topic_array_blocks(raw_topics, block_messages=block_messages):
+        # the next block is read on a thread while this one runs (bag.read_ahead)
+        blocks = reader.topic_array_blocks(raw_topics, block_messages=block_messages)
+        for arrays in read_ahead(blocks):
             bar.update(sum(len(a.datas) for a in arrays.values()))
             for topic in raw_topics:
                 arr = arrays.get(topic)
