@@ -33,6 +33,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -741,10 +742,12 @@ def _stream(
         merged = _MergedWriter(writer, topics, len(raw_topics), bar)
         for topic in raw_topics:
             merged.declare(topic, topics[topic].msgtype)
-        # the next block is read on a thread while this one runs (bag.read_ahead)
-        blocks = reader.topic_array_blocks(raw_topics, block_messages=block_messages)
-        for arrays in read_ahead(blocks):
-            bar.update(sum(len(a.datas) for a in arrays.values()))
+        # what the blocks before left to write: written while the next block's cascade runs
+        before: int | None = None
+
+        def write_before(arrays: Mapping[str, TopicArrays]) -> None:
+            if before is not None:
+                merged.flush(before)
             for topic in raw_topics:
                 arr = arrays.get(topic)
                 if arr is not None:
@@ -752,12 +755,17 @@ def _stream(
                     # layout, so the output holds one definition per type
                     datas = upgrade_batch(arr.msgtype, arr.decoding_type, arr.datas)
                     merged.add(topic, arr.msgtype, arr.log_time_ns, datas)
-            run.block(arrays, merged, phase, final=False)
+
+        # the next block is read on a thread while this one runs (bag.read_ahead)
+        blocks = reader.topic_array_blocks(raw_topics, block_messages=block_messages)
+        for arrays in read_ahead(blocks):
+            bar.update(sum(len(a.datas) for a in arrays.values()))
+            run.block(arrays, merged, phase, final=False, meanwhile=partial(write_before, arrays))
             # what comes next is logged at or after the newest log time read (bags are in
             # log-time order; checked by `merged.add`), the estimates of the carried stamps at
             # their wheel message's log time: everything before both is final
-            merged.flush(min(run.carried_log_ns(), merged.newest_ns))
-        run.block({}, merged, phase, final=True)
+            before = min(run.carried_log_ns(), merged.newest_ns)
+        run.block({}, merged, phase, final=True, meanwhile=partial(write_before, {}))
         merged.flush(None)
     return merged.written
 
@@ -890,6 +898,27 @@ class _GapStats:
         )
 
 
+def _on_thread(work: Callable[[], None], meanwhile: Callable[[], None], name: str) -> None:
+    """Run `work` on a thread of its own while `meanwhile` runs on this one; both are done
+    when this returns. An error of `meanwhile` is raised first, then one of `work`."""
+    failure: list[BaseException] = []
+
+    def guarded() -> None:
+        try:
+            work()
+        except BaseException as exc:  # re-raised on the caller's thread after the join
+            failure.append(exc)
+
+    worker = threading.Thread(target=guarded, name=name)
+    worker.start()
+    try:
+        meanwhile()
+    finally:
+        worker.join()
+    if failure:
+        raise failure[0]
+
+
 class _Run:
     """The replay's state from block to block: alignment, cascade, monitor and the totals."""
 
@@ -1015,8 +1044,15 @@ class _Run:
         phase: Any,
         *,
         final: bool,
+        meanwhile: Callable[[], None] | None = None,
     ) -> None:
-        """Decode, align, run and encode one block; hand its estimates to `merged`."""
+        """Decode, align, run and encode one block; hand its estimates to `merged`.
+
+        Args:
+            meanwhile: work of the caller's that does not touch this run (writing what the
+                blocks before gave): done on this thread while the compiled cascade, which
+                releases the GIL, runs on a second one.
+        """
         used = self.used
         decoded = [self._decode(s, arrays) for s in used]
         for gaps, d in zip(self.gaps, decoded, strict=True):
@@ -1074,24 +1110,32 @@ class _Run:
                 **part,
             )
 
-        meter = self.wheel_meter
-        k = meter.size - meter.count if meter is not None else n + 1
-        if meter is None or k > n:
-            result = run(slice(0, n))
+        def cascade() -> None:
+            meter = self.wheel_meter
+            k = meter.size - meter.count if meter is not None else n + 1
+            if meter is None or k > n:
+                result = run(slice(0, n))
+            else:
+                # the settings left to the rate follow it after the FOLLOW_AFTER-th stamp, as
+                # the live nodes do (rate_settings)
+                result = run(slice(0, k))
+                meter.add_many(common[:k])
+                self._follow_rate(meter.stamps)
+                if k < n:
+                    result = _joined(result, run(slice(k, n)))
+            if meter is not None and self.wheel_meter is not None:
+                meter.add_many(common)
+            self.cascade_time += time.perf_counter() - cascade_start
+            self.result = result
+            self.samples += n
+            self.torque_valid += int(np.count_nonzero(result.torque_valid))
+
+        if meanwhile is None:
+            cascade()
         else:
-            # the settings left to the rate follow it after the FOLLOW_AFTER-th stamp, as
-            # the live nodes do (rate_settings)
-            result = run(slice(0, k))
-            meter.add_many(common[:k])
-            self._follow_rate(meter.stamps)
-            if k < n:
-                result = _joined(result, run(slice(k, n)))
-        if meter is not None and self.wheel_meter is not None:
-            meter.add_many(common)
-        self.cascade_time += time.perf_counter() - cascade_start
-        self.result = result
-        self.samples += n
-        self.torque_valid += int(np.count_nonzero(result.torque_valid))
+            _on_thread(cascade, meanwhile, 'replay-cascade')
+        result = self.result
+        assert result is not None  # set by cascade()
         braked = brake is not None
         if (engine is not None or braked) and result.wheel_torque_used.shape[0] == n:
             # the situation monitor gets the torques the engine path and brakes gave the estimator
@@ -1099,30 +1143,21 @@ class _Run:
             given = result.wheel_torque_used
             wheel_torque = np.where(np.isfinite(given), given, 0.0)
         situation_values: dict[str, dict[str, np.ndarray]] = {}
-        failure: list[BaseException] = []
 
-        def run_monitor() -> None:
+        def situation() -> None:
             situation_start = time.perf_counter()
-            try:
-                situation_values.update(
-                    situation_topics(
-                        wheel_angle, body_speed, wheel_torque, result, self.monitor, phase.update
-                    )
+            situation_values.update(
+                situation_topics(
+                    wheel_angle, body_speed, wheel_torque, result, self.monitor, phase.update
                 )
-            except BaseException as exc:  # re-raised by the caller after the join
-                failure.append(exc)
+            )
             self.situation_time += time.perf_counter() - situation_start
 
-        worker = None
-        if self.monitor is not None:
-            # The compiled monitor releases the GIL: it runs on the second core while this
-            # thread encodes the cascade's topics.
-            worker = threading.Thread(target=run_monitor, name='replay-monitor')
-            worker.start()
         log_ns = picked[0]['log']
         # the sensor's angles as the observer node publishes them; with speeds, the observer's
         observed = result.angle if self.mapping.wheel_input == 'speed' else wheel_angle
-        try:
+
+        def encode() -> None:
             for topic, values in estimate_topics(result, observed, self.estimator_config).items():
                 datas = encode_packed(ESTIMATE_TOPICS[topic], common, frame_id, values)
                 merged.add(topic, ESTIMATE_TOPICS[topic], log_ns, datas)
@@ -1131,11 +1166,13 @@ class _Run:
                 msgtype = ESTIMATE_TOPICS[ESTIMATES_TORQUE_OFFSET]
                 datas = encode_packed(msgtype, common[changed], frame_id, values)
                 merged.add(ESTIMATES_TORQUE_OFFSET, msgtype, log_ns[changed], datas)
-        finally:
-            if worker is not None:
-                worker.join()
-        if failure:
-            raise failure[0]
+
+        if self.monitor is None:
+            encode()
+        else:
+            # The compiled monitor releases the GIL: it runs on the second core while this
+            # thread encodes the cascade's topics.
+            _on_thread(situation, encode, 'replay-monitor')
         if n == 0:  # a block that aligned no stamp (a headerless input held, 'exact')
             situation_values.clear()
         for topic, values in situation_values.items():
