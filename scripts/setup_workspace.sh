@@ -139,7 +139,8 @@ fi
 kernels_stamp="$root/install/.vd-kernels-$src_hash"
 if [ ! -f "$kernels_stamp" ]; then
   log "compiling the kernels"
-  (set +u && . ./env.sh && python -m vd_observer_node.chain) >&2
+  (set +u && . ./env.sh && python -m vd_observer_node.chain \
+    && python -m vd_observer_node.bag.copy_kernel) >&2
   rm -f "$root"/install/.vd-kernels-*
   touch "$kernels_stamp"
 fi

@@ -44,7 +44,7 @@ from vd_observer_node.bag.metadata import (
     render_metadata,
     write_metadata,
 )
-from vd_observer_node.bag.packed import PackedMessages, PackedParts, windows
+from vd_observer_node.bag.packed import PackedMessages, PackedParts
 from vd_observer_node.bag.typestore import message_definition, type_hash
 
 __all__ = [
@@ -504,12 +504,16 @@ class BagWriter:
         heads['sequence'] = sequence & 0xFFFFFFFF
         heads['log'] = log
         heads['publish'] = pub
-        # Every 31-byte record head, then every message's bytes, copied into place with one
-        # numpy operation each (per distinct message length): no Python object per message.
+        # Every 31-byte record head, then every message's bytes, copied into place by one
+        # compiled loop each (per part): no Python object per message.
         out = np.empty(int(ends[-1]), dtype=np.uint8)
-        head_bytes = np.dtype((np.void, _MESSAGE_HEAD.size))
-        windows(out, _MESSAGE_HEAD.size)[starts] = heads.view(head_bytes)
-        packed.scatter_into(out, starts + _MESSAGE_HEAD.size)
+        # compiled: numba is loaded by the offline tools that write this way anyway
+        from vd_observer_node.bag.copy_kernel import copy_ranges
+
+        size = _MESSAGE_HEAD.size
+        head_at = np.arange(n, dtype=np.int64) * size
+        copy_ranges(out, starts, heads.view(np.uint8), head_at, np.full(n, size, np.int64))
+        packed.scatter_into(out, starts + size, copy_ranges)
         records = out.data  # chunks are compressed and CRC'd from it, not copied
         # A new chunk starts at the first message beginning past each chunk_size multiple.
         bucket = starts // self._chunk_size
