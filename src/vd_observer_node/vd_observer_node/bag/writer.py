@@ -71,6 +71,10 @@ _MESSAGE_DTYPE = np.dtype(
     ]
 )  # unaligned: the same 31 bytes as _MESSAGE_HEAD
 _DISK_FULL = {errno.ENOSPC, errno.EDQUOT, errno.EFBIG}
+# zstd level 1, not 3: on a replay's output (200 MB of records in 256 kB chunks) 0.25 s
+# instead of 0.60 s of compression for a ratio of 5.22 instead of 5.23; on the simulator's
+# sensor bag 4.23 instead of 4.33.
+_ZSTD_LEVEL = 1
 # Chunks a background writer may hold before the producer waits (about 16 MB uncompressed).
 _MAX_PENDING = 64
 
@@ -142,7 +146,7 @@ class BagWriter:
         self._chunk_size = chunk_size
         self._chunk_duration_s = chunk_duration_s
         self._compression = compression
-        self._compressor = zstandard.ZstdCompressor(level=3) if compression else None
+        self._compressor = zstandard.ZstdCompressor(level=_ZSTD_LEVEL) if compression else None
         self._fsync = fsync
         self._clock = clock
         self._topics: dict[str, _Topic] = {}
