@@ -787,10 +787,9 @@ class _MergedWriter:
         self._names: list[str] = []
         self._index: dict[str, int] = {}
         self._counts: list[int] = []
-        self._log: list[np.ndarray] = []
-        self._which: list[np.ndarray] = []
-        self._seq: list[np.ndarray] = []
-        self._datas: list[PackedMessages] = []
+        # the held messages, one entry per topic and `add` (each in its order): topic index,
+        # log times [ns], sequence numbers within the topic, the messages
+        self._held: list[tuple[int, np.ndarray, np.ndarray, PackedMessages]] = []
         self.newest_ns = -1  # [ns] newest log time of an input or truth message added
         self._flushed = -1  # [ns] everything logged before this was written
         self.written = 0
@@ -817,37 +816,40 @@ class _MergedWriter:
         log = np.asarray(log_ns, dtype=np.int64)
         if k < self._raw and n and int(log.min()) < self._flushed:
             raise _OutOfOrderError(topic)
-        self._log.append(log)
-        self._which.append(np.full(n, k, dtype=np.int64))
-        self._seq.append(np.arange(self._counts[k], self._counts[k] + n, dtype=np.int64))
-        self._datas.append(PackedMessages.from_list(datas))
+        seq = np.arange(self._counts[k], self._counts[k] + n, dtype=np.int64)
+        self._held.append((k, log, seq, PackedMessages.from_list(datas)))
         self._counts[k] += n
         if k < self._raw and n:
             self.newest_ns = max(self.newest_ns, int(log.max()))
 
     def flush(self, before_ns: int | None) -> None:
         """Write the held messages logged before `before_ns` [ns] (None: all), in order."""
-        if not self._log:
+        if not self._held:
             return
-        log = np.concatenate(self._log)
-        which = np.concatenate(self._which)
-        seq = np.concatenate(self._seq)
+        # In topic order, each topic's messages in their order: a stable sort by log time
+        # then orders by (log time, topic, sequence), and finds the held runs already sorted.
+        held = sorted(self._held, key=lambda entry: (entry[0], entry[2][:1].tolist()))
+        log = np.concatenate([entry[1] for entry in held])
+        which = np.concatenate([np.full(entry[1].size, entry[0], np.int64) for entry in held])
+        seq = np.concatenate([entry[2] for entry in held])
         ready = np.ones(len(log), dtype=bool) if before_ns is None else log < before_ns
         if before_ns is not None:
             self._flushed = max(self._flushed, before_ns)
         order = np.flatnonzero(ready)
-        order = order[np.lexsort((seq[order], which[order], log[order]))]
+        order = order[np.argsort(log[order], kind='stable')]
         # everything held, as it is (one buffer per topic and block); the writer copies the
-        # selected messages from there into its chunks with numpy
-        datas = PackedParts.join(self._datas)
+        # selected messages from there into its chunks
+        datas = PackedParts.join([entry[3] for entry in held])
         for start in range(0, len(order), _WRITE_BLOCK):
             sel = order[start : start + _WRITE_BLOCK]
             self._writer.write_interleaved(self._names, which[sel], datas.take(sel), log[sel])
             self._bar.update(int(np.count_nonzero(which[sel] < self._raw)))
         self.written += len(order)
-        rest = np.flatnonzero(~ready)
-        self._log, self._which, self._seq = [log[rest]], [which[rest]], [seq[rest]]
-        self._datas = [datas.take(rest).compact()]
+        rest = np.flatnonzero(~ready)  # in topic order, each topic's in its order
+        self._held = []
+        for k in np.unique(which[rest]).tolist():
+            mine = rest[which[rest] == k]
+            self._held.append((k, log[mine], seq[mine], datas.take(mine).compact()))
 
 
 class _GapStats:
