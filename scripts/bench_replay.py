@@ -11,11 +11,19 @@
 3. Offline replay of a synthetic drive: full (real cascade) and bag pipeline only (a null
    cascade), as real-time factor and sensor messages per second (goal: >= 100x, >= 100 k/s),
    from wall time and from process CPU time (meaningful on a loaded machine).
+4. The ``vd replay`` command as a user runs it (issue 30's figure): wall clock from the
+   process start to its end, Python start-up, imports and loading the cached kernels
+   included, on a 1 s bag (the start-up alone) and on bags of ``--command-durations``
+   seconds, ``--command-runs`` each, with the load average at the start (figures taken at a
+   load above ~1.5 on 2 cores are not figures).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import resource
+import subprocess
 import sys
 import tempfile
 import time
@@ -174,16 +182,55 @@ def bench_replay(folder: Path, seconds: float, rate: float) -> None:
             )
 
 
+def _children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def bench_command(folder: Path, durations: list[float], rate: float, runs: int) -> None:
+    """`vd replay` as a process, start to end, on bags of each duration [s]."""
+    print(f'== the vd replay command, wall clock start to end, {rate:.0f} Hz, {runs} runs each')
+    command = [sys.executable, '-m', 'vd_observer_node.tools.cli', 'replay', '--no-progress']
+    for seconds in [1.0, *durations]:
+        bag = folder / f'command_{seconds:g}'
+        write_synthetic_drive_bag(bag, seconds, rate)
+        walls, cpus = [], []
+        load = os.getloadavg()[0]
+        for k in range(runs):
+            out = folder / f'command_out_{seconds:g}_{k}'
+            cpu_start = _children_cpu()
+            start = time.perf_counter()
+            subprocess.run([*command, str(bag), str(out)], check=True, capture_output=True)
+            walls.append(time.perf_counter() - start)
+            cpus.append(_children_cpu() - cpu_start)
+        label = 'start-up (1 s bag)' if seconds == 1.0 else f'{seconds:.0f} s bag'
+        print(
+            f'  {label}: wall {min(walls):.2f}-{max(walls):.2f} s '
+            f'({seconds / max(walls):.0f}-{seconds / min(walls):.0f}x real time), CPU '
+            f'{min(cpus):.2f}-{max(cpus):.2f} s, load average {load:.2f} at the start'
+        )
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--duration', type=float, default=20.0, help='data seconds')
     parser.add_argument('--rate', type=float, default=1000.0, help='sensor rate [Hz]')
+    parser.add_argument(
+        '--command-durations',
+        type=float,
+        nargs='*',
+        default=[150.0, 600.0],
+        help='bag lengths [s] for the vd replay command (none: skip section 4)',
+    )
+    parser.add_argument('--command-runs', type=int, default=3, help='runs per bag')
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix='vd-bench-') as tmp:
         folder = Path(tmp)
         demo = bench_writer(folder, args.duration, args.rate)
         bench_reader(demo)
         bench_replay(folder, args.duration, args.rate)
+        if args.command_durations:
+            bench_command(folder, args.command_durations, args.rate, args.command_runs)
     return 0
 
 

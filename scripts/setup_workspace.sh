@@ -114,6 +114,11 @@ if [ ! -f "$build_stamp" ]; then
       log "colcon build failed; full log: log/colcon-build.txt"
       exit 1
     }
+  # Byte-compile what colcon installed, as a setuptools install normally does: where
+  # PYTHONDONTWRITEBYTECODE is set (container images set it) every `vd` and node start would
+  # otherwise compile our ~200 modules from source again (~0.15 s of each `vd replay`).
+  "$venv/bin/python" -m compileall -q -j 0 "$root"/install/*/lib/python*/site-packages \
+    >/dev/null
   touch "$build_stamp"
 fi
 
@@ -134,7 +139,8 @@ fi
 kernels_stamp="$root/install/.vd-kernels-$src_hash"
 if [ ! -f "$kernels_stamp" ]; then
   log "compiling the kernels"
-  (set +u && . ./env.sh && python -m vd_observer_node.chain) >&2
+  (set +u && . ./env.sh && python -m vd_observer_node.chain \
+    && python -m vd_observer_node.bag.copy_kernel) >&2
   rm -f "$root"/install/.vd-kernels-*
   touch "$kernels_stamp"
 fi

@@ -20,7 +20,8 @@ OBSERVER_LAYERS: dict[str, set[str]] = {
     # numba's decorator with the project's settings (kernel/_jit.py): what every concept's
     # step functions are compiled with, so the rooms that compute may use it
     'jit': set(),
-    'bag': {'errors'},
+    # the offline writer's compiled byte copy (bag/copy_kernel.py)
+    'bag': {'errors', 'jit'},
     'estimation': {'errors', 'jit'},
     'situation': {'errors', 'jit', 'estimation'},
     'inputs': {'errors', 'bag', 'estimation'},

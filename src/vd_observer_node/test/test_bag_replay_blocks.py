@@ -183,3 +183,30 @@ def test_a_failed_replay_leaves_no_output(vd_bag: Path, tmp_path: Path) -> None:
     assert not (tmp_path / 'out').exists()
     with pytest.raises(ConfigurationError, match='block_messages'):
         replay_bag(vd_bag, tmp_path / 'out', progress=False, block_messages=0)
+
+
+def test_a_write_failing_while_the_cascade_runs_leaves_no_output(
+    vd_bag: Path, tmp_path: Path, monkeypatch: Any
+) -> None:
+    """The blocks before are written while the next block's cascade runs on a thread: an
+    error there (a full disk) ends the replay with that error, as it did in sequence."""
+    import threading
+
+    from vd_observer_node.bag import BagDiskFullError
+    from vd_observer_node.tools import replay as replay_module
+
+    real_flush = replay_module._MergedWriter.flush
+    calls = {'n': 0}
+
+    def failing_flush(self: Any, before_ns: int | None) -> None:
+        calls['n'] += 1
+        if calls['n'] == 3:
+            raise BagDiskFullError('disk full (test)')
+        real_flush(self, before_ns)
+
+    monkeypatch.setattr(replay_module._MergedWriter, 'flush', failing_flush)
+    with pytest.raises(BagDiskFullError, match='disk full'):
+        replay_bag(vd_bag, tmp_path / 'out', progress=False, block_messages=TINY)
+    assert calls['n'] == 3
+    assert not (tmp_path / 'out').exists()
+    assert not [t for t in threading.enumerate() if t.name.startswith(('replay-', 'bag-'))]

@@ -12,12 +12,16 @@ that is one operation per topic.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from typing import Any, overload
 
 import numpy as np
 
-__all__ = ['PackedMessages', 'PackedParts', 'scatter', 'windows']
+__all__ = ['PackedMessages', 'PackedParts', 'Scatter', 'scatter', 'windows']
+
+#: A function copying message k to ``out[at[k]:]``: (out, at, src, starts, lengths), the
+#: signature of :func:`scatter` and of the compiled `.copy_kernel.copy_ranges`.
+Scatter = Callable[[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray], None]
 
 
 def windows(buf: np.ndarray, width: int) -> np.ndarray:
@@ -145,9 +149,9 @@ class PackedMessages(Sequence[bytes]):
         """The messages at ``index`` (offsets selected, bytes shared)."""
         return PackedMessages(self.data, self.starts[index], self.lengths[index])
 
-    def scatter_into(self, out: np.ndarray, at: np.ndarray) -> None:
-        """Copy message k to ``out[at[k]:]`` (see :func:`scatter`)."""
-        scatter(out, at, self.array, self.starts, self.lengths)
+    def scatter_into(self, out: np.ndarray, at: np.ndarray, copy: Scatter = scatter) -> None:
+        """Copy message k to ``out[at[k]:]`` with `copy` (default :func:`scatter`)."""
+        copy(out, at, self.array, self.starts, self.lengths)
 
     def __len__(self) -> int:
         return int(self.starts.size)
@@ -227,7 +231,9 @@ class PackedParts(Sequence[bytes]):
         if self._groups is None:
             self._groups = []
             if self.part.size:
-                order = np.argsort(self.part, kind='stable')
+                # with fewer than 2**16 parts a 16-bit key: numpy sorts it by radix
+                key = self.part.astype(np.uint16) if len(self.parts) <= 2**16 else self.part
+                order = np.argsort(key, kind='stable')
                 bounds = np.flatnonzero(np.diff(self.part[order])) + 1
                 self._groups = [(int(self.part[m[0]]), m) for m in np.split(order, bounds)]
         return self._groups
@@ -236,12 +242,13 @@ class PackedParts(Sequence[bytes]):
         """The messages at ``index`` (no bytes copied)."""
         return PackedParts(self.parts, self.part[index], self.row[index])
 
-    def scatter_into(self, out: np.ndarray, at: np.ndarray) -> None:
-        """Copy message k to ``out[at[k]:]``, part by part (see :func:`scatter`)."""
+    def scatter_into(self, out: np.ndarray, at: np.ndarray, copy: Scatter = scatter) -> None:
+        """Copy message k to ``out[at[k]:]``, part by part, with `copy` (default
+        :func:`scatter`)."""
         for j, members in self._members():
             source = self.parts[j]
             rows = self.row[members]
-            scatter(out, at[members], source.array, source.starts[rows], source.lengths[rows])
+            copy(out, at[members], source.array, source.starts[rows], source.lengths[rows])
 
     def compact(self) -> PackedMessages:
         """The messages back to back in one new buffer."""

@@ -159,7 +159,8 @@ class EstimatorConfig:
         max_mu: |mu| above this [-] is implausible for a tyre on a road: mu is flagged
             invalid (and counted as 'mu_out_of_range'); must be > 0.
         mass_adaptation: estimate the mass online (measured torques only) and use it, once
-            converged, for Fz, mu, rolling resistance and the slope; False: the file's mass.
+            its standard deviation is within ``mass.use_std_ratio`` (or it has converged),
+            for Fz, mu, rolling resistance and the slope; False: the file's mass.
         mass: settings of the online mass estimator (flat keys ``mass.<name>`` in
             `from_mapping` and as node parameters).
         radius_adaptation: estimate the effective rolling radius online from the free-rolling

@@ -292,6 +292,12 @@ def _online_mass(
     holds); while it waits for the radius it is not called."""
     if p.mass_on and not waiting:
         m = s.mass_s
+        if p.radius_on:
+            # Fx is T/R_used: the mass carries R_used's error, the squared distance to the
+            # radius estimate plus that estimate's variance (relative)
+            r_used = est.radius_used
+            bias = est.radius - r_used
+            m.scale_var = (bias * bias + est.radius_std * est.radius_std) / (r_used * r_used)
         clamped = m.counts[_M_CLAMPED]
         mass_update(p.mass_p, m, t, sum_fx if ok else math.nan, v)
         if m.counts[_M_CLAMPED] != clamped:

@@ -29,8 +29,9 @@ with ideal sensors. So the grade is given a memory of ``grade_tau`` seconds by
 
 and the grade is then taken from the level with the current mass, fast:
 ``sin(alpha) = (F / m_used - y) / g``, low-passed by two first-order stages of
-``filter_tau`` (as the estimator's slope). ``m_used`` is the estimated mass once it has
-converged and the nominal mass before, so before convergence the slope is the estimator's.
+``filter_tau`` (as the estimator's slope). ``m_used`` is the estimated mass once its
+standard deviation is within ``use_std_ratio`` (10 %: after the first excitation) or it has
+converged, and the nominal mass before.
 
 Excitation. 1/m is observable only from force changes faster than ``grade_tau`` (a throttle
 step, a gear change, a braking). The mass is updated (and forgotten) only where
@@ -214,8 +215,14 @@ class MassGradeConfig:
         mass_min_ratio: lower bound of the mass / nominal mass, [-].
         mass_max_ratio: upper bound of the mass / nominal mass, [-].
         converged_std_ratio: converged once the mass standard deviation / mass is below
-            this ... [-]
+            this ... [-] (1 %: two standard deviations within 2 %)
         min_excited_time: ... after at least this much excited driving, [s].
+        use_std_ratio: ``mass_used`` is the estimate (not the nominal mass) from the first
+            stamp at which its standard deviation / mass is at most this, before it has
+            converged (latched until a reset), [-]; 0: only once converged. The estimate is
+            the posterior mean of the nominal prior and what was learnt, so from its first
+            excitation it is a better mass than the nominal one; the slope, Fz and mu no
+            longer carry the whole load error until the converged flag.
         max_slope: |alpha| bound of the published slope, [rad].
         max_gap: a gap longer than this, or a stamp older by more than this, resets, [s].
     """
@@ -233,8 +240,9 @@ class MassGradeConfig:
     max_force_rate: float = 1.0
     mass_min_ratio: float = 0.7
     mass_max_ratio: float = 2.0
-    converged_std_ratio: float = 0.02
-    min_excited_time: float = 5.0
+    converged_std_ratio: float = 0.01
+    min_excited_time: float = 1.0
+    use_std_ratio: float = 0.1
     max_slope: float = 0.5
     max_gap: float = 0.5
 
@@ -282,10 +290,12 @@ class MassGradeEstimate:
 
     Attributes:
         mass: estimated mass, [kg] (the nominal mass until the first excitation).
-        mass_std: its standard deviation, [kg] (delta method from the variance of 1/m).
+        mass_std: its standard deviation, [kg] (delta method from the variance of 1/m, and
+            in the estimator the radius's relative uncertainty: `mass_grade_step`).
         converged: the mass estimate is trusted (latched until a reset).
-        mass_used: ``mass`` once converged, the nominal mass before, [kg]: what Fz, mu,
-            rolling resistance and the slope should use.
+        mass_used: ``mass`` once converged or once its standard deviation is within
+            ``use_std_ratio``, the nominal mass before, [kg]: what Fz, mu, rolling resistance
+            and the slope should use.
         excited: this stamp updated the mass.
         slope: published road slope, [rad], positive uphill (held where invalid).
         slope_valid: ``|v| >= slope_min_speed`` and ``|slope| <= max_slope``.
@@ -325,6 +335,7 @@ def mass_params(vehicle: EstimatorVehicle, config: MassGradeConfig) -> np.record
     p.theta_max = 1.0 / (vehicle.mass * config.mass_min_ratio)
     p.converged_std_ratio = config.converged_std_ratio
     p.min_excited_time = config.min_excited_time
+    p.use_std_ratio = config.use_std_ratio
     p.max_sine = math.sin(config.max_slope)
     p.max_gap = config.max_gap
     # no mass update this long after a (re)start: the filters start from the first sample

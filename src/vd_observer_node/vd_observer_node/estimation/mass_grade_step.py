@@ -69,6 +69,7 @@ MASS_PARAMS: Final = np.dtype(
         ('theta_max', 'f8'),
         ('converged_std_ratio', 'f8'),
         ('min_excited_time', 'f8'),
+        ('use_std_ratio', 'f8'),
         ('max_sine', 'f8'),
         ('max_gap', 'f8'),
         ('warmup', 'f8'),
@@ -91,8 +92,11 @@ MASS_OUT: Final = np.dtype(
 )
 #: The estimator's memory: last stamp (nan: none), the two low-pass stages of F and of v
 #: (``lp_on``: started), the grade_tau low-passes of F_lp and y (nan: none), the published
-#: slope [rad], excited time and time since the (re)start [s], 1/m and its variance, the
-#: last estimate (``has_last``) and the fault counts (`MASS_GRADE_FAULTS` order).
+#: slope [rad], excited time and time since the (re)start [s], whether the estimate has
+#: converged and whether it is used (``in_use``), 1/m and its variance, the relative variance
+#: of the force's scale (``scale_var``, [-]: set by the caller, the estimator's from the
+#: radius its Fx used; 0 alone), the last estimate (``has_last``) and the fault counts
+#: (`MASS_GRADE_FAULTS` order).
 MASS_STATE: Final = np.dtype(
     [
         ('t', 'f8'),
@@ -107,8 +111,10 @@ MASS_STATE: Final = np.dtype(
         ('excited_time', 'f8'),
         ('running', 'f8'),
         ('converged', 'b1'),
+        ('in_use', 'b1'),
         ('theta', 'f8', (1,)),
         ('cov', 'f8', (1, 1)),
+        ('scale_var', 'f8'),
         ('has_last', 'b1'),
         ('out', MASS_OUT),
         ('counts', 'i8', (len(MASS_GRADE_FAULTS),)),
@@ -235,10 +241,23 @@ def mass_reset(p: np.record, s: np.record) -> None:
     s.excited_time = 0.0
     s.running = 0.0
     s.converged = False
+    s.in_use = False
     s.theta[0] = 1.0 / p.mass
     sigma = p.std_ratio / p.mass  # d(1/m) = dm / m^2
     s.cov[0, 0] = sigma * sigma
+    s.scale_var = 0.0
     s.has_last = False
+
+
+@jit
+def _mass_std(s: np.record) -> float:
+    """[kg] the mass's standard deviation: the regression's (delta method, d(1/m) = dm/m^2)
+    and the force scale's (``s.scale_var``, relative), independent. The regression learns
+    m/F's scale: a force 3 % off (the radius not known yet) is a mass 3 % off, whatever
+    the excitation, so convergence needs the force's scale known as well."""
+    theta = s.theta[0]
+    regression = max(s.cov[0, 0], 0.0) / (theta * theta * theta * theta)
+    return math.sqrt(regression + s.scale_var / (theta * theta))
 
 
 @jit
@@ -248,9 +267,9 @@ def _mass_out(p: np.record, s: np.record, excited: bool, valid: bool) -> None:
     mass = 1.0 / theta
     o = s.out
     o.mass = mass
-    o.mass_std = math.sqrt(max(s.cov[0, 0], 0.0)) / (theta * theta)
+    o.mass_std = _mass_std(s)
     o.converged = s.converged
-    o.mass_used = mass if s.converged else p.mass
+    o.mass_used = mass if s.in_use else p.mass
     o.excited = excited
     o.slope = s.slope
     o.slope_valid = valid
@@ -340,12 +359,14 @@ def mass_update(p: np.record, s: np.record, t: float, sum_fx: float, speed: floa
             s.counts[_CLAMPED] += 1
         s.excited_time += dt
         theta = s.theta[0]
-        std = math.sqrt(max(s.cov[0, 0], 0.0)) / (theta * theta)
+        std = _mass_std(s)
         if s.excited_time >= p.min_excited_time and std * theta <= p.converged_std_ratio:
             s.converged = True
+        if s.converged or std * theta <= p.use_std_ratio:
+            s.in_use = True
     valid = False
     if abs(speed) >= p.slope_min_speed:
-        m_used = 1.0 / s.theta[0] if s.converged else p.mass
+        m_used = 1.0 / s.theta[0] if s.in_use else p.mass
         sine = (f_lp / m_used - y) / g
         bound = p.max_sine
         s.slope = math.asin(min(max(sine, -bound), bound))

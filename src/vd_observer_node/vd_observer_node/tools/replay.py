@@ -33,6 +33,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -64,6 +65,7 @@ from vd_observer_node.bag.alerts_cdr import encode_alerts_packed
 from vd_observer_node.bag.cdr_batch import encode_packed, upgrade_batch
 from vd_observer_node.bag.errors import BagExistsError, ReplayInputError
 from vd_observer_node.bag.packed import PackedMessages, PackedParts
+from vd_observer_node.bag.read_ahead import read_ahead
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.errors import ConfigurationError
@@ -739,12 +741,16 @@ def _stream(
         _OutOfOrderError: the bag's files are not in log-time order (with more than one block).
     """
     topics = reader.topics
-    with BagWriter(out_bag) as writer:
+    with BagWriter(out_bag, background=True) as writer:
         merged = _MergedWriter(writer, topics, len(raw_topics), bar)
         for topic in raw_topics:
             merged.declare(topic, topics[topic].msgtype)
-        for arrays in reader.topic_array_blocks(raw_topics, block_messages=block_messages):
-            bar.update(sum(len(a.datas) for a in arrays.values()))
+        # what the blocks before left to write: written while the next block's cascade runs
+        before: int | None = None
+
+        def write_before(arrays: Mapping[str, TopicArrays]) -> None:
+            if before is not None:
+                merged.flush(before)
             for topic in raw_topics:
                 arr = arrays.get(topic)
                 if arr is not None:
@@ -752,12 +758,17 @@ def _stream(
                     # layout, so the output holds one definition per type
                     datas = upgrade_batch(arr.msgtype, arr.decoding_type, arr.datas)
                     merged.add(topic, arr.msgtype, arr.log_time_ns, datas)
-            run.block(arrays, merged, phase, final=False)
+
+        # the next block is read on a thread while this one runs (bag.read_ahead)
+        blocks = reader.topic_array_blocks(raw_topics, block_messages=block_messages)
+        for arrays in read_ahead(blocks):
+            bar.update(sum(len(a.datas) for a in arrays.values()))
+            run.block(arrays, merged, phase, final=False, meanwhile=partial(write_before, arrays))
             # what comes next is logged at or after the newest log time read (bags are in
             # log-time order; checked by `merged.add`), the estimates of the carried stamps at
             # their wheel message's log time: everything before both is final
-            merged.flush(min(run.carried_log_ns(), merged.newest_ns))
-        run.block({}, merged, phase, final=True)
+            before = min(run.carried_log_ns(), merged.newest_ns)
+        run.block({}, merged, phase, final=True, meanwhile=partial(write_before, {}))
         merged.flush(None)
     return merged.written
 
@@ -779,10 +790,9 @@ class _MergedWriter:
         self._names: list[str] = []
         self._index: dict[str, int] = {}
         self._counts: list[int] = []
-        self._log: list[np.ndarray] = []
-        self._which: list[np.ndarray] = []
-        self._seq: list[np.ndarray] = []
-        self._datas: list[PackedMessages] = []
+        # the held messages, one entry per topic and `add` (each in its order): topic index,
+        # log times [ns], sequence numbers within the topic, the messages
+        self._held: list[tuple[int, np.ndarray, np.ndarray, PackedMessages]] = []
         self.newest_ns = -1  # [ns] newest log time of an input or truth message added
         self._flushed = -1  # [ns] everything logged before this was written
         self.written = 0
@@ -809,37 +819,40 @@ class _MergedWriter:
         log = np.asarray(log_ns, dtype=np.int64)
         if k < self._raw and n and int(log.min()) < self._flushed:
             raise _OutOfOrderError(topic)
-        self._log.append(log)
-        self._which.append(np.full(n, k, dtype=np.int64))
-        self._seq.append(np.arange(self._counts[k], self._counts[k] + n, dtype=np.int64))
-        self._datas.append(PackedMessages.from_list(datas))
+        seq = np.arange(self._counts[k], self._counts[k] + n, dtype=np.int64)
+        self._held.append((k, log, seq, PackedMessages.from_list(datas)))
         self._counts[k] += n
         if k < self._raw and n:
             self.newest_ns = max(self.newest_ns, int(log.max()))
 
     def flush(self, before_ns: int | None) -> None:
         """Write the held messages logged before `before_ns` [ns] (None: all), in order."""
-        if not self._log:
+        if not self._held:
             return
-        log = np.concatenate(self._log)
-        which = np.concatenate(self._which)
-        seq = np.concatenate(self._seq)
+        # In topic order, each topic's messages in their order: a stable sort by log time
+        # then orders by (log time, topic, sequence), and finds the held runs already sorted.
+        held = sorted(self._held, key=lambda entry: (entry[0], entry[2][:1].tolist()))
+        log = np.concatenate([entry[1] for entry in held])
+        which = np.concatenate([np.full(entry[1].size, entry[0], np.int64) for entry in held])
+        seq = np.concatenate([entry[2] for entry in held])
         ready = np.ones(len(log), dtype=bool) if before_ns is None else log < before_ns
         if before_ns is not None:
             self._flushed = max(self._flushed, before_ns)
         order = np.flatnonzero(ready)
-        order = order[np.lexsort((seq[order], which[order], log[order]))]
+        order = order[np.argsort(log[order], kind='stable')]
         # everything held, as it is (one buffer per topic and block); the writer copies the
-        # selected messages from there into its chunks with numpy
-        datas = PackedParts.join(self._datas)
+        # selected messages from there into its chunks
+        datas = PackedParts.join([entry[3] for entry in held])
         for start in range(0, len(order), _WRITE_BLOCK):
             sel = order[start : start + _WRITE_BLOCK]
             self._writer.write_interleaved(self._names, which[sel], datas.take(sel), log[sel])
             self._bar.update(int(np.count_nonzero(which[sel] < self._raw)))
         self.written += len(order)
-        rest = np.flatnonzero(~ready)
-        self._log, self._which, self._seq = [log[rest]], [which[rest]], [seq[rest]]
-        self._datas = [datas.take(rest).compact()]
+        rest = np.flatnonzero(~ready)  # in topic order, each topic's in its order
+        self._held = []
+        for k in np.unique(which[rest]).tolist():
+            mine = rest[which[rest] == k]
+            self._held.append((k, log[mine], seq[mine], datas.take(mine).compact()))
 
 
 class _GapStats:
@@ -888,6 +901,27 @@ class _GapStats:
             expected=expected,
             lost=lost,
         )
+
+
+def _on_thread(work: Callable[[], None], meanwhile: Callable[[], None], name: str) -> None:
+    """Run `work` on a thread of its own while `meanwhile` runs on this one; both are done
+    when this returns. An error of `meanwhile` is raised first, then one of `work`."""
+    failure: list[BaseException] = []
+
+    def guarded() -> None:
+        try:
+            work()
+        except BaseException as exc:  # re-raised on the caller's thread after the join
+            failure.append(exc)
+
+    worker = threading.Thread(target=guarded, name=name)
+    worker.start()
+    try:
+        meanwhile()
+    finally:
+        worker.join()
+    if failure:
+        raise failure[0]
 
 
 class _Run:
@@ -1015,8 +1049,15 @@ class _Run:
         phase: Any,
         *,
         final: bool,
+        meanwhile: Callable[[], None] | None = None,
     ) -> None:
-        """Decode, align, run and encode one block; hand its estimates to `merged`."""
+        """Decode, align, run and encode one block; hand its estimates to `merged`.
+
+        Args:
+            meanwhile: work of the caller's that does not touch this run (writing what the
+                blocks before gave): done on this thread while the compiled cascade, which
+                releases the GIL, runs on a second one.
+        """
         used = self.used
         decoded = [self._decode(s, arrays) for s in used]
         for gaps, d in zip(self.gaps, decoded, strict=True):
@@ -1074,24 +1115,32 @@ class _Run:
                 **part,
             )
 
-        meter = self.wheel_meter
-        k = meter.size - meter.count if meter is not None else n + 1
-        if meter is None or k > n:
-            result = run(slice(0, n))
+        def cascade() -> None:
+            meter = self.wheel_meter
+            k = meter.size - meter.count if meter is not None else n + 1
+            if meter is None or k > n:
+                result = run(slice(0, n))
+            else:
+                # the settings left to the rate follow it after the FOLLOW_AFTER-th stamp, as
+                # the live nodes do (rate_settings)
+                result = run(slice(0, k))
+                meter.add_many(common[:k])
+                self._follow_rate(meter.stamps)
+                if k < n:
+                    result = _joined(result, run(slice(k, n)))
+            if meter is not None and self.wheel_meter is not None:
+                meter.add_many(common)
+            self.cascade_time += time.perf_counter() - cascade_start
+            self.result = result
+            self.samples += n
+            self.torque_valid += int(np.count_nonzero(result.torque_valid))
+
+        if meanwhile is None:
+            cascade()
         else:
-            # the settings left to the rate follow it after the FOLLOW_AFTER-th stamp, as
-            # the live nodes do (rate_settings)
-            result = run(slice(0, k))
-            meter.add_many(common[:k])
-            self._follow_rate(meter.stamps)
-            if k < n:
-                result = _joined(result, run(slice(k, n)))
-        if meter is not None and self.wheel_meter is not None:
-            meter.add_many(common)
-        self.cascade_time += time.perf_counter() - cascade_start
-        self.result = result
-        self.samples += n
-        self.torque_valid += int(np.count_nonzero(result.torque_valid))
+            _on_thread(cascade, meanwhile, 'replay-cascade')
+        result = self.result
+        assert result is not None  # set by cascade()
         braked = brake is not None
         if (engine is not None or braked) and result.wheel_torque_used.shape[0] == n:
             # the situation monitor gets the torques the engine path and brakes gave the estimator
@@ -1099,30 +1148,21 @@ class _Run:
             given = result.wheel_torque_used
             wheel_torque = np.where(np.isfinite(given), given, 0.0)
         situation_values: dict[str, dict[str, np.ndarray]] = {}
-        failure: list[BaseException] = []
 
-        def run_monitor() -> None:
+        def situation() -> None:
             situation_start = time.perf_counter()
-            try:
-                situation_values.update(
-                    situation_topics(
-                        wheel_angle, body_speed, wheel_torque, result, self.monitor, phase.update
-                    )
+            situation_values.update(
+                situation_topics(
+                    wheel_angle, body_speed, wheel_torque, result, self.monitor, phase.update
                 )
-            except BaseException as exc:  # re-raised by the caller after the join
-                failure.append(exc)
+            )
             self.situation_time += time.perf_counter() - situation_start
 
-        worker = None
-        if self.monitor is not None:
-            # The compiled monitor releases the GIL: it runs on the second core while this
-            # thread encodes the cascade's topics.
-            worker = threading.Thread(target=run_monitor, name='replay-monitor')
-            worker.start()
         log_ns = picked[0]['log']
         # the sensor's angles as the observer node publishes them; with speeds, the observer's
         observed = result.angle if self.mapping.wheel_input == 'speed' else wheel_angle
-        try:
+
+        def encode() -> None:
             for topic, values in estimate_topics(result, observed, self.estimator_config).items():
                 datas = encode_packed(ESTIMATE_TOPICS[topic], common, frame_id, values)
                 merged.add(topic, ESTIMATE_TOPICS[topic], log_ns, datas)
@@ -1131,11 +1171,13 @@ class _Run:
                 msgtype = ESTIMATE_TOPICS[ESTIMATES_TORQUE_OFFSET]
                 datas = encode_packed(msgtype, common[changed], frame_id, values)
                 merged.add(ESTIMATES_TORQUE_OFFSET, msgtype, log_ns[changed], datas)
-        finally:
-            if worker is not None:
-                worker.join()
-        if failure:
-            raise failure[0]
+
+        if self.monitor is None:
+            encode()
+        else:
+            # The compiled monitor releases the GIL: it runs on the second core while this
+            # thread encodes the cascade's topics.
+            _on_thread(situation, encode, 'replay-monitor')
         if n == 0:  # a block that aligned no stamp (a headerless input held, 'exact')
             situation_values.clear()
         for topic, values in situation_values.items():
