@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import errno
 import os
 import signal
 import subprocess
@@ -13,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from full_disk import fill_disk_after
 from vd_common.topics import SENSORS_WHEEL_ANGLES
 from vd_observer_node.bag import (
     BagDiskFullError,
@@ -174,18 +174,7 @@ def test_disk_full_keeps_complete_chunks(tmp_path: Path, monkeypatch: Any) -> No
     stamps, datas = _messages(2000)
     writer = BagWriter(tmp_path / 'full', chunk_size=4096)
     writer.add_topic(TOPIC, MSGTYPE)
-    real_write = writer._file.write
-    budget = {'bytes': 30_000}
-
-    def limited_write(data: bytes) -> int:
-        if budget['bytes'] < len(data):
-            real_write(data[: budget['bytes']])  # a partial record, like a real full disk
-            budget['bytes'] = 0
-            raise OSError(errno.ENOSPC, 'No space left on device')
-        budget['bytes'] -= len(data)
-        return real_write(data)
-
-    monkeypatch.setattr(writer._file, 'write', limited_write)
+    fill_disk_after(writer, 30_000, monkeypatch)
     with pytest.raises(BagDiskFullError, match='disk full'):
         for k in range(2000):
             writer.write(TOPIC, datas[k], int(stamps[k]))

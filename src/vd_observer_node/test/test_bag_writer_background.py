@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import errno
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from full_disk import fill_disk_after
 from vd_common.topics import ESTIMATES_SLOPE, SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES
 from vd_observer_node.bag import BagDiskFullError, BagReader, BagUsageError, BagWriter
 from vd_observer_node.bag.cdr_batch import encode_batch
@@ -61,18 +61,7 @@ def test_a_full_disk_in_the_background_is_raised_and_keeps_complete_chunks(
     rng = np.random.default_rng(3)
     writer = BagWriter(tmp_path / 'full', chunk_size=4096, background=True)
     writer.add_topic(SENSORS_WHEEL_ANGLES, ANGLES)
-    real_write = writer._file.write
-    budget = {'bytes': 30_000}
-
-    def limited_write(data: bytes) -> int:
-        if budget['bytes'] < len(data):
-            real_write(data[: budget['bytes']])  # a partial record, like a real full disk
-            budget['bytes'] = 0
-            raise OSError(errno.ENOSPC, 'No space left on device')
-        budget['bytes'] -= len(data)
-        return real_write(data)
-
-    monkeypatch.setattr(writer._file, 'write', limited_write)
+    fill_disk_after(writer, 30_000, monkeypatch)
     written: list[bytes] = []
     with pytest.raises(BagDiskFullError, match='disk full'):
         # raised by a later call or at the latest by close, never lost

@@ -43,26 +43,25 @@ def read_ahead(items: Iterator[T], depth: int = 1) -> Iterator[T]:
     ready: queue.Queue[T | _End] = queue.Queue(maxsize=depth)
     stop = threading.Event()
 
+    def offer(item: T | _End) -> bool:
+        """Queue `item` once there is room; False if the consumer stopped meanwhile."""
+        while not stop.is_set():
+            try:
+                ready.put(item, timeout=_POLL_S)
+                return True
+            except queue.Full:
+                continue
+        return False
+
     def produce() -> None:
         end = _End(None)
         try:
             for item in items:
-                while not stop.is_set():
-                    try:
-                        ready.put(item, timeout=_POLL_S)
-                        break
-                    except queue.Full:
-                        continue
-                if stop.is_set():
+                if not offer(item):
                     return
         except BaseException as exc:  # handed to the consumer, raised in its thread
             end = _End(exc)
-        while not stop.is_set():
-            try:
-                ready.put(end, timeout=_POLL_S)
-                return
-            except queue.Full:
-                continue
+        offer(end)
 
     worker = threading.Thread(target=produce, name='bag-read-ahead', daemon=True)
     worker.start()
