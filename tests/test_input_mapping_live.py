@@ -352,6 +352,33 @@ def test_messages_serialized_by_rclpy_decode_like_the_replays() -> None:
     )
 
 
+def _play_through_pipeline(
+    procs: RosProcessGroup,
+    tmp_path: Path,
+    mapping_file: Path,
+    bag: Path,
+    *,
+    ready: str,
+    seconds: int,
+    topics: list[str],
+) -> tuple[RosProcess, list[list[str]]]:
+    """pipeline_node on `mapping_file` (started once it logs `ready`), a collector of `topics`
+    ('topic=pkg.msg/Type') for `seconds`, then the player of `bag` with the same mapping; the
+    pipeline's process and the collector's lines, split, once player and collector ended."""
+    params = params_file(tmp_path / 'p.yaml', {}, input_mapping=str(mapping_file))
+    pipeline = _start(procs, 'pipeline', 'pipeline_node', params)
+    pipeline.wait_for(ready, timeout=90)
+    collector = procs.python('collector', SCRIPTS / 'collect_outputs.py', str(seconds), *topics)
+    collector.wait_for('SUBSCRIBED', timeout=60)
+    player_params = params_file(
+        tmp_path / 'player.yaml', {}, input_mapping=str(mapping_file), bag=str(bag)
+    )
+    player = _start(procs, 'player', 'player_node', player_params)
+    assert _wait_exit(player, 60) == 0, player.output()
+    assert _wait_exit(collector, 60) == 0
+    return pipeline, [line.split() for line in collector.output().splitlines()]
+
+
 def _drop_windows(src: Path, dst: Path, start_s: float, length_s: float) -> None:
     """Copy a bag without the messages logged in [start_s, start_s + length_s) of every
     second (from its first log time): a link that goes silent on every topic at once."""
@@ -420,24 +447,11 @@ def test_pipeline_node_on_abs_wheel_speeds_computes_what_the_replay_computes(
     offline = decode_batch(ESTIMATE_TOPICS[ESTIMATES_SLOPE], datas.datas)
     expected = dict(zip(offline.stamp_ns.tolist(), offline.values['angle'].tolist(), strict=True))
 
-    params = params_file(tmp_path / 'p.yaml', {}, input_mapping=str(mapping_file))
-    pipeline = _start(procs, 'pipeline', 'pipeline_node', params)
-    pipeline.wait_for('pipeline ready', timeout=90)
-    collector = procs.python(
-        'collector', SCRIPTS / 'collect_outputs.py', '14', f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope'
-    )
-    collector.wait_for('SUBSCRIBED', timeout=60)
-    player_params = params_file(
-        tmp_path / 'player.yaml', {}, input_mapping=str(mapping_file), bag=str(bag)
-    )
-    player = _start(procs, 'player', 'player_node', player_params)
-    assert _wait_exit(player, 60) == 0, player.output()
-    assert _wait_exit(collector, 60) == 0
-    live = {
-        int(f[2]): float(f[4])
-        for f in (line.split() for line in collector.output().splitlines())
-        if f[0] == 'MSG'
-    }
+    pipeline, lines = _play_through_pipeline(
+        procs, tmp_path, mapping_file, bag, ready='pipeline ready', seconds=14,
+        topics=[f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope'],
+    )  # fmt: skip
+    live = {int(f[2]): float(f[4]) for f in lines if f[0] == 'MSG'}
     assert len(live) > 0.9 * len(expected), (len(live), len(expected))
     assert set(live) <= set(expected)
     # the same sets in the same order through the same compiled chain: the same bits
@@ -523,25 +537,12 @@ def test_pipeline_node_on_the_engine_and_no_torque_paths_computes_what_the_repla
     # the engine path holds and does not (the launch, the upshift); none never holds
     assert {v[1] for v in expected.values()} == ({0, 1} if source == 'engine' else {0})
 
-    params = params_file(tmp_path / 'p.yaml', {}, input_mapping=str(mapping_file))
-    pipeline = _start(procs, 'pipeline', 'pipeline_node', params)
-    pipeline.wait_for(f'torque source {source}', timeout=90)
     offset_topic = f'{ESTIMATES_TORQUE_OFFSET}=vd_msgs.msg/TorqueOffsetEstimate'
-    collector = procs.python(
-        'collector',
-        SCRIPTS / 'collect_outputs.py',
-        '25',
-        f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope',
-        *([offset_topic] if source == 'engine' else []),
-    )
-    collector.wait_for('SUBSCRIBED', timeout=60)
-    player_params = params_file(
-        tmp_path / 'player.yaml', {}, input_mapping=str(mapping_file), bag=str(bag)
-    )
-    player = _start(procs, 'player', 'player_node', player_params)
-    assert _wait_exit(player, 60) == 0, player.output()
-    assert _wait_exit(collector, 60) == 0
-    lines = [line.split() for line in collector.output().splitlines()]
+    _, lines = _play_through_pipeline(
+        procs, tmp_path, mapping_file, bag, ready=f'torque source {source}', seconds=25,
+        topics=[f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope',
+                *([offset_topic] if source == 'engine' else [])],
+    )  # fmt: skip
     live = {
         int(f[2]): (float(f[4]), int(f[5]), int(f[6]))
         for f in lines
@@ -636,24 +637,11 @@ def test_pipeline_node_takes_a_brake_switch_as_the_replay_does(
     braking = (t_est >= 11.0) & (t_est < 12.5)
     assert not valid[braking].any() and valid[(t_est > 10.0) & (t_est < 11.0)].all()
 
-    params = params_file(tmp_path / 'p.yaml', {}, input_mapping=str(mapping_file))
-    pipeline = _start(procs, 'pipeline', 'pipeline_node', params)
-    pipeline.wait_for('pipeline ready', timeout=90)
-    collector = procs.python(
-        'collector', SCRIPTS / 'collect_outputs.py', '25', f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope'
-    )
-    collector.wait_for('SUBSCRIBED', timeout=60)
-    player_params = params_file(
-        tmp_path / 'player.yaml', {}, input_mapping=str(mapping_file), bag=str(bag)
-    )
-    player = _start(procs, 'player', 'player_node', player_params)
-    assert _wait_exit(player, 60) == 0, player.output()
-    assert _wait_exit(collector, 60) == 0
-    live = {
-        int(f[2]): int(f[5])
-        for f in (line.split() for line in collector.output().splitlines())
-        if f[0] == 'MSG'
-    }
+    _, lines = _play_through_pipeline(
+        procs, tmp_path, mapping_file, bag, ready='pipeline ready', seconds=25,
+        topics=[f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope'],
+    )  # fmt: skip
+    live = {int(f[2]): int(f[5]) for f in lines if f[0] == 'MSG'}
     assert len(live) > 0.9 * len(expected), (len(live), len(expected))
     edges = np.array([11.0, 12.5])
     away = {
