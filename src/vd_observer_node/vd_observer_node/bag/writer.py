@@ -234,11 +234,12 @@ class BagWriter:
         while pending and (len(pending) > keep or pending[0].done()):
             error = pending.popleft().exception()  # waits for the job if it runs
             if error is not None:
+                self._failed = True
                 self._cancel_pending()
                 raise error
 
     def _cancel_pending(self) -> None:
-        self._failed = True
+        """Drop the queued jobs (only after a failure: the output stops there)."""
         for job in self._pending:
             job.cancel()
         self._pending.clear()
@@ -649,9 +650,7 @@ class BagWriter:
 
     def _stop_worker(self) -> None:
         if self._worker is not None:
-            for job in self._pending:  # only after a failure: the output stops there
-                job.cancel()
-            self._pending.clear()
+            self._cancel_pending()
             self._worker.shutdown(wait=True)
             self._worker = None
 
