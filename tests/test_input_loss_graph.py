@@ -3,7 +3,8 @@
 The simulator's every third wheel-angle publish is refused (``ros_scripts/refuse_publishes``,
 as the middleware refuses under overload), so the observer receives two of every three
 stamps. Its /diagnostics status turns WARN and names the topic and the share that arrived
-(about 67 %), from the stamps alone; the body speed, complete, is not named.
+(about 67 %: a third of the expected stamps lost, in every window), from the stamps alone;
+the body speed, complete, is not named.
 """
 
 from __future__ import annotations
@@ -52,13 +53,22 @@ def test_the_observer_reports_the_share_of_wheel_stamps_that_arrived(
     assert obs.stop() == 0, obs.output()[-3000:]
     collect.popen.terminate()
     out = collect.output()
-    shares = [
-        int(share)
-        for topic, share in re.findall(
-            r'^DIAG vd: observer 1 .*?(\S+): (\d+) % of the expected stamps arrived', out, re.M
+    windows = [
+        (int(lost), int(expected))
+        for topic, lost, expected in re.findall(
+            r'^DIAG vd: observer 1 .*?(\S+): \d+ % of the expected stamps arrived '
+            r'\((\d+) of (\d+) lost\)',
+            out,
+            re.M,
         )
         if topic == SENSORS_WHEEL_ANGLES
     ]
-    assert shares, out[-3000:]
-    assert all(60 <= share <= 72 for share in shares), shares
+    assert windows, out[-3000:]
+    for lost, expected in windows:
+        # Of n consecutive stamps the refusals take n // 3 or one more; a window is only a few
+        # stamps when its 1 s period cut the stream's start or end, and then its share is far
+        # from 67 % (3 of 4 stamps: 75 %) while its count is right. The middleware may lose a
+        # few more on a loaded machine, never fewer.
+        assert expected // 3 <= lost <= -(-expected // 3) + max(1, expected // 20), windows
+    assert any(expected >= 50 for _, expected in windows), windows
     assert f'{SENSORS_BODY_VELOCITY}: ' not in out, out[-3000:]
