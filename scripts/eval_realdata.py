@@ -112,12 +112,22 @@ def evaluate(
     return {
         'samples': float(report.samples),
         'torque_valid': report.torque_valid_fraction,
-        'slope_rms_deg': float(np.degrees(np.sqrt(np.mean(error[valid] ** 2)))),
-        'slope_bias_deg': float(np.degrees(np.mean(error[valid]))),
+        'slope_rms_deg': float(np.degrees(_rms(error[valid]))),
+        'slope_bias_deg': float(np.degrees(_mean(error[valid]))),
         'slope_valid_share': float(valid.sum() / max(moving.sum(), 1)),
-        'force_rms_n': float(np.sqrt(np.mean(residual[balanced] ** 2))),
-        'force_bias_n': float(np.mean(residual[balanced])),
+        'force_rms_n': _rms(residual[balanced]),
+        'force_bias_n': _mean(residual[balanced]),
     }
+
+
+def _rms(x: Any) -> float:
+    """Root mean square; nan for no samples (no valid estimate: said, not warned about)."""
+    return float(np.sqrt(np.mean(x**2))) if x.size else float('nan')
+
+
+def _mean(x: Any) -> float:
+    """Mean; nan for no samples."""
+    return float(np.mean(x)) if x.size else float('nan')
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -261,13 +261,14 @@ def test_the_real_drive_meets_its_plausibility_figures(tmp_path: Path) -> None:
     assert 0.45 < f['slope_valid_share'] < 0.73  # braking (27 % of the drive) is invalid
     assert f['force_rms_n'] < 200.0
     # With the windscreen IMU fused (issue 27): its grade covers the braking, and its bias
-    # (the device's -4.2 deg pitch) is learnt where the torque is known. Today 0.88 deg
-    # (bias +0.01) over every moving sample; without the torque the bias stays: 4.25 deg.
+    # (the device's -4.2 deg pitch) is learnt where the torque is known. Today 0.65 deg (bias
+    # +0.12) over 94.4 % of the moving samples: the first 3 s, braking before any bias is
+    # learnt, are invalid (`alone_bias_std`; valid, they read 4.5 deg low and made it 0.88).
     config = REPO_ROOT / 'src' / 'vd_observer_node' / 'config'
     fused = module.evaluate(
         segment, config / 'replay_100hz_example.yaml', tmp_path / 'imu',
         config / 'input_mapping_comma2k19_imu.yaml',
     )  # fmt: skip
-    assert fused['slope_valid_share'] > 0.95
-    assert fused['slope_rms_deg'] < 1.0
+    assert 0.9 < fused['slope_valid_share'] < 0.99
+    assert fused['slope_rms_deg'] < 0.75
     assert abs(fused['slope_bias_deg']) < 0.3

@@ -195,6 +195,34 @@ def test_a_large_bias_is_learnt_and_does_not_reach_the_grade() -> None:
     assert _rms_deg((out.slope - sim.slope)[trusted]) < 0.25
 
 
+def test_the_imu_alone_is_valid_only_once_its_bias_is_known() -> None:
+    """No torque for the first 12 s (a braking on a switch, a shift): the IMU's grade alone,
+    its 0.4 m/s^2 bias (2.3 deg) not learnt yet, is published invalid; with `alone_bias_std`
+    well above the prior's deviation it would be valid and degrees off. Once the bias is learnt, a later
+    stretch without torque is covered by the IMU, valid."""
+    sim = _drive(1, bias=0.4)
+    torque = sim.wheel_torque.copy()
+    first = sim.t < 12.0
+    later = (sim.t >= 60.0) & (sim.t < 63.0)
+    torque[first | later] = np.nan
+
+    def run(config: ImuGradeConfig) -> CascadeResult:
+        return run_cascade(sim.t, sim.wheel_angle, sim.body_speed, torque, VEHICLE,
+                           imu=_imu(sim), imu_config=config)  # fmt: skip
+
+    out = run(CONFIG)
+    moving = sim.speed_true > 1.0
+    alone = first & moving & (out.slope_sources == SOURCE_IMU)
+    assert alone.sum() > 0.9 * (first & moving).sum()
+    assert not out.slope_valid[first].any()
+    assert np.all(out.imu_trusted[later]) and np.all(out.slope_valid[later & moving])
+    assert _rms_deg((out.slope - sim.slope)[later & moving]) < 1.0
+    careless = run(dataclasses.replace(CONFIG, alone_bias_std=5.0))
+    assert np.all(careless.slope_valid[alone])
+    assert _rms_deg((careless.slope - sim.slope)[alone]) > 2.0
+    np.testing.assert_array_equal(careless.slope[alone], out.slope[alone])
+
+
 def test_the_imu_record_and_settings_are_checked() -> None:
     sim = _drive()
     with pytest.raises(InputShapeError, match='imu must have shape'):

@@ -26,10 +26,11 @@ the two slopes weighted by their variances (the IMU's is its bias's, the force b
 ``force_slope_std``) until the bias's standard deviation is below ``bias_tol``; from then on
 (latched) the IMU's grade (``sources = SOURCE_FORCE | SOURCE_IMU``: the IMU's grade with a bias
 learnt from the force balance). Without a valid force slope (no torque, standstill) the IMU's
-grade with the bias known so far (``SOURCE_IMU``). Where the IMU drops out (no sample newer
-than ``max_age``), saturates (``|f_x| >= saturation``) or gives a non-finite value, the force
-balance's slope is passed on as it is (``SOURCE_FORCE``) and the IMU's filters restart when
-it comes back (the regression is kept).
+grade with the bias known so far (``SOURCE_IMU``; valid once the bias's standard deviation is
+below ``alone_bias_std``). Where the IMU drops out (no sample newer than ``max_age``),
+saturates (``|f_x| >= saturation``) or gives a non-finite value, the force balance's slope is
+passed on as it is (``SOURCE_FORCE``) and the IMU's filters restart when it comes back (the
+regression is kept).
 
 `imu_grade_step` is the one per-stamp function (compiled, `kernel._jit`); the cascade's stamp
 (`cascade_step.cascade_step`) runs it after the estimator, on the estimator's outputs, and
@@ -109,6 +110,7 @@ GRADE_PARAMS: Final = np.dtype(
         ('bias_q', 'f8'),
         ('mass_tol', 'f8'),
         ('bias_tol', 'f8'),
+        ('alone_bias_std', 'f8'),
         ('force_slope_var', 'f8'),
         ('rolling_c0', 'f8'),
         ('rolling_c1', 'f8'),
@@ -210,6 +212,12 @@ class ImuGradeConfig:
         bias_tol: the IMU's grade is used alone once the bias's standard deviation is below
             this (and ``settle`` has passed), [m/s^2]; before, the two slopes are weighted
             by their variances.
+        alone_bias_std: where the force balance's slope is not valid (a braking on a switch,
+            a shift, no torque at all) and the bias is not trusted yet, the IMU's grade alone
+            is valid only while the bias's standard deviation is at or below this, [m/s^2]
+            (0.1: 0.6 deg; the prior's 0.5 m/s^2 is 2.9 deg, a mounting pitch nobody
+            measured: on the RAV4's windscreen the first 3 s read 4.5 deg low). A sensor whose
+            mounting is measured (``mount_rpy_deg``) states a smaller ``bias_std``.
         force_slope_std: the force balance's slope error in that weighting, besides the one
             its mass error makes (which the regression measures), [rad] (0.01: on the
             everyday drives a larger one is better, 0.05: slope p90 0.174 deg against 0.184
@@ -239,12 +247,13 @@ class ImuGradeConfig:
     bias_drift: float = 1e-4
     mass_tol: float = 0.015
     bias_tol: float = 0.05
+    alone_bias_std: float = 0.1
     force_slope_std: float = 0.01
     mass_feedback: bool = True
 
     def __post_init__(self) -> None:
         for name in ('tau', 'fit_tau', 'max_age', 'saturation', 'max_slope', 'mass_std',
-                     'bias_std', 'force_std', 'mass_tol', 'bias_tol',
+                     'bias_std', 'force_std', 'mass_tol', 'bias_tol', 'alone_bias_std',
                      'force_slope_std'):  # fmt: skip
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
@@ -302,6 +311,7 @@ def grade_params(
     p.bias_q = config.bias_drift**2
     p.mass_tol = config.mass_tol
     p.bias_tol = config.bias_tol
+    p.alone_bias_std = config.alone_bias_std
     p.force_slope_var = config.force_slope_std**2
     p.rolling_c0 = rolling_c0
     p.rolling_c1 = rolling_c1
@@ -596,9 +606,10 @@ def imu_grade_step(
         out.slope_valid = valid
         out.sources = SOURCE_IMU | SOURCE_FORCE
     elif not force_valid:
-        # no force balance to lean on: the IMU's grade with the bias known so far
+        # no force balance to lean on: the IMU's grade with the bias known so far, valid
+        # only once that is known well enough (an unmeasured mounting pitch is degrees)
         out.slope = slope_imu
-        out.slope_valid = valid
+        out.slope_valid = valid and out.bias_std <= p.alone_bias_std
         out.sources = SOURCE_IMU
     else:
         # both, weighted by their variances: the IMU's is its bias's (while it is learnt),
