@@ -198,8 +198,8 @@ def test_a_large_bias_is_learnt_and_does_not_reach_the_grade() -> None:
 def test_the_imu_alone_is_valid_only_once_its_bias_is_known() -> None:
     """No torque for the first 12 s (a braking on a switch, a shift): the IMU's grade alone,
     its 0.4 m/s^2 bias (2.3 deg) not learnt yet, is published invalid; with `alone_bias_std`
-    well above the prior's deviation it would be valid and degrees off. Once the bias is learnt, a later
-    stretch without torque is covered by the IMU, valid."""
+    well above the prior's deviation it would be valid and degrees off. Once the bias is
+    learnt, a later stretch without torque is covered by the IMU, valid."""
     sim = _drive(1, bias=0.4)
     torque = sim.wheel_torque.copy()
     first = sim.t < 12.0
