@@ -193,9 +193,9 @@ def test_a_write_failing_while_the_cascade_runs_leaves_no_output(
     import threading
 
     from vd_observer_node.bag import BagDiskFullError
-    from vd_observer_node.tools import replay as replay_module
+    from vd_observer_node.tools import merged_writer
 
-    real_flush = replay_module._MergedWriter.flush
+    real_flush = merged_writer.MergedWriter.flush
     calls = {'n': 0}
 
     def failing_flush(self: Any, before_ns: int | None) -> None:
@@ -204,7 +204,7 @@ def test_a_write_failing_while_the_cascade_runs_leaves_no_output(
             raise BagDiskFullError('disk full (test)')
         real_flush(self, before_ns)
 
-    monkeypatch.setattr(replay_module._MergedWriter, 'flush', failing_flush)
+    monkeypatch.setattr(merged_writer.MergedWriter, 'flush', failing_flush)
     with pytest.raises(BagDiskFullError, match='disk full'):
         replay_bag(vd_bag, tmp_path / 'out', progress=False, block_messages=TINY)
     assert calls['n'] == 3

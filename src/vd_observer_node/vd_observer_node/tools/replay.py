@@ -21,6 +21,9 @@ stays bounded (`BLOCK_MESSAGES`; the state of every step carries over to the nex
 
 Inputs' own ``/vd/estimates/*`` and ``/vd/observer/*`` topics (a live recording) are not
 copied: the output holds the replayed ones only.
+
+Beside it: the settings file (`replay_config`), the output messages from a cascade result
+(`replay_topics`) and the writer that merges them in log-time order (`merged_writer`).
 """
 
 from __future__ import annotations
@@ -31,31 +34,20 @@ import shutil
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, fields, replace
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from tqdm import tqdm
 from vd_common.topics import (
     ALERTS,
     ESTIMATES,
     ESTIMATES_ALERTS,
-    ESTIMATES_FRICTION,
-    ESTIMATES_FRICTION_POTENTIAL,
-    ESTIMATES_MASS,
-    ESTIMATES_RESISTANCES,
-    ESTIMATES_ROLLING_RADIUS,
-    ESTIMATES_SLOPE,
-    ESTIMATES_TIRE_FORCES,
     ESTIMATES_TORQUE_OFFSET,
     OBSERVER,
-    OBSERVER_BODY_ACCEL,
-    OBSERVER_BODY_VELOCITY,
-    OBSERVER_WHEEL_STATES,
     SENSORS,
     TRUTH_NAMESPACE,
 )
@@ -64,7 +56,6 @@ from vd_common.vehicle.estimation import EstimationVehicleParams
 from vd_observer_node.bag.alerts_cdr import encode_alerts_packed
 from vd_observer_node.bag.cdr_batch import encode_packed, upgrade_batch
 from vd_observer_node.bag.errors import BagExistsError, ReplayInputError
-from vd_observer_node.bag.packed import PackedMessages, PackedParts
 from vd_observer_node.bag.read_ahead import read_ahead
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
@@ -83,12 +74,9 @@ from vd_observer_node.estimation.drivetrain import (
     torque_source_code,
 )
 from vd_observer_node.estimation.estimator import (
-    MASS_MESSAGE_FIELDS,
-    RADIUS_MESSAGE_FIELDS,
     EstimatorConfig,
 )
 from vd_observer_node.estimation.imu_grade import (
-    SOURCE_FORCE,
     imu_grade_config,
     vehicle_pitch_compliance,
 )
@@ -121,8 +109,13 @@ from vd_observer_node.situation.friction_potential import FrictionPotentialConfi
 from vd_observer_node.situation.monitor import (
     SituationConfig,
     SituationMonitor,
-    SituationSeries,
-    run_situation,
+)
+from vd_observer_node.tools.merged_writer import MergedWriter, OutOfOrderError
+from vd_observer_node.tools.replay_config import ReplayConfig, load_replay_config
+from vd_observer_node.tools.replay_topics import (
+    estimate_topics,
+    joined_results,
+    situation_topics,
 )
 
 __all__ = [
@@ -145,13 +138,11 @@ TRUTH_PREFIX = TRUTH_NAMESPACE
 ESTIMATE_TOPICS = {**OBSERVER, **ESTIMATES}
 #: Written by the situation monitor phase (``situation=True``), as the alerts node publishes.
 ALERT_TOPICS = dict(ALERTS)
-_WRITE_BLOCK = 65536  # messages per vectorized write (and progress-bar update)
 #: messages read per block by default: bounds the replay's memory (docs/bags.md)
 BLOCK_MESSAGES = 1 << 17
 #: [s] an input whose stamps fall this far behind another's (stopped) holds the others no
 #: longer (`BlockAligner` max_wait): bounds the carry between blocks
 MAX_WAIT_S = 10.0
-_SITUATION_BLOCK = 20_000  # samples per progress-bar update of the situation phase
 
 
 @dataclass(frozen=True)
@@ -220,262 +211,6 @@ class ReplayReport:
     def situation_us_per_sample(self) -> float:
         """[us] situation-monitor wall time per aligned sample (0 when not run)."""
         return 1e6 * self.situation_time_s / self.samples if self.samples else 0.0
-
-
-@dataclass(frozen=True)
-class ReplayConfig:
-    """Cascade and alert settings of an offline replay (None: the defaults).
-
-    Attributes:
-        given: what the file set, by ``section.key`` (nested sections flattened, e.g.
-            ``'estimator.mass.mass_tau'``), for the log of where each setting came from.
-        source: the file's path ('' when not read from a file).
-    """
-
-    observer: ObserverConfig | None = None
-    estimator: EstimatorConfig | None = None
-    cascade_kwargs: dict[str, Any] | None = None
-    alerts: AlertConfig | None = None
-    friction: FrictionPotentialConfig | None = None
-    situation: SituationConfig | None = None
-    given: dict[str, Any] = field(default_factory=dict)
-    source: str = ''
-
-    def replay_kwargs(self) -> dict[str, Any]:
-        """These settings as `replay_bag`'s keyword arguments."""
-        return {
-            'observer_config': self.observer,
-            'estimator_config': self.estimator,
-            'cascade_kwargs': self.cascade_kwargs,
-            'alert_config': self.alerts,
-            'friction_config': self.friction,
-            'situation_config': self.situation,
-        }
-
-
-def _flat(prefix: str, section: Mapping[str, Any]) -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in section.items():
-        if isinstance(value, dict):
-            out.update(_flat(f'{prefix}{key}.', value))
-        else:
-            out[f'{prefix}{key}'] = value
-    return out
-
-
-_SECTIONS = ('observer', 'estimator', 'cascade', 'alerts', 'friction_potential', 'situation')
-
-
-def load_replay_config(path: str | os.PathLike[str]) -> ReplayConfig:
-    """Read replay settings from YAML: optional ``observer``, ``estimator``, ``cascade``,
-    ``alerts``, ``friction_potential`` and ``situation`` mappings (flat, the keys of
-    ``ObserverConfig.from_mapping`` / ``EstimatorConfig.from_mapping`` / extra ``run_cascade``
-    keyword arguments / ``AlertConfig`` / ``FrictionPotentialConfig`` / ``SituationConfig``).
-
-    Raises:
-        ConfigurationError: unreadable file, not a mapping, or unknown keys.
-    """
-    try:
-        data = yaml.safe_load(Path(path).read_text(encoding='utf-8')) or {}
-    except (OSError, yaml.YAMLError, UnicodeDecodeError) as exc:
-        raise ConfigurationError(f'{path}: cannot read replay settings: {exc}') from exc
-    if not isinstance(data, dict) or set(data) - set(_SECTIONS):
-        raise ConfigurationError(
-            f'{path}: expected a mapping with sections among {" / ".join(_SECTIONS)}'
-        )
-    sections = {}
-    for key in _SECTIONS:
-        value = data.get(key)
-        if value is not None and not isinstance(value, dict):
-            raise ConfigurationError(f'{path}: {key} must be a mapping')
-        sections[key] = value
-    return ReplayConfig(
-        observer=ObserverConfig.from_mapping(sections['observer'])
-        if sections['observer'] is not None
-        else None,
-        estimator=EstimatorConfig.from_mapping(sections['estimator'])
-        if sections['estimator'] is not None
-        else None,
-        cascade_kwargs=sections['cascade'],
-        alerts=AlertConfig.from_mapping(sections['alerts'])
-        if sections['alerts'] is not None
-        else None,
-        friction=FrictionPotentialConfig.from_mapping(sections['friction_potential'])
-        if sections['friction_potential'] is not None
-        else None,
-        situation=SituationConfig.from_mapping(sections['situation'])
-        if sections['situation'] is not None
-        else None,
-        given={
-            k: v
-            for key, section in sections.items()
-            if section is not None
-            for k, v in _flat(f'{key}.', section).items()
-        },
-        source=str(path),
-    )
-
-
-def estimate_topics(
-    result: CascadeResult, angles: np.ndarray, config: EstimatorConfig | None = None
-) -> dict[str, dict[str, np.ndarray]]:
-    """The estimate topics of a cascade result, as the live nodes publish them: the online
-    mass and radius only where `config` adapts them (the nodes publish no constants), the
-    mass also where the result has the IMU's regression."""
-    n = result.t.shape[0]
-    zeros = np.zeros(n)
-    source = np.full(n, result.torque_source, dtype=np.uint8)
-    topics: dict[str, dict[str, np.ndarray]] = {
-        OBSERVER_WHEEL_STATES: {
-            'angle': angles,
-            'omega': result.omega,
-            'omega_dot': result.omega_dot,
-        },
-        OBSERVER_BODY_ACCEL: {
-            'accel.linear.x': result.accel,
-            'accel.linear.y': zeros,
-            'accel.linear.z': zeros,
-            'accel.angular.x': zeros,
-            'accel.angular.y': zeros,
-            'accel.angular.z': zeros,
-        },
-        OBSERVER_BODY_VELOCITY: {
-            'twist.linear.x': result.speed,
-            'twist.linear.y': zeros,
-            'twist.linear.z': zeros,
-            'twist.angular.x': zeros,
-            'twist.angular.y': zeros,
-            'twist.angular.z': zeros,
-        },
-        ESTIMATES_TIRE_FORCES: {'fx': result.fx, 'fz': result.fz, 'torque_source': source},
-        ESTIMATES_FRICTION: {
-            'mu': result.mu,
-            'slip': result.slip,
-            'valid': result.mu_valid,
-            'torque_source': source,
-        },
-        ESTIMATES_RESISTANCES: {'rolling': result.rolling, 'aero': result.aero},
-        ESTIMATES_SLOPE: {
-            'angle': result.slope,
-            'valid': result.slope_valid,
-            'torque_source': source,
-            'sources': _slope_sources(result),
-        },
-    }
-    # the online mass where adapted; with an IMU the regression's (`imu_grade`, in the fields)
-    if (config is not None and config.mass_adaptation) or result.imu_mass.shape[0] > 0:
-        topics[ESTIMATES_MASS] = {
-            field: getattr(result, attr) for field, attr in MASS_MESSAGE_FIELDS
-        }
-    if config is not None and config.radius_adaptation:
-        topics[ESTIMATES_ROLLING_RADIUS] = {
-            field: getattr(result, attr) for field, attr in RADIUS_MESSAGE_FIELDS
-        }
-    return topics
-
-
-def _slope_sources(result: CascadeResult) -> np.ndarray:
-    """The Slope messages' ``sources`` bits (`imu_grade.SOURCE_FORCE`, `SOURCE_IMU`); a
-    result without them (an injected cascade): the force balance where the slope is valid."""
-    if result.slope_sources.shape == result.slope_valid.shape:
-        return result.slope_sources
-    return np.where(result.slope_valid, SOURCE_FORCE, 0).astype(np.uint8)
-
-
-def _stamp_ns(seconds: np.ndarray) -> np.ndarray:
-    """[s] -> int64 [ns] as the alerts node stamps onset/detected (0 while nan)."""
-    finite = np.isfinite(seconds)
-    out: np.ndarray = np.where(finite, np.round(np.where(finite, seconds, 0.0) * 1e9), 0)
-    return out.astype(np.int64)
-
-
-def _rows(result: CascadeResult, start: int, stop: int) -> CascadeResult:
-    """The cascade result on stamps [start, stop) (every per-stamp array sliced)."""
-    n = result.t.shape[0]
-    sliced: dict[str, Any] = {
-        f.name: value[start:stop]
-        for f in fields(result)
-        if isinstance(value := getattr(result, f.name), np.ndarray) and value.shape[:1] == (n,)
-    }
-    return replace(result, **sliced)
-
-
-def _joined(first: CascadeResult, second: CascadeResult) -> CascadeResult:
-    """Two consecutive blocks' results as one (per-stamp arrays joined; the totals, e.g.
-    the fault counts, are the second's)."""
-    n, m = first.t.shape[0], second.t.shape[0]
-    joined: dict[str, Any] = {}
-    for f in fields(first):
-        a, b = getattr(first, f.name), getattr(second, f.name)
-        if isinstance(a, np.ndarray) and a.shape[:1] == (n,) and b.shape[:1] == (m,):
-            joined[f.name] = np.concatenate([a, b])
-    return replace(second, **joined)
-
-
-def situation_topics(
-    wheel_angle: np.ndarray,
-    speed: np.ndarray,
-    wheel_torque: np.ndarray,
-    result: CascadeResult,
-    monitor: SituationMonitor | Any,
-    progress: Callable[[int], object] | None = None,
-    runner: Callable[..., SituationSeries] = run_situation,
-    block: int = _SITUATION_BLOCK,
-) -> dict[str, dict[str, np.ndarray]]:
-    """Friction potential and alerts of every stamp, as the alerts node computes them.
-
-    Runs :func:`vd_observer_node.situation.monitor.run_situation` in blocks of stamps (the
-    monitor's state carries across them), so a progress bar can follow.
-
-    Args:
-        wheel_angle: shape (N, 4), [rad] measured wheel angles.
-        speed: shape (N,), [m/s] MEASURED body speed (what the node receives).
-        wheel_torque: shape (N, 4), [N m] measured wheel torques.
-        result: the cascade on the same N stamps (t, omega, mu, mu_valid, fz used).
-        monitor: a fresh (or reset) situation monitor (`runner`'s kind).
-        progress: called with the number of stamps done since its last call.
-        runner: `run_situation` (injectable for tests).
-        block: stamps per call of `runner` (per progress-bar update).
-
-    Returns:
-        Topic values: ``/vd/estimates/alerts`` ('level', 'onset_ns', 'detected_ns', each
-        (N, 3, 4)) and ``/vd/estimates/friction_potential`` ('mu_max', 'slip_peak',
-        'confidence' (N, 2) float, 'road_class' (N, 2) uint8, 'vehicle_road_class' (N,)).
-    """
-    n = result.t.shape[0]
-    parts = []
-    # one (empty) block when n == 0: the shapes of the outputs still come out right
-    for start in range(0, max(n, 1), block):
-        stop = min(start + block, n)
-        parts.append(
-            runner(
-                monitor,
-                wheel_angle[start:stop],
-                speed[start:stop],
-                wheel_torque[start:stop],
-                _rows(result, start, stop),
-            )
-        )
-        if progress is not None:
-            progress(stop - start)
-
-    def cat(name: str) -> np.ndarray:
-        return np.concatenate([getattr(p, name) for p in parts])
-
-    return {
-        ESTIMATES_ALERTS: {
-            'level': cat('level').astype(np.uint8),
-            'onset_ns': _stamp_ns(cat('onset')),
-            'detected_ns': _stamp_ns(cat('detected')),
-        },
-        ESTIMATES_FRICTION_POTENTIAL: {
-            'mu_max': cat('mu_max'),
-            'slip_peak': cat('slip_peak'),
-            'confidence': cat('confidence'),
-            'road_class': cat('road_class').astype(np.uint8),
-            'vehicle_road_class': cat('vehicle_road_class').astype(np.uint8),
-        },
-    }
 
 
 def replay_bag(
@@ -683,7 +418,7 @@ def replay_bag(
             run = new_run()
             try:
                 written = _stream(reader, out_bag, run, raw_topics, bar, phase, block_messages)
-            except _OutOfOrderError:
+            except OutOfOrderError:
                 # The files are not in log-time order (e.g. a topic appended after the rest):
                 # what was written cannot take what comes. Start again with the whole bag in
                 # one block, as before streaming (memory then grows with the bag).
@@ -722,10 +457,6 @@ def replay_brakes(mapping: InputMapping, params: EstimationVehicleParams) -> Bra
     return Brakes.from_params(mapping.brake.signal, params, mapping.source)
 
 
-class _OutOfOrderError(Exception):
-    """A message logged before what the streamed replay already wrote (internal signal)."""
-
-
 def _stream(
     reader: BagReader,
     out_bag: str | os.PathLike[str],
@@ -738,11 +469,11 @@ def _stream(
     """Replay the bag block by block into `out_bag`; the number of messages written.
 
     Raises:
-        _OutOfOrderError: the bag's files are not in log-time order (with more than one block).
+        OutOfOrderError: the bag's files are not in log-time order (with more than one block).
     """
     topics = reader.topics
     with BagWriter(out_bag, background=True) as writer:
-        merged = _MergedWriter(writer, topics, len(raw_topics), bar)
+        merged = MergedWriter(writer, topics, len(raw_topics), bar)
         for topic in raw_topics:
             merged.declare(topic, topics[topic].msgtype)
         # what the blocks before left to write: written while the next block's cascade runs
@@ -771,88 +502,6 @@ def _stream(
         run.block({}, merged, phase, final=True, meanwhile=partial(write_before, {}))
         merged.flush(None)
     return merged.written
-
-
-class _MergedWriter:
-    """Writes the replay's messages in log-time order as the blocks come.
-
-    Messages are held until :meth:`flush` is told that nothing earlier can come any more;
-    the order is that of one stable sort of everything by log time with ties in topic order
-    (inputs, truth, estimates, alerts) and then in arrival order, which is how the whole
-    replay wrote them.
-    """
-
-    def __init__(self, writer: BagWriter, infos: Mapping[str, Any], raw: int, bar: Any) -> None:
-        self._writer = writer
-        self._infos = infos
-        self._raw = raw  # the first `raw` topics are the copied inputs and truth
-        self._bar = bar
-        self._names: list[str] = []
-        self._index: dict[str, int] = {}
-        self._counts: list[int] = []
-        # the held messages, one entry per topic and `add` (each in its order): topic index,
-        # log times [ns], sequence numbers within the topic, the messages
-        self._held: list[tuple[int, np.ndarray, np.ndarray, PackedMessages]] = []
-        self.newest_ns = -1  # [ns] newest log time of an input or truth message added
-        self._flushed = -1  # [ns] everything logged before this was written
-        self.written = 0
-
-    def declare(self, topic: str, msgtype: str) -> int:
-        """The topic's index (in first-declared order), declared to the writer once."""
-        k = self._index.get(topic)
-        if k is None:
-            info = self._infos.get(topic)
-            self._writer.add_topic(topic, msgtype, info.qos_profiles_yaml if info else '')
-            k = self._index[topic] = len(self._names)
-            self._names.append(topic)
-            self._counts.append(0)
-        return k
-
-    def add(self, topic: str, msgtype: str, log_ns: np.ndarray, datas: Sequence[bytes]) -> None:
-        """Hold messages of one topic (in their order) until they can be written.
-
-        Raises:
-            _OutOfOrderError: an input or truth message logged before what was written.
-        """
-        k = self.declare(topic, msgtype)
-        n = len(datas)
-        log = np.asarray(log_ns, dtype=np.int64)
-        if k < self._raw and n and int(log.min()) < self._flushed:
-            raise _OutOfOrderError(topic)
-        seq = np.arange(self._counts[k], self._counts[k] + n, dtype=np.int64)
-        self._held.append((k, log, seq, PackedMessages.from_list(datas)))
-        self._counts[k] += n
-        if k < self._raw and n:
-            self.newest_ns = max(self.newest_ns, int(log.max()))
-
-    def flush(self, before_ns: int | None) -> None:
-        """Write the held messages logged before `before_ns` [ns] (None: all), in order."""
-        if not self._held:
-            return
-        # In topic order, each topic's messages in their order: a stable sort by log time
-        # then orders by (log time, topic, sequence), and finds the held runs already sorted.
-        held = sorted(self._held, key=lambda entry: (entry[0], entry[2][:1].tolist()))
-        log = np.concatenate([entry[1] for entry in held])
-        which = np.concatenate([np.full(entry[1].size, entry[0], np.int64) for entry in held])
-        seq = np.concatenate([entry[2] for entry in held])
-        ready = np.ones(len(log), dtype=bool) if before_ns is None else log < before_ns
-        if before_ns is not None:
-            self._flushed = max(self._flushed, before_ns)
-        order = np.flatnonzero(ready)
-        order = order[np.argsort(log[order], kind='stable')]
-        # everything held, as it is (one buffer per topic and block); the writer copies the
-        # selected messages from there into its chunks
-        datas = PackedParts.join([entry[3] for entry in held])
-        for start in range(0, len(order), _WRITE_BLOCK):
-            sel = order[start : start + _WRITE_BLOCK]
-            self._writer.write_interleaved(self._names, which[sel], datas.take(sel), log[sel])
-            self._bar.update(int(np.count_nonzero(which[sel] < self._raw)))
-        self.written += len(order)
-        rest = np.flatnonzero(~ready)  # in topic order, each topic's in its order
-        self._held = []
-        for k in np.unique(which[rest]).tolist():
-            mine = rest[which[rest] == k]
-            self._held.append((k, log[mine], seq[mine], datas.take(mine).compact()))
 
 
 class _GapStats:
@@ -1045,7 +694,7 @@ class _Run:
     def block(
         self,
         arrays: Mapping[str, TopicArrays],
-        merged: _MergedWriter,
+        merged: MergedWriter,
         phase: Any,
         *,
         final: bool,
@@ -1127,7 +776,7 @@ class _Run:
                 meter.add_many(common[:k])
                 self._follow_rate(meter.stamps)
                 if k < n:
-                    result = _joined(result, run(slice(k, n)))
+                    result = joined_results(result, run(slice(k, n)))
             if meter is not None and self.wheel_meter is not None:
                 meter.add_many(common)
             self.cascade_time += time.perf_counter() - cascade_start
