@@ -43,7 +43,7 @@ sys.path[:0] = json.loads(sys.argv[3])
 path, bag, block = sys.argv[1], sys.argv[2], int(sys.argv[4])
 started = time.perf_counter()
 if path == 'whole':
-    from vd_observer_node.tools.report.evaluate import evaluate
+    from vd_observer_node.tools.report.evaluation import evaluate
     from vd_observer_node.tools.report.load import load_bag_series
     report, _ = evaluate(load_bag_series(bag, progress=False))
 else:

@@ -384,7 +384,7 @@ def test_traction_alert_on_the_launch_reaches_the_report(
     launch: tuple[Path, Path, object], tmp_path: Path
 ) -> None:
     """`vd report` of the replayed recording has the alerts section with figures."""
-    from vd_observer_node.tools.report.evaluate import evaluate
+    from vd_observer_node.tools.report.evaluation import evaluate
     from vd_observer_node.tools.report.load import load_bag_series
 
     _, out_bag, _ = launch

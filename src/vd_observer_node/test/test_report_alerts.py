@@ -37,7 +37,7 @@ from vd_observer_node.tools.report.alerts import (
     truth_episodes,
 )
 from vd_observer_node.tools.report.cli import add_report_parser
-from vd_observer_node.tools.report.evaluate import evaluate
+from vd_observer_node.tools.report.evaluation import evaluate
 from vd_observer_node.tools.report.load import load_bag_series
 
 RATE = 100.0  # [Hz]

@@ -23,7 +23,7 @@ from vd_common.topics import (
 )
 from vd_observer_node.testing.devbag import write_topic_arrays_bag
 from vd_observer_node.tools.report.cli import add_report_parser, default_out_dir, run_report
-from vd_observer_node.tools.report.evaluate import evaluate
+from vd_observer_node.tools.report.evaluation import evaluate
 from vd_observer_node.tools.report.load import load_bag_series
 
 RATE = 100.0  # [Hz]
@@ -267,7 +267,7 @@ def test_a_reference_on_another_clock_is_interpolated_onto_the_estimates(
 
 
 def test_a_reference_with_gaps_is_not_interpolated_across_them(tmp_path: Path) -> None:
-    from vd_observer_node.tools.report.evaluate import EvaluationSettings, build_comparisons
+    from vd_observer_node.tools.report.evaluation import EvaluationSettings, build_comparisons
 
     t = np.arange(400) / RATE
     stamp = np.round(t * 1e9).astype(np.int64)

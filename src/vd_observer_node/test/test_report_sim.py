@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import pytest
 from vd_observer_node.testing.devbag import cascade_topics, sim_topics, write_topic_arrays_bag
-from vd_observer_node.tools.report.evaluate import evaluate
+from vd_observer_node.tools.report.evaluation import evaluate
 from vd_observer_node.tools.report.load import load_bag_series
 from vd_observer_node.tools.report.metrics import error_stats, evaluation_mask
 

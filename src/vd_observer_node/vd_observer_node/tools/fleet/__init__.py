@@ -6,22 +6,27 @@ result per bag so an interrupted run resumes; :func:`~.report.write_fleet_report
 fleet report. The ``vd fleet`` sub-command is in :mod:`.cli`. See docs/bags.md.
 """
 
-from vd_observer_node.tools.fleet.bags import find_bags, read_bag_list
-from vd_observer_node.tools.fleet.errors import FleetEngineError, FleetError, FleetInputError
-from vd_observer_node.tools.fleet.process import (
-    ROW_COLUMNS,
-    FleetSettings,
-    bag_id,
-    process_bag,
-)
-from vd_observer_node.tools.fleet.report import (
-    FleetReport,
-    Regression,
-    compare_baseline,
-    read_fleet_csv,
-    write_fleet_report,
-)
-from vd_observer_node.tools.fleet.run import ENGINES, FleetRun, load_records, run_fleet
+from typing import TYPE_CHECKING
+
+from vd_observer_node.tools.lazy import lazy_exports
+
+if TYPE_CHECKING:  # the names as mypy and editors see them; imported on first use
+    from vd_observer_node.tools.fleet.bags import find_bags, read_bag_list
+    from vd_observer_node.tools.fleet.errors import FleetEngineError, FleetError, FleetInputError
+    from vd_observer_node.tools.fleet.process import (
+        ROW_COLUMNS,
+        FleetSettings,
+        bag_id,
+        process_bag,
+    )
+    from vd_observer_node.tools.fleet.report import (
+        FleetReport,
+        Regression,
+        compare_baseline,
+        read_fleet_csv,
+        write_fleet_report,
+    )
+    from vd_observer_node.tools.fleet.run import ENGINES, FleetRun, load_records, run_fleet
 
 __all__ = [
     'ENGINES',
@@ -43,3 +48,27 @@ __all__ = [
     'run_fleet',
     'write_fleet_report',
 ]
+
+__getattr__ = lazy_exports(
+    __name__,
+    {
+        'ENGINES': 'run',
+        'FleetEngineError': 'errors',
+        'FleetError': 'errors',
+        'FleetInputError': 'errors',
+        'FleetReport': 'report',
+        'FleetRun': 'run',
+        'FleetSettings': 'process',
+        'ROW_COLUMNS': 'process',
+        'Regression': 'report',
+        'bag_id': 'process',
+        'compare_baseline': 'report',
+        'find_bags': 'bags',
+        'load_records': 'run',
+        'process_bag': 'process',
+        'read_bag_list': 'bags',
+        'read_fleet_csv': 'report',
+        'run_fleet': 'run',
+        'write_fleet_report': 'report',
+    },
+)

@@ -29,7 +29,7 @@ from vd_common.topics import ESTIMATES_ALERTS, OBSERVER_BODY_VELOCITY, SENSORS_B
 
 from vd_observer_node.tools.report.alerts import ALERT_KINDS, activation_indices
 from vd_observer_node.tools.report.errors import ReportInputError, StampOrderError
-from vd_observer_node.tools.report.evaluate import AccuracyReport
+from vd_observer_node.tools.report.evaluation import AccuracyReport
 from vd_observer_node.tools.report.stream import DEFAULT_BLOCK_MESSAGES, evaluate_bag
 
 __all__ = [
@@ -282,7 +282,7 @@ def bag_figures_whole(
 ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """:func:`bag_figures` from the whole decoded bag (``load_bag_series``): the reference,
     and the path for bags whose stamps go backwards. Memory grows with the bag's length."""
-    from vd_observer_node.tools.report.evaluate import evaluate
+    from vd_observer_node.tools.report.evaluation import evaluate
     from vd_observer_node.tools.report.load import load_bag_series
 
     series = load_bag_series(path, progress=False)

@@ -6,19 +6,24 @@ ROS-free. Pipeline: :func:`load_bag_series` (batch-decoded topics) -> :func:`eva
 ``vd report`` sub-command is in :mod:`.cli`. See docs/report.md.
 """
 
-from vd_observer_node.tools.report.alerts import AlertSettings, AlertsSection
-from vd_observer_node.tools.report.errors import ReportError, ReportInputError
-from vd_observer_node.tools.report.evaluate import (
-    AccuracyReport,
-    Comparison,
-    EvaluationSettings,
-    QuantityMetrics,
-    SlopeConvergence,
-    evaluate,
-)
-from vd_observer_node.tools.report.format import report_json, report_markdown, report_text
-from vd_observer_node.tools.report.load import BagSeries, TopicSeries, load_bag_series
-from vd_observer_node.tools.report.metrics import ErrorStats
+from typing import TYPE_CHECKING
+
+from vd_observer_node.tools.lazy import lazy_exports
+
+if TYPE_CHECKING:  # the names as mypy and editors see them; imported on first use
+    from vd_observer_node.tools.report.alerts import AlertSettings, AlertsSection
+    from vd_observer_node.tools.report.errors import ReportError, ReportInputError
+    from vd_observer_node.tools.report.evaluation import (
+        AccuracyReport,
+        Comparison,
+        EvaluationSettings,
+        QuantityMetrics,
+        SlopeConvergence,
+        evaluate,
+    )
+    from vd_observer_node.tools.report.format import report_json, report_markdown, report_text
+    from vd_observer_node.tools.report.load import BagSeries, TopicSeries, load_bag_series
+    from vd_observer_node.tools.report.metrics import ErrorStats
 
 __all__ = [
     'AccuracyReport',
@@ -39,3 +44,26 @@ __all__ = [
     'report_markdown',
     'report_text',
 ]
+
+__getattr__ = lazy_exports(
+    __name__,
+    {
+        'AccuracyReport': 'evaluation',
+        'AlertSettings': 'alerts',
+        'AlertsSection': 'alerts',
+        'BagSeries': 'load',
+        'Comparison': 'evaluation',
+        'ErrorStats': 'metrics',
+        'EvaluationSettings': 'evaluation',
+        'QuantityMetrics': 'evaluation',
+        'ReportError': 'errors',
+        'ReportInputError': 'errors',
+        'SlopeConvergence': 'evaluation',
+        'TopicSeries': 'load',
+        'evaluate': 'evaluation',
+        'load_bag_series': 'load',
+        'report_json': 'format',
+        'report_markdown': 'format',
+        'report_text': 'format',
+    },
+)

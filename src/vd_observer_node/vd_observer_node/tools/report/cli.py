@@ -154,7 +154,7 @@ def _load_mapped(
 
 
 def _run(args: argparse.Namespace) -> int:
-    from vd_observer_node.tools.report.evaluate import evaluate
+    from vd_observer_node.tools.report.evaluation import evaluate
     from vd_observer_node.tools.report.format import report_json, report_markdown, report_text
     from vd_observer_node.tools.report.load import load_bag_series
 

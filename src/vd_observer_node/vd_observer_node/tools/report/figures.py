@@ -31,7 +31,7 @@ from vd_observer_node.tools.report.alerts import (
     axle_utilisation,
     truth_conditions,
 )
-from vd_observer_node.tools.report.evaluate import AccuracyReport, Comparison
+from vd_observer_node.tools.report.evaluation import AccuracyReport, Comparison
 from vd_observer_node.tools.report.metrics import error_stats
 from vd_observer_node.tools.report.topics import WHEEL_NAMES
 
@@ -222,7 +222,7 @@ def write_figures(
     """Write one PNG per quantity and ``summary.png`` into ``out_dir``.
 
     Args:
-        comparisons: from :func:`~vd_observer_node.tools.report.evaluate.evaluate`.
+        comparisons: from :func:`~vd_observer_node.tools.report.evaluation.evaluate`.
         report: the metrics (for excluded windows and titles).
         out_dir: existing directory.
 

@@ -9,7 +9,7 @@ import unicodedata
 from typing import Any
 
 from vd_observer_node.tools.report.alerts import AXLE_NAMES, AlertsSection, road_name
-from vd_observer_node.tools.report.evaluate import AccuracyReport, QuantityMetrics
+from vd_observer_node.tools.report.evaluation import AccuracyReport, QuantityMetrics
 from vd_observer_node.tools.report.topics import TRUE_POTENTIAL_TOPIC, WHEEL_NAMES
 
 __all__ = ['report_json', 'report_markdown', 'report_text']

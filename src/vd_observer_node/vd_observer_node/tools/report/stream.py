@@ -1,6 +1,6 @@
 """Streamed evaluation of one bag: the report's figures in memory bounded by a block.
 
-:func:`evaluate_bag` gives the same :class:`~.evaluate.AccuracyReport` as
+:func:`evaluate_bag` gives the same :class:`~.evaluation.AccuracyReport` as
 ``evaluate(load_bag_series(bag))`` (the reference, kept for ``vd report`` and its figures)
 without holding the bag's series: it reads the bag in file order, in blocks of
 ``block_messages`` messages decoded per topic (:func:`iter_topic_blocks`).
@@ -79,7 +79,7 @@ from vd_observer_node.tools.report.alerts import (
     segments_from_peaks,
 )
 from vd_observer_node.tools.report.errors import ReportInputError, StampOrderError
-from vd_observer_node.tools.report.evaluate import (
+from vd_observer_node.tools.report.evaluation import (
     _SPECS,
     AccuracyReport,
     EvaluationSettings,
@@ -442,7 +442,7 @@ class _Events:
 
 class _Convergence:
     """Slope convergence after each true step, as ``metrics.convergence_times`` and
-    ``evaluate._convergence`` take it, from the compared slope samples in stamp order.
+    ``evaluation._convergence`` take it, from the compared slope samples in stamp order.
 
     Steps are added as they are found; samples come only once every step up to them is known
     (so a new step lies after every sample seen: the one before it is the last seen)."""
@@ -875,7 +875,7 @@ class StreamedEvaluation:
     """What one streamed evaluation found.
 
     Attributes:
-        report: the accuracy report (as :func:`~.evaluate.evaluate`'s), or None when the bag
+        report: the accuracy report (as :func:`~.evaluation.evaluate`'s), or None when the bag
             has no truth (``no_report`` says why).
         no_report: the :class:`ReportInputError` message when ``report`` is None, else ''.
         topics: the report topics with messages, in the vd contract's order.
