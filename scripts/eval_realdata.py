@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import math
 import sys
 import tempfile
 from pathlib import Path
@@ -58,6 +59,7 @@ def evaluate(
     from vd_observer_node.estimation.vehicle import load_vehicle_params
     from vd_observer_node.inputs.mapping import load_input_mapping
     from vd_observer_node.tools.replay import ESTIMATE_TOPICS, load_replay_config, replay_bag
+    from vd_observer_node.tools.report.metrics import error_stats
 
     importer = _importer()
     bag = work / 'bag'
@@ -91,7 +93,6 @@ def evaluate(
     speed = np.interp(t, pose_t, pose_v)
     moving = ref_ok & (speed >= 0.5)
     valid = moving & np.asarray(slope['valid'], dtype=bool)
-    error = np.asarray(slope['angle']) - theta
     params = load_vehicle_params(VEHICLE)
     mass, g = params.chassis.mass, params.environment.gravity
     dt = float(np.median(np.diff(pose_t)))
@@ -104,30 +105,22 @@ def evaluate(
         - np.asarray(resist['aero'])
     )
     need = mass * (accel + g * np.sin(theta))
-    residual = net - need
     # the force balance where it held (its slope valid: SOURCE_FORCE), not where the IMU's
     # grade alone covered a braking
     sources = np.asarray(slope.get('sources', np.ones(t.size, dtype=np.uint8)))
     balanced = valid & ((sources & 1) != 0)
+    # (nan where nothing is valid: said, not warned about)
+    slope_error = error_stats(np.asarray(slope['angle']), theta, valid)
+    force_error = error_stats(net, need, balanced)
     return {
         'samples': float(report.samples),
         'torque_valid': report.torque_valid_fraction,
-        'slope_rms_deg': float(np.degrees(_rms(error[valid]))),
-        'slope_bias_deg': float(np.degrees(_mean(error[valid]))),
+        'slope_rms_deg': math.degrees(slope_error.rms),
+        'slope_bias_deg': math.degrees(slope_error.mean),
         'slope_valid_share': float(valid.sum() / max(moving.sum(), 1)),
-        'force_rms_n': _rms(residual[balanced]),
-        'force_bias_n': _mean(residual[balanced]),
+        'force_rms_n': force_error.rms,
+        'force_bias_n': force_error.mean,
     }
-
-
-def _rms(x: Any) -> float:
-    """Root mean square; nan for no samples (no valid estimate: said, not warned about)."""
-    return float(np.sqrt(np.mean(x**2))) if x.size else float('nan')
-
-
-def _mean(x: Any) -> float:
-    """Mean; nan for no samples."""
-    return float(np.mean(x)) if x.size else float('nan')
 
 
 def main(argv: list[str] | None = None) -> int:

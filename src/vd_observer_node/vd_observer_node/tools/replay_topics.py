@@ -32,7 +32,7 @@ from vd_observer_node.estimation.estimator import (
 from vd_observer_node.estimation.imu_grade import SOURCE_FORCE
 from vd_observer_node.situation.monitor import SituationMonitor, SituationSeries, run_situation
 
-__all__ = ['estimate_topics', 'joined_results', 'result_rows', 'situation_topics']
+__all__ = ['estimate_topics', 'joined_results', 'situation_topics']
 
 _SITUATION_BLOCK = 20_000  # samples per progress-bar update of the situation phase
 
@@ -110,7 +110,7 @@ def _stamp_ns(seconds: np.ndarray) -> np.ndarray:
     return out.astype(np.int64)
 
 
-def result_rows(result: CascadeResult, start: int, stop: int) -> CascadeResult:
+def _rows(result: CascadeResult, start: int, stop: int) -> CascadeResult:
     """The cascade result on stamps [start, stop) (every per-stamp array sliced)."""
     n = result.t.shape[0]
     sliced: dict[str, Any] = {
@@ -174,7 +174,7 @@ def situation_topics(
                 wheel_angle[start:stop],
                 speed[start:stop],
                 wheel_torque[start:stop],
-                result_rows(result, start, stop),
+                _rows(result, start, stop),
             )
         )
         if progress is not None:
