@@ -171,22 +171,104 @@ def test_default_output_dir_is_next_to_the_bag(known_bag: Path, tmp_path: Path) 
     )
 
 
-def test_bag_without_truth_is_a_one_line_error(
+def _no_reference_bag(path: Path) -> Path:
+    """Estimates without any /vd/truth/* topic: a slope valid after 0.5 s, tyre forces, and a
+    friction estimate never valid on the rear wheels (their panels have nothing to draw)."""
+    t = np.arange(200) / RATE
+    n = t.size
+    slope = np.radians(np.where(t < 1.0, 0.0, 2.0))
+    mu_valid = np.zeros((n, 4), bool)
+    mu_valid[:, :2] = t[:, None] > 0.2
+    write_topic_arrays_bag(
+        path,
+        T0_NS + np.round(t * 1e9).astype(np.int64),
+        {
+            ESTIMATES_SLOPE: {'angle': slope, 'valid': t >= 0.5},
+            ESTIMATES_TIRE_FORCES: {
+                'fx': np.tile([100.0, 200.0, 0.0, 0.0], (n, 1)),
+                'fz': np.tile(STATIC, (n, 1)),
+            },
+            ESTIMATES_FRICTION: {'mu': np.full((n, 4), 0.05), 'valid': mu_valid},
+        },
+    )
+    return path
+
+
+def test_bag_without_reference_gives_an_estimates_only_report(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    t = np.arange(200) / RATE
-    bag = tmp_path / 'no_truth'
+    bag = _no_reference_bag(tmp_path / 'no_truth')
+    out = tmp_path / 'out'
+    assert _vd(['report', str(bag), '--out', str(out), '--no-progress']) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert 'has no reference' in printed[0] and 'estimates-only' in printed[0]
+    data = json.loads((out / 'metrics.json').read_text())
+    assert data['reference'] == 'none'
+    assert data['quantities'] == [] and data['targets'] == {} and data['convergence'] == []
+    stats = {e['key']: e for e in data['estimates']}
+    assert set(stats) == {'fx', 'fz', 'mu', 'slip', 'slope'}
+    slope = stats['slope']['overall']
+    assert slope['samples'] == 200 and slope['valid'] == 150
+    assert slope['valid_pct'] == pytest.approx(75.0)
+    assert slope['minimum'] == pytest.approx(0.0) and slope['maximum'] == pytest.approx(2.0)
+    assert slope['mean'] == pytest.approx((50 * 0.0 + 100 * 2.0) / 150)
+    assert stats['fx']['wheels']['FR']['mean'] == pytest.approx(200.0)
+    assert (
+        stats['mu']['wheels']['RL']['valid'] == 0 and stats['mu']['wheels']['RL']['mean'] is None
+    )
+    assert stats['mu']['wheels']['FL']['valid'] == 200 - 21  # t > 0.2 s
+    md = (out / 'metrics.md').read_text()
+    assert 'This bag has no reference' in md and '/vd/truth/slope' in md
+    assert 'Estimate vs' not in md and 'RMS' not in md and 'Targets' not in md
+    assert 'no valid samples' in md  # the rear wheels' mu
+    pngs = {p.name for p in out.glob('*.png')}
+    assert {'slope.png', 'tire_fx.png', 'friction_mu.png', 'summary.png'} <= pngs
+
+
+def test_a_bag_with_nothing_to_report_is_a_one_line_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    t = np.arange(100) / RATE
+    bag = tmp_path / 'sensors_only'
     write_topic_arrays_bag(
-        bag,
-        np.round(t * 1e9).astype(np.int64),
-        {ESTIMATES_SLOPE: {'angle': np.zeros(t.size), 'valid': np.ones(t.size, bool)}},
+        bag, np.round(t * 1e9).astype(np.int64), {SENSORS_WHEEL_TORQUES: {'gear': np.ones(100)}}
     )
     assert _vd(['report', str(bag), '--out', str(tmp_path / 'out')]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1
-    assert err[0].startswith('vd: error: ') and 'no truth topics' in err[0]
-    assert 'slope' in err[0] and 'tire_forces' in err[0]
+    assert len(err) == 1 and err[0].startswith('vd: error: ') and 'nothing to report' in err[0]
     assert not (tmp_path / 'out').exists()
+
+
+def test_out_replaces_only_its_own_previous_report(
+    known_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / 'out'
+    assert _vd(['report', str(known_bag), '--out', str(out), '--no-progress']) == 0
+    first = {p.name for p in out.iterdir()}
+    assert 'tire_fz.png' in first and '.vd_report_files.json' in first
+    mine = out / 'my_notes.txt'
+    mine.write_text('keep me')
+    # the same folder for a bag that has fewer figures: the old ones must not stay
+    bag = _no_reference_bag(tmp_path / 'no_truth')
+    assert _vd(['report', str(bag), '--out', str(out), '--no-progress']) == 0
+    second = {p.name for p in out.iterdir()}
+    assert 'replaced the previous report' in capsys.readouterr().out
+    assert 'wheel_speed.png' in first and 'wheel_speed.png' not in second
+    assert mine.read_text() == 'keep me'
+    listed = json.loads((out / '.vd_report_files.json').read_text())['files']
+    assert second == {*listed, '.vd_report_files.json', 'my_notes.txt'}
+
+
+def test_out_refuses_a_folder_that_is_not_a_report(
+    known_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / 'photos'
+    out.mkdir()
+    (out / 'summary.png').write_bytes(b'not ours')
+    assert _vd(['report', str(known_bag), '--out', str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'not empty and holds no vd report' in err[0]
+    assert (out / 'summary.png').read_bytes() == b'not ours'
 
 
 def test_missing_bag_is_a_one_line_error(

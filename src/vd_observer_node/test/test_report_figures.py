@@ -1,11 +1,15 @@
-"""Plot helpers of vd report: the min/max envelope keeps extremes and gaps."""
+"""Plot helpers of vd report: the min/max envelope keeps extremes and gaps; panels without a
+valid sample say so; titles say 'reference' where the bag is not the simulator's."""
 
 from __future__ import annotations
 
+import matplotlib.pyplot as plt
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from vd_observer_node.tools.report.figures import envelope
+from matplotlib.figure import Figure
+from vd_observer_node.tools.report.evaluation import AccuracyReport, Comparison, EvaluationSettings
+from vd_observer_node.tools.report.figures import NO_VALID_SAMPLES, _quantity_figure, envelope
 
 
 def test_short_series_is_returned_unchanged() -> None:
@@ -47,3 +51,59 @@ def test_envelope_keeps_global_extremes_and_time_order(seed: int, n: int, bucket
     assert ye.max() == y.max() and ye.min() == y.min()
     assert te.size == ye.size <= max(2 * buckets, n)
     assert np.all(np.diff(te) >= 0)
+
+
+def _report(reference: str) -> AccuracyReport:
+    return AccuracyReport(
+        bag='drive',
+        first_stamp_s=0.0,
+        duration_s=2.0,
+        settings=EvaluationSettings(),
+        slope_steps_s=(),
+        gear_changes_s=(),
+        evaluated_fraction=0.0,
+        quantities=(),
+        convergence=(),
+        targets={},
+        notes=(),
+        reference=reference,
+    )
+
+
+def _panel_texts(fig: Figure) -> list[str]:
+    return [t.get_text() for ax in fig.axes for t in ax.texts]
+
+
+def test_a_panel_without_a_valid_sample_says_so() -> None:
+    t = np.arange(200) / 100.0
+    valid = np.zeros((200, 4), bool)
+    valid[:, :2] = True  # the rear wheels' mu is never valid (a front-wheel-drive car)
+    mu = Comparison(
+        'mu', 'Utilised friction μ', '-', t, np.full((200, 4), 0.1), None,
+        np.ones(200, bool), 'estimated (where valid)', '', 'μ', valid,
+    )  # fmt: skip
+    fig = _quantity_figure(mu, _report('none'))
+    try:
+        titles = [ax.get_title() for ax in fig.axes]
+        texts = {ax.get_title(): [x.get_text() for x in ax.texts] for ax in fig.axes}
+        assert titles == ['FL', 'FR', 'RL', 'RR']
+        assert texts['RL'] == [NO_VALID_SAMPLES] and texts['RR'] == [NO_VALID_SAMPLES]
+        assert texts['FL'] == [] and texts['FR'] == []
+        assert 'no reference' in fig.get_suptitle()
+    finally:
+        plt.close(fig)
+
+
+def test_titles_say_reference_where_the_bag_is_not_the_simulators() -> None:
+    t = np.arange(100) / 100.0
+    slope = Comparison(
+        'slope', 'Road slope', 'deg', t, np.ones(100), np.zeros(100), np.ones(100, bool),
+        'estimated', 'reference (/vd/truth/slope)', 'slope', np.ones(100, bool),
+    )  # fmt: skip
+    for reference, word in (('reference', 'vs reference'), ('simulator', 'vs truth')):
+        fig = _quantity_figure(slope, _report(reference))
+        try:
+            assert word in fig.get_suptitle()
+            assert _panel_texts(fig) == []
+        finally:
+            plt.close(fig)

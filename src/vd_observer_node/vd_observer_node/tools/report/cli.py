@@ -7,11 +7,18 @@ With ``--mapping`` (a user's bag with its own topics and standard types, docs/ba
 report summarises each mapped input (messages, longest gap, gaps longer than ``max_gap``);
 a bag without estimates is first replayed with the mapping (``vd replay``, into a temporary
 folder) so that there is something to compare with the truth.
+
+A bag without reference (no ``/vd/truth/*`` topic) gives an estimates-only report (each
+estimate's values and validity, no accuracy); the command says so before it reads or replays
+the bag. The output folder is checked first too (:func:`prepare_out_dir`): the files a
+previous ``vd report`` wrote there (listed in its manifest, :data:`MANIFEST`) are removed
+before the new ones are written, and a non-empty folder that is not a report is refused.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import tempfile
 import time
@@ -26,14 +33,104 @@ from vd_common.topics import (
 )
 
 from vd_observer_node.errors import ObserverError
+from vd_observer_node.tools.report.errors import ReportOutputError
 
 if TYPE_CHECKING:
     from vd_observer_node.tools.report.load import BagSeries
 
-__all__ = ['add_report_parser', 'default_out_dir', 'run_report']
+__all__ = [
+    'MANIFEST',
+    'REPORT_FILES',
+    'add_report_parser',
+    'clear_previous_report',
+    'default_out_dir',
+    'prepare_out_dir',
+    'run_report',
+]
 
 EXIT_OK = 0
 EXIT_ERROR = 2
+
+#: The list of the files ``vd report`` wrote into its folder (JSON: {"files": [names]}).
+MANIFEST = '.vd_report_files.json'
+#: The names ``vd report`` writes: a folder's old report without a manifest (written before
+#: the manifest existed) is recognised by its metrics.json and cleared of these names only.
+REPORT_FILES = (
+    'metrics.json',
+    'metrics.md',
+    'summary.png',
+    'wheel_speed.png',
+    'wheel_accel.png',
+    'body_accel.png',
+    'body_speed.png',
+    'tire_fx.png',
+    'tire_fz.png',
+    'friction_mu.png',
+    'slip.png',
+    'rolling_resistance.png',
+    'aero_drag.png',
+    'slope.png',
+    'alerts.png',
+    'friction_potential.png',
+)
+
+
+def _previous_files(out: Path) -> list[str] | None:
+    """Names of the files a previous report wrote into ``out`` (None: no report there)."""
+    manifest = out / MANIFEST
+    if manifest.is_file():
+        try:
+            names = json.loads(manifest.read_text(encoding='utf-8'))['files']
+        except (ValueError, KeyError, TypeError, OSError):
+            names = None
+        if isinstance(names, list) and all(isinstance(n, str) for n in names):
+            # names only: a manifest never reaches outside its folder
+            return [n for n in names if n and Path(n).name == n] + [MANIFEST]
+    metrics = out / 'metrics.json'
+    try:
+        data = json.loads(metrics.read_text(encoding='utf-8'))
+    except (OSError, ValueError):
+        return None
+    if isinstance(data, dict) and {'bag', 'settings', 'quantities'} <= data.keys():
+        return list(REPORT_FILES)  # a report from before the manifest
+    return None
+
+
+def prepare_out_dir(out: Path) -> list[str]:
+    """Check that ``vd report`` may write into ``out``; returns the old report's files there.
+
+    Args:
+        out: the output folder (need not exist).
+
+    Returns:
+        Names of files a previous ``vd report`` wrote there (to remove before writing).
+
+    Raises:
+        ReportOutputError: ``out`` is a file, or a non-empty folder without a previous report
+            (vd report never removes files it did not write).
+    """
+    if out.exists() and not out.is_dir():
+        raise ReportOutputError(f'--out {out} is a file, not a folder')
+    if not out.is_dir() or not any(out.iterdir()):
+        return []
+    previous = _previous_files(out)
+    if previous is None:
+        raise ReportOutputError(
+            f'--out {out} is not empty and holds no vd report: give a new or empty folder '
+            '(vd report removes only the files of its own previous report)'
+        )
+    return previous
+
+
+def clear_previous_report(out: Path, names: list[str]) -> int:
+    """Remove the previous report's files ``names`` from ``out``; returns how many."""
+    removed = 0
+    for name in names:
+        path = out / name
+        if path.is_file() and not path.is_symlink():
+            path.unlink()
+            removed += 1
+    return removed
 
 
 def default_out_dir(bag: Path) -> Path:
@@ -58,7 +155,9 @@ def add_report_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentPa
         '--out',
         type=Path,
         default=None,
-        help='output directory (default: <bag>_report next to the bag)',
+        help='output directory (default: <bag>_report next to the bag); the files of a '
+        'previous report there are replaced, a non-empty folder that is not a report is '
+        'refused',
     )
     parser.add_argument(
         '--vehicle',
@@ -153,12 +252,29 @@ def _load_mapped(
     )
 
 
+def _reference_first(bag: Path) -> bool:
+    """Whether the bag holds a reference; says at once when it does not (before a replay)."""
+    from vd_observer_node.bag.reader import BagReader
+    from vd_observer_node.tools.report.evaluation import NO_REFERENCE_HINT, has_reference
+
+    if has_reference(BagReader(bag).topics):
+        return True
+    print(
+        f'{bag} has no reference (no {TRUTH_NAMESPACE}* topic): an estimates-only report '
+        f'(every estimate and its validity, no accuracy); {NO_REFERENCE_HINT}'
+    )
+    return False
+
+
 def _run(args: argparse.Namespace) -> int:
-    from vd_observer_node.tools.report.evaluation import evaluate
+    from vd_observer_node.tools.report.evaluation import evaluate, evaluate_estimates
     from vd_observer_node.tools.report.format import report_json, report_markdown, report_text
     from vd_observer_node.tools.report.load import load_bag_series
 
     started = time.perf_counter()
+    out = args.out if args.out is not None else default_out_dir(args.bag)
+    previous = prepare_out_dir(out)
+    reference = _reference_first(args.bag)
     static = None
     if getattr(args, 'vehicle', None):
         from vd_observer_node.estimation.vehicle import load_estimator_vehicle
@@ -179,9 +295,12 @@ def _run(args: argparse.Namespace) -> int:
                 getattr(args, 'config', None),
             )
         series.path = args.bag
-    report, comparisons = evaluate(series, static_loads=static)
-    out = args.out if args.out is not None else default_out_dir(args.bag)
+    if reference:
+        report, comparisons = evaluate(series, static_loads=static)
+    else:
+        report, comparisons = evaluate_estimates(series)
     out.mkdir(parents=True, exist_ok=True)
+    removed = clear_previous_report(out, previous)
     (out / 'metrics.json').write_text(report_json(report))
     (out / 'metrics.md').write_text(report_markdown(report))
     figures: list[Path] = []
@@ -196,7 +315,11 @@ def _run(args: argparse.Namespace) -> int:
             data, _ = alert_data(series)
             if data is not None:
                 figures += write_alert_figures(data, report.alerts, out)
+    names = ['metrics.json', 'metrics.md', *(f.name for f in figures)]
+    (out / MANIFEST).write_text(json.dumps({'files': names}, indent=1) + '\n')
     sys.stdout.write(report_text(report))
+    if removed:
+        print(f'replaced the previous report in {out} ({removed} files)')
     print(
         f'wrote metrics.json, metrics.md and {len(figures)} figures to {out} '
         f'(read {series.message_count} messages in {series.read_time_s:.1f} s, '

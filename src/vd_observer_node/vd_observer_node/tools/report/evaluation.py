@@ -44,26 +44,35 @@ from vd_observer_node.tools.report.errors import ReportInputError
 from vd_observer_node.tools.report.load import BagSeries, TopicSeries
 from vd_observer_node.tools.report.metrics import (
     ErrorStats,
+    ValueStats,
     change_times,
     convergence_times,
     error_stats,
     evaluation_mask,
     relative_error_stats,
     step_times,
+    value_stats,
 )
 from vd_observer_node.tools.report.topics import ESTIMATE_TOPICS, GEAR_TOPIC, TRUTH_TOPICS
 
 __all__ = [
+    'NO_REFERENCE_HINT',
     'TARGETS',
+    'TARGETS_TITLE',
     'AccuracyReport',
     'Comparison',
+    'EstimateStats',
     'EvaluationSettings',
     'QuantityMetrics',
     'SlopeConvergence',
     'build_comparisons',
     'closing_notes',
     'evaluate',
+    'evaluate_estimates',
+    'has_reference',
     'quantity_note',
+    'reference_kind',
+    'target_values',
     'torque_path',
     'torque_path_note',
 ]
@@ -79,6 +88,15 @@ TARGETS: dict[str, tuple[str, str, float]] = {
     'Fz RMS [% of static load]': ('fz', 'rms_pct_of_static', 1.0),
     'omega relative RMS [%]': ('omega', 'rel_rms_pct', 0.1),
 }
+#: What :data:`TARGETS` are: judged only on the simulator's bags, never on a real car's.
+TARGETS_TITLE = "Targets for the simulator's ideal sensors"
+
+#: How a bag without reference gets one (the report's note and the command's first line).
+NO_REFERENCE_HINT = (
+    f'to compare, record a reference on {TRUTH_NAMESPACE}* in the bag (e.g. a grade from '
+    f'a GNSS/INS as {TRUTH_SLOPE}, vd_msgs/msg/Slope, on its own clock: it is interpolated '
+    'onto the estimates; docs/report.md)'
+)
 
 
 @dataclass(frozen=True)
@@ -206,6 +224,12 @@ class AccuracyReport:
         targets: target name -> (value, limit, met) for the issue's targets found.
         notes: what is missing from the bag and other caveats.
         alerts: the alerts and friction-potential section (None: skipped, see ``notes``).
+        reference: what the estimates were compared with: 'simulator' (the simulator's
+            truth, on the estimates' stamps), 'reference' (a real car's, e.g. on its own
+            clock or in a mapped bag: no targets judged) or 'none' (an estimates-only
+            report: ``quantities`` and ``targets`` are empty, ``estimates`` holds the
+            statistics).
+        estimates: statistics of every estimate's own values (estimates-only reports).
     """
 
     bag: str
@@ -220,6 +244,29 @@ class AccuracyReport:
     targets: dict[str, tuple[float, float, bool]]
     notes: tuple[str, ...]
     alerts: AlertsSection | None = None
+    reference: str = 'simulator'
+    estimates: tuple[EstimateStats, ...] = ()
+
+
+@dataclass(frozen=True)
+class EstimateStats:
+    """One estimate's values over the drive (a report without reference).
+
+    Attributes:
+        key: short name (see :class:`Comparison`).
+        title: human name.
+        unit: unit of the statistics (e.g. deg for the slope).
+        overall: over all wheels (or the scalar quantity), every sample of the bag.
+        wheels: per wheel FL, FR, RL, RR; empty for scalar quantities.
+        note: what counts as valid.
+    """
+
+    key: str
+    title: str
+    unit: str
+    overall: ValueStats
+    wheels: tuple[ValueStats, ...]
+    note: str = ''
 
 
 @dataclass(frozen=True)
@@ -349,6 +396,31 @@ def _events(
     return steps, gears, slope_t, slope_deg
 
 
+def has_reference(topics: Collection[str]) -> bool:
+    """True when a bag's topics hold a reference to compare the estimates with (any
+    ``/vd/truth/*`` topic)."""
+    return any(t in topics for t in TRUTH_TOPICS)
+
+
+def reference_kind(series: BagSeries) -> str:
+    """'simulator', 'reference' or 'none': what the bag's ``/vd/truth/*`` topics are.
+
+    The simulator's truth carries the estimates' own stamps and comes without an input
+    mapping; a reference on its own clock (interpolated) or in a mapped bag (a car's own
+    topics) is a real car's reference, which the simulator's targets do not judge.
+    """
+    if not has_reference(series.topics):
+        return 'none'
+    if series.inputs:
+        return 'reference'
+    for spec in _SPECS:
+        est = series.topics.get(spec.est_topic)
+        truth = series.topics.get(spec.truth_topic)
+        if est is not None and truth is not None and _on_own_clock(est, truth):
+            return 'reference'
+    return 'simulator'
+
+
 def build_comparisons(
     series: BagSeries, settings: EvaluationSettings | None = None
 ) -> tuple[list[Comparison], FloatArray, FloatArray, list[str]]:
@@ -367,13 +439,14 @@ def build_comparisons(
     events = np.concatenate([steps, gears])
     notes: list[str] = []
     out: list[Comparison] = []
+    simulator = reference_kind(series) == 'simulator'
     for spec in _SPECS:
         est = series.topics.get(spec.est_topic)
         truth = series.topics.get(spec.truth_topic)
         if est is None and truth is None:
             continue
         ie: np.ndarray | None = None
-        truth_label = spec.truth_label
+        truth_label = spec.truth_label if simulator else f'reference ({spec.truth_topic})'
         if est is not None and truth is not None and _on_own_clock(est, truth):
             # a real car's reference: its own clock, interpolated onto the estimates
             stamps, ie = est.stamp_ns, np.arange(est.stamp_ns.size)
@@ -534,7 +607,8 @@ def evaluate(
         (report, comparisons for the figures).
 
     Raises:
-        ReportInputError: the bag holds no truth topic, or no topic at all.
+        ReportInputError: the bag holds no truth topic (:func:`evaluate_estimates` reports
+            such a bag), or no topic at all.
     """
     cfg = settings or EvaluationSettings()
     if not series.topics:
@@ -586,6 +660,12 @@ def evaluate(
     )
     if section is None:
         notes.extend(alert_notes)
+    kind = reference_kind(series)
+    if kind != 'simulator':
+        notes.append(
+            "the reference is a car's (on its own clock or in a mapped bag), not the "
+            "simulator's truth: the simulator's ideal-sensor targets are not judged"
+        )
     report = AccuracyReport(
         bag=str(series.path),
         first_stamp_s=t0 * 1e-9,
@@ -596,9 +676,95 @@ def evaluate(
         evaluated_fraction=float(window.mean()) if window.size else 0.0,
         quantities=tuple(quantities),
         convergence=tuple(convergence),
-        targets=_targets(quantities),
+        targets=_targets(quantities) if kind == 'simulator' else {},
         notes=tuple(notes),
         alerts=section,
+        reference=kind,
+    )
+    return report, comparisons
+
+
+def evaluate_estimates(
+    series: BagSeries,
+    *,
+    settings: EvaluationSettings | None = None,
+) -> tuple[AccuracyReport, list[Comparison]]:
+    """The report of a bag without reference: every estimate's own values, no accuracy.
+
+    Per estimate (and wheel): samples, the share valid (finite, and the estimator's ``valid``
+    flag where its message has one: mu, slope), min / mean / max of the valid values over the
+    whole bag (no evaluation window: there are no steps to exclude).
+
+    Args:
+        series: the decoded bag (its ``/vd/truth/*`` topics, if any, are not used).
+        settings: evaluation settings (the figures' grey start-up band); default
+            :class:`EvaluationSettings`.
+
+    Returns:
+        (report with ``reference`` 'none', ``estimates`` filled, ``quantities`` and
+        ``targets`` empty; comparisons without truth, for the figures).
+
+    Raises:
+        ReportInputError: the bag holds none of the vd topics, or no estimate.
+    """
+    cfg = settings or EvaluationSettings()
+    if not series.topics:
+        raise ReportInputError(f'{series.path}: none of the vd topics found in the bag')
+    if not any(t in series.topics for t in ESTIMATE_TOPICS):
+        raise ReportInputError(
+            f'{series.path}: no {OBSERVER_NAMESPACE}* or {ESTIMATES_NAMESPACE}* topic and no '
+            'reference: nothing to report (compute the estimates with `vd replay IN OUT`, or '
+            'give --mapping)'
+        )
+    without = BagSeries(
+        series.path,
+        {k: v for k, v in series.topics.items() if k not in TRUTH_TOPICS},
+        series.skipped,
+        series.read_time_s,
+        series.message_count,
+        series.inputs,
+    )
+    comparisons, steps, gears, _ = build_comparisons(without, cfg)
+    comparisons = [c for c in comparisons if c.estimate is not None]
+    stats: list[EstimateStats] = []
+    for c in comparisons:
+        assert c.estimate is not None
+        valid = c.estimate_valid
+        overall = value_stats(c.estimate, valid)
+        wheels: tuple[ValueStats, ...] = ()
+        if c.per_wheel:
+            wheels = tuple(
+                value_stats(c.estimate[:, k], None if valid is None else valid[:, k])
+                for k in range(c.estimate.shape[1])
+            )
+        note = 'finite and flagged valid' if valid is not None else 'finite'
+        stats.append(EstimateStats(c.key, c.title, c.unit, overall, wheels, note))
+    t0 = _first_stamp(without)
+    last = max(int(s.stamp_ns[-1]) for s in without.topics.values())
+    notes = [f'no reference in the bag: no accuracy computed; {NO_REFERENCE_HINT}']
+    notes.extend(
+        n
+        for n in closing_notes(
+            set(without.topics), torque_path(without), series.skipped, series.inputs
+        )
+        # what excludes samples from an accuracy window says nothing without one
+        if not n.startswith(('reference topics missing', f'{TRUTH_SLOPE} missing', GEAR_TOPIC))
+    )
+    report = AccuracyReport(
+        bag=str(series.path),
+        first_stamp_s=t0 * 1e-9,
+        duration_s=(last - t0) * 1e-9,
+        settings=cfg,
+        slope_steps_s=tuple(steps.tolist()),
+        gear_changes_s=tuple(gears.tolist()),
+        evaluated_fraction=0.0,
+        quantities=(),
+        convergence=(),
+        targets={},
+        notes=tuple(notes),
+        alerts=None,
+        reference='none',
+        estimates=tuple(stats),
     )
     return report, comparisons
 
@@ -708,14 +874,23 @@ def _convergence(
     return out
 
 
-def _targets(quantities: list[QuantityMetrics]) -> dict[str, tuple[float, float, bool]]:
+def target_values(quantities: Sequence[QuantityMetrics]) -> dict[str, float]:
+    """The figures :data:`TARGETS` name, where finite (target name -> value), whether or
+    not the bag is one the targets judge."""
     by_key = {q.key: q for q in quantities}
-    out: dict[str, tuple[float, float, bool]] = {}
-    for name, (key, metric, limit) in TARGETS.items():
+    out: dict[str, float] = {}
+    for name, (key, metric, _) in TARGETS.items():
         q = by_key.get(key)
         if q is None:
             continue
         value = q.overall.rms if metric == 'rms' else q.extras.get(metric, float('nan'))
         if np.isfinite(value):
-            out[name] = (float(value), limit, bool(value <= limit))
+            out[name] = float(value)
     return out
+
+
+def _targets(quantities: Sequence[QuantityMetrics]) -> dict[str, tuple[float, float, bool]]:
+    return {
+        name: (value, TARGETS[name][2], bool(value <= TARGETS[name][2]))
+        for name, value in target_values(quantities).items()
+    }

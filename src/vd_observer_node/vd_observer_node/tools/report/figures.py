@@ -31,11 +31,11 @@ from vd_observer_node.tools.report.alerts import (
     axle_utilisation,
     truth_conditions,
 )
-from vd_observer_node.tools.report.evaluation import AccuracyReport, Comparison
+from vd_observer_node.tools.report.evaluation import TARGETS_TITLE, AccuracyReport, Comparison
 from vd_observer_node.tools.report.metrics import error_stats
 from vd_observer_node.tools.report.topics import WHEEL_NAMES
 
-__all__ = ['DPI', 'envelope', 'write_alert_figures', 'write_figures']
+__all__ = ['DPI', 'NO_VALID_SAMPLES', 'envelope', 'write_alert_figures', 'write_figures']
 
 FloatArray = NDArray[np.float64]
 
@@ -44,6 +44,9 @@ _ESTIMATE_PERCENTILES = (0.5, 99.5)  # [%] of the estimate kept inside the y ran
 _BUCKETS = 1500  # min/max pairs per line: finer than the ~800 px wide axes
 _EST_COLOR = 'tab:blue'
 _TRUTH_COLOR = 'black'
+_INVALID_COLOR = 'tab:red'
+#: The text of a panel with nothing valid to draw (instead of an empty frame).
+NO_VALID_SAMPLES = 'no valid samples'
 _FILES = {
     'omega': 'wheel_speed.png',
     'omega_dot': 'wheel_accel.png',
@@ -125,6 +128,37 @@ def _robust_ylim(ax: Axes, est: FloatArray | None, truth: FloatArray | None) -> 
     ax.set_ylim(lo - pad, hi + pad)
 
 
+def _against(report: AccuracyReport) -> str:
+    """'truth' (the simulator's), 'reference' (a car's) or '' (none) for the titles."""
+    return {'simulator': 'truth', 'reference': 'reference'}.get(report.reference, '')
+
+
+def _vs(report: AccuracyReport) -> str:
+    against = _against(report)
+    return f'estimate vs {against}' if against else 'estimate (no reference in the bag)'
+
+
+def _mark_invalid(ax: Axes, c: Comparison, column: int | None) -> None:
+    """A band along the bottom of the axes where the estimator flags its estimate invalid
+    (mu's and the slope's ``valid``): a reader sees what the statistics leave out."""
+    if c.estimate_valid is None or c.t.size == 0:
+        return
+    valid = np.asarray(c.estimate_valid, dtype=bool)
+    if valid.ndim == 2:
+        valid = valid[:, column] if column is not None else np.all(valid, axis=1)
+    runs = _runs(np.logical_not(valid), c.t)
+    if runs:
+        ax.broken_barh(
+            runs,
+            (0.0, 0.04),
+            facecolors=_INVALID_COLOR,
+            alpha=0.5,
+            lw=0,
+            transform=ax.get_xaxis_transform(),
+            label='estimate invalid',
+        )
+
+
 def _plot_axis(
     ax: Axes, c: Comparison, report: AccuracyReport, column: int | None, title: str
 ) -> None:
@@ -135,6 +169,12 @@ def _plot_axis(
         ax.plot(*envelope(c.t, truth), color=_TRUTH_COLOR, lw=1.0, label=c.truth_label)
     if est is not None:
         ax.plot(*envelope(c.t, est), color=_EST_COLOR, lw=0.8, alpha=0.85, label=c.estimate_label)
+        _mark_invalid(ax, c, column)
+    if not _has_valid(est, c, column):
+        # an empty frame reads as a plotting bug: say why nothing (of the estimate) is drawn
+        text = NO_VALID_SAMPLES if est is not None else 'no estimate'
+        ax.text(0.5, 0.5, text, transform=ax.transAxes, ha='center', va='center',
+                fontsize=12, color='0.35')  # fmt: skip
     if est is not None and truth is not None:
         mask = c.mask if c.mask.ndim == 1 else c.mask[:, column]
         stats = error_stats(est, truth, mask)
@@ -148,6 +188,20 @@ def _plot_axis(
     ax.grid(True, lw=0.3)
 
 
+def _has_valid(est: FloatArray | None, c: Comparison, column: int | None) -> bool:
+    """Whether the estimate has one finite sample its estimator flags valid."""
+    if est is None:
+        return False
+    ok = np.isfinite(est)
+    if c.estimate_valid is not None:
+        valid = np.asarray(c.estimate_valid, dtype=bool)
+        if column is not None and valid.ndim == 2:
+            valid = valid[:, column]
+        if valid.shape == ok.shape:
+            ok = ok & valid
+    return bool(ok.any())
+
+
 def _quantity_figure(c: Comparison, report: AccuracyReport) -> Figure:
     if c.per_wheel:
         fig, axes = plt.subplots(2, 2, figsize=(12, 7.5), sharex=True)
@@ -156,7 +210,7 @@ def _quantity_figure(c: Comparison, report: AccuracyReport) -> Figure:
             if k < 2:
                 ax.set_xlabel('')
         axes[0, 0].legend(loc='best', fontsize=9)
-        fig.suptitle(f'{c.title} per wheel: estimate vs truth', fontsize=12)
+        fig.suptitle(f'{c.title} per wheel: {_vs(report)}', fontsize=12)
         fig.subplots_adjust(left=0.07, right=0.98, bottom=0.07, top=0.91, hspace=0.18, wspace=0.15)
     elif c.key == 'slope' and c.estimate is not None and c.truth is not None:
         fig, (ax, ax_err) = plt.subplots(2, 1, figsize=(11, 7), sharex=True, height_ratios=(2, 1))
@@ -173,15 +227,17 @@ def _quantity_figure(c: Comparison, report: AccuracyReport) -> Figure:
         ax_err.set_xlabel('time [s]')
         ax_err.grid(True, lw=0.3)
         ax_err.set_title(
-            f'estimate - truth (dashed: ±{limit:g} deg convergence band)', fontsize=10
+            f'estimate - {_against(report)} (dashed: ±{limit:g} deg convergence band)',
+            fontsize=10,
         )
-        fig.suptitle('Road slope: estimate vs true slope', fontsize=12)
+        fig.suptitle(f'Road slope: {_vs(report)}', fontsize=12)
         fig.subplots_adjust(left=0.08, right=0.98, bottom=0.08, top=0.91, hspace=0.2)
     else:
         fig, ax = plt.subplots(figsize=(11, 4.5))
         _plot_axis(ax, c, report, None, c.title)
         ax.legend(loc='best', fontsize=9)
-        fig.subplots_adjust(left=0.08, right=0.98, bottom=0.12, top=0.92)
+        fig.suptitle(f'{c.title}: {_vs(report)}', fontsize=12)
+        fig.subplots_adjust(left=0.08, right=0.98, bottom=0.12, top=0.9)
     return fig
 
 
@@ -208,8 +264,9 @@ def _summary_figure(comparisons: Sequence[Comparison], report: AccuracyReport) -
     if lines:
         half = (len(lines) + 1) // 2
         text = '   |   '.join(lines[:half]) + '\n' + '   |   '.join(lines[half:])
-        fig.text(0.5, 0.008, 'targets: ' + text, ha='center', va='bottom', fontsize=9)
-    fig.suptitle(f'Summary: {Path(report.bag).name} (grey: not evaluated)', fontsize=12)
+        fig.text(0.5, 0.008, f'{TARGETS_TITLE}: ' + text, ha='center', va='bottom', fontsize=9)
+    grey = 'grey: not evaluated' if report.reference != 'none' else 'no reference in the bag'
+    fig.suptitle(f'Summary: {Path(report.bag).name} ({grey})', fontsize=12)
     fig.subplots_adjust(left=0.07, right=0.98, bottom=0.1, top=0.94, hspace=0.22, wspace=0.15)
     return fig
 

@@ -9,7 +9,13 @@ import unicodedata
 from typing import Any
 
 from vd_observer_node.tools.report.alerts import AXLE_NAMES, AlertsSection, road_name
-from vd_observer_node.tools.report.evaluation import AccuracyReport, QuantityMetrics
+from vd_observer_node.tools.report.evaluation import (
+    NO_REFERENCE_HINT,
+    TARGETS_TITLE,
+    AccuracyReport,
+    EstimateStats,
+    QuantityMetrics,
+)
 from vd_observer_node.tools.report.topics import TRUE_POTENTIAL_TOPIC, WHEEL_NAMES
 
 __all__ = ['report_json', 'report_markdown', 'report_text']
@@ -45,7 +51,7 @@ def report_json(report: AccuracyReport) -> str:
         name: {'value': value, 'limit': limit, 'met': met}
         for name, (value, limit, met) in report.targets.items()
     }
-    for q in data['quantities']:
+    for q in data['quantities'] + data['estimates']:
         q['wheels'] = dict(zip(WHEEL_NAMES, q['wheels'], strict=False))
     if report.alerts is not None:
         data['alerts']['targets'] = {
@@ -107,6 +113,93 @@ def _rows(report: AccuracyReport) -> list[list[str]]:
 
 
 _HEAD = ['quantity', 'unit', 'RMS', 'max |err|', 'mean err', 'samples', 'also']
+
+
+_EST_HEAD = ['estimate', 'unit', 'samples', 'valid %', 'min', 'mean', 'max', 'valid means']
+
+
+def _estimate_rows(report: AccuracyReport) -> list[list[str]]:
+    rows = []
+    for e in report.estimates:
+        o = e.overall
+        rows.append(
+            [
+                e.title,
+                e.unit,
+                str(o.samples),
+                _num(o.valid_pct, 3),
+                _num(o.minimum),
+                _num(o.mean),
+                _num(o.maximum),
+                e.note,
+            ]
+        )
+    return rows
+
+
+def _wheel_cell(e: EstimateStats, k: int) -> str:
+    w = e.wheels[k]
+    if not w.valid:
+        return 'no valid samples'
+    return f'{_num(w.minimum)} / {_num(w.mean)} / {_num(w.maximum)} ({_num(w.valid_pct, 3)} %)'
+
+
+def _table(head: list[str], rows: list[list[str]]) -> list[str]:
+    """A fixed-width table: text columns left, the rest right; the last one free."""
+    widths = [max(_width(r[k]) for r in [head, *rows]) for k in range(len(head) - 1)]
+
+    def line(cells: list[str]) -> str:
+        padded = [
+            _pad(c, w, right=k >= 2)
+            for k, (c, w) in enumerate(zip(cells[:-1], widths, strict=True))
+        ]
+        return ('  '.join(padded) + '  ' + cells[-1]).rstrip()
+
+    return [line(head), *(line(r) for r in rows)]
+
+
+def _estimates_text(report: AccuracyReport) -> str:
+    lines = [
+        f'estimates of {report.bag} ({report.duration_s:.1f} s): no reference in the bag, '
+        'no accuracy computed; valid samples of every estimate over the whole bag:'
+    ]
+    lines += _table(_EST_HEAD, _estimate_rows(report))
+    lines.extend(f'note: {n}' for n in report.notes[1:])  # the first: the line above
+    return '\n'.join(lines) + '\n'
+
+
+def _estimates_markdown(report: AccuracyReport) -> str:
+    out = [
+        f'# Estimates report: `{report.bag}`',
+        '',
+        f'- Duration: {report.duration_s:.2f} s (t = 0 at stamp {report.first_stamp_s:.3f} s)',
+        '- Gear changes at: ' + (', '.join(f'{s:.2f} s' for s in report.gear_changes_s) or '-'),
+        '',
+        '**This bag has no reference** (no `/vd/truth/*` topic), so no accuracy is computed: '
+        "the tables give each estimate's own values. How to add one: " + NO_REFERENCE_HINT + '.',
+        '',
+        '## Estimates (valid samples, whole bag)',
+        '',
+        _md(_EST_HEAD),
+        '|' + '---|' * len(_EST_HEAD),
+    ]
+    out += [_md(r) for r in _estimate_rows(report)]
+    wheel_rows = [e for e in report.estimates if e.wheels]
+    if wheel_rows:
+        out += [
+            '',
+            '## Per wheel: min / mean / max (valid %)',
+            '',
+            '| estimate | unit | ' + ' | '.join(WHEEL_NAMES) + ' |',
+            '|---|---|---|---|---|---|',
+        ]
+        for e in wheel_rows:
+            cells = [_wheel_cell(e, k) for k in range(len(e.wheels))]
+            out.append(_md([e.title, e.unit, *cells]))
+    notes = report.notes[1:] if report.notes else ()
+    if notes:
+        out += ['', '## Notes', ''] + [f'- {n}' for n in notes]
+    return '\n'.join(out) + '\n'
 
 
 def _convergence_lines(report: AccuracyReport) -> list[str]:
@@ -197,6 +290,8 @@ def _alerts_text(section: AlertsSection) -> list[str]:
 
 def report_text(report: AccuracyReport) -> str:
     """A concise fixed-width table for the terminal."""
+    if report.reference == 'none':
+        return _estimates_text(report)
     rows = _rows(report)
     widths = [max(_width(r[k]) for r in [_HEAD, *rows]) for k in range(len(_HEAD) - 1)]
     lines = [
@@ -214,7 +309,10 @@ def report_text(report: AccuracyReport) -> str:
     lines.extend(line(r) for r in rows)
     lines.extend(_convergence_lines(report))
     for name, (value, limit, met) in report.targets.items():
-        lines.append(f'target {name}: {_num(value)} <= {limit:g}: {"met" if met else "MISSED"}')
+        verdict = 'met' if met else 'MISSED'
+        lines.append(
+            f'simulator ideal-sensor target {name}: {_num(value)} <= {limit:g}: {verdict}'
+        )
     if report.alerts is not None:
         lines.extend(_alerts_text(report.alerts))
     lines.extend(f'note: {n}' for n in report.notes)
@@ -227,7 +325,11 @@ def _md(cells: list[str]) -> str:
 
 
 def report_markdown(report: AccuracyReport) -> str:
-    """The report as Markdown: window, metrics table, per-wheel table, convergence, targets."""
+    """The report as Markdown: window, metrics table, per-wheel table, convergence, targets
+    (only for the simulator's bags); without reference, the estimates' own statistics."""
+    if report.reference == 'none':
+        return _estimates_markdown(report)
+    against = 'truth' if report.reference == 'simulator' else 'reference'
     out = [
         f'# Accuracy report: `{report.bag}`',
         '',
@@ -236,7 +338,7 @@ def report_markdown(report: AccuracyReport) -> str:
         '- Slope steps at: ' + (', '.join(f'{s:.2f} s' for s in report.slope_steps_s) or '-'),
         '- Gear changes at: ' + (', '.join(f'{s:.2f} s' for s in report.gear_changes_s) or '-'),
         '',
-        '## Estimate vs truth',
+        f'## Estimate vs {against}',
         '',
         _md(_HEAD),
         '|' + '---|' * len(_HEAD),
@@ -274,7 +376,7 @@ def report_markdown(report: AccuracyReport) -> str:
     if report.targets:
         out += [
             '',
-            '## Accuracy targets (issue, ideal sensors)',
+            f'## {TARGETS_TITLE}',
             '',
             '| target | value | limit | met |',
             '|---|---|---|---|',

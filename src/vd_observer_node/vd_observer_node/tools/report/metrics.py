@@ -15,6 +15,7 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
     'ErrorStats',
+    'ValueStats',
     'change_times',
     'convergence_time',
     'convergence_times',
@@ -24,6 +25,7 @@ __all__ = [
     'relative_error_stats',
     'selected_errors',
     'step_times',
+    'value_stats',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -48,6 +50,50 @@ class ErrorStats:
 
 
 _EMPTY = ErrorStats(float('nan'), float('nan'), float('nan'), 0)
+
+
+@dataclass(frozen=True)
+class ValueStats:
+    """Statistics of an estimate's own values, where there is nothing to compare it with.
+
+    Attributes:
+        samples: elements (rows, or rows x wheels) of the estimate.
+        valid: elements that are finite and whose ``valid`` flag is set (where it has one).
+        valid_pct: [%] ``valid`` of ``samples`` (nan without samples).
+        minimum: smallest valid value, unit of the quantity (nan without a valid value).
+        mean: mean of the valid values.
+        maximum: largest valid value.
+    """
+
+    samples: int
+    valid: int
+    valid_pct: float
+    minimum: float
+    mean: float
+    maximum: float
+
+
+def value_stats(values: ArrayLike, valid: ArrayLike | None = None) -> ValueStats:
+    """Count, valid share, min, mean and max of an estimate's valid values.
+
+    Args:
+        values: any shape, e.g. (N,) or (N, 4).
+        valid: bool, broadcastable to that shape (the estimator's own flags); None: every
+            finite value is valid. Non-finite values never are.
+    """
+    data = np.asarray(values, dtype=np.float64)
+    ok = np.isfinite(data)
+    if valid is not None:
+        ok &= np.broadcast_to(np.asarray(valid, dtype=bool), data.shape)
+    count = int(ok.sum())
+    nan = float('nan')
+    pct = 100.0 * count / data.size if data.size else nan
+    if count == 0:
+        return ValueStats(int(data.size), 0, pct, nan, nan, nan)
+    kept = data[ok]
+    return ValueStats(
+        int(data.size), count, pct, float(kept.min()), float(kept.mean()), float(kept.max())
+    )
 
 
 def error_stats(

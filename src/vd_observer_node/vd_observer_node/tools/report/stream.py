@@ -78,7 +78,11 @@ from vd_observer_node.tools.report.alerts import (
     paired_alert_data,
     segments_from_peaks,
 )
-from vd_observer_node.tools.report.errors import ReportInputError, StampOrderError
+from vd_observer_node.tools.report.errors import (
+    ReferenceClockError,
+    ReportInputError,
+    StampOrderError,
+)
 from vd_observer_node.tools.report.evaluation import (
     _SPECS,
     AccuracyReport,
@@ -917,6 +921,8 @@ def evaluate_bag(
         BagError: the bag cannot be read.
         ReportInputError: none of the vd topics is in the bag.
         StampOrderError: a topic's header stamps go backwards (use the whole-bag path).
+        ReferenceClockError: a reference runs on its own clock (use the whole-bag path, which
+            interpolates it as ``vd report`` does).
         ValueError: ``block_messages`` < 1.
     """
     if block_messages < 1:
@@ -1124,6 +1130,14 @@ def _the_pass(
             alert_join.push(block)
         drain(False)
     drain(True)
+    for (est_topic, truth_topic), (_, qs) in joins.items():
+        # the whole-bag path's test (evaluation._on_own_clock) on the stamps paired here
+        if 2 * qs[0].rows < tally.counts.get(est_topic, 0):
+            raise ReferenceClockError(
+                f'{truth_topic} runs on its own clock ({qs[0].rows} of '
+                f'{tally.counts[est_topic]} stamps of {est_topic} found in it): it is '
+                'interpolated by the whole-bag evaluation'
+            )
     quantities: list[QuantityMetrics] = []
     for spec in _SPECS:
         has_est, has_truth = spec.est_topic in have, spec.truth_topic in have
