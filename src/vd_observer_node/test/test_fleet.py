@@ -12,9 +12,11 @@ from typing import Any
 import numpy as np
 import pytest
 from vd_common.topics import (
+    ESTIMATES_SLOPE,
     SENSORS_BODY_VELOCITY,
     SENSORS_WHEEL_ANGLES,
     SENSORS_WHEEL_TORQUES,
+    TRUTH_SLOPE,
     TRUTH_TIRE_FORCES,
 )
 from vd_observer_node.bag.writer import BagWriter
@@ -410,3 +412,81 @@ def test_report_files(tmp_path: Path) -> None:
     again = write_fleet_report(records, tmp_path / '..' / tmp_path.name, baseline=tmp_path)
     assert again.regressions == []
     assert (tmp_path / 'regressions.csv').read_text() == 'bag,column,old,new\n'
+
+
+# -- a car's reference, bags without one, symlinked folders -----------------------------------
+
+
+def _car_bag(path: Path, *, reference: bool) -> Path:
+    """Recorded estimates of a car (no replay) and, if asked, a grade reference on its own
+    clock: 10 Hz, 3.3 ms off the estimates' 100 Hz stamps, as a GNSS/INS logs it."""
+    t = np.arange(20 * 100) / 100.0
+    stamp = 1_700_000_000_000_000_000 + np.round(t * 1e9).astype(np.int64)
+    grade = np.radians(1.0 + 0.5 * np.sin(0.3 * t))
+    rng = np.random.default_rng(3)
+    topics: dict[str, dict[str, np.ndarray]] = {
+        ESTIMATES_SLOPE: {
+            'angle': grade + np.radians(rng.normal(0.0, 0.2, t.size)),
+            'valid': t > 0.5,
+        },
+    }
+    stamps = {}
+    if reference:
+        ref_t = np.arange(0.0, 20.0, 0.1) + 0.0033
+        ref_stamp = 1_700_000_000_000_000_000 + np.round(ref_t * 1e9).astype(np.int64)
+        topics[TRUTH_SLOPE] = {
+            'angle': np.radians(1.0 + 0.5 * np.sin(0.3 * ref_t)),
+            'valid': np.ones(ref_t.size, bool),
+        }
+        stamps[TRUTH_SLOPE] = ref_stamp
+    write_topic_arrays_bag(path, stamp, topics, stamps=stamps)
+    return path
+
+
+def test_a_reference_on_its_own_clock_gives_vd_reports_figure(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import json
+
+    bag = _car_bag(tmp_path / 'car', reference=True)
+    row = process_bag(str(bag), FleetSettings(replay=False))['row']
+    assert row['status'] == 'ok', row['error']
+    assert row['has_truth'] is True
+    out = tmp_path / 'report'
+    assert main(['report', str(bag), '--out', str(out), '--no-figures', '--no-progress']) == 0
+    capsys.readouterr()
+    data = json.loads((out / 'metrics.json').read_text())
+    slope = next(q for q in data['quantities'] if q['key'] == 'slope')
+    assert slope['overall']['samples'] > 1500  # interpolated, not paired by stamp (none)
+    assert row['slope_rms_deg'] == pytest.approx(slope['overall']['rms'], rel=1e-8)
+    assert 0.15 < row['slope_rms_deg'] < 0.25  # the 0.2 deg noise put in
+    # a car's reference: its figures, but never judged against the simulator's targets
+    assert data['reference'] == 'reference' and data['targets'] == {}
+    assert row['targets_met'] is None and row['targets_failed'] is None
+    rows = sort_worst_first([row])
+    assert rows[0]['worst_target_ratio'] is None
+    md = fleet_markdown(rows)
+    assert '| car |' in md and "1 bags with a reference (0 from the simulator, 1 a car's)" in md
+
+
+def test_a_bag_without_reference_is_an_estimates_only_row(tmp_path: Path) -> None:
+    bag = _car_bag(tmp_path / 'car', reference=False)
+    row = process_bag(str(bag), FleetSettings(replay=False))['row']
+    assert row['status'] == 'ok', row['error']
+    assert row['has_truth'] is False and row['duration_s'] == pytest.approx(19.99)
+    assert row['slope_rms_deg'] is None and row['targets_met'] is None
+    md = fleet_markdown(sort_worst_first([row]))
+    assert '| none |' in md and '1 without (estimates only: no accuracy)' in md
+
+
+def test_symlinked_bag_folders_are_followed_once(tmp_path: Path) -> None:
+    drives = tmp_path / 'drives'
+    write_synthetic_drive_bag(drives / 'monday', 0.1, 100.0)
+    write_synthetic_drive_bag(tmp_path / 'elsewhere' / 'tuesday', 0.1, 100.0)
+    fleet_dir = tmp_path / 'fleet'
+    fleet_dir.mkdir()
+    (fleet_dir / 'monday').symlink_to(drives / 'monday', target_is_directory=True)
+    (fleet_dir / 'more').symlink_to(tmp_path / 'elsewhere', target_is_directory=True)
+    (fleet_dir / 'loop').symlink_to(fleet_dir, target_is_directory=True)  # must not recurse
+    found = find_bags([fleet_dir])
+    assert found == [fleet_dir / 'monday', fleet_dir / 'more' / 'tuesday']

@@ -1,8 +1,9 @@
 """Which bags a fleet run processes: folders, glob patterns and list files of paths.
 
 A folder that holds a ``metadata.yaml`` is one bag (rosbag2's layout, split files
-included); any other folder is searched (recursively, in sorted order) for bag folders and
-loose ``.mcap`` files, each of which is a bag of its own. A pattern with ``*``, ``?`` or
+included); any other folder is searched (recursively, in sorted order, following symbolic
+links to folders, each real folder once) for bag folders and loose ``.mcap`` files, each of
+which is a bag of its own. A pattern with ``*``, ``?`` or
 ``[`` that names no existing path is expanded with :func:`glob.glob` (``**`` recursive).
 List files hold one path, folder or pattern per line (``#`` starts a comment; relative
 paths are relative to the list file).
@@ -34,8 +35,16 @@ def is_bag(path: Path) -> bool:
 
 def _bags_under(folder: Path) -> list[Path]:
     found: list[Path] = []
-    for root, dirs, _ in os.walk(folder):
+    seen: set[str] = set()
+    # symlinked folders are followed (a fleet is often a folder of links to the drives);
+    # each real folder is walked once, so a link back up the tree ends there
+    for root, dirs, _ in os.walk(folder, followlinks=True):
         here = Path(root)
+        real = os.path.realpath(here)
+        if real in seen:
+            dirs[:] = []
+            continue
+        seen.add(real)
         if is_bag(here):
             found.append(here)
             dirs[:] = []  # a bag folder's insides are its files, not more bags

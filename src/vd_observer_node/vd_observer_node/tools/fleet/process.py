@@ -28,8 +28,12 @@ import numpy as np
 from vd_common.topics import ESTIMATES_ALERTS, OBSERVER_BODY_VELOCITY, SENSORS_BODY_VELOCITY
 
 from vd_observer_node.tools.report.alerts import ALERT_KINDS, activation_indices
-from vd_observer_node.tools.report.errors import ReportInputError, StampOrderError
-from vd_observer_node.tools.report.evaluation import AccuracyReport
+from vd_observer_node.tools.report.errors import (
+    ReferenceClockError,
+    ReportInputError,
+    StampOrderError,
+)
+from vd_observer_node.tools.report.evaluation import AccuracyReport, target_values
 from vd_observer_node.tools.report.stream import DEFAULT_BLOCK_MESSAGES, evaluate_bag
 
 __all__ = [
@@ -48,7 +52,7 @@ __all__ = [
 ]
 
 #: Bumped when the row's meaning changes: older per-bag results are then recomputed.
-RECORD_VERSION = 1
+RECORD_VERSION = 2  # 2: a car's reference interpolated, its targets not judged
 
 #: Accuracy targets of the report (``evaluate.TARGETS`` names) -> fleet column.
 TARGET_COLUMNS: dict[str, str] = {
@@ -204,19 +208,24 @@ def _alert_counts(series: Any) -> dict[str, int | None]:
 def _truth_figures(report: AccuracyReport | None, row: dict[str, Any]) -> list[dict[str, Any]]:
     """Fill the accuracy and alert-scoring columns; return the μ_max segments.
 
+    The accuracy figures are filled for any reference; ``targets_met`` / ``targets_failed``
+    only where the report judged the simulator's ideal-sensor targets (a simulator bag), else
+    they stay None: a real car is not marked against them.
+
     Args:
-        report: the bag's accuracy report, None when the bag has no truth.
+        report: the bag's accuracy report, None when the bag has no reference.
         row: the row to fill.
     """
-    if report is None:
+    if report is None or report.reference == 'none':
         row['has_truth'] = False
         return []
     row['has_truth'] = True
+    values = target_values(report.quantities)
     for name, column in TARGET_COLUMNS.items():
-        target = report.targets.get(name)
-        row[column] = _finite(target[0]) if target is not None else None
-    row['targets_met'] = sum(1 for _, _, met in report.targets.values() if met)
-    row['targets_failed'] = sum(1 for _, _, met in report.targets.values() if not met)
+        row[column] = _finite(values.get(name))
+    if report.reference == 'simulator':
+        row['targets_met'] = sum(1 for _, _, met in report.targets.values() if met)
+        row['targets_failed'] = sum(1 for _, _, met in report.targets.values() if not met)
     segments: list[dict[str, Any]] = []
     section = report.alerts
     if section is not None:
@@ -261,6 +270,8 @@ def bag_figures(
     Raises:
         ReportInputError: none of the vd topics in the bag.
         StampOrderError: stamps go backwards: use :func:`bag_figures_whole`.
+        ReferenceClockError: the reference runs on its own clock: use
+            :func:`bag_figures_whole`, which interpolates it as ``vd report`` does.
         BagError: the bag cannot be read.
     """
     try:
@@ -281,7 +292,9 @@ def bag_figures_whole(
     path: str | os.PathLike[str], bag: str
 ) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """:func:`bag_figures` from the whole decoded bag (``load_bag_series``): the reference,
-    and the path for bags whose stamps go backwards. Memory grows with the bag's length."""
+    and the path for bags whose stamps go backwards or whose reference runs on its own clock
+    (interpolated by ``evaluate``, the code of ``vd report``). Memory grows with the bag's
+    length."""
     from vd_observer_node.tools.report.evaluation import evaluate
     from vd_observer_node.tools.report.load import load_bag_series
 
@@ -375,8 +388,13 @@ def process_bag(bag: str, settings: FleetSettings) -> dict[str, Any]:
         report_start = time.perf_counter()
         try:
             figures, segments = bag_figures(evaluated, bag)
-        except StampOrderError:  # stamps out of order: the whole-bag path sorts them
+        except (StampOrderError, ReferenceClockError):
+            # stamps out of order (the whole-bag path sorts them), or a car's reference on its
+            # own clock (it interpolates it, as vd report does)
             figures, segments = bag_figures_whole(evaluated, bag)
+        if settings.mapping_file is not None:  # a car's own topics: its reference is a car's
+            figures.pop('targets_met', None)
+            figures.pop('targets_failed', None)
         if row['duration_s'] is not None:  # the replay's own duration
             del figures['duration_s']
         row.update(figures)

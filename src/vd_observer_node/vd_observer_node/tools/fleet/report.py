@@ -89,7 +89,10 @@ def _limits() -> dict[str, float]:
 
 
 def target_ratio(row: dict[str, Any]) -> float | None:
-    """The worst accuracy figure over its target limit (> 1: a target failed); None: none."""
+    """The worst accuracy figure over its target limit (> 1: a target failed); None: none, or
+    a bag the simulator's ideal-sensor targets do not judge (a car's reference)."""
+    if row.get('targets_met') is None:
+        return None
     ratios = [
         row[column] / limit
         for column, limit in _limits().items()
@@ -269,6 +272,7 @@ def _summary_lines(rows: Sequence[dict[str, Any]]) -> list[str]:
     hours = sum(r['duration_s'] or 0.0 for r in ok) / 3600.0
     km = sum(r['distance_m'] or 0.0 for r in ok) / 1000.0
     truth = [r for r in ok if r.get('has_truth')]
+    simulated = [r for r in truth if r.get('targets_met') is not None]
     met = sum(r.get('targets_met') or 0 for r in truth)
     total = met + sum(r.get('targets_failed') or 0 for r in truth)
     alerts = {k: sum(r.get(f'alerts_{k}') or 0 for r in ok) for k in ALERT_KINDS}
@@ -279,8 +283,11 @@ def _summary_lines(rows: Sequence[dict[str, Any]]) -> list[str]:
     return [
         f'- **{len(rows)} bags**: {len(ok)} processed, {len(rows) - len(ok)} failed',
         f'- drive time {hours:.2f} h, distance {km:.1f} km (processed bags)',
-        f'- {len(truth)} bags with truth: accuracy targets met {met} of {total}; alert '
-        f'episodes {episodes}, missed {missed}, false alarms {false}',
+        f'- {len(truth)} bags with a reference ({len(simulated)} from the simulator, '
+        f"{len(truth) - len(simulated)} a car's), {len(ok) - len(truth)} without "
+        '(estimates only: no accuracy)',
+        f"- the simulator's ideal-sensor targets (simulator bags only): met {met} of {total}; "
+        f'alert episodes {episodes}, missed {missed}, false alarms {false}',
         '- alert activations: ' + ', '.join(f'{kind} {count}' for kind, count in alerts.items()),
         f'- faults counted by the estimator cascade: {faults}',
     ]
@@ -289,6 +296,7 @@ def _summary_lines(rows: Sequence[dict[str, Any]]) -> list[str]:
 _TABLE: tuple[tuple[str, str, int], ...] = (
     # column, header, significant digits
     ('status', 'status', 0),
+    ('reference', 'reference', 0),
     ('duration_s', 'duration [s]', 4),
     ('distance_m', 'distance [m]', 4),
     ('slope_rms_deg', 'slope RMS [deg]', 3),
@@ -303,6 +311,15 @@ _TABLE: tuple[tuple[str, str, int], ...] = (
     ('mu_max_rms_worst', 'μ_max RMS (worst segment)', 3),
     ('faults_total', 'faults', 0),
 )
+
+
+def _reference(row: dict[str, Any]) -> str:
+    """'simulator', 'car' (a car's reference: figures, no targets) or 'none' (estimates only)."""
+    if row['status'] != 'ok':
+        return ''
+    if not row.get('has_truth'):
+        return 'none'
+    return 'simulator' if row.get('targets_met') is not None else 'car'
 
 
 def fleet_markdown(
@@ -320,7 +337,9 @@ def fleet_markdown(
         targets = row.get('targets_met')
         cells = [str(k), f'`{names[str(row["bag"])]}`']
         for column, _, digits in _TABLE:
-            if column == 'targets_met' and targets is not None:
+            if column == 'reference':
+                cells.append(_reference(row))
+            elif column == 'targets_met' and targets is not None:
                 cells.append(f'{targets}/{targets + (row.get("targets_failed") or 0)}')
             else:
                 cells.append(_fmt(row.get(column), digits or 3))
@@ -368,16 +387,21 @@ def _write_figure(rows: Sequence[dict[str, Any]], path: Path) -> None:
     ok = [r for r in rows if r['status'] == 'ok']
     limits = _limits()
     ax = axes[0, 0]
+    judged = [r for r in ok if r.get('targets_met') is not None]  # simulator bags only
     for x, column in enumerate(limits):
-        values = [r[column] / limits[column] for r in ok if r.get(column) is not None]
+        values = [r[column] / limits[column] for r in judged if r.get(column) is not None]
         if values:
             ax.scatter(np.full(len(values), x), values, s=14, alpha=0.7)
     ax.axhline(1.0, color='tab:red', lw=1, ls='--', label='target limit')
     ax.set_xticks(range(len(limits)), [c.replace('_', ' ') for c in limits], rotation=20)
     ax.set_yscale('log')
     ax.set_ylabel('figure / target limit')
-    ax.set_title('Accuracy across bags (each dot a bag)')
+    ax.set_title("Accuracy against the simulator's ideal-sensor targets (each dot a bag)")
     ax.legend(loc='best')
+    if not any(r.get('worst_target_ratio') is not None for r in ok):
+        # rows of cars' references or without one: nothing judged, which must not look empty
+        ax.text(0.5, 0.5, 'no simulator bag (no valid samples)', transform=ax.transAxes,
+                ha='center', va='center', color='0.35')  # fmt: skip
     ax = axes[0, 1]
     worst = rows[:30]
     ratios = [r.get('worst_target_ratio') or 0.0 for r in worst]
@@ -386,6 +410,9 @@ def _write_figure(rows: Sequence[dict[str, Any]], path: Path) -> None:
         if row['status'] != 'ok':  # no figure: a full-width red bar says "failed"
             ax.barh(k, reach, color='tab:red', alpha=0.35)
             ax.text(reach * 0.02, k, 'failed', va='center', fontsize=7, color='tab:red')
+        elif row.get('worst_target_ratio') is None:
+            why = 'no reference' if not row.get('has_truth') else "a car's reference"
+            ax.text(reach * 0.02, k, f'{why}: no targets', va='center', fontsize=7, color='0.35')
         else:
             ax.barh(k, ratios[k], color='tab:blue')
     ax.set_yticks(range(len(worst)), [Path(str(r['bag'])).name[:28] for r in worst], fontsize=7)
