@@ -207,6 +207,7 @@ def test_bag_without_reference_gives_an_estimates_only_report(
     assert data['quantities'] == [] and data['targets'] == {} and data['convergence'] == []
     stats = {e['key']: e for e in data['estimates']}
     assert set(stats) == {'fx', 'fz', 'mu', 'slip', 'slope'}
+    assert stats['slip']['note'] == 'finite'  # the friction message's flags are mu's
     slope = stats['slope']['overall']
     assert slope['samples'] == 200 and slope['valid'] == 150
     assert slope['valid_pct'] == pytest.approx(75.0)

@@ -144,7 +144,7 @@ class Comparison:
         truth_label: legend text of the truth.
         symbol: axis label of the quantity without its unit (e.g. 'Fx').
         estimate_valid: same shape as ``estimate``: the estimator's own validity flags
-            (mu, slope), or None where its message has none.
+            (mu, slope), or None for the other quantities.
     """
 
     key: str
@@ -495,10 +495,15 @@ def build_comparisons(
                 spec.estimate_label,
                 truth_label,
                 spec.symbol,
-                _validity(est, ie),
+                _validity(est, ie) if spec.key in _FLAGGED else None,
             )
         )
     return out, steps, gears, notes
+
+
+#: The quantities whose message's ``valid`` flags are theirs (the friction message's flags
+#: are mu's, not the slip's).
+_FLAGGED = frozenset({'mu', 'slope'})
 
 
 def _validity(est: TopicSeries | None, rows: np.ndarray | None) -> BoolArray | None:
