@@ -241,6 +241,7 @@ class AlertsNode(Node):
             time.monotonic_ns(),
             queued_by_topic(self.aligner, self._queue_topics),
             self._capacity,
+            log=self.get_logger().warning,  # inputs whose stamps never meet: once
         )
         values.update(watch_values)
         self.pub_diag.publish(

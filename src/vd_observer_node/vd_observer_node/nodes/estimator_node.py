@@ -178,8 +178,9 @@ class EstimatorNode(Node):
             observed.append(('speed', TwistStamped, OBSERVER_BODY_VELOCITY))
         for key, kind, topic in observed:
             callback = aligned_input(
-                _INPUT_TYPES[key], key, self.aligner, self.estimate, self.counts
-            )
+                _INPUT_TYPES[key], key, self.aligner, self.estimate, self.counts,
+                lambda: self.get_clock().now().nanoseconds,
+            )  # fmt: skip
             self.create_subscription(kind, topic, callback, STREAM_QOS, raw=True)
         clock = self.get_clock()
         for key, spec in sensors.items():
@@ -284,6 +285,7 @@ class EstimatorNode(Node):
             time.monotonic_ns(),
             queued_by_topic(self.aligner, self._queue_topics),
             self._capacity,
+            log=self.get_logger().warning,  # inputs whose stamps never meet: once
         )
         values.update(watch_values)
         self.pub_diag.publish(

@@ -479,6 +479,7 @@ class PipelineNode(Node):
             time.monotonic_ns(),
             queued_by_topic(self.aligner, self._queue_topics),
             self._capacity,
+            log=self.get_logger().warning,  # inputs whose stamps never meet: once
         )
         values = {
             'torque_source': self.torque_source,

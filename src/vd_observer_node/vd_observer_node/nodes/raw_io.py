@@ -8,15 +8,16 @@ and ``frame_id`` (an output keeps the frame of the input it derives from).
 The mapped sensor inputs (:mod:`vd_observer_node.inputs`) go through `mapped_input`: each
 subscription's bytes are decoded by the mapping's `InputDecoder` to SI values, then either
 matched by header stamp (`InputMatcher`, a `StampAligner`) or, for an input without header
-stamp (Float64MultiArray, stamped with its receive time), held as its latest value and added
-to each matched set. `InputWatch` notes every input's arrivals and reports a topic that stopped.
+stamp (Float64MultiArray, stamped on receipt by `ReceiptStamps`), held as its latest value and
+added to each matched set. `InputWatch` notes every input's arrivals and reports a topic that
+stopped; `MatchCheck` reports inputs whose stamps never meet.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import Any, Final
 
 from vd_common.settings_log import settings_line
 
@@ -46,6 +47,8 @@ __all__ = [
     'InputMatcher',
     'InputWatch',
     'LatestMatcher',
+    'MatchCheck',
+    'ReceiptStamps',
     'aligned_input',
     'follow_input_rate',
     'input_matcher',
@@ -108,6 +111,7 @@ def aligned_input(
     aligner: StampAligner | InputMatcher | LatestMatcher,
     on_matched: Callable[[int, dict[str, Any]], None],
     counts: dict[str, int],
+    clock_ns: Callable[[], int] | None = None,
 ) -> Callable[[bytes], None]:
     """Subscription callback: decode, match by stamp, call ``on_matched`` once a set is full.
 
@@ -119,8 +123,11 @@ def aligned_input(
         on_matched: called with (stamp [ns], {key: (frame_id, values)}) for every full set.
         counts: its 'undecodable' entry counts messages that are not valid CDR of `msgtype`
             (dropped, never a crash).
+        clock_ns: the node's clock [ns]; given, the input's stamps set the time base of the
+            headerless inputs where it drives (`ReceiptStamps`).
     """
     decoder = MessageCodec(msgtype)
+    receipts = None if isinstance(aligner, StampAligner) else aligner.receipts
 
     def callback(data: bytes) -> None:
         try:
@@ -133,6 +140,8 @@ def aligned_input(
             if matched is not None:
                 on_matched(stamp_ns, matched)
             return
+        if receipts is not None and clock_ns is not None:
+            receipts.note(key, stamp_ns, clock_ns())
         if key in aligner.held:
             aligner.hold(key, time.monotonic_ns(), (frame, values))
             return
@@ -157,6 +166,162 @@ def matched_inputs(mapping: InputMapping, names: Sequence[str]) -> tuple[str, ..
     return tuple(n for n in names if has_header(specs[n]))
 
 
+#: [ns] A header stamp within this of the node clock at its receipt is on the node's clock: a
+#: live sensor is never a second late, and a played bag without /clock is off by its age.
+SAME_CLOCK_NS: Final = 1_000_000_000
+#: [ns] How long every input may arrive without one matched set before `MatchCheck` reports
+#: it (the nodes publish their status once per second: reported within 4 s).
+MATCH_WAIT_NS: Final = 3_000_000_000
+
+
+class ReceiptStamps:
+    """The stamp of an input without header: its receipt, in the stamped inputs' time base.
+
+    On a car the sensors stamp by the clock the node runs on: a headerless message is stamped
+    with the node clock at receipt, as always. A played bag's header stamps are the bag's:
+    unless the node follows the player's /clock (``use_sim_time:=true``) its clock is days or
+    years away from them, and a receipt stamp by the node clock never falls among the wheel
+    stamps ('latest' alignment: not one set). So when the reference input's header stamp is
+    more than `SAME_CLOCK_NS` from the node clock at its receipt, a receipt is translated:
+    the reference's newest stamp plus the node-clock time elapsed since its receipt. That is
+    the receipt time on the bag's clock, late by the reference's delivery delay (a local
+    player's: well under a millisecond) and, between two reference messages (10 ms at
+    100 Hz), off by the play rate's difference from 1 times the time elapsed.
+
+    Each input's stamps stay increasing: a translated stamp not after the input's last one
+    (the reference arrived late) is moved just after it, unless it jumped back by more than
+    `SAME_CLOCK_NS` (a looped bag: a new time line).
+
+    Attributes:
+        reference: the input whose header stamps give the time base (the driving one).
+        offset_ns: [ns] the reference's last header stamp minus the node clock at its receipt
+            (None before it arrived).
+    """
+
+    def __init__(self, reference: str, same_clock_ns: int = SAME_CLOCK_NS) -> None:
+        """Create the stamper; nothing received yet (receipts stamped by the node clock)."""
+        self.reference = reference
+        self.same_clock_ns = same_clock_ns
+        self.offset_ns: int | None = None
+        self._ref: tuple[int, int] | None = None
+        self._last: dict[str, int] = {}
+
+    @property
+    def translating(self) -> bool:
+        """Whether receipts are stamped on the reference's clock, not the node's."""
+        return self.offset_ns is not None and abs(self.offset_ns) > self.same_clock_ns
+
+    def note(self, key: str, stamp_ns: int, clock_ns: int) -> None:
+        """A message of the stamped input `key` with header stamp `stamp_ns` [ns] received at
+        node clock `clock_ns` [ns] (only the reference's are kept)."""
+        if key == self.reference:
+            self._ref = (stamp_ns, clock_ns)
+            self.offset_ns = stamp_ns - clock_ns
+
+    def stamp(self, key: str, clock_ns: int) -> int:
+        """[ns] The stamp of a message of the headerless input `key` received at node clock
+        `clock_ns` [ns]."""
+        ref = self._ref
+        if ref is None or not self.translating:
+            return clock_ns
+        stamp = ref[0] + (clock_ns - ref[1])
+        last = self._last.get(key)
+        if last is not None and stamp <= last and last - stamp <= self.same_clock_ns:
+            stamp = last + 1
+        self._last[key] = stamp
+        return stamp
+
+
+class MatchCheck:
+    """Notes the stamps a matcher receives and reports inputs that arrive but never match.
+
+    Every input of the matcher arriving for `MATCH_WAIT_NS` without one matched set (since
+    the last input was first heard from, or since the last set) means their stamps do not
+    meet: 'exact' alignment on topics with their own clocks, or stamps on different clocks
+    (a played bag's inputs against the node clock's receipt stamps, a sensor stamping by its
+    boot time). The report names each input's newest stamp against the driving input's and
+    what to set; it is cleared by the next set.
+
+    Attributes:
+        names: the matched inputs, the driving one first.
+        topics: input name -> topic, where known (`mapped_input` fills it).
+        headerless: the inputs stamped on receipt.
+    """
+
+    def __init__(
+        self,
+        names: Sequence[str],
+        alignment: str,
+        max_age_ns: int | None = None,
+        wait_ns: int = MATCH_WAIT_NS,
+    ) -> None:
+        """Create the check.
+
+        Args:
+            names: the matched inputs, the driving one first.
+            alignment: 'exact' or 'latest' (the advice differs).
+            max_age_ns: [ns] 'latest': the oldest a held sample may be.
+            wait_ns: [ns] > 0, how long all inputs may arrive without a set.
+        """
+        self.names = tuple(names)
+        self.alignment = alignment
+        self.max_age_ns = max_age_ns
+        self.wait_ns = wait_ns
+        self.topics: dict[str, str] = {}
+        self.headerless: set[str] = set()
+        self._newest: dict[str, int] = {}
+        self._since: int | None = None  # when the wait began (monotonic [ns])
+        self._last_push: int | None = None
+
+    def pushed(self, key: str, stamp_ns: int, now_ns: int, matched: bool) -> None:
+        """Note a message of input `key` stamped `stamp_ns` [ns], pushed at `now_ns` [ns]
+        (monotonic), and whether a set was matched."""
+        first = key not in self._newest
+        self._newest[key] = stamp_ns
+        self._last_push = now_ns
+        if matched:
+            self._since = now_ns
+        elif first and len(self._newest) == len(self.names):
+            self._since = now_ns if self._since is None else max(self._since, now_ns)
+
+    def status(self, now_ns: int) -> str:
+        """The report at `now_ns` [ns] (monotonic), '' while sets match, an input is not
+        heard from yet, or none arrives any more (the `InputWatch` reports those)."""
+        since, last = self._since, self._last_push
+        if since is None or last is None or len(self._newest) < len(self.names):
+            return ''
+        if now_ns - since < self.wait_ns or now_ns - last > self.wait_ns:
+            return ''
+        driver = self.names[0]
+        base = self._newest[driver]
+        offsets = {k: (self._newest[k] - base) * 1e-9 for k in self.names[1:]}
+        parts = ', '.join(f'{self._name(k)} {off:+.6g} s' for k, off in offsets.items())
+        note = (
+            f'no input set matched for {(now_ns - since) * 1e-9:.0f} s: the newest stamps of '
+            f'{parts} from those of {self._name(driver)}'
+        )
+        limit = self.max_age_ns if self.max_age_ns is not None else SAME_CLOCK_NS
+        if any(abs(off) * 1e9 > max(limit, SAME_CLOCK_NS) for off in offsets.values()):
+            note += (
+                '; they are not on one clock: with a played bag start the player and the '
+                'nodes with use_sim_time:=true (the player publishes /clock), and make every '
+                'input stamp by one clock'
+            )
+        elif self.alignment == 'exact':
+            note += (
+                "; 'exact' alignment needs equal stamps: for topics on their own clocks set "
+                "the mapping's alignment: latest (inputs.alignment: latest)"
+            )
+        elif any(abs(off) * 1e9 > limit for off in offsets.values()):
+            note += "; more than the mapping's max_age apart: raise max_age (inputs.max_age)"
+        return note
+
+    def _name(self, key: str) -> str:
+        topic = self.topics.get(key)
+        receipt = ', stamped on receipt' if key in self.headerless else ''
+        return f'{key} ({topic}{receipt})' if topic else key
+
+
 class InputMatcher:
     """Stamp-matched inputs (a `StampAligner`) plus held inputs (their latest value).
 
@@ -164,6 +329,11 @@ class InputMatcher:
     latest values are added to it. A set is withheld (counted in `withheld_stale`) while a
     held input has sent nothing yet or its latest value is older than `max_age_ns` by the
     receive clock: a stopped torque topic must not feed old torques to fresh wheel speeds.
+
+    Attributes:
+        check: reports matched inputs whose stamps never meet (`MatchCheck`).
+        receipts: the stamps of headerless inputs that are matched, not held (a headerless
+            driver): `ReceiptStamps`.
     """
 
     def __init__(
@@ -185,6 +355,8 @@ class InputMatcher:
         """
         self.aligner = StampAligner(matched, capacity=capacity, max_jump_back_ns=max_jump_back_ns)
         self.held = tuple(held)
+        self.check = MatchCheck(matched, 'exact')
+        self.receipts = ReceiptStamps(matched[0])
         self.max_age_ns = max_age_ns
         self._latest: dict[str, tuple[int, Any]] = {}
         self.withheld_stale = 0
@@ -198,6 +370,7 @@ class InputMatcher:
     ) -> dict[str, Any] | None:
         """Add a matched input's message; return the full set {input: payload} or None."""
         matched = self.aligner.push(key, stamp_ns, payload)
+        self.check.pushed(key, stamp_ns, receive_ns, matched is not None)
         if matched is None or not self.held:
             return matched
         for name in self.held:
@@ -227,7 +400,12 @@ class InputMatcher:
 class LatestMatcher:
     """The mapping's 'latest' alignment live (`LatestAligner`): each wheel stamp with the
     newest not-later sample of every other input, the sets the replay computes. Nothing is
-    held by receive time (``held`` is empty); a headerless input is stamped on receipt.
+    held by receive time (``held`` is empty); a headerless input is stamped on receipt
+    (`receipts`: in the driving input's time base where that is not the node clock's).
+
+    Attributes:
+        check: reports inputs whose stamps never meet (`MatchCheck`).
+        receipts: the stamps of the headerless inputs (`ReceiptStamps`).
     """
 
     held: tuple[str, ...] = ()
@@ -237,6 +415,8 @@ class LatestMatcher:
     ) -> None:
         """Create the matcher; ``names`` the inputs, the wheels first (they drive)."""
         self.aligner = LatestAligner(names, max_age_ns, capacity, max_jump_back_ns)
+        self.check = MatchCheck(names, 'latest', max_age_ns)
+        self.receipts = ReceiptStamps(names[0])
 
     def hold(self, key: str, receive_ns: int, payload: Any) -> None:
         """Never called: no input is held (``held`` is empty)."""
@@ -246,8 +426,10 @@ class LatestMatcher:
         self, key: str, stamp_ns: int, payload: Any, receive_ns: int
     ) -> list[tuple[int, dict[str, Any]]]:
         """Add one input's message; the sets it completes, oldest first."""
-        del receive_ns  # the samples are ordered by their stamps, not by their arrival
-        return self.aligner.push(key, stamp_ns, payload)
+        # the samples are ordered by their stamps, not by their arrival
+        sets = self.aligner.push(key, stamp_ns, payload)
+        self.check.pushed(key, stamp_ns, receive_ns, bool(sets))
+        return sets
 
     def counts(self) -> dict[str, int]:
         """The aligner's totals."""
@@ -306,6 +488,11 @@ class InputWatch:
         self._problem: dict[str, str] = {}
         self._health: dict[str, StreamHealth] = {}
         self._first: dict[str, RateMeter] = {}
+        #: the node's matcher's check, reported with the topics (`mapped_input` sets it)
+        self.check: MatchCheck | None = None
+        #: the check's report when it is new (not in the last status): to be logged once
+        self.new_report: str | None = None
+        self._reported = False
 
     def seen(self, topic: str, now_ns: int) -> None:
         """Note a message of `topic` received at `now_ns` (monotonic clock)."""
@@ -341,7 +528,8 @@ class InputWatch:
         WARN names each topic silent for longer than `timeout_ns` (or never heard from while
         another input arrives) and how long, and each stamped topic that lost more than
         `limits` allow, lags or fills the matcher (`queues`: messages waiting per topic, of
-        `capacity`); ERROR the last mapping problem of a topic. Back to OK when every topic
+        `capacity`), and inputs whose stamps never meet (`check`; `new_report` holds it the
+        first time); ERROR the last mapping problem of a topic. Back to OK when every topic
         arrives again.
         """
         notes: list[str] = []
@@ -367,6 +555,12 @@ class InputWatch:
             if warned:
                 notes.extend(warned)
                 level = max(level, WARN)
+        report = self.check.status(now_ns) if self.check is not None else ''
+        self.new_report = report if report and not self._reported else None
+        self._reported = bool(report)
+        if report:
+            notes.append(report)
+            level = max(level, WARN)
         for topic, problem in self._problem.items():
             notes.append(f'{topic}: {problem}')
             level = ERROR
@@ -381,10 +575,14 @@ def merge_status(
     now_ns: int,
     queues: dict[str, int] | None = None,
     capacity: int | None = None,
+    log: Callable[[str], object] | None = None,
 ) -> tuple[int, str, dict[str, object]]:
     """A node's diagnostic level and message with `watch`'s status added, and its values
-    (`queues`, `capacity`: see `InputWatch.status`)."""
+    (`queues`, `capacity`: see `InputWatch.status`); `log` (a logger's warning) gets the
+    report of inputs whose stamps never meet once, when it first appears."""
     watch_level, note, values = watch.status(now_ns, queues, capacity)
+    if log is not None and watch.new_report is not None:
+        log(watch.new_report)
     if note:
         message = note if level == OK else f'{message}; {note}'
         level = max(level, watch_level)
@@ -441,8 +639,10 @@ def mapped_input(
         on_matched: called with (stamp [ns], {input: (frame_id, values)}) for a full set.
         counts: 'undecodable' counts bytes that are not a message of the type, 'unfit'
             messages the mapping cannot read (a joint absent): dropped, never a crash.
-        watch: notes each arrival (monotonic clock) and each unfit message.
-        clock_ns: the node's clock [ns]: the stamp of a message without header.
+        watch: notes each arrival (monotonic clock) and each unfit message; it reports the
+            matcher's `MatchCheck`.
+        clock_ns: the node's clock [ns]: the stamp of a message without header, translated
+            by the matcher's `ReceiptStamps` where the stamped inputs run on another clock.
         key: the input's name in `matcher` (default ``spec.name``).
         radius: effective rolling radius [m], for wheel speeds in m/s or km/h.
     """
@@ -451,12 +651,20 @@ def mapped_input(
     topic = spec.topic
     held = name in matcher.held
     headerless = not has_header(spec)
+    receipts = matcher.receipts
+    matcher.check.topics[name] = topic
+    if headerless:
+        matcher.check.headerless.add(name)
+    watch.check = matcher.check
 
     def callback(data: bytes) -> None:
         now = time.monotonic_ns()
         watch.seen(topic, now)
+        clock = clock_ns()
         try:
-            stamp_ns, frame, values = decoder.decode(data, clock_ns() if headerless else 0)
+            stamp_ns, frame, values = decoder.decode(
+                data, receipts.stamp(name, clock) if headerless else 0
+            )
         except BagFormatError:
             counts['undecodable'] += 1
             return
@@ -465,7 +673,8 @@ def mapped_input(
             watch.unfit(topic, str(exc))
             return
         if not headerless:
-            watch.stamped(topic, stamp_ns, clock_ns() - stamp_ns)
+            watch.stamped(topic, stamp_ns, clock - stamp_ns)
+            receipts.note(name, stamp_ns, clock)
         if held:
             matcher.hold(name, now, (frame, values))
             return
