@@ -131,7 +131,9 @@ __all__ = [
     'BRAKE_INPUT',
     'BRAKE_SIGNALS',
     'ENGINE_INPUT',
+    'FUSION_KEY',
     'IMU_INPUT',
+    'IMU_KEYS',
     'INPUTS',
     'INPUT_KEYS',
     'PER_RADIUS_UNITS',
@@ -217,6 +219,10 @@ PER_RADIUS_UNITS: Final = frozenset({'m/s', 'km/h'})
 _PER_WHEEL: Final = frozenset({'wheel_angles', 'wheel_speeds', 'wheel_torques'})
 #: The settings of one input, in the order of a mapping file.
 INPUT_KEYS: Final = ('topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sign')
+#: The key of the IMU fusion's settings (``imu.fusion``, `ImuGradeConfig` fields).
+FUSION_KEY: Final = 'fusion'
+#: The settings of the IMU besides its fusion's (node parameters ``inputs.imu.<key>``).
+IMU_KEYS: Final = ('topic', 'type', 'indices', 'unit', 'scale', 'mount_rpy_deg')
 # speed_unit and gear_offset: engine_torque only; signal: brake only; mount_rpy_deg and
 # fusion: imu only
 _KEYS: Final = frozenset(
@@ -644,6 +650,10 @@ def mapping_from_params(
             value = list(value)  # ROS arrays (array.array, tuples) in the YAML form
         if len(parts) == 1 and parts[0] in SETTINGS:
             data[parts[0]] = value
+            continue
+        if len(parts) == 3 and parts[:2] == [IMU_INPUT, FUSION_KEY]:
+            # inputs.imu.fusion.<setting>: the file's ``imu: {fusion: {...}}``
+            data.setdefault(IMU_INPUT, {}).setdefault(FUSION_KEY, {})[parts[2]] = value
             continue
         if len(parts) != 2:
             raise MappingError(f'{source}: {name}: expected {prefix}<input>.<key>')

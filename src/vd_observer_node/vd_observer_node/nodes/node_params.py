@@ -41,6 +41,7 @@ from vd_observer_node.estimation.estimator import (
     TORQUE_OFFSET_PREFIX,
     EstimatorConfig,
 )
+from vd_observer_node.estimation.imu_grade import ImuGradeConfig
 from vd_observer_node.estimation.mass_grade import MassGradeConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.rolling_radius import RollingRadiusConfig
@@ -48,6 +49,9 @@ from vd_observer_node.estimation.torque_offset import TorqueOffsetConfig
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import (
     ALIGNMENTS,
+    FUSION_KEY,
+    IMU_INPUT,
+    IMU_KEYS,
     INPUT_KEYS,
     INPUTS,
     SUPPORTED_TYPES,
@@ -98,6 +102,7 @@ INPUT_MAPPING: Final = ParamSpec(
 )
 _KEY_DOCS: Final = {
     'topic': 'topic (absolute name)',
+    'mount_rpy_deg': "sensor frame's roll, pitch, yaw in the body frame [deg]",
     'joints': 'JointState joint names, order FL, FR, RL, RR',
     'indices': 'Float64MultiArray element indices',
     'unit': 'unit',
@@ -126,6 +131,26 @@ INPUT_PARAMS: Final = [
         'wheel stamp with the newest not-later sample of the others (topics on their own clocks)',
     ),
     ParamSpec('inputs.max_age', None, "'latest' alignment: oldest held sample [s]"),
+    # the IMU (optional; fused by pipeline_node, `imu_grade`): as the mapping file's ``imu``
+    *(
+        ParamSpec(
+            f'inputs.{IMU_INPUT}.{key}',
+            None,
+            f'{IMU_INPUT}: {_KEY_DOCS.get(key, "message type" if key == "type" else key)}'
+            + (f' ({" | ".join(UNITS[IMU_INPUT])})' if key == 'unit' else '')
+            + (f' ({" | ".join(SUPPORTED_TYPES[IMU_INPUT])})' if key == 'type' else '')
+            + ('; unset: no IMU, the force balance slope' if key == 'topic' else ''),
+        )
+        for key in IMU_KEYS
+    ),
+    *(
+        ParamSpec(
+            f'inputs.{IMU_INPUT}.{FUSION_KEY}.{spec.name}',
+            None,
+            f'{IMU_INPUT} fusion (unset: {spec.default}): {spec.description}',
+        )
+        for spec in dataclass_param_specs(ImuGradeConfig, skip=('pitch_compliance',))
+    ),
 ]
 
 

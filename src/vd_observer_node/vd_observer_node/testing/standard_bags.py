@@ -27,6 +27,7 @@ from vd_observer_node.bag.typestore import message_class, serialize
 from vd_observer_node.bag.writer import BagWriter
 
 __all__ = [
+    'IMU_MAPPING',
     'JOINTS',
     'JOINT_TORQUES',
     'STANDARD_MAPPING',
@@ -34,6 +35,7 @@ __all__ = [
     'abs_wheel_speeds',
     'float64_array',
     'header',
+    'imu',
     'joint_state',
     'odometry',
     'write_standard_bag',
@@ -65,6 +67,11 @@ STANDARD_MAPPING: Final[dict[str, Any]] = {
     },
     'alignment': 'latest',
 }
+#: :data:`STANDARD_MAPPING` for ``CarSensors(imu_rate_hz=...)``: the IMU fused.
+IMU_MAPPING: Final[dict[str, Any]] = {
+    **STANDARD_MAPPING,
+    'imu': {'topic': '/imu', 'type': 'sensor_msgs/msg/Imu', 'unit': 'm/s^2'},
+}
 #: :data:`STANDARD_MAPPING` for ``CarSensors(torques_in_joint_states=True)``.
 JOINT_TORQUES: Final[dict[str, Any]] = {
     **STANDARD_MAPPING,
@@ -88,6 +95,12 @@ class CarSensors:
         torques_in_joint_states: carry the torques as the JointState's ``effort`` (at the
             wheel stamps, mirrored like the speeds) instead of a CAN Float64MultiArray: every
             input then has a header stamp (:data:`JOINT_TORQUES`).
+        imu_rate_hz: an accelerometer on ``/imu`` (``sensor_msgs/Imu``, the true specific
+            force of the simulator's ``imu_true``, forward axis x) at this rate [Hz]; 0: none
+            (:data:`IMU_MAPPING` maps it).
+        imu_noise_std: white noise on its forward specific force [m/s^2].
+        imu_bias: constant offset of its forward specific force [m/s^2].
+        imu_phase_s: its clock offset [s].
     """
 
     wheel_rate_hz: float = 100.0
@@ -99,6 +112,10 @@ class CarSensors:
     phase_s: tuple[float, float, float] = (0.0, 0.003, 0.006)
     seed: int = 0
     torques_in_joint_states: bool = False
+    imu_rate_hz: float = 0.0
+    imu_noise_std: float = 0.05
+    imu_bias: float = 0.0
+    imu_phase_s: float = 0.001
 
 
 def header(stamp_ns: int, frame: str = 'base_link') -> Any:
@@ -148,6 +165,24 @@ def odometry(stamp_ns: int, speed: float) -> Any:
         child_frame_id='base_link',
         pose=message_class('geometry_msgs/msg/PoseWithCovariance')(pose=pose, covariance=cov),
         twist=message_class('geometry_msgs/msg/TwistWithCovariance')(twist=twist, covariance=cov),
+    )
+
+
+def imu(stamp_ns: int, forward: float) -> Any:
+    """A sensor_msgs/Imu (rosbags class) reading ``forward`` [m/s^2] on its x axis, gravity
+    on z; orientation unknown (covariance[0] = -1, as the message's comment says)."""
+    vec = message_class('geometry_msgs/msg/Vector3')
+    quat = message_class('geometry_msgs/msg/Quaternion')(x=0.0, y=0.0, z=0.0, w=1.0)
+    unknown = np.zeros(9)
+    unknown[0] = -1.0
+    return message_class('sensor_msgs/msg/Imu')(
+        header=header(stamp_ns, 'imu_link'),
+        orientation=quat,
+        orientation_covariance=unknown,
+        angular_velocity=vec(x=0.0, y=0.0, z=0.0),
+        angular_velocity_covariance=np.zeros(9),
+        linear_acceleration=vec(x=forward, y=0.0, z=9.81),
+        linear_acceleration_covariance=np.zeros(9),
     )
 
 
@@ -219,11 +254,20 @@ def write_standard_bag(path: str | os.PathLike[str], sim: Any, sensors: CarSenso
     for k, stamp in enumerate(np.round(torque_t * _NS).astype(np.int64).tolist()):
         if not in_joints:
             rows.append((stamp, '/can/wheel_torques', serialize(float64_array(torque[k]))))
+    if sensors.imu_rate_hz > 0.0:
+        # drawn after every other sample: the bag without an IMU stays the same
+        imu_t = _stamps(t, sensors.imu_rate_hz, sensors.imu_phase_s)
+        forward = np.interp(imu_t, t, np.asarray(sim.imu_true, dtype=np.float64)[:, 0])
+        forward = forward + sensors.imu_bias + rng.normal(0.0, sensors.imu_noise_std, imu_t.size)
+        for k, stamp in enumerate(np.round(imu_t * _NS).astype(np.int64).tolist()):
+            rows.append((stamp, '/imu', serialize(imu(stamp, float(forward[k])))))
     rows.sort(key=lambda row: row[0])
     with BagWriter(path) as writer:
         writer.add_topic('/joint_states', 'sensor_msgs/msg/JointState')
         writer.add_topic('/odom', 'nav_msgs/msg/Odometry')
         if not in_joints:
             writer.add_topic('/can/wheel_torques', 'std_msgs/msg/Float64MultiArray')
+        if sensors.imu_rate_hz > 0.0:
+            writer.add_topic('/imu', 'sensor_msgs/msg/Imu')
         for stamp, topic, data in rows:
             writer.write(topic, data, stamp)

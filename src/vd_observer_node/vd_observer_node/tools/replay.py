@@ -165,8 +165,9 @@ class ReplayReport:
             potential; 0 when not run).
         faults: the cascade's fault totals per kind (``CascadeResult.faults``: keys
             'wheel.<kind>', 'speed.<kind>', 'estimator.<kind>', as on /diagnostics).
-        inputs: per input, in mapping order: messages, longest gap between stamps and gaps
-            longer than the observers' ``max_gap`` (a topic that stopped arriving).
+        inputs: per input, in mapping order (the IMU last, where fused): messages, longest
+            gap between stamps and gaps longer than the observers' ``max_gap`` (a topic that
+            stopped arriving).
         torque_source: the torque path: 'measured', 'engine' or 'none'.
         torque_valid_fraction: share of the samples where the torque path held (1 when
             measured, 0 with none, below 1 on the engine path while the clutch slipped).
@@ -211,6 +212,42 @@ class ReplayReport:
     def situation_us_per_sample(self) -> float:
         """[us] situation-monitor wall time per aligned sample (0 when not run)."""
         return 1e6 * self.situation_time_s / self.samples if self.samples else 0.0
+
+
+def check_input_topic(
+    bag: str | os.PathLike[str],
+    topics: Mapping[str, Any],
+    spec: InputSpec,
+    source: str | None = None,
+) -> None:
+    """Refuse an input the bag cannot deliver: its topic absent, empty or of another type.
+
+    Args:
+        bag: the bag's path (for the message).
+        topics: the bag's topics by name (`BagReader.topics`: ``message_count``, ``msgtype``).
+        spec: the input (sensor or IMU) of the mapping.
+        source: the mapping's file (for the message), or None.
+
+    Raises:
+        ReplayInputError: one line naming the input, and the bag's topics where the topic is
+            not there (a typo).
+    """
+    origin = f' ({source}: {spec.name})' if source else f' ({spec.name})'
+    info = topics.get(spec.topic)
+    if info is None:
+        listed = ', '.join(sorted(topics)) or 'none'
+        raise ReplayInputError(
+            f'{bag}: no messages on sensor topic {spec.topic}{origin}: the bag has no such '
+            f'topic (its topics: {listed})'
+        )
+    if info.message_count == 0:
+        raise ReplayInputError(
+            f'{bag}: no messages on sensor topic {spec.topic}{origin}: the topic is empty'
+        )
+    if info.msgtype != spec.msgtype:
+        raise ReplayInputError(
+            f'{bag}: {spec.topic} has type {info.msgtype}, need {spec.msgtype}{origin}'
+        )
 
 
 def replay_bag(
@@ -298,25 +335,11 @@ def replay_bag(
         torque_source_code(torque_source)  # refuses an unknown name
         mapping = replace(mapping, torque_source=torque_source)
     source = mapping.torque_source
-    for spec in mapping.used_specs:
-        info = topics.get(spec.topic)
-        origin = f' ({mapping.source}: {spec.name})' if mapping.source else ''
-        if info is None or info.message_count == 0:
-            raise ReplayInputError(f'{in_bag}: no messages on sensor topic {spec.topic}{origin}')
-        if info.msgtype != spec.msgtype:
-            raise ReplayInputError(
-                f'{in_bag}: {spec.topic} has type {info.msgtype}, need {spec.msgtype}{origin}'
-            )
-    if mapping.imu is not None:
-        info = topics.get(mapping.imu.topic)
-        if info is not None and info.msgtype != mapping.imu.msgtype:
-            raise ReplayInputError(
-                f'{in_bag}: {mapping.imu.topic} has type {info.msgtype}, need '
-                f'{mapping.imu.msgtype} ({mapping.source}: imu)'
-            )
-        if info is None or info.message_count == 0:
-            # an optional input: the slope is the force balance's, as without an IMU
-            mapping = replace(mapping, imu=None)
+    # the IMU too: a mapping that names one asks for the fusion, so a typo in its topic or
+    # a silent sensor must not quietly give the force balance's slope instead
+    imu_specs = [mapping.imu] if mapping.imu is not None else []
+    for spec in [*mapping.used_specs, *imu_specs]:
+        check_input_topic(in_bag, topics, spec, mapping.source)
     imu_topics = [mapping.imu.topic] if mapping.imu is not None else []
     inputs = list(dict.fromkeys([*(spec.topic for spec in mapping.used_specs), *imu_topics]))
     observer_config = replace(observer_config or ObserverConfig(), wheel_input=mapping.wheel_input)
@@ -602,6 +625,10 @@ class _Run:
             len(self.used), mapping.alignment, mapping.max_age, max_wait=MAX_WAIT_S
         )
         self.gaps = [_GapStats(s, observer_config.max_gap) for s in self.used]
+        # the IMU is counted like the other inputs (it is not aligned: held at each stamp)
+        self.imu_gaps = (
+            _GapStats(mapping.imu, observer_config.max_gap) if mapping.imu is not None else None
+        )
         self.frame_id: str | None = None
         self.samples = 0
         self.sensor_messages = 0
@@ -630,6 +657,8 @@ class _Run:
         spec = self.mapping.imu
         assert spec is not None  # called with an IMU only
         series = self._decode(spec, arrays)
+        if self.imu_gaps is not None:
+            self.imu_gaps.add(series.stamp_ns)
         order = np.argsort(series.stamp_ns, kind='stable')
         stamps = series.stamp_ns[order]
         values = series.values[order, 0]
@@ -854,7 +883,7 @@ class _Run:
             situation_time_s=self.situation_time,
             stale=self.aligner.stale,
             faults=dict(result.faults),
-            inputs=tuple(g.stats() for g in self.gaps),
+            inputs=tuple(g.stats() for g in [*self.gaps, *filter(None, [self.imu_gaps])]),
             torque_source=TORQUE_SOURCES[result.torque_source],
             torque_valid_fraction=self.torque_valid / self.samples if self.samples else 0.0,
             input_rate_hz=self.input_rate_hz,

@@ -1,0 +1,180 @@
+"""The IMU is an input like the others (issue 41, item 3): checked, counted, live parameters."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from vd_observer_node.bag.errors import ReplayInputError
+from vd_observer_node.bag.writer import BagWriter
+from vd_observer_node.inputs.errors import MappingError
+from vd_observer_node.inputs.mapping import mapping_from_dict
+from vd_observer_node.nodes.node_params import INPUT_PARAMS, take_input_mapping
+from vd_observer_node.testing.standard_bags import (
+    IMU_MAPPING,
+    STANDARD_MAPPING,
+    CarSensors,
+    write_standard_bag,
+)
+from vd_observer_node.tools.replay import replay_bag
+
+RADIUS = 0.29  # [m] about the Clio's
+
+
+def _drive(seconds: float = 3.0) -> SimpleNamespace:
+    """A 1 kHz 'simulator run' of a car speeding up at 0.5 m/s^2 on the flat (the arrays
+    `write_standard_bag` samples)."""
+    t = np.arange(0.0, seconds, 1e-3)
+    speed = 5.0 + 0.5 * t
+    angle = np.repeat(((5.0 * t + 0.25 * t * t) / RADIUS)[:, None], 4, axis=1)
+    torque = np.tile([60.0, 60.0, 0.0, 0.0], (t.size, 1))
+    imu_true = np.column_stack([np.full(t.size, 0.5), np.full(t.size, 9.81)])
+    return SimpleNamespace(
+        t=t, angle_true=angle, speed_true=speed, wheel_torque=torque, imu_true=imu_true
+    )
+
+
+@pytest.fixture(scope='module')
+def imu_bag(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Standard types with an IMU on /imu at 100 Hz."""
+    path = tmp_path_factory.mktemp('imu') / 'car'
+    write_standard_bag(path, _drive(), CarSensors(imu_rate_hz=100.0))
+    return path
+
+
+def test_replay_refuses_an_imu_topic_the_bag_does_not_have(imu_bag: Path, tmp_path: Path) -> None:
+    typo = {**IMU_MAPPING, 'imu': {**IMU_MAPPING['imu'], 'topic': '/imu/data'}}
+    with pytest.raises(ReplayInputError) as caught:
+        replay_bag(
+            imu_bag, tmp_path / 'out', progress=False, mapping=mapping_from_dict(typo, 'car.yaml')
+        )
+    text = str(caught.value)
+    # one line, naming the mapping key and listing what the bag has
+    assert '\n' not in text
+    assert 'no messages on sensor topic /imu/data (car.yaml: imu)' in text
+    assert '/can/wheel_torques, /imu, /joint_states, /odom' in text
+    assert not (tmp_path / 'out').exists()
+
+
+def test_replay_refuses_an_imu_topic_without_messages(tmp_path: Path) -> None:
+    bag = tmp_path / 'car'
+    write_standard_bag(bag, _drive(1.0), CarSensors())
+    # the same bag with an /imu topic that never delivered a message
+    empty = tmp_path / 'empty_imu'
+    from vd_observer_node.bag.reader import BagReader
+
+    reader = BagReader(bag)
+    with BagWriter(empty) as writer:
+        for name, info in reader.topics.items():
+            writer.add_topic(name, info.msgtype)
+        writer.add_topic('/imu', 'sensor_msgs/msg/Imu')
+        for msg in reader.raw_messages():
+            writer.write(msg.topic, msg.data, msg.log_time_ns)
+    mapping = mapping_from_dict(IMU_MAPPING, 'car.yaml')
+    with pytest.raises(ReplayInputError, match=r'/imu \(car.yaml: imu\): the topic is empty'):
+        replay_bag(empty, tmp_path / 'out', progress=False, mapping=mapping)
+    # without the IMU in the mapping the same bag replays (the topic is not an input then)
+    replay_bag(
+        empty, tmp_path / 'plain', progress=False, mapping=mapping_from_dict(STANDARD_MAPPING)
+    )
+
+
+def test_replay_refuses_an_imu_topic_of_another_type(imu_bag: Path, tmp_path: Path) -> None:
+    other = {
+        **IMU_MAPPING,
+        'imu': {**IMU_MAPPING['imu'], 'type': 'geometry_msgs/msg/AccelStamped'},
+    }
+    with pytest.raises(ReplayInputError, match='/imu has type sensor_msgs/msg/Imu'):
+        replay_bag(imu_bag, tmp_path / 'out', progress=False, mapping=mapping_from_dict(other))
+
+
+def test_replay_summary_counts_the_fused_imu(imu_bag: Path, tmp_path: Path) -> None:
+    report = replay_bag(
+        imu_bag, tmp_path / 'out', progress=False, mapping=mapping_from_dict(IMU_MAPPING)
+    )
+    names = [stats.name for stats in report.inputs]
+    assert names == ['wheel_speeds', 'body_speed', 'wheel_torques', 'imu']
+    imu = report.inputs[-1]
+    assert imu.topic == '/imu'
+    # 3 s at 100 Hz less the one period of history `_stamps` leaves out, no gap
+    assert imu.messages == 299
+    assert imu.longest_gap_s == pytest.approx(0.01, abs=1e-6)
+    assert imu.long_gaps == 0
+    assert imu.lost == 0
+    assert 'imu (/imu): 299 messages' in imu.text()
+    # without the IMU in the mapping it is not an input
+    plain = replay_bag(
+        imu_bag, tmp_path / 'plain', progress=False, mapping=mapping_from_dict(STANDARD_MAPPING)
+    )
+    assert [s.name for s in plain.inputs] == ['wheel_speeds', 'body_speed', 'wheel_torques']
+
+
+def _values(**given: object) -> dict[str, object]:
+    """The declared input parameters' values as a node reads them: unset ones None."""
+    values: dict[str, object] = {spec.name: spec.default for spec in INPUT_PARAMS}
+    values.update(given)
+    return values
+
+
+def test_live_imu_parameters_build_the_mapping_of_the_file() -> None:
+    names = {spec.name for spec in INPUT_PARAMS}
+    for key in ('topic', 'type', 'indices', 'unit', 'scale', 'mount_rpy_deg'):
+        assert f'inputs.imu.{key}' in names
+    assert 'inputs.imu.fusion.tau' in names
+    assert 'inputs.imu.fusion.pitch_compliance' not in names  # from the vehicle file
+    file_form = {
+        **STANDARD_MAPPING,
+        'imu': {
+            'topic': '/imu',
+            'type': 'sensor_msgs/msg/Imu',
+            'mount_rpy_deg': [0.0, -2.5, 0.0],
+            'unit': 'g',
+            'fusion': {'tau': 0.4, 'mass_feedback': False},
+        },
+    }
+    params = {
+        'inputs.wheel_speeds.topic': '/joint_states',
+        'inputs.wheel_speeds.type': 'sensor_msgs/msg/JointState',
+        'inputs.wheel_speeds.joints': list(STANDARD_MAPPING['wheel_speeds']['joints']),
+        'inputs.wheel_speeds.unit': 'rad/s',
+        'inputs.wheel_speeds.sign': [1, -1, 1, -1],
+        'inputs.body_speed.topic': '/odom',
+        'inputs.body_speed.type': 'nav_msgs/msg/Odometry',
+        'inputs.body_speed.unit': 'm/s',
+        'inputs.wheel_torques.topic': '/can/wheel_torques',
+        'inputs.wheel_torques.type': 'std_msgs/msg/Float64MultiArray',
+        'inputs.wheel_torques.indices': [0, 1, 2, 3],
+        'inputs.wheel_torques.unit': 'N m',
+        'inputs.alignment': 'latest',
+        'inputs.imu.topic': '/imu',
+        'inputs.imu.type': 'sensor_msgs/msg/Imu',
+        'inputs.imu.mount_rpy_deg': [0.0, -2.5, 0.0],
+        'inputs.imu.unit': 'g',
+        'inputs.imu.fusion.tau': 0.4,
+        'inputs.imu.fusion.mass_feedback': False,
+    }
+    live = take_input_mapping(_values(**params))
+    offline = mapping_from_dict(file_form)
+    assert live.imu is not None and offline.imu is not None
+    assert live.imu == offline.imu
+    assert live.imu.fusion == (('tau', 0.4), ('mass_feedback', 0.0))
+
+
+def test_live_imu_parameters_are_refused_as_the_file_is() -> None:
+    with pytest.raises(MappingError, match=r'imu.fusion.tua is not a setting'):
+        take_input_mapping(
+            _values(**{'inputs.imu.topic': '/imu', 'inputs.imu.type': 'sensor_msgs/msg/Imu'}),
+            ['inputs.imu.fusion.tua'],
+        )
+    with pytest.raises(MappingError, match=r'imu\.unit'):
+        take_input_mapping(
+            _values(
+                **{
+                    'inputs.imu.topic': '/imu',
+                    'inputs.imu.type': 'sensor_msgs/msg/Imu',
+                    'inputs.imu.unit': 'furlong',
+                }
+            )
+        )
