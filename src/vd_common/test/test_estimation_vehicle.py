@@ -26,8 +26,7 @@ REQUIRED = [
     ('chassis', 'mass'), ('chassis', 'wheelbase'), ('chassis', 'cg_to_front_axle'),
     ('chassis', 'cg_height'), ('wheel', 'inertia_front'), ('wheel', 'inertia_rear'),
     ('wheel', 'effective_radius'), ('aero', 'drag_coefficient'), ('rolling_resistance', 'c0'),
-    ('environment', 'gravity'),
-]  # fmt: skip
+]  # fmt: skip  (environment.gravity has a default: test_vehicle_keys.py)
 
 
 def test_the_simulators_file_reads_to_the_same_numbers() -> None:

@@ -46,6 +46,7 @@ _DELETE = object()
 # Keys that may be absent (defaults exist) or are free text.
 _OPTIONAL = {
     'name',
+    'environment.gravity',
     'rolling_resistance.regularisation_speed',
     'tire.pHx1',
     'tire.pHx2',

@@ -7,14 +7,54 @@ offending key by its dotted path, so a user sees exactly one clear message such 
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeAlias
 
 import yaml
 
-__all__ = ['MappingReader', 'load_yaml_mapping']
+__all__ = ['KeySchema', 'MappingReader', 'check_known_keys', 'load_yaml_mapping']
+
+#: The keys a YAML mapping may hold: each key maps to the schema of its nested mapping, or
+#: to None for a value that is not checked further (a number, a list, a string).
+KeySchema: TypeAlias = Mapping[str, 'KeySchema | None']
+
+
+def check_known_keys(data: Any, schema: KeySchema, error: type[Exception], path: str = '') -> None:
+    """Refuse the first key of ``data`` (depth first, in file order) that ``schema`` lacks.
+
+    A misspelt key would otherwise be ignored (an optional one: its default is used
+    silently) or be reported as the key it should have been being missing. Values that are
+    not mappings where the schema expects one are left to the typed readers, which name them.
+
+    Args:
+        data: the parsed YAML mapping (anything else is not checked).
+        schema: the known keys, nested.
+        error: exception class raised.
+        path: dotted path of ``data`` in the document ('' for the top level).
+
+    Raises:
+        error: ``brakes.gain_frnt is not a known key; did you mean brakes.gain_front?`` (the
+            closest known key when one is close, else the known keys of that mapping).
+    """
+    if not isinstance(data, Mapping):
+        return
+    prefix = f'{path}.' if path else ''
+    for key, value in data.items():
+        name = f'{prefix}{key}'
+        if not isinstance(key, str) or key not in schema:
+            close = difflib.get_close_matches(str(key), list(schema), n=1, cutoff=0.6)
+            hint = (
+                f'did you mean {prefix}{close[0]}?'
+                if close
+                else f'known keys{" of " + path if path else ""}: {", ".join(schema)}'
+            )
+            raise error(f'{name} is not a known key; {hint}')
+        nested = schema[key]
+        if nested is not None:
+            check_known_keys(value, nested, error, name)
 
 
 def load_yaml_mapping(path: str | Path, error: type[Exception], what: str = '') -> dict[str, Any]:

@@ -7,9 +7,10 @@ only these keys, each range-checked and named by its dotted path when missing or
 
 * ``chassis``: ``mass`` [kg], ``wheelbase`` [m], ``cg_to_front_axle`` [m], ``cg_height`` [m];
 * ``wheel``: ``inertia_front``, ``inertia_rear`` [kg m^2], ``effective_radius`` [m];
-* ``aero``, ``rolling_resistance``, ``environment.gravity``: as the simulator's file;
-* optional ``tire`` (the Magic Formula of the friction potential and the alerts: the alerts
-  node refuses a file without it, `vd replay` skips them and says so);
+* ``aero``, ``rolling_resistance``: as the simulator's file;
+* optional ``environment.gravity`` [m/s^2], default 9.81;
+* optional ``tire`` (the Magic Formula of the friction potential and the alerts that compare
+  the utilised friction with it: without it they are off, said once, and the rest runs);
 * optional ``gearbox.ratios`` and ``gearbox.final_drive`` with ``engine.inertia`` (the
   engine torque path; refused, naming the key, when that path is asked for without them),
   and with them, optional: ``gearbox.efficiency`` (one number, or one per gear; default 1),
@@ -21,6 +22,10 @@ only these keys, each range-checked and named by its dotted path when missing or
 * optional ``brakes.gain_front`` and ``brakes.gain_rear``: brake torque per wheel per unit
   of the mapped brake pressure [N m per unit] (the brake input; a simulator file's
   ``brakes.max_torque_*`` are not read).
+
+A key that neither this parser nor the simulator's knows is refused before any value is read,
+naming the closest known key (:data:`~vd_common.vehicle.params.VEHICLE_FILE_KEYS`, shared
+with the simulator's parser). docs/vehicle_file.md has the table of these keys.
 """
 
 from __future__ import annotations
@@ -34,7 +39,9 @@ from vd_common.vehicle.params import (
     EnvironmentParams,
     RollingResistanceParams,
     TireParams,
+    check_vehicle_keys,
     read_aero,
+    read_environment,
     read_rolling,
     read_tire,
 )
@@ -250,6 +257,7 @@ def parse_estimation_vehicle(data: object, source: str = '') -> EstimationVehicl
         ParameterError: naming the first missing or invalid parameter by its dotted path.
     """
     r = MappingReader(data, '', ParameterError)
+    check_vehicle_keys(data)
     c = r.section('chassis')
     wheelbase = c.number('wheelbase', 'm', gt=0.0)
     w = r.section('wheel')
@@ -268,9 +276,7 @@ def parse_estimation_vehicle(data: object, source: str = '') -> EstimationVehicl
         ),
         aero=read_aero(r.section('aero')),
         rolling_resistance=read_rolling(r.section('rolling_resistance')),
-        environment=EnvironmentParams(
-            gravity=r.section('environment').number('gravity', 'm/s^2', gt=0.0)
-        ),
+        environment=read_environment(r),
         tire=None if r.optional_section('tire') is None else read_tire(r.section('tire')),
         driveline=_driveline(r),
         source=source,

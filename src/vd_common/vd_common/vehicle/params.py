@@ -9,6 +9,16 @@ All values are SI (angles in rad, engine speeds in rad/s). The loader refuses a 
 out-of-range value with one :class:`~vd_common.errors.ParameterError` that names the
 parameter by its dotted YAML path, e.g. ``chassis.mass must be > 0 kg, got -3``;
 :func:`load_vehicle` puts the file in front: ``vehicle file x.yaml: chassis.mass must be ...``.
+
+Both parsers of a vehicle file (this one and the estimators',
+:func:`vd_common.vehicle.estimation.parse_estimation_vehicle`) refuse a key that is not in
+:data:`VEHICLE_FILE_KEYS` before reading a value, naming the closest known key
+(``brakes.gain_frnt is not a known key; did you mean brakes.gain_front?``): one schema, the
+union of the simulator's keys and the estimators', so a full simulator file passes both and a
+misspelt key is never ignored or reported as another key missing. The simulator does not read
+the estimation-only keys (``gearbox.efficiency``, ``gearbox.reverse_ratio``, ``driveline``,
+``torque_converter``, ``brakes.gain_*``). ``environment.gravity`` is optional in both, default
+:data:`DEFAULT_GRAVITY` (9.81 m/s^2).
 """
 
 from __future__ import annotations
@@ -17,9 +27,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from vd_common.errors import ParameterError
-from vd_common.yaml_reader import MappingReader, load_yaml_mapping
+from vd_common.yaml_reader import KeySchema, MappingReader, check_known_keys, load_yaml_mapping
 
 __all__ = [
+    'DEFAULT_GRAVITY',
+    'VEHICLE_FILE_KEYS',
     'AeroParams',
     'BrakeParams',
     'ChassisParams',
@@ -32,13 +44,109 @@ __all__ = [
     'TireParams',
     'VehicleParams',
     'WheelParams',
+    'check_vehicle_keys',
     'default_vehicle_file',
     'load_vehicle',
     'parse_vehicle',
     'read_aero',
+    'read_environment',
     'read_rolling',
     'read_tire',
 ]
+
+#: [m/s^2] ``environment.gravity`` when the file does not give it.
+DEFAULT_GRAVITY = 9.81
+
+
+def _keys(*names: str) -> dict[str, KeySchema | None]:
+    return dict.fromkeys(names)
+
+
+#: Every key a vehicle file may hold, by section: the simulator's (:func:`parse_vehicle`) and
+#: the estimators' (:mod:`vd_common.vehicle.estimation`). A key added to either parser is added
+#: here, or the parser refuses its own key (tests load every shipped file through both).
+VEHICLE_FILE_KEYS: KeySchema = {
+    'name': None,
+    'chassis': _keys(
+        'mass',
+        'unsprung_mass_front',
+        'unsprung_mass_rear',
+        'wheelbase',
+        'cg_to_front_axle',
+        'cg_height',
+        'pitch_inertia',
+        'track_front',
+        'track_rear',
+    ),
+    'suspension': _keys('stiffness_front', 'stiffness_rear', 'damping_front', 'damping_rear'),
+    'wheel': _keys(
+        'inertia_front',
+        'inertia_rear',
+        'unloaded_radius',
+        'effective_radius',
+        'tyre_vertical_stiffness',
+        'tyre_vertical_damping',
+    ),
+    'aero': _keys('drag_coefficient', 'frontal_area', 'air_density'),
+    'rolling_resistance': _keys('c0', 'c1', 'regularisation_speed'),
+    'environment': _keys('gravity'),
+    'tire': _keys(
+        'nominal_load',
+        'pCx1',
+        'pDx1',
+        'pDx2',
+        'pEx1',
+        'pEx2',
+        'pEx3',
+        'pEx4',
+        'pKx1',
+        'pKx2',
+        'pKx3',
+        'pHx1',
+        'pHx2',
+        'pVx1',
+        'pVx2',
+        'low_speed_velocity',
+    ),
+    'engine': _keys(
+        'inertia',
+        'full_load_speed',
+        'full_load_torque',
+        'drag_torque_c0',
+        'drag_torque_c1',
+        'idle_speed',
+        'idle_gain',
+        'max_speed',
+    ),
+    'clutch': _keys(
+        'capacity', 'slip_speed', 'engage_start_speed', 'engage_full_speed', 'engage_time'
+    ),
+    'gearbox': _keys(
+        'ratios',
+        'final_drive',
+        'upshift_speed_closed',
+        'upshift_speed_open',
+        'downshift_speed',
+        'shift_time',
+        'efficiency',
+        'reverse_ratio',
+    ),
+    'brakes': _keys(
+        'max_torque_front', 'max_torque_rear', 'lock_speed', 'gain_front', 'gain_rear'
+    ),
+    'driveline': _keys('layout', 'front_share'),
+    'torque_converter': _keys('speed_ratio', 'torque_ratio', 'capacity_factor'),
+}
+
+
+def check_vehicle_keys(data: object) -> None:
+    """Refuse the first key of a vehicle file that :data:`VEHICLE_FILE_KEYS` lacks.
+
+    Raises:
+        ParameterError: ``chassis.mas is not a known key; did you mean chassis.mass?``.
+    """
+    check_known_keys(data, VEHICLE_FILE_KEYS, ParameterError)
+
 
 # The shipped parameter file, in ``config/`` of this package (vd_common).
 _CLIO_FILE = 'clio_rl_1_1.yaml'
@@ -263,6 +371,16 @@ def read_rolling(r: MappingReader) -> RollingResistanceParams:
     )
 
 
+def read_environment(r: MappingReader) -> EnvironmentParams:
+    """``environment`` (optional, as its ``gravity``: default :data:`DEFAULT_GRAVITY`)."""
+    env = r.optional_section('environment')
+    if env is None:
+        return EnvironmentParams(gravity=DEFAULT_GRAVITY)
+    return EnvironmentParams(
+        gravity=env.number('gravity', 'm/s^2', gt=0.0, default=DEFAULT_GRAVITY)
+    )
+
+
 def read_tire(r: MappingReader) -> TireParams:
     return TireParams(
         nominal_load=r.number('nominal_load', 'N', gt=0.0),
@@ -362,6 +480,7 @@ def parse_vehicle(data: object) -> VehicleParams:
         ParameterError: naming the first missing or invalid parameter.
     """
     r = MappingReader(data, '', ParameterError)
+    check_vehicle_keys(data)
     engine = _engine(r.section('engine'))
     return VehicleParams(
         name=r.string('name', default='vehicle'),
@@ -370,9 +489,7 @@ def parse_vehicle(data: object) -> VehicleParams:
         wheel=_wheel(r.section('wheel')),
         aero=read_aero(r.section('aero')),
         rolling_resistance=read_rolling(r.section('rolling_resistance')),
-        environment=EnvironmentParams(
-            gravity=r.section('environment').number('gravity', 'm/s^2', gt=0.0)
-        ),
+        environment=read_environment(r),
         tire=read_tire(r.section('tire')),
         engine=engine,
         clutch=_clutch(r.section('clutch'), engine.idle_speed),
