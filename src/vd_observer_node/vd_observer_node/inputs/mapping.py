@@ -102,6 +102,7 @@ body speed from ``geometry_msgs/msg/TwistStamped``
 ``std_msgs/msg/Float64MultiArray``; wheel torques from ``vd_msgs/msg/WheelTorques``,
 ``sensor_msgs/msg/JointState`` (effort) or ``std_msgs/msg/Float64MultiArray``.
 Float64MultiArray has no header: its samples are stamped with their log time.
+Units (``unit``, ``speed_unit``) are read regardless of case: ``RPM`` is ``rpm``.
 """
 
 from __future__ import annotations
@@ -374,6 +375,15 @@ def _number(where: str, value: Any) -> float:
     return float(value)
 
 
+def _unit_name(raw: Any, units: Mapping[str, float]) -> Any:
+    """The unit ``raw`` as spelt in ``units`` when it matches one regardless of case (``RPM``
+    is ``rpm``; no two units of one input differ by case alone); else ``raw`` unchanged."""
+    if isinstance(raw, str):
+        by_case = {u.casefold(): u for u in units}
+        return by_case.get(raw.strip().casefold(), raw)
+    return raw
+
+
 def _spec(name: str, data: Any, where: str) -> InputSpec:
     if not isinstance(data, Mapping):
         raise MappingError(f'{where} must be a mapping with topic and type')
@@ -413,7 +423,7 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
     elif 'gear_offset' in data:
         raise MappingError(f'{where}.gear_offset is for {ENGINE_INPUT} only')
     if name == ENGINE_INPUT:
-        speed_unit = data.get('speed_unit', 'rad/s')
+        speed_unit = _unit_name(data.get('speed_unit', 'rad/s'), SPEED_UNITS)
         if speed_unit not in SPEED_UNITS:
             raise MappingError(
                 f'{where}.speed_unit {speed_unit!r} is unknown (use one of '
@@ -462,7 +472,7 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         indices = tuple(raw)
     elif 'indices' in data:
         raise MappingError(f'{where}.indices is for std_msgs/msg/Float64MultiArray only')
-    unit = data.get('unit', next(iter(UNITS[name])))
+    unit = _unit_name(data.get('unit', next(iter(UNITS[name]))), UNITS[name])
     if unit not in UNITS[name]:
         raise MappingError(
             f'{where}.unit {unit!r} is unknown (use one of {", ".join(UNITS[name])})'
