@@ -91,12 +91,14 @@ def envelope(
 
 
 def _shade(ax: Axes, report: AccuracyReport, t_end: float) -> None:
+    ax.set_xlim(0.0, t_end)
+    if report.reference == 'none':  # no accuracy, so no evaluation window to grey out
+        return
     cfg = report.settings
     ax.axvspan(0.0, cfg.settle_s, color='0.9', lw=0, zorder=0)
     for event in (*report.slope_steps_s, *report.gear_changes_s):
         w = cfg.exclusion_half_width_s
         ax.axvspan(event - w, event + w, color='0.9', lw=0, zorder=0)
-    ax.set_xlim(0.0, t_end)
 
 
 def _series(c: Comparison, column: int | None) -> tuple[FloatArray | None, FloatArray | None]:
