@@ -132,7 +132,7 @@ def _wait_exit(proc: RosProcess, timeout: float) -> int:
         time.sleep(0.1)
     code = proc.popen.poll()
     assert code is not None, f'{proc.name} still running:\n{proc.stacks()}'
-    return code
+    return int(code)
 
 
 def _play(
