@@ -20,6 +20,7 @@ from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.imu_grade import (
+    REFERENCE_RATE_FOLLOWING,
     SOURCE_FORCE,
     SOURCE_IMU,
     ImuGradeConfig,
@@ -177,7 +178,7 @@ def test_a_dropout_or_saturation_falls_back_to_the_force_balance_and_recovers(ki
     assert np.all(out.imu_fitted[during])
     np.testing.assert_array_equal(out.mass_used[during], out.imu_mass[np.flatnonzero(during)[0]])
     # after: the filters restart (no jump from the stale state), the bias is kept
-    later = sim.t > 65.0 + 6 * CONFIG.tau + 0.5
+    later = sim.t > 65.0 + 6 * CONFIG.tau_in_use + 0.5
     np.testing.assert_array_equal(out.imu_bias[during], np.full(during.sum(), out.imu_bias[
         np.flatnonzero(during)[0]]))  # fmt: skip
     moving = later & (sim.speed_true > 1.0)
@@ -274,7 +275,10 @@ def test_replay_reads_the_mapped_imu_and_marks_the_slope_sources(tmp_path: Path)
     )
     stamps = np.round(part.t * 1e9).astype(np.int64)
     write_topic_arrays_bag(tmp_path / 'in', stamps, sim_topics(part, truth=False, imu=True))
-    mapping = mapping_from_dict({'imu': {'topic': SENSORS_IMU, 'type': 'sensor_msgs/msg/Imu'}})
+    # the fusion's low-passes set as the cascade's reference values (unset, the replay follows
+    # the bag's rate after 200 stamps: test_imu_input)
+    imu = {'topic': SENSORS_IMU, 'type': 'sensor_msgs/msg/Imu', 'fusion': REFERENCE_RATE_FOLLOWING}
+    mapping = mapping_from_dict({'imu': imu})
     # the slope filter set: left unset, the replay follows the bag's rate after 200 stamps
     # (rate_settings; tested in test_bag_replay)
     fixed = EstimatorConfig(slope_filter_tau=0.1)

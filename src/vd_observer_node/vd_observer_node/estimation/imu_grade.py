@@ -60,12 +60,15 @@ from vd_observer_node.estimation.filters import (
     lowpass_reset,
     lowpass_update,
 )
+from vd_observer_node.estimation.rate_settings import REFERENCE_RATE_HZ
 from vd_observer_node.kernel._jit import jit, new_record
 
 __all__ = [
     'GRADE_OUT',
     'GRADE_PARAMS',
     'GRADE_STATE',
+    'RATE_FOLLOWING',
+    'REFERENCE_RATE_FOLLOWING',
     'SOURCE_FORCE',
     'SOURCE_IMU',
     'ImuGrade',
@@ -73,6 +76,7 @@ __all__ = [
     'imu_grade_config',
     'imu_grade_step',
     'pitch_compliance',
+    'tau_for_rate',
     'vehicle_pitch_compliance',
 ]
 
@@ -176,7 +180,9 @@ class ImuGradeConfig:
 
     Attributes:
         tau: time constant of each of the 3 low-pass stages of the grade on f_x and the
-            speed, [s] (the vibration, the speed's noise).
+            speed, [s] (the vibration, the speed's noise); None: it follows the inputs' rate
+            (`tau_for_rate`: 0.3 s at and above 1 kHz, longer below), as the force balance's
+            ``slope_filter_tau`` does.
         lag_compensation: the grade's low-pass has a lead that cancels its lag on ramps:
             ``(1 + 3 tau s) / (1 + tau s)^3`` (False: ``1 / (1 + tau s)^3``, 3 tau late).
         fit_tau: time constant of each of the 2 low-pass stages of the regression on f_x,
@@ -184,7 +190,8 @@ class ImuGradeConfig:
         warmup: the filters start after this long, on a line fitted through the speed (the
             car's acceleration at the start) and the mean f_x, [s].
         step_tau: time constant of each of the 3 stages of a short low-pass of the grade
-            without lead, [s] (0: none): where it differs from the grade by more than
+            without lead, [s] (0: none; None: it follows the inputs' rate, 0.1 s at and above
+            1 kHz, as ``tau``): where it differs from the grade by more than
             ``step_slope`` [rad] (a step of the grade, which the lead overshoots for a few
             ``tau``) the grade is the short one's (on the paper's 5 deg steps: 0.22 deg RMS
             without it, see docs/estimation.md).
@@ -227,11 +234,11 @@ class ImuGradeConfig:
             keeps its own (the file's or the online mass).
     """
 
-    tau: float = 0.3
+    tau: float | None = None
     lag_compensation: bool = True
     fit_tau: float = 0.2
     fit_delay: float = 2.7
-    step_tau: float = 0.1
+    step_tau: float | None = None
     step_slope: float = 0.015
     warmup: float = 0.3
     settle: float = 3.0
@@ -256,15 +263,78 @@ class ImuGradeConfig:
                      'bias_std', 'force_std', 'mass_tol', 'bias_tol', 'alone_bias_std',
                      'force_slope_std'):  # fmt: skip
             value = getattr(self, name)
+            if value is None and name in RATE_FOLLOWING:
+                continue
             if not (math.isfinite(value) and value > 0.0):
                 raise ConfigurationError(f'imu.{name} must be finite and > 0, got {value}')
         for name in ('settle', 'min_speed', 'mass_drift', 'bias_drift', 'pitch_compliance',
                      'warmup', 'fit_delay', 'step_tau', 'step_slope'):  # fmt: skip
             value = getattr(self, name)
+            if value is None and name in RATE_FOLLOWING:
+                continue
             if not (math.isfinite(value) and value >= 0.0):
                 raise ConfigurationError(f'imu.{name} must be finite and >= 0, got {value}')
         if self.max_slope >= math.pi / 2:
             raise ConfigurationError(f'imu.max_slope must be < pi/2, got {self.max_slope}')
+
+    @property
+    def tau_in_use(self) -> float:
+        """[s] ``tau``, or the reference rate's while it is left to a rate not known yet."""
+        return REFERENCE_RATE_FOLLOWING['tau'] if self.tau is None else self.tau
+
+    @property
+    def step_tau_in_use(self) -> float:
+        """[s] ``step_tau``, or the reference rate's while it is left to a rate not known."""
+        return REFERENCE_RATE_FOLLOWING['step_tau'] if self.step_tau is None else self.step_tau
+
+    def at_rate(self, rate_hz: float) -> tuple[ImuGradeConfig, dict[str, float]]:
+        """These settings for inputs at `rate_hz`: the ones left unset follow the rate.
+
+        Args:
+            rate_hz: [Hz] the rate the estimator's settings follow (`rate_settings.
+                follow_rate_hz`: the slower of the wheel and body-speed inputs); nan:
+                unknown, nothing changes.
+
+        Returns:
+            The settings with the rate-dependent ones fixed, and those fixed here by name
+            (``'tau'``, ``'step_tau'``) with their values (empty where the user set them).
+        """
+        if not math.isfinite(rate_hz):
+            return self, {}
+        fixed = {
+            name: tau_for_rate(name, rate_hz)
+            for name in RATE_FOLLOWING
+            if getattr(self, name) is None
+        }
+        changes: dict[str, Any] = dict(fixed)
+        return dataclasses.replace(self, **changes), fixed
+
+
+#: the settings that follow the inputs' rate where left unset (None)
+RATE_FOLLOWING: Final = ('tau', 'step_tau')
+#: [s] their values at and above `rate_settings.REFERENCE_RATE_HZ` (where they were tuned)
+REFERENCE_RATE_FOLLOWING: Final = {'tau': 0.3, 'step_tau': 0.1}
+
+
+def tau_for_rate(name: str, rate_hz: float) -> float:
+    """[s] the setting `name` (`RATE_FOLLOWING`) for inputs at `rate_hz`.
+
+    The grade is the IMU's specific force less the derivative of the low-passed speed, so
+    the speed's noise reaches it as it reaches the force balance's slope: the same law as
+    ``slope_filter_tau`` (`rate_settings`), the reference value times
+    ``(1000 Hz / f)^(1/4)`` below 1 kHz. Measured on standard-type bags with a 100 Hz IMU
+    (``scripts/eval_imu_rate.py``; docs/estimation.md, section 8): at 50 Hz, 0.3 s gave a
+    slope worse than the force balance alone (0.318 deg against 0.245 deg on paper_table1),
+    0.53 s better (0.207 deg).
+
+    Args:
+        name: 'tau' or 'step_tau'.
+        rate_hz: [Hz]; not finite or <= 0 (unknown): the reference rate's value.
+    """
+    reference = REFERENCE_RATE_FOLLOWING[name]
+    if not (math.isfinite(rate_hz) and rate_hz > 0.0):
+        return reference
+    return float(reference * max(1.0, REFERENCE_RATE_HZ / rate_hz) ** 0.25)
 
 
 def imu_grade_config(
@@ -290,13 +360,13 @@ def grade_params(
     [kg] and rolling-resistance coefficients (paper eq. 7)."""
     p = new_record(GRADE_PARAMS)
     p.gravity = gravity
-    p.tau = config.tau
+    p.tau = config.tau_in_use
     p.warmup = config.warmup
     p.fit_tau = config.fit_tau
     p.fit_delay = config.fit_delay
-    p.step_tau = config.step_tau
+    p.step_tau = config.step_tau_in_use
     p.step_sine = math.sin(config.step_slope)
-    p.lead = _ORDER * config.tau if config.lag_compensation else 0.0
+    p.lead = _ORDER * config.tau_in_use if config.lag_compensation else 0.0
     p.bias_settle = config.settle
     p.max_age = config.max_age
     p.saturation = config.saturation
@@ -688,3 +758,22 @@ class ImuGrade:
         self.params = grade_params(self.config, gravity, mass, rolling_c0, rolling_c1)
         self.state = new_record(GRADE_STATE)
         imu_grade_reset(self.params, self.state)
+
+    def follow_rate(self, rate_hz: float) -> dict[str, float]:
+        """Fix the settings left to the inputs' rate, now that it is known (from the stamp
+        the estimator's follow it, `Estimator.follow_rate`); the filters keep their state
+        (their stages hold signals, not coefficients).
+
+        Args:
+            rate_hz: [Hz] rate of the slower of the wheel and body-speed inputs.
+
+        Returns:
+            The settings fixed here, by name, with their values (empty: none was left
+            unset, or they were fixed before).
+        """
+        self.config, fixed = self.config.at_rate(rate_hz)
+        if fixed:
+            self.params.tau = self.config.tau_in_use
+            self.params.step_tau = self.config.step_tau_in_use
+            self.params.lead = _ORDER * self.params.tau if self.config.lag_compensation else 0.0
+        return fixed

@@ -147,7 +147,9 @@ INPUT_PARAMS: Final = [
         ParamSpec(
             f'inputs.{IMU_INPUT}.{FUSION_KEY}.{spec.name}',
             None,
-            f'{IMU_INPUT} fusion (unset: {spec.default}): {spec.description}',
+            f'{IMU_INPUT} fusion (unset: '
+            + ('follows the input rate' if spec.default is None else f'{spec.default}')
+            + f'): {spec.description}',
         )
         for spec in dataclass_param_specs(ImuGradeConfig, skip=('pitch_compliance',))
     ),

@@ -88,11 +88,11 @@ from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import ERROR
 from vd_observer_node.estimation.imu_grade import imu_grade_config, vehicle_pitch_compliance
 from vd_observer_node.estimation.observer import ObserverConfig
-from vd_observer_node.estimation.rate_settings import RateMeter
+from vd_observer_node.estimation.rate_settings import RateMeter, follow_rate_hz
 from vd_observer_node.estimation.vehicle import (
     EstimatorVehicle,
     load_vehicle_params,
-    vehicle_tire,
+    no_tire_note,
 )
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
@@ -158,9 +158,10 @@ _GAIN_KEYS = set(LevantGains.__dataclass_fields__)
 
 def _settings(
     values: dict[str, Any], torque_source: str = 'measured', brake_signal: str = ''
-) -> tuple[ChainSettings, str]:
+) -> tuple[ChainSettings, str, str | None]:
     """Chain settings from the declared parameters and the mapping's torque source (the
-    engine path takes the vehicle file's drivetrain); also the vehicle file used."""
+    engine path takes the vehicle file's drivetrain); also the vehicle file used, and why the
+    situation monitor is off (`no_tire_note`: a file without tyre), or None."""
     vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
     speed_source = values.pop('speed_source')
     estimator_keys = set(EstimatorConfig.setting_keys())
@@ -174,7 +175,7 @@ def _settings(
     taken = _OBSERVER_KEYS | _GAIN_KEYS | estimator_keys | situation_keys | friction_keys
     settings = ChainSettings(
         vehicle=EstimatorVehicle.from_params(params),
-        curves=TyreCurves.from_tire(vehicle_tire(params)),
+        curves=None if params.tire is None else TyreCurves.from_tire(params.tire),
         observer=observer,
         estimator=EstimatorConfig.from_mapping(
             {k: v for k, v in values.items() if k in estimator_keys}
@@ -195,7 +196,7 @@ def _settings(
             else None
         ),
     )
-    return settings, vehicle_file
+    return settings, vehicle_file, no_tire_note(params)
 
 
 def _stamp_ns(t: float) -> int:
@@ -217,7 +218,7 @@ class PipelineNode(Node):
         classes = [input_message_class(spec) for spec in specs]
         capacity = values.pop('align_capacity')
         layout = values.pop('estimate_topics')
-        settings, vehicle_file = _settings(
+        settings, vehicle_file, self._situation_off = _settings(
             values, mapping.torque_source, mapping.brake.signal if mapping.brake else ''
         )
         # what the wheel sensors are (angles or ABS speeds) follows from the mapping
@@ -240,7 +241,11 @@ class PipelineNode(Node):
         self.aligner = input_matcher(
             mapping, names, capacity, max_jump_back_ns=max_gap_ns, max_age_ns=max_gap_ns
         )
-        self.watch = InputWatch([spec.topic for spec in specs], max_gap_ns)
+        # the IMU is watched like the other inputs: a stopped one is a WARN on /diagnostics
+        imu_topics = [mapping.imu.topic] if mapping.imu is not None else []
+        self.watch = InputWatch(
+            list(dict.fromkeys([*(spec.topic for spec in specs), *imu_topics])), max_gap_ns
+        )
         # the wheel stamps and a stamped body speed's set what follows the rate
         self._wheel_rate: RateMeter | None = RateMeter()
         self._speed_topic = mapping.body_speed.topic if has_header(mapping.body_speed) else None
@@ -258,6 +263,9 @@ class PipelineNode(Node):
             and settings.estimator.torque_offset_adaptation,
             'combined': layout != 'separate',
             **dict.fromkeys(_SEPARATE, layout != 'combined'),
+            # without a tyre, no friction potential and no alerts (`no_tire_note`)
+            'potential': self._situation_off is None,
+            'alerts': self._situation_off is None,
         }
         self.pubs = {
             key: self.refusals.publisher(cls, topic, STATE_QOS if key == 'offset' else STREAM_QOS)
@@ -293,13 +301,22 @@ class PipelineNode(Node):
         self._imu: deque[tuple[float, float]] = deque(maxlen=_IMU_HELD)
         if mapping.imu is not None:
             imu_decoder = InputDecoder(mapping.imu)
+            imu_topic, imu_stamped = mapping.imu.topic, has_header(mapping.imu)
 
             def on_imu(data: bytes) -> None:
+                self.watch.seen(imu_topic, time.monotonic_ns())
+                now = clock.now().nanoseconds
                 try:
-                    stamp, _, row = imu_decoder.decode(data, clock.now().nanoseconds)
-                except (BagFormatError, MappingError):
+                    stamp, _, row = imu_decoder.decode(data, now)
+                except BagFormatError:
                     self.counts['undecodable'] += 1
                     return
+                except MappingError as exc:  # as the other inputs (`raw_io.mapped_input`)
+                    self.counts['unfit'] = self.counts.get('unfit', 0) + 1
+                    self.watch.unfit(imu_topic, str(exc))
+                    return
+                if imu_stamped:
+                    self.watch.stamped(imu_topic, stamp, now - stamp)
                 self._imu.append((stamp * 1e-9, row[0]))
 
             self.create_subscription(
@@ -314,6 +331,11 @@ class PipelineNode(Node):
             f'({vehicle_file}), torque source {self.torque_source}'
             + (f', inputs from {mapping.source}' if mapping.source else '')
         )
+        if self._situation_off is not None:
+            # a configuration, not a fault: said once here, and as a value on /diagnostics
+            self.get_logger().info(
+                f'friction potential and alerts {self._situation_off}; every estimate runs'
+            )
 
     def _codec(self, key: str, frame: bytes) -> MessageCodec:
         return self.encoders(self._types[key], frame)
@@ -335,6 +357,15 @@ class PipelineNode(Node):
             follow_input_rate(
                 self.chain.parts.estimator, self._wheel_rate.stamps, speed_stamps, self
             )
+            if self.chain.parts.imu_on:  # the IMU fusion's low-passes too, as vd replay
+                rate = follow_rate_hz(self._wheel_rate.stamps, speed_stamps)
+                fixed = self.chain.parts.imu_grade.follow_rate(rate)
+                if fixed:
+                    self.get_logger().info(
+                        'IMU fusion settings following the input rate '
+                        f'({rate:g} Hz): '
+                        + ', '.join(f'imu.fusion.{k} {v:.3g} s' for k, v in fixed.items())
+                    )
             self._wheel_rate = None
         self.counts['estimates'] += 1
         if not self._finite(out):
@@ -431,6 +462,8 @@ class PipelineNode(Node):
                 pubs['offset'].publish(
                     codec('offset', frame).encode(stamp_ns, offset_values(offset))
                 )
+        if sit is None:  # no tyre: no situation monitor
+            return
         pot = sit.potential
         pubs['potential'].publish(
             codec('potential', frame).encode(
@@ -469,6 +502,8 @@ class PipelineNode(Node):
         if self._active:
             level = max(level, int.from_bytes(DiagnosticStatus.WARN, 'little'))
             message += f'; alerts: {self._last_alerts}'
+        if self._situation_off is not None:
+            message += '; friction potential and alerts off: no tire in the vehicle file'
         if self.counts['withheld_non_finite']:
             level = max(level, ERROR)
             message += f'; {self.counts["withheld_non_finite"]} non-finite outputs withheld'
@@ -483,6 +518,7 @@ class PipelineNode(Node):
         )
         values = {
             'torque_source': self.torque_source,
+            **({'situation': self._situation_off} if self._situation_off is not None else {}),
             **self.counts,
             **self.aligner.counts(),
             **report.counts,

@@ -116,7 +116,10 @@ def _replay(args: argparse.Namespace) -> int:
         print(f'  input {stats.text()}')
     print(f'torque path: {path}')
     print(f'vehicle: {report.vehicle}')
-    derived = {f'estimator.{k}': v for k, v in report.rate_settings.items()}
+    # the IMU fusion's are named as the mapping names them (imu.fusion.*)
+    derived = {
+        k if k.startswith('imu.') else f'estimator.{k}': v for k, v in report.rate_settings.items()
+    }
     origin = Path(config.source).name if config.source else ''
     print(f'settings: {settings_line(config.given, origin, derived, report.input_rate_hz)}')
     for note in report.notes:

@@ -77,6 +77,8 @@ from vd_observer_node.estimation.estimator import (
     EstimatorConfig,
 )
 from vd_observer_node.estimation.imu_grade import (
+    RATE_FOLLOWING,
+    ImuGradeConfig,
     imu_grade_config,
     vehicle_pitch_compliance,
 )
@@ -134,6 +136,8 @@ __all__ = [
 ]
 
 SENSOR_TOPICS = SENSORS
+#: prefix of the IMU fusion's settings in `ReplayReport.rate_settings` (the mapping's keys)
+IMU_FUSION_PREFIX = 'imu.fusion.'
 TRUTH_PREFIX = TRUTH_NAMESPACE
 ESTIMATE_TOPICS = {**OBSERVER, **ESTIMATES}
 #: Written by the situation monitor phase (``situation=True``), as the alerts node publishes.
@@ -176,8 +180,9 @@ class ReplayReport:
         input_rate_hz: [Hz] rate of the slower of the wheel and body-speed inputs, measured
             on the first `rate_settings.FOLLOW_AFTER` wheel stamps (nan if none was left
             to the rate, or the bag had fewer stamps).
-        rate_settings: the estimator settings left unset that followed `input_rate_hz` from
-            the next stamp on, by name (``'slope_filter_tau'``), with the value used.
+        rate_settings: the settings left unset that followed `input_rate_hz` from the next
+            stamp on, by name (the estimator's ``'slope_filter_tau'``; the IMU fusion's
+            ``'imu.fusion.tau'``, ``'imu.fusion.step_tau'``), with the value used.
     """
 
     samples: int
@@ -639,8 +644,13 @@ class _Run:
         self.result: CascadeResult | None = None
         self.input_rate_hz = math.nan
         self.rate_settings: dict[str, float] = {}
-        # what the settings left to the rate follow (rate_settings.follow_rate_hz)
-        unset = (estimator_config or EstimatorConfig()).slope_filter_tau is None
+        # what the settings left to the rate follow (rate_settings.follow_rate_hz): the
+        # estimator's slope filter and the IMU fusion's low-passes
+        imu_config = cascade_kwargs.get('imu_config')
+        imu_unset = isinstance(imu_config, ImuGradeConfig) and any(
+            getattr(imu_config, name) is None for name in RATE_FOLLOWING
+        )
+        unset = (estimator_config or EstimatorConfig()).slope_filter_tau is None or imu_unset
         self.wheel_meter: RateMeter | None = RateMeter() if unset else None
         speed = self.used[1]
         self.speed_meter = RateMeter(SPEED_STAMPS_KEPT) if unset and has_header(speed) else None
@@ -684,6 +694,14 @@ class _Run:
         parts = self.state.parts
         if parts is not None:  # None for an injected cascade that keeps no parts
             parts.estimator.follow_rate(self.input_rate_hz)
+        imu_config = self.cascade_kwargs.get('imu_config')
+        if self.mapping.imu is not None and isinstance(imu_config, ImuGradeConfig):
+            # the fusion's grade takes the speed's derivative as the slope filter does
+            # (`imu_grade.tau_for_rate`); a fusion made later starts with the fixed values
+            self.cascade_kwargs['imu_config'], fixed = imu_config.at_rate(self.input_rate_hz)
+            self.rate_settings.update({f'{IMU_FUSION_PREFIX}{k}': v for k, v in fixed.items()})
+            if parts is not None and parts.imu_on:
+                parts.imu_grade.follow_rate(self.input_rate_hz)
 
     def offset_messages(
         self, result: CascadeResult, stamp_ns: np.ndarray
