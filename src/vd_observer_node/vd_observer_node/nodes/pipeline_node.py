@@ -4,7 +4,8 @@ Observer, estimator and alerts nodes in one: subscribes the three sensor topics
 (``/vd/sensors/wheel_angles``, ``/vd/sensors/body_velocity``, ``/vd/sensors/wheel_torques``,
 or the topics and types of an input mapping: ``input_mapping`` or ``inputs.*``, see
 docs/bags.md), matches them by header stamp (an input without header, Float64MultiArray, is
-stamped with its receive time by the node clock and joins each match with its latest value),
+stamped with its receive time, on the stamped inputs' clock where that is not the node's, see
+`raw_io.ReceiptStamps`; with 'exact' alignment it joins each match with its latest value),
 runs :mod:`vd_observer_node.chain` (observers -> estimator ->
 situation monitor, compiled) and publishes, with the sensors' stamp,
 every topic those three nodes publish: ``/vd/observer/{wheel_states, body_accel,

@@ -2,10 +2,12 @@
 
 Publishes the selected topics of an MCAP bag as stored (serialized CDR, no decode), spaced
 by their log times divided by ``rate``, and ``/clock`` with the bag's log time, like
-``ros2 bag play --clock``. Observer and estimator nodes started with ``use_sim_time:=true``
-then recompute the estimates, and the recorder can record them. With ``loop`` the bag starts
-over at its end (time jumps backwards; the observers re-initialise); otherwise the node exits
-with code 0 when everything has been played.
+``ros2 bag play --clock``. The nodes then recompute the estimates, and the recorder can record
+them; the estimating nodes need no ``use_sim_time``, as they stamp their outputs with the
+inputs' header stamps and put a headerless input's receipt on the same clock
+(`raw_io.ReceiptStamps`); the recorder needs it to log on the bag's time line. With ``loop``
+the bag starts over at its end (time jumps backwards; the observers re-initialise); otherwise
+the node exits with code 0 when everything has been played.
 
 With an input mapping (``input_mapping`` or ``inputs.*``, docs/bags.md) and ``topics`` left
 at its default, it plays the mapped input topics of a user's bag as they are (their own
