@@ -392,3 +392,21 @@ def test_static_loads_from_the_vehicle_file(known_bag: Path, tmp_path: Path) -> 
     assert fz['rms_pct_of_static'] == pytest.approx(expected, rel=1e-9)  # type: ignore[index]
     assert fz['static_load_RR'] == pytest.approx(float(static[3]))  # type: ignore[index]
     assert not list(out.glob('*.png'))
+
+
+def test_a_mapped_topic_the_bag_lacks_is_named_with_the_bags_topics(
+    known_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import yaml
+    from vd_observer_node.testing.standard_bags import STANDARD_MAPPING
+
+    mapping = tmp_path / 'car.yaml'
+    mapping.write_text(yaml.safe_dump(STANDARD_MAPPING))
+    out = tmp_path / 'out'
+    # the bag has estimates: no replay, the mapped inputs are only summarised
+    assert _vd(['report', str(known_bag), '--mapping', str(mapping), '--out', str(out)]) == 0
+    notes = json.loads((out / 'metrics.json').read_text())['notes']
+    absent = [n for n in notes if n.startswith('/joint_states skipped')]
+    assert len(absent) == 1 and 'the bag has no such topic' in absent[0]
+    assert f'its topics: {ESTIMATES_FRICTION}, ' in absent[0]  # sorted, every one of them
+    capsys.readouterr()

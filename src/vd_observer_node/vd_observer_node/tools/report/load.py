@@ -173,9 +173,15 @@ def load_bag_series(
         for spec in mapped:
             decoded = decode_input(spec, inputs[spec.topic], radius)
             series.inputs.append(input_stats(spec, decoded, max_gap_s))
+        listed = ', '.join(sorted(infos)) or 'none'
         series.skipped.update(
             {
-                spec.topic: f'mapped {spec.name} ({spec.msgtype}) absent'
+                spec.topic: f'mapped {spec.name} ({spec.msgtype}) absent: '
+                + (
+                    f'the bag has no such topic (its topics: {listed})'
+                    if spec.topic not in infos
+                    else f'the topic has type {infos[spec.topic].msgtype}'
+                )
                 for spec in mapping.specs
                 if spec not in mapped
             }
