@@ -69,7 +69,8 @@ class ChainSettings:
 
     Attributes:
         vehicle: estimator vehicle parameters.
-        curves: the tyre's curves (friction potential).
+        curves: the tyre's curves (friction potential); None (a vehicle file without
+            ``tire``): no situation monitor, the outputs' ``situation`` is None.
         observer: observer settings (the situation monitor's fast observer shares all but L).
         estimator: estimator settings.
         alerts: alert settings.
@@ -86,7 +87,7 @@ class ChainSettings:
     """
 
     vehicle: EstimatorVehicle
-    curves: TyreCurves
+    curves: TyreCurves | None
     observer: ObserverConfig = field(default_factory=ObserverConfig)
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
     alerts: AlertConfig = field(default_factory=AlertConfig)
@@ -140,7 +141,8 @@ class ChainOutput(NamedTuple):
         wheel: wheel observer output (angle, omega, omega_dot, valid; shapes (4,)).
         speed: speed observer output (filtered speed, accel, valid).
         estimates: estimator output for the stamp.
-        situation: friction potential and the 12 alert records.
+        situation: friction potential and the 12 alert records (None without a tyre:
+            `ChainSettings.curves`).
         torque_offset: the engine-torque offset estimate (engine path with
             ``torque_offset_adaptation`` only, else None).
         slope_sources: what ``estimates.slope`` is made of (`imu_grade.SOURCE_FORCE` |
@@ -150,7 +152,7 @@ class ChainOutput(NamedTuple):
     wheel: WheelState
     speed: SpeedState
     estimates: Estimates
-    situation: Situation
+    situation: Situation | None
     torque_offset: TorqueOffset | None = None
     slope_sources: int = 0
 
@@ -161,7 +163,7 @@ class Chain:
     Attributes:
         settings: the chain's settings.
         parts: the cascade's parts (observers, estimator, torque path) and their records.
-        monitor: the situation monitor.
+        monitor: the situation monitor (None without a tyre).
         engine_faults: the engine path's own faults where it learns the torque offset.
     """
 
@@ -178,15 +180,17 @@ class Chain:
             settings.drivetrain,
             settings.brakes,
         )
-        self.monitor = SituationMonitor(
-            settings.curves,
-            vehicle.static_wheel_loads[[0, 2]],
-            vehicle.effective_radius,
-            observer=settings.observer,
-            alerts=settings.alerts,
-            friction=settings.friction,
-            situation=settings.situation,
-        )
+        self.monitor: SituationMonitor | None = None
+        if settings.curves is not None:
+            self.monitor = SituationMonitor(
+                settings.curves,
+                vehicle.static_wheel_loads[[0, 2]],
+                vehicle.effective_radius,
+                observer=settings.observer,
+                alerts=settings.alerts,
+                friction=settings.friction,
+                situation=settings.situation,
+            )
         self.engine_faults: FaultCounter | None = self.parts.engine_faults
         self._none = self.parts.source == TORQUE_NONE
         self._out = CascadeBlock.empty(1, self.parts.offset_on)
@@ -260,22 +264,24 @@ class Chain:
             # the torques the engine path and brakes gave the estimator (0 where none)
             torques = np.where(np.isfinite(out.used[0]), out.used[0], 0.0)
         wheel = out.wheel[0]
-        fields = self._est_fields
-        self.monitor.run(
-            stamp,
-            SituationInputs(
-                angles[None],
-                speeds,
-                torques[None],
-                out.wheel[:, 1].copy(),
-                fields['mu'].copy(),
-                fields['mu_valid'] != 0,
-                fields['fz'].copy(),
-            ),
-            self._situation,
-        )
-        situation = self.monitor.last
-        assert situation is not None  # run just set it
+        situation = None
+        if self.monitor is not None:
+            fields = self._est_fields
+            self.monitor.run(
+                stamp,
+                SituationInputs(
+                    angles[None],
+                    speeds,
+                    torques[None],
+                    out.wheel[:, 1].copy(),
+                    fields['mu'].copy(),
+                    fields['mu_valid'] != 0,
+                    fields['fz'].copy(),
+                ),
+                self._situation,
+            )
+            situation = self.monitor.last
+            assert situation is not None  # run just set it
         offset = None
         if parts.offset_on:
             offset = offset_from_record(out.offsets[0])

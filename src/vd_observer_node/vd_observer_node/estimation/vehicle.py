@@ -23,7 +23,13 @@ from vd_common.vehicle.params import TireParams, VehicleParams, default_vehicle_
 
 from vd_observer_node.errors import VehicleParameterError
 
-__all__ = ['EstimatorVehicle', 'load_estimator_vehicle', 'load_vehicle_params', 'vehicle_tire']
+__all__ = [
+    'EstimatorVehicle',
+    'load_estimator_vehicle',
+    'load_vehicle_params',
+    'no_tire_note',
+    'vehicle_tire',
+]
 
 # c0 = 0, c1 = 0, Cx = 0, A = 0 or rho = 0 switch a resistance off, as the simulator's
 # parser allows; every other quantity is a divisor or a physical size and must be > 0.
@@ -190,6 +196,27 @@ def vehicle_tire(params: EstimationVehicleParams) -> TireParams:
         return params.require_tire()
     except ParameterError as exc:
         raise VehicleParameterError(str(exc)) from exc
+
+
+def no_tire_note(params: EstimationVehicleParams) -> str | None:
+    """Why the friction potential and the alerts are off, or None when the file has a tyre.
+
+    A vehicle file without ``tire`` (an estimation-only file) is a configuration, not a fault:
+    every estimate runs; the friction potential and the alerts, which compare the utilised
+    friction with the Magic Formula's peak, are off. The nodes log this once and show it on
+    ``/diagnostics`` (key ``situation``); `vd replay` prints it.
+
+    Returns:
+        One line, e.g. ``off (no tire in vehicle file car.yaml: the friction potential and
+        the alerts need its Magic Formula coefficients)``.
+    """
+    if params.tire is not None:
+        return None
+    where = f'vehicle file {params.source}' if params.source else 'the vehicle file'
+    return (
+        f'off (no tire in {where}: the friction potential and the alerts need its Magic '
+        'Formula coefficients)'
+    )
 
 
 def load_estimator_vehicle(path: str | os.PathLike[str]) -> EstimatorVehicle:

@@ -9,7 +9,9 @@ match with its latest value, see :func:`held_inputs`). Publishes with that stamp
 ``/vd/estimates/friction_potential`` (vd_msgs/FrictionPotential: mu_max per axle, confidence,
 road class) and ``/vd/estimates/alerts`` (vd_msgs/Alerts: traction, lock and low-friction
 alerts per wheel, with hysteresis and onset stamps). Health goes to ``/diagnostics``, with a
-WARN naming a mapped input topic that stopped. All logic
+WARN naming a mapped input topic that stopped. With a vehicle file without ``tire`` the node
+subscribes and publishes nothing but ``/diagnostics`` (OK, ``situation: off (no tire ...)``),
+says so once in its log and stays up (docs/alerts.md). All logic
 is in :mod:`vd_observer_node.situation.monitor` (see docs/alerts.md); offline replay runs the same.
 Its step functions are compiled (numba); messages travel as CDR bytes
 (:mod:`vd_observer_node.bag.cdr_message`).
@@ -54,7 +56,7 @@ from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import (
     EstimatorVehicle,
     load_vehicle_params,
-    vehicle_tire,
+    no_tire_note,
 )
 from vd_observer_node.inputs.decode import has_header
 from vd_observer_node.inputs.mapping import InputMapping
@@ -125,10 +127,23 @@ class AlertsNode(Node):
         # One read of the file gives the estimator vehicle and the tyre alike.
         params = load_vehicle_params(vehicle_file)
         vehicle = EstimatorVehicle.from_params(params)
+        self.pub_diag = self.refusals.publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
+        self._off = no_tire_note(params)
+        if params.tire is None:
+            # Every alert is off: low friction compares mu with the Magic Formula's peak, and
+            # the 12 channels of vd_msgs/Alerts have no 'not computed' level, so a traction or
+            # lock alert alone would publish the low-friction channels as OK. The node stays
+            # up (a launch file of the whole graph must not die) and says why, once.
+            self.get_logger().info(
+                f'alerts and friction potential {self._off}: nothing to do; staying up, '
+                'reporting on /diagnostics'
+            )
+            self.create_timer(1.0, self.publish_off)
+            return
         situation_keys = set(SituationConfig.__dataclass_fields__)
         friction_keys = set(FrictionPotentialConfig.__dataclass_fields__)
         self.monitor = SituationMonitor(
-            TyreCurves.from_tire(vehicle_tire(params)),
+            TyreCurves.from_tire(params.tire),
             vehicle.static_wheel_loads[[0, 2]],
             vehicle.effective_radius,
             # its fast wheel observer reads the wheel sensor: angles or ABS speeds
@@ -156,7 +171,6 @@ class AlertsNode(Node):
         self.pub_potential = self.refusals.publisher(
             FrictionPotential, ESTIMATES_FRICTION_POTENTIAL, STREAM_QOS
         )
-        self.pub_diag = self.refusals.publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
         self.encoders = Encoders()
         self.counts = {'estimates': 0, 'alerts_raised': 0, 'undecodable': 0, 'unfit': 0}
         clock = self.get_clock()
@@ -220,6 +234,15 @@ class AlertsNode(Node):
                 [_ns(a.onset) for a in out.alerts],
                 [_ns(a.detected) for a in out.alerts],
             )
+        )
+
+    def publish_off(self) -> None:
+        """Diagnostics of a node that has nothing to do (a vehicle file without tyre): OK,
+        it is a configuration, with the reason as the ``situation`` value."""
+        message = 'off: no tire in the vehicle file (friction potential and alerts need it)'
+        values: dict[str, object] = {'situation': self._off}
+        self.pub_diag.publish(
+            node_status(self, 'vd: alerts', 'alerts_node', OK, message, values, self.refusals)
         )
 
     def publish_diagnostics(self) -> None:
