@@ -27,6 +27,7 @@ __all__ = [
     'EstimatorVehicle',
     'load_estimator_vehicle',
     'load_vehicle_params',
+    'mapped_without_vehicle_warning',
     'no_tire_note',
     'vehicle_tire',
 ]
@@ -216,6 +217,16 @@ def no_tire_note(params: EstimationVehicleParams) -> str | None:
     return (
         f'off (no tire in {where}: the friction potential and the alerts need its Magic '
         'Formula coefficients)'
+    )
+
+
+def mapped_without_vehicle_warning() -> str:
+    """The one warning line of `vd replay` / `vd report` given ``--mapping`` without
+    ``--vehicle``: a mapped bag is a user's car, almost never the Clio whose file is the
+    default, and its mass, radius and resistances set every estimate."""
+    return (
+        f'warning: no --vehicle: the shipped Renault Clio file ({default_vehicle_file()}) is '
+        "used for this mapped bag; give your car's file with --vehicle (docs/vehicle_file.md)"
     )
 
 

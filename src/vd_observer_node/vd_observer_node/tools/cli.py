@@ -86,6 +86,10 @@ def _replay(args: argparse.Namespace) -> int:
 
     config = load_replay_config(args.config) if args.config else ReplayConfig()
     mapping = load_input_mapping(args.mapping) if args.mapping else None
+    if mapping is not None and args.vehicle is None:
+        from vd_observer_node.estimation.vehicle import mapped_without_vehicle_warning
+
+        print(mapped_without_vehicle_warning(), file=sys.stderr)
     report = replay_bag(
         args.in_bag,
         args.out_bag,

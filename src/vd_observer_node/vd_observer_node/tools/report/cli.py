@@ -285,6 +285,10 @@ def _run(args: argparse.Namespace) -> int:
     if mapping_file is None:
         series = load_bag_series(args.bag, progress=progress)
     else:
+        if not getattr(args, 'vehicle', None):
+            from vd_observer_node.estimation.vehicle import mapped_without_vehicle_warning
+
+            print(mapped_without_vehicle_warning(), file=sys.stderr)
         with tempfile.TemporaryDirectory(prefix='vd-report-') as scratch:
             series = _load_mapped(
                 args.bag,
