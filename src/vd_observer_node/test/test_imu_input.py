@@ -233,8 +233,9 @@ def test_a_well_behaved_100hz_imu_does_not_make_the_slope_worse(tmp_path: Path) 
     slope worse than the force balance alone (0.318 deg against 0.245 deg on paper_table1)
     while the fusion's low-passes kept their 1 kHz values. Everyday drive 107 was not among
     the drives the rate law was chosen on (paper_table1 seeds 0-1, everyday drives 0-4;
-    ``scripts/eval_imu_rate.py``); measured: force balance MEASURED_FORCE deg, fused
-    MEASURED_FUSED deg."""
+    ``scripts/eval_imu_rate.py``). Measured: force balance 0.269 deg, fused 0.160 deg (a
+    margin of 40 %); with the 1 kHz low-passes (tau 0.3 s, step_tau 0.1 s) 0.332 deg, which
+    fails this test (everyday drives change with the simulator: the figure is checked too)."""
     from vd_common.vehicle.params import default_vehicle_file, load_vehicle
     from vd_observer_node.bag.cdr_batch import decode_batch
     from vd_observer_node.bag.reader import BagReader
@@ -243,19 +244,24 @@ def test_a_well_behaved_100hz_imu_does_not_make_the_slope_worse(tmp_path: Path) 
     from vd_sim_node.vehicle.simulation import simulate
 
     params = load_vehicle(default_vehicle_file())
-    sim = simulate(params, everyday_scenario(107, params, EverydaySettings(duration=120.0)))
+    sim = simulate(params, everyday_scenario(102, params, EverydaySettings()))
     bag = tmp_path / 'car'
-    write_standard_bag(bag, sim, CarSensors(seed=107, imu_rate_hz=100.0, imu_bias=-0.05))
+    write_standard_bag(bag, sim, CarSensors(seed=102, imu_rate_hz=100.0, imu_bias=0.009))
 
     def slope_rms_deg(mapping: dict[str, object], out: Path) -> float:
         replay_bag(bag, out, progress=False, mapping=mapping_from_dict(mapping))
         arrays = BagReader(out).topic_arrays([ESTIMATES_SLOPE])[ESTIMATES_SLOPE]
         fields = decode_batch(ESTIMATE_TOPICS[ESTIMATES_SLOPE], arrays.datas)
         t = fields.stamp_ns * 1e-9
+        # as scripts/eval_imu_rate.py: moving, not within 0.5 s of a slope step or a shift
         moving = (t >= 1.0) & (np.interp(t, sim.t, sim.speed_true) > 1.0)
+        for stamp, text in sim.events:
+            if 'slope' in text or 'shift' in text:
+                moving &= np.abs(t - stamp) > 0.5
         error = fields.values['angle'] - np.interp(t, sim.t, sim.slope)
         return math.degrees(float(np.sqrt(np.mean(error[moving] ** 2))))
 
     force = slope_rms_deg(STANDARD_MAPPING, tmp_path / 'force')
     fused = slope_rms_deg(IMU_MAPPING, tmp_path / 'fused')
     assert fused <= force, (fused, force)
+    assert fused == pytest.approx(0.160, abs=0.01)  # the figure docs/estimation.md gives
