@@ -136,13 +136,13 @@ def _wait_exit(proc: RosProcess, timeout: float) -> int:
 
 
 def _play(
-    procs: RosProcessGroup, tmp_path: Path, alignment: str, seconds: float
+    procs: RosProcessGroup, tmp_path: Path, alignment: str, seconds: float, *node_args: str
 ) -> tuple[Any, RosProcess, RosProcess, RosProcess]:
     """The car's bag played to pipeline_node, both started as the docs say, and a collector
     of the slopes and /diagnostics for `seconds`: the run and the three processes."""
     sim = _car_bag(tmp_path / 'drive')
     params = str(_car_params(tmp_path / 'car_params.yaml', alignment))
-    pipeline = _start(procs, 'pipeline', 'pipeline_node', '--params-file', params)
+    pipeline = _start(procs, 'pipeline', 'pipeline_node', '--params-file', params, *node_args)
     pipeline.wait_for('pipeline ready', timeout=180)
     slope = f'{ESTIMATES_SLOPE}=vd_msgs.msg/Slope'
     collector = procs.python('collector', SCRIPTS / 'collect_outputs.py', str(seconds), slope)
@@ -156,10 +156,16 @@ def _play(
 
 @pytest.mark.slow
 @pytest.mark.ros
+@pytest.mark.parametrize('sim_time', [False, True])
 def test_a_users_bag_played_live_with_the_documented_commands_gives_slope_estimates(
-    procs: RosProcessGroup, tmp_path: Path
+    procs: RosProcessGroup, tmp_path: Path, sim_time: bool
 ) -> None:
-    sim, pipeline, player, collector = _play(procs, tmp_path, 'latest', SECONDS / RATE + 12)
+    """The documented commands, and the same with ``-p use_sim_time:=true`` on the
+    pipeline (on the player's /clock): the same slopes either way."""
+    extra = ('-p', 'use_sim_time:=true') if sim_time else ()
+    sim, pipeline, player, collector = _play(
+        procs, tmp_path, 'latest', SECONDS / RATE + 12, *extra
+    )
     assert _wait_exit(player, 90) == 0, player.output()
     assert _wait_exit(collector, 60) == 0
     lines = collector.output().splitlines()
