@@ -262,6 +262,11 @@ def test_bad_parameters_refuse_to_start_with_one_line(
             ('estimator_node', {'vehicle_file': variant('nokey', 'wheel', 'inertia_rear', None)}),
             ('wheel.inertia_rear',),
         ),
+        (
+            # a misspelt key is named with the known one, not dropped or reported as missing
+            ('pipeline_node', {'vehicle_file': variant('typo', 'brakes', 'gain_frnt', 30.0)}),
+            ('brakes.gain_frnt is not a known key; did you mean brakes.gain_front?',),
+        ),
         (('estimator_node', {'max_mu': 0.0}), ('max_mu',)),
         (('alerts_node', {'traction.warning_off': 0.5}), ('warning_off', 'warning_on')),
         (('alerts_node', {'evidence_low': 500.0}), ('evidence_low',)),
