@@ -22,11 +22,12 @@ MINIMAL: dict[str, Any] = {
     'rolling_resistance': {'c0': 0.011, 'c1': 3.6},
     'environment': {'gravity': 9.81},
 }
+# environment.gravity has a default (test_vehicle_keys.py)
 REQUIRED = [
     ('chassis', 'mass'), ('chassis', 'wheelbase'), ('chassis', 'cg_to_front_axle'),
     ('chassis', 'cg_height'), ('wheel', 'inertia_front'), ('wheel', 'inertia_rear'),
     ('wheel', 'effective_radius'), ('aero', 'drag_coefficient'), ('rolling_resistance', 'c0'),
-]  # fmt: skip  (environment.gravity has a default: test_vehicle_keys.py)
+]  # fmt: skip
 
 
 def test_the_simulators_file_reads_to_the_same_numbers() -> None:
