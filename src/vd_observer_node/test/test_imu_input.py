@@ -265,3 +265,18 @@ def test_a_well_behaved_100hz_imu_does_not_make_the_slope_worse(tmp_path: Path) 
     fused = slope_rms_deg(IMU_MAPPING, tmp_path / 'fused')
     assert fused <= force, (fused, force)
     assert fused == pytest.approx(0.160, abs=0.01)  # the figure docs/estimation.md gives
+
+
+def test_report_summary_lists_the_fused_imu(imu_bag: Path) -> None:
+    from vd_observer_node.tools.report.load import load_bag_series
+
+    series = load_bag_series(imu_bag, progress=False, mapping=mapping_from_dict(IMU_MAPPING))
+    assert [s.name for s in series.inputs] == [
+        'wheel_speeds',
+        'body_speed',
+        'wheel_torques',
+        'imu',
+    ]
+    assert series.inputs[-1].messages == 299
+    plain = load_bag_series(imu_bag, progress=False, mapping=mapping_from_dict(STANDARD_MAPPING))
+    assert 'imu' not in [s.name for s in plain.inputs]

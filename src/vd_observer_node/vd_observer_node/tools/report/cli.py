@@ -237,7 +237,11 @@ def _load_mapped(
             vehicle_file=vehicle_file,
             **config.replay_kwargs(),
         )
-        derived = {f'estimator.{k}': v for k, v in replayed.rate_settings.items()}
+        # the IMU fusion's are named as the mapping names them (imu.fusion.*)
+        derived = {
+            k if k.startswith('imu.') else f'estimator.{k}': v
+            for k, v in replayed.rate_settings.items()
+        }
         origin = Path(config.source).name if config.source else ''
         print(f'{bag} has no estimates: replayed it with {mapping_file} first')
         print(f'  vehicle: {replayed.vehicle}')

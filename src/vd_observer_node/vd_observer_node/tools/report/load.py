@@ -164,9 +164,11 @@ def load_bag_series(
             series.message_count += len(arr.datas)
             bar.update(len(arr.datas))
     if mapping is not None:
+        # the IMU is summarised like the other inputs where it is fused
+        specs = [*mapping.specs, *([mapping.imu] if mapping.imu is not None else [])]
         mapped = [
             spec
-            for spec in mapping.specs
+            for spec in specs
             if spec.topic in infos and infos[spec.topic].msgtype == spec.msgtype
         ]
         inputs = reader.topic_arrays([spec.topic for spec in mapped])
@@ -182,7 +184,7 @@ def load_bag_series(
                     if spec.topic not in infos
                     else f'the topic has type {infos[spec.topic].msgtype}'
                 )
-                for spec in mapping.specs
+                for spec in specs
                 if spec not in mapped
             }
         )
