@@ -179,3 +179,29 @@ def test_the_report_is_logged_once_and_on_every_status_until_a_set_matches() -> 
     check.pushed('wheel_speeds', 7 * NS, 6 * NS, True)
     assert merge_status(0, 'ok', watch, 6 * NS, log=logged.append)[:2] == (0, 'ok')
     assert len(logged) == 1
+
+
+def test_the_estimator_nodes_wheel_states_set_the_time_base_of_its_headerless_torques() -> None:
+    """The estimator node's driving input is the observer's WheelStates (`aligned_input`):
+    given the node clock, its stamps put the headerless torques' receipts on the bag's clock."""
+    from vd_observer_node.bag.cdr_message import MessageCodec
+    from vd_observer_node.nodes.raw_io import LatestMatcher, aligned_input
+
+    matcher = LatestMatcher(['states', 'torques'], 100, None, NS // 10)
+    got: list[tuple[int, dict[str, Any]]] = []
+    counts = {'undecodable': 0}
+    clock = [WALL]
+    states = aligned_input(
+        'vd_msgs/msg/WheelStates', 'states', matcher, lambda s, m: got.append((s, m)), counts,
+        lambda: clock[0],
+    )  # fmt: skip
+    codec = MessageCodec('vd_msgs/msg/WheelStates')
+    states(codec.encode(NS, [0.0] * 12))
+    assert matcher.receipts.translating
+    assert matcher.receipts.stamp('torques', WALL + 2 * MS) == NS + 2 * MS
+    # without the node clock (the other nodes' derived inputs) nothing is noted
+    other = LatestMatcher(['states', 'torques'], 100, None, NS // 10)
+    aligned_input('vd_msgs/msg/WheelStates', 'states', other, lambda s, m: None, counts)(
+        codec.encode(NS, [0.0] * 12)
+    )
+    assert other.receipts.offset_ns is None and counts['undecodable'] == 0
