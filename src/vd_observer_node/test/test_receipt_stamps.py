@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import pytest
 from vd_observer_node.bag.typestore import serialize
 from vd_observer_node.inputs.mapping import mapping_from_dict
 from vd_observer_node.nodes.raw_io import (
@@ -100,13 +101,19 @@ def _standard_callbacks(
     return callbacks, matcher, watch
 
 
-def test_a_played_bags_sensors_and_a_headerless_torque_make_sets_without_sim_time() -> None:
+@pytest.mark.parametrize('translate', [True, False])
+def test_a_played_bags_sensors_and_a_headerless_torque_make_sets_without_sim_time(
+    translate: bool,
+) -> None:
     """The standard bag's three inputs as a player delivers them to a node on the wall
     clock: 100 Hz wheels and torque, 50 Hz odometry, bag stamps from 1 s. Every wheel stamp
-    whose odometry has arrived gets a set, with the torque received last before the wheels."""
+    whose odometry has arrived gets a set, with the torque received last before the wheels.
+    Stamped by the node clock instead (as before, issue 41): not one set."""
     clock = [WALL]
     got: list[tuple[int, dict[str, Any]]] = []
     callbacks, matcher, _ = _standard_callbacks(clock, got)
+    if not translate:
+        matcher.receipts.same_clock_ns = 2**62
     speeds = [10.0, -10.0, 10.0, -10.0]
     for k in range(100):  # 1 s, 1 ms steps; each message arrives 0.2 ms after its stamp
         t_ms = 1_000 + k * 10
@@ -117,6 +124,10 @@ def test_a_played_bags_sensors_and_a_headerless_torque_make_sets_without_sim_tim
             callbacks['body_speed'](serialize(odometry((t_ms + 3) * MS, 3.0)))
         clock[0] += 3 * MS
         callbacks['wheel_torques'](serialize(float64_array([float(k), 0.0, 0.0, 0.0])))
+    if not translate:
+        # every wheel stamp the odometry released is dropped: no torque stamped before it
+        assert got == [] and matcher.counts()['unmatched_dropped'] == 99
+        return
     assert matcher.receipts.translating
     # sets wait for an odometry stamp at or after the wheel's: all but the last two
     assert len(got) == 98, (len(got), matcher.counts())
