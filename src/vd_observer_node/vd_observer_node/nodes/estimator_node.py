@@ -115,6 +115,12 @@ class EstimatorNode(Node):
         values = declare_parameters(self, PARAMS)
         log_settings(self, PARAMS, values)
         mapping = take_input_mapping(values, undeclared_inputs(self), estimates=True)
+        if mapping.imu is not None:
+            # one params file for every node may map an IMU: said once, not refused
+            self.get_logger().info(
+                f'imu ({mapping.imu.topic}) is fused by pipeline_node only: this node publishes '
+                "the force balance's slope"
+            )
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')
         measured = values.pop('speed_source') == 'measured'
