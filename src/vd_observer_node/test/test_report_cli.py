@@ -152,6 +152,8 @@ def test_known_answers_through_the_command(
     assert (conv['from_deg'], conv['to_deg']) == pytest.approx((0.0, 2.0))
     assert data['targets']['Fx RMS [% of max |Fx|]']['met'] is True
     assert data['targets']['slope RMS [deg]']['met'] is False
+    assert data['reference'] == 'simulator'
+    assert "## Targets for the simulator's ideal sensors" in (out / 'metrics.md').read_text()
 
     pngs = sorted(p.name for p in out.glob('*.png'))
     assert {'summary.png', 'slope.png', 'tire_fx.png', 'friction_mu.png'} <= set(pngs)
@@ -347,6 +349,11 @@ def test_a_reference_on_another_clock_is_interpolated_onto_the_estimates(
     assert fx['rms'] == pytest.approx(5.0, abs=1e-6)
     assert any('own clock' in note and 'interpolated' in note for note in data['notes'])
     assert 'own clock' in capsys.readouterr().out
+    # a car's reference: called so, and never judged against the simulator's targets
+    assert data['reference'] == 'reference' and data['targets'] == {}
+    md = (out / 'metrics.md').read_text()
+    assert '## Estimate vs reference' in md and 'Targets' not in md and '**no**' not in md
+    assert any("not the simulator's truth" in note for note in data['notes'])
 
 
 def test_a_reference_with_gaps_is_not_interpolated_across_them(tmp_path: Path) -> None:
