@@ -98,7 +98,7 @@ def test_titles_say_reference_where_the_bag_is_not_the_simulators() -> None:
     t = np.arange(100) / 100.0
     slope = Comparison(
         'slope', 'Road slope', 'deg', t, np.ones(100), np.zeros(100), np.ones(100, bool),
-        'estimated', 'reference (/vd/truth/slope)', 'slope', np.ones(100, bool),
+        'estimated', 'reference (on its own clock)', 'slope', np.ones(100, bool),
     )  # fmt: skip
     for reference, word in (('reference', 'vs reference'), ('simulator', 'vs truth')):
         fig = _quantity_figure(slope, _report(reference))

@@ -8,6 +8,8 @@ import math
 import unicodedata
 from typing import Any
 
+from vd_common.topics import TRUTH_NAMESPACE
+
 from vd_observer_node.tools.report.alerts import AXLE_NAMES, AlertsSection, road_name
 from vd_observer_node.tools.report.evaluation import (
     NO_REFERENCE_HINT,
@@ -175,7 +177,8 @@ def _estimates_markdown(report: AccuracyReport) -> str:
         f'- Duration: {report.duration_s:.2f} s (t = 0 at stamp {report.first_stamp_s:.3f} s)',
         '- Gear changes at: ' + (', '.join(f'{s:.2f} s' for s in report.gear_changes_s) or '-'),
         '',
-        '**This bag has no reference** (no `/vd/truth/*` topic), so no accuracy is computed: '
+        f'**This bag has no reference** (no `{TRUTH_NAMESPACE}*` topic), so no accuracy is '
+        'computed: '
         "the tables give each estimate's own values. How to add one: " + NO_REFERENCE_HINT + '.',
         '',
         '## Estimates (valid samples, whole bag)',
