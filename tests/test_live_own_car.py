@@ -190,6 +190,14 @@ def test_a_users_bag_played_live_with_the_documented_commands_gives_slope_estima
     assert 'no input set matched' not in pipeline.output()
 
 
+def _log_time(output: str, text: str) -> float:
+    """[s] The ROS log time of the first line of `output` holding `text` (wall clock)."""
+    line = next(line for line in output.splitlines() if text in line)
+    found = re.search(r'\] \[(\d+\.\d+)\] \[', line)
+    assert found, line
+    return float(found.group(1))
+
+
 @pytest.mark.slow
 @pytest.mark.ros
 def test_inputs_whose_stamps_never_meet_are_a_warning_within_5_s(
@@ -199,11 +207,10 @@ def test_inputs_whose_stamps_never_meet_are_a_warning_within_5_s(
     odometry stamp equal to it. One WARN line, and WARN on /diagnostics, within 5 s of the
     player's first message, naming the odometry's offset and the setting to change."""
     _, pipeline, player, collector = _play(procs, tmp_path, 'exact', 14.0)
-    player.wait_for('playing', timeout=60)
-    started = time.monotonic()
-    pipeline.wait_for('no input set matched', timeout=10)
-    # the player's start_delay (0.5 s) and its wait for subscribers come first
-    assert time.monotonic() - started < 5.5 + 0.5
+    playing = _log_time(player.wait_for('playing', timeout=60), 'playing')
+    warned_at = _log_time(pipeline.wait_for('no input set matched', timeout=10), 'no input set')
+    # the player's first message comes its start_delay (0.5 s) after it logs 'playing'
+    assert warned_at - playing < 5.0 + 0.5, warned_at - playing
     assert _wait_exit(collector, 60) == 0
     warned = [line for line in pipeline.output().splitlines() if 'no input set matched' in line]
     assert len(warned) == 1, warned  # once, not every second

@@ -170,8 +170,9 @@ def matched_inputs(mapping: InputMapping, names: Sequence[str]) -> tuple[str, ..
 #: live sensor is never a second late, and a played bag without /clock is off by its age.
 SAME_CLOCK_NS: Final = 1_000_000_000
 #: [ns] How long every input may arrive without one matched set before `MatchCheck` reports
-#: it (the nodes publish their status once per second: reported within 4 s).
-MATCH_WAIT_NS: Final = 3_000_000_000
+#: it (the nodes publish their status once per second: reported within 3 s). Sets match
+#: within one period of the slowest input where the stamps meet, so 2 s is not a slow start.
+MATCH_WAIT_NS: Final = 2_000_000_000
 
 
 class ReceiptStamps:
@@ -303,8 +304,8 @@ class MatchCheck:
         limit = self.max_age_ns if self.max_age_ns is not None else SAME_CLOCK_NS
         if any(abs(off) * 1e9 > max(limit, SAME_CLOCK_NS) for off in offsets.values()):
             note += (
-                '; they are not on one clock: with a played bag start the player and the '
-                'nodes with use_sim_time:=true (the player publishes /clock), and make every '
+                '; they are not on one clock: with a played bag start the nodes with '
+                "use_sim_time:=true (they follow the player's /clock); on a car make every "
                 'input stamp by one clock'
             )
         elif self.alignment == 'exact':
