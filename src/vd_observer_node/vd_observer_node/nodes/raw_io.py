@@ -236,11 +236,12 @@ class ReceiptStamps:
 class MatchCheck:
     """Notes the stamps a matcher receives and reports inputs that arrive but never match.
 
-    Every input of the matcher arriving for `MATCH_WAIT_NS` without one matched set (since
-    the last input was first heard from, or since the last set) means their stamps do not
-    meet: 'exact' alignment on topics with their own clocks, or stamps on different clocks
-    (a played bag's inputs against the node clock's receipt stamps, a sensor stamping by its
-    boot time). The report names each input's newest stamp against the driving input's and
+    Every input of the matcher arriving, and for `MATCH_WAIT_NS` not one matched set (since
+    the first message of any input, or since the last set; and a quarter of that since the
+    last input was first heard from) means their stamps do not meet: 'exact' alignment on
+    topics with their own clocks, or stamps on different clocks (a played bag's inputs
+    against the node clock's receipt stamps, a sensor stamping by its boot time). The
+    report names each input's newest stamp against the driving input's and
     what to set; it is cleared by the next set.
 
     Attributes:
@@ -271,28 +272,36 @@ class MatchCheck:
         self.topics: dict[str, str] = {}
         self.headerless: set[str] = set()
         self._newest: dict[str, int] = {}
-        self._since: int | None = None  # when the wait began (monotonic [ns])
-        self._last_push: int | None = None
+        self._pushed_at: dict[str, int] = {}  # the last push of each input (monotonic [ns])
+        self._start: int | None = None  # the first push of any input
+        self._all_at: int | None = None  # when the last input was first heard from
+        self._since: int | None = None  # the last matched set
 
     def pushed(self, key: str, stamp_ns: int, now_ns: int, matched: bool) -> None:
         """Note a message of input `key` stamped `stamp_ns` [ns], pushed at `now_ns` [ns]
         (monotonic), and whether a set was matched."""
         first = key not in self._newest
         self._newest[key] = stamp_ns
-        self._last_push = now_ns
+        self._pushed_at[key] = now_ns
+        if self._start is None:
+            self._start = now_ns
+        if first and len(self._newest) == len(self.names):
+            self._all_at = now_ns
         if matched:
             self._since = now_ns
-        elif first and len(self._newest) == len(self.names):
-            self._since = now_ns if self._since is None else max(self._since, now_ns)
 
     def status(self, now_ns: int) -> str:
         """The report at `now_ns` [ns] (monotonic), '' while sets match, an input is not
-        heard from yet, or none arrives any more (the `InputWatch` reports those)."""
-        since, last = self._since, self._last_push
-        if since is None or last is None or len(self._newest) < len(self.names):
+        heard from yet, or one has not arrived for `wait_ns` (the `InputWatch` reports
+        those)."""
+        since = self._since if self._since is not None else self._start
+        if since is None or self._all_at is None or len(self._newest) < len(self.names):
             return ''
-        if now_ns - since < self.wait_ns or now_ns - last > self.wait_ns:
+        # a moment for the first set after the last input came
+        if now_ns - since < self.wait_ns or now_ns - self._all_at < self.wait_ns // 4:
             return ''
+        if any(now_ns - t > self.wait_ns for t in self._pushed_at.values()):
+            return ''  # an input stopped: its own report
         driver = self.names[0]
         base = self._newest[driver]
         offsets = {k: (self._newest[k] - base) * 1e-9 for k in self.names[1:]}
