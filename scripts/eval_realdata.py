@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The real drive's figures (issue 26): the RAV4 segment replayed as docs/bags.md says.
+"""The real drive's figures (issue 26): the RAV4 segment replayed as docs/real_car.md says.
 
 Imports ``../shared/realdata/comma2k19-rav4-seg40`` (scripts/import_comma2k19.py), replays
 it with ``input_mapping_comma2k19.yaml`` (engine torque through the torque converter, brake

@@ -3,8 +3,9 @@
 The bag holds what a user's car logs on standard types only: ABS wheel speeds in rpm in a
 ``sensor_msgs/JointState`` with the car's own joint names (100 Hz), the body speed in an
 ``nav_msgs/Odometry`` (50 Hz), the drive torques in a ``std_msgs/Float64MultiArray`` without
-header (100 Hz), each on its own clock phase. One params file (docs/bags.md, "The same mapping
-on the live nodes and the player") configures both processes, started as the docs say::
+header (100 Hz), each on its own clock phase. One params file (docs/input_mapping.md,
+"The same mapping on the live nodes and the player") configures both processes, started as
+the docs say::
 
     pipeline_node --ros-args --params-file car_params.yaml
     player_node --ros-args --params-file car_params.yaml -p bag:=drive
@@ -99,7 +100,7 @@ def _car_bag(path: Path) -> Any:
 
 
 def _car_params(path: Path, alignment: str) -> Path:
-    """docs/bags.md's car_params.yaml for this car (the default vehicle file: the Clio)."""
+    """docs/input_mapping.md's car_params.yaml for this car (default vehicle file: the Clio)."""
     from vd_common.vehicle.params import default_vehicle_file
 
     params = {

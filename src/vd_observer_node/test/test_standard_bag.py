@@ -82,7 +82,7 @@ def test_a_standard_types_bag_replays_with_the_shipped_files_near_vds_own(tmp_pa
     ours, n_ours = _slope_rms_deg(tmp_path / 'vd_out', sim)
     theirs, n_theirs = _slope_rms_deg(tmp_path / 'car_out', sim)
     assert n_ours == 30001 and abs(n_theirs - 2999) <= 3
-    # 150 s: 0.17 deg on vd's topics, 0.23 deg on the standard bag (docs/bags.md)
+    # 150 s: 0.17 deg on vd's topics, 0.23 deg on the standard bag (docs/estimation.md 2.4)
     assert ours < 0.3
     assert theirs < 1.5 * max(ours, 0.2)
     # Without the settings file the slope filter follows the measured rate: the odometry's

@@ -1,7 +1,7 @@
 """Inputs: a user's topics and message types mapped to the cascade's three inputs.
 
 `mapping` reads and checks an input mapping (YAML or a dict); `decode` turns one mapped
-topic's raw CDR messages into stamped SI arrays. ROS-free; see docs/bags.md.
+topic's raw CDR messages into stamped SI arrays. ROS-free; see docs/input_mapping.md.
 """
 
 __all__: list[str] = []

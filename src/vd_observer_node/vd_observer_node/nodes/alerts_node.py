@@ -4,7 +4,7 @@ Subscribes, matched by header stamp: ``/vd/sensors/wheel_angles`` (for its own f
 observer), ``/vd/sensors/body_velocity``, ``/vd/sensors/wheel_torques``,
 ``/vd/observer/wheel_states`` (the cascade's omega), ``/vd/estimates/friction`` (mu, validity)
 and ``/vd/estimates/tire_forces`` (Fz); the three sensor topics as the input mapping gives them
-(``input_mapping`` or ``inputs.*``, docs/bags.md; an input without header stamp joins each
+(``input_mapping`` or ``inputs.*``, docs/input_mapping.md; an input without header stamp joins each
 match with its latest value, see :func:`held_inputs`). Publishes with that stamp
 ``/vd/estimates/friction_potential`` (vd_msgs/FrictionPotential: mu_max per axle, confidence,
 road class) and ``/vd/estimates/alerts`` (vd_msgs/Alerts: traction, lock and low-friction

@@ -3,8 +3,9 @@
 Subscribes ``/vd/observer/wheel_states``, ``/vd/observer/body_accel``,
 ``/vd/observer/body_velocity`` (or the measured body speed) and ``/vd/sensors/wheel_torques``
 (the sensor topics as the input mapping gives them: ``input_mapping`` or ``inputs.*``,
-docs/bags.md), matches them by header stamp (an input without header stamp, or derived from
-one, joins each match with its latest value: :func:`held_inputs`) and publishes, with that stamp,
+docs/input_mapping.md), matches them by header stamp (an input without header stamp, or derived
+from one, joins each match with its latest value: :func:`held_inputs`) and publishes, with that
+stamp,
 ``/vd/estimates/tire_forces`` (TireForces), ``/vd/estimates/friction`` (Friction),
 ``/vd/estimates/resistances`` (Resistances) and ``/vd/estimates/slope`` (Slope). Health and
 fault counters go to ``/diagnostics`` once per second, with a WARN naming a mapped input

@@ -98,7 +98,8 @@ INPUT_MAPPING: Final = ParamSpec(
     'input_mapping',
     '',
     'input mapping YAML: the topics, types, joints, units and signs of the sensor inputs '
-    f"(docs/bags.md; '' = vd's own {SENSORS_NAMESPACE}* topics, or the inputs.* parameters)",
+    f"(docs/input_mapping.md; '' = vd's own {SENSORS_NAMESPACE}* topics, "
+    'or the inputs.* parameters)',
 )
 _KEY_DOCS: Final = {
     'topic': 'topic (absolute name)',

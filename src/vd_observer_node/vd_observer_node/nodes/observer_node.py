@@ -2,8 +2,8 @@
 
 Subscribes ``/vd/sensors/wheel_angles`` (vd_msgs/WheelAngles) and
 ``/vd/sensors/body_velocity`` (geometry_msgs/TwistStamped), or the topics and types the input
-mapping gives (``input_mapping`` or ``inputs.*``, docs/bags.md; a Float64MultiArray is stamped
-with its receive time by the node clock); publishes, stamped with the
+mapping gives (``input_mapping`` or ``inputs.*``, docs/input_mapping.md; a Float64MultiArray is
+stamped with its receive time by the node clock); publishes, stamped with the
 measurement's own stamp, ``/vd/observer/wheel_states`` (vd_msgs/WheelStates),
 ``/vd/observer/body_accel`` (geometry_msgs/AccelStamped) and the differentiator's filtered
 speed ``/vd/observer/body_velocity`` (geometry_msgs/TwistStamped, which the estimator uses so

@@ -3,8 +3,8 @@
 Observer, estimator and alerts nodes in one: subscribes the three sensor topics
 (``/vd/sensors/wheel_angles``, ``/vd/sensors/body_velocity``, ``/vd/sensors/wheel_torques``,
 or the topics and types of an input mapping: ``input_mapping`` or ``inputs.*``, see
-docs/bags.md), matches them by header stamp (an input without header, Float64MultiArray, is
-stamped with its receive time, on the stamped inputs' clock where that is not the node's, see
+docs/input_mapping.md), matches them by header stamp (an input without header, Float64MultiArray,
+is stamped with its receive time, on the stamped inputs' clock where that is not the node's, see
 `raw_io.ReceiptStamps`; with 'exact' alignment it joins each match with its latest value),
 runs :mod:`vd_observer_node.chain` (observers -> estimator ->
 situation monitor, compiled) and publishes, with the sensors' stamp,
@@ -15,7 +15,8 @@ union of the three nodes' (one ``max_gap``, ``vehicle_file`` and ``align_capacit
 the input mapping. A mapped topic that stops arriving is reported on
 ``/diagnostics`` (WARN naming it and the time since its last message).
 
-The mapping's ``torque_source`` (docs/bags.md) picks the torque path, as ``vd replay`` does:
+The mapping's ``torque_source`` (docs/input_mapping.md) picks the torque path, as ``vd replay``
+does:
 ``measured`` reads the wheel torques; ``engine`` reads the ``engine_torque`` input (engine
 torque, gear, engine speed; vd's own WheelTorques topic unless mapped) instead and derives
 the wheel torques through the vehicle file's drivetrain; ``none`` reads no torque topic (Fx,

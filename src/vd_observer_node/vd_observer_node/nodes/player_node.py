@@ -9,8 +9,8 @@ inputs' header stamps and put a headerless input's receipt on the same clock
 the bag starts over at its end (time jumps backwards; the observers re-initialise); otherwise
 the node exits with code 0 when everything has been played.
 
-With an input mapping (``input_mapping`` or ``inputs.*``, docs/bags.md) and ``topics`` left
-at its default, it plays the mapped input topics of a user's bag as they are (their own
+With an input mapping (``input_mapping`` or ``inputs.*``, docs/input_mapping.md) and ``topics``
+left at its default, it plays the mapped input topics of a user's bag as they are (their own
 names and types), so that nodes given the same mapping consume them; a mapped topic absent
 from the bag or of another type is refused at start, naming the mapping key.
 """

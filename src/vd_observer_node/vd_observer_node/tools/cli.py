@@ -160,7 +160,7 @@ def _parser() -> argparse.ArgumentParser:
     replay.add_argument(
         '--mapping',
         type=Path,
-        help='input mapping YAML: your topics, types, joints and units (docs/bags.md)',
+        help='input mapping YAML: your topics, types, joints and units (docs/input_mapping.md)',
     )
     replay.add_argument(
         '--torque-source',

@@ -142,7 +142,7 @@ TRUTH_PREFIX = TRUTH_NAMESPACE
 ESTIMATE_TOPICS = {**OBSERVER, **ESTIMATES}
 #: Written by the situation monitor phase (``situation=True``), as the alerts node publishes.
 ALERT_TOPICS = dict(ALERTS)
-#: messages read per block by default: bounds the replay's memory (docs/bags.md)
+#: messages read per block by default: bounds the replay's memory (docs/replay.md)
 BLOCK_MESSAGES = 1 << 17
 #: [s] an input whose stamps fall this far behind another's (stopped) holds the others no
 #: longer (`BlockAligner` max_wait): bounds the carry between blocks

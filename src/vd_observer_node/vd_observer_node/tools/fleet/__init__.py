@@ -3,7 +3,7 @@
 ROS-free. :func:`~.bags.find_bags` names the bags; :func:`~.run.run_fleet` runs the per-bag
 function :func:`~.process.process_bag` over them (local process pool or Dask), storing one
 result per bag so an interrupted run resumes; :func:`~.report.write_fleet_report` writes the
-fleet report. The ``vd fleet`` sub-command is in :mod:`.cli`. See docs/bags.md.
+fleet report. The ``vd fleet`` sub-command is in :mod:`.cli`. See docs/fleet.md.
 """
 
 from typing import TYPE_CHECKING

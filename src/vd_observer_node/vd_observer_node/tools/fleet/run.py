@@ -135,7 +135,7 @@ def _reusable(
 #: The row error of a bag whose worker process died (twice: alone, the second time).
 WORKER_DIED = (
     'WorkerDied: the worker process died while processing this bag (killed, or out of '
-    'memory: a replay holds the whole bag in memory, see docs/bags.md)'
+    'memory: a replay holds the whole bag in memory, see docs/fleet.md)'
 )
 
 BagFunction = Callable[[str, FleetSettings], dict[str, Any]]

@@ -3,7 +3,7 @@
 The ``vd`` command adds the sub-command with :func:`add_report_parser`; the parsed
 arguments carry ``run=run_report``. Errors print one line on stderr and give exit status 2.
 
-With ``--mapping`` (a user's bag with its own topics and standard types, docs/bags.md) the
+With ``--mapping`` (a user's bag with its own topics and standard types, docs/input_mapping.md) the
 report summarises each mapped input (messages, longest gap, gaps longer than ``max_gap``);
 a bag without estimates is first replayed with the mapping (``vd replay``, into a temporary
 folder) so that there is something to compare with the truth.
@@ -171,7 +171,7 @@ def add_report_parser(subparsers: argparse._SubParsersAction[argparse.ArgumentPa
         '--mapping',
         type=Path,
         default=None,
-        help='input mapping YAML of a bag with your own topics and types (docs/bags.md): '
+        help='input mapping YAML of a bag with your own topics and types (docs/input_mapping.md): '
         'its inputs are summarised, and a bag without estimates is replayed with it first',
     )
     parser.add_argument(
