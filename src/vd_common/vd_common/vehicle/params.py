@@ -58,100 +58,6 @@ __all__ = [
 DEFAULT_GRAVITY = 9.81
 
 
-def _keys(*names: str) -> dict[str, KeySchema | None]:
-    return dict.fromkeys(names)
-
-
-#: Every key a vehicle file may hold, by section: the simulator's (:func:`parse_vehicle`) and
-#: the estimators' (:mod:`vd_common.vehicle.estimation`). A key added to either parser is added
-#: here, or the parser refuses its own key (tests load every shipped file through both).
-VEHICLE_FILE_KEYS: KeySchema = {
-    'name': None,
-    'chassis': _keys(
-        'mass',
-        'unsprung_mass_front',
-        'unsprung_mass_rear',
-        'wheelbase',
-        'cg_to_front_axle',
-        'cg_height',
-        'pitch_inertia',
-        'track_front',
-        'track_rear',
-    ),
-    'suspension': _keys('stiffness_front', 'stiffness_rear', 'damping_front', 'damping_rear'),
-    'wheel': _keys(
-        'inertia_front',
-        'inertia_rear',
-        'unloaded_radius',
-        'effective_radius',
-        'tyre_vertical_stiffness',
-        'tyre_vertical_damping',
-    ),
-    'aero': _keys('drag_coefficient', 'frontal_area', 'air_density'),
-    'rolling_resistance': _keys('c0', 'c1', 'regularisation_speed'),
-    'environment': _keys('gravity'),
-    'tire': _keys(
-        'nominal_load',
-        'pCx1',
-        'pDx1',
-        'pDx2',
-        'pEx1',
-        'pEx2',
-        'pEx3',
-        'pEx4',
-        'pKx1',
-        'pKx2',
-        'pKx3',
-        'pHx1',
-        'pHx2',
-        'pVx1',
-        'pVx2',
-        'low_speed_velocity',
-    ),
-    'engine': _keys(
-        'inertia',
-        'full_load_speed',
-        'full_load_torque',
-        'drag_torque_c0',
-        'drag_torque_c1',
-        'idle_speed',
-        'idle_gain',
-        'max_speed',
-    ),
-    'clutch': _keys(
-        'capacity', 'slip_speed', 'engage_start_speed', 'engage_full_speed', 'engage_time'
-    ),
-    'gearbox': _keys(
-        'ratios',
-        'final_drive',
-        'upshift_speed_closed',
-        'upshift_speed_open',
-        'downshift_speed',
-        'shift_time',
-        'efficiency',
-        'reverse_ratio',
-    ),
-    'brakes': _keys(
-        'max_torque_front', 'max_torque_rear', 'lock_speed', 'gain_front', 'gain_rear'
-    ),
-    'driveline': _keys('layout', 'front_share'),
-    'torque_converter': _keys('speed_ratio', 'torque_ratio', 'capacity_factor'),
-}
-
-
-def check_vehicle_keys(data: object) -> None:
-    """Refuse the first key of a vehicle file that :data:`VEHICLE_FILE_KEYS` lacks.
-
-    Raises:
-        ParameterError: ``chassis.mas is not a known key; did you mean chassis.mass?``.
-    """
-    check_known_keys(data, VEHICLE_FILE_KEYS, ParameterError)
-
-
-# The shipped parameter file, in ``config/`` of this package (vd_common).
-_CLIO_FILE = 'clio_rl_1_1.yaml'
-
-
 @dataclass(frozen=True)
 class ChassisParams:
     """Whole-vehicle mass and geometry (CG refers to the whole vehicle)."""
@@ -302,6 +208,83 @@ class VehicleParams:
     clutch: ClutchParams
     gearbox: GearboxParams
     brakes: BrakeParams
+
+
+def _keys(*names: str) -> dict[str, KeySchema | None]:
+    return dict.fromkeys(names)
+
+
+#: Every key a vehicle file may hold, by section: the simulator's (:func:`parse_vehicle`) and
+#: the estimators' (:mod:`vd_common.vehicle.estimation`). A key added to either parser is added
+#: here, or the parser refuses its own key (tests load every shipped file through both).
+VEHICLE_FILE_KEYS: KeySchema = {
+    'name': None,
+    'chassis': _keys(
+        'mass',
+        'unsprung_mass_front',
+        'unsprung_mass_rear',
+        'wheelbase',
+        'cg_to_front_axle',
+        'cg_height',
+        'pitch_inertia',
+        'track_front',
+        'track_rear',
+    ),
+    'suspension': _keys('stiffness_front', 'stiffness_rear', 'damping_front', 'damping_rear'),
+    'wheel': _keys(
+        'inertia_front',
+        'inertia_rear',
+        'unloaded_radius',
+        'effective_radius',
+        'tyre_vertical_stiffness',
+        'tyre_vertical_damping',
+    ),
+    'aero': _keys('drag_coefficient', 'frontal_area', 'air_density'),
+    'rolling_resistance': _keys('c0', 'c1', 'regularisation_speed'),
+    'environment': _keys('gravity'),
+    'tire': _keys(*TireParams.__dataclass_fields__),
+    'engine': _keys(
+        'inertia',
+        'full_load_speed',
+        'full_load_torque',
+        'drag_torque_c0',
+        'drag_torque_c1',
+        'idle_speed',
+        'idle_gain',
+        'max_speed',
+    ),
+    'clutch': _keys(
+        'capacity', 'slip_speed', 'engage_start_speed', 'engage_full_speed', 'engage_time'
+    ),
+    'gearbox': _keys(
+        'ratios',
+        'final_drive',
+        'upshift_speed_closed',
+        'upshift_speed_open',
+        'downshift_speed',
+        'shift_time',
+        'efficiency',
+        'reverse_ratio',
+    ),
+    'brakes': _keys(
+        'max_torque_front', 'max_torque_rear', 'lock_speed', 'gain_front', 'gain_rear'
+    ),
+    'driveline': _keys('layout', 'front_share'),
+    'torque_converter': _keys('speed_ratio', 'torque_ratio', 'capacity_factor'),
+}
+
+
+def check_vehicle_keys(data: object) -> None:
+    """Refuse the first key of a vehicle file that :data:`VEHICLE_FILE_KEYS` lacks.
+
+    Raises:
+        ParameterError: ``chassis.mas is not a known key; did you mean chassis.mass?``.
+    """
+    check_known_keys(data, VEHICLE_FILE_KEYS, ParameterError)
+
+
+# The shipped parameter file, in ``config/`` of this package (vd_common).
+_CLIO_FILE = 'clio_rl_1_1.yaml'
 
 
 def _chassis(r: MappingReader) -> ChassisParams:
