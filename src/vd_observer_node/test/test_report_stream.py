@@ -351,3 +351,36 @@ def test_state_held_between_blocks_is_bounded_not_the_bag(
     # start until the first second of true forces (the static loads) is read; plus a block
     assert len(held) > 20 and 0 < max(held) <= round(1.0 * RATE) + block_stamps
     assert max(held[len(held) // 2 :]) <= round(0.501 * RATE) + block_stamps
+
+
+def test_omega_relative_rms_is_the_rms_error_over_the_rms_truth(tmp_path: Path) -> None:
+    # A constant error of 0.05 rad/s on wheels turning 10 to 110 rad/s: the RMS error over the
+    # RMS truth (closed form below) is 1.5x smaller than the RMS of per-sample ratios, which
+    # the report gave before; whole and streamed evaluations must both give the closed form.
+    n = 2001
+    t = np.arange(n) / RATE
+    stamps = np.round(t * 1e9).astype(np.int64)
+    omega = np.tile(10.0 + 10.0 * t[:, None], (1, 4))
+    zeros = np.zeros((n, 4))
+    bag = tmp_path / 'omega'
+    write_topic_arrays_bag(
+        bag,
+        stamps,
+        {
+            TRUTH_WHEEL_STATES: {'angle': zeros, 'omega': omega, 'omega_dot': zeros},
+            OBSERVER_WHEEL_STATES: {'angle': zeros, 'omega': omega + 0.05, 'omega_dot': zeros},
+        },
+    )
+    window = t >= 1.0  # EvaluationSettings.settle_s; every wheel spins above omega_min
+    expected = 100.0 * 0.05 / math.sqrt(np.mean(np.square(omega[window, 0])))
+    per_sample = 100.0 * math.sqrt(np.mean(np.square(0.05 / omega[window, 0])))
+    assert per_sample > 1.4 * expected  # the two definitions differ on this drive
+
+    def rel_rms(report: AccuracyReport | None) -> float:
+        assert report is not None
+        (q,) = [q for q in report.quantities if q.key == 'omega']
+        return float(q.extras['rel_rms_pct'])
+
+    whole, _ = evaluate(load_bag_series(bag, progress=False))
+    assert rel_rms(whole) == pytest.approx(expected, rel=1e-9)
+    assert rel_rms(evaluate_bag(bag).report) == pytest.approx(expected, rel=1e-9)

@@ -23,7 +23,7 @@ from vd_observer_node.tools.report.topics import TRUE_POTENTIAL_TOPIC, WHEEL_NAM
 __all__ = ['report_json', 'report_markdown', 'report_text']
 
 _EXTRA_LABELS = {
-    'rel_rms_pct': ('relative RMS', '%'),
+    'rel_rms_pct': ('relative RMS (RMS error / RMS truth)', '%'),
     'rel_max_pct': ('relative max', '%'),
     'rms_pct_of_max_truth': ('RMS / max |truth|', '%'),
     'max_abs_truth': ('max |truth|', None),

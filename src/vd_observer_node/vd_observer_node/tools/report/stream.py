@@ -524,6 +524,8 @@ class _Quantity:
         self.wheels = [_StatsSum() for _ in range(4)]
         self.per_wheel = False
         self.relative = _StatsSum()  # omega: |error| / |truth|; fz: error / static load
+        self.spinning_error = _StatsSum()  # omega: the error where the wheel spins
+        self.spinning_truth = _StatsSum()  # omega: the truth on the same samples
         self.peak = -math.inf  # fx: max |true Fx| in the window
         self.peak_seen = False
         self.base = _StatsSum()  # slope: every sample of the window, valid or not
@@ -567,10 +569,13 @@ class _Quantity:
                 self.wheels[k].add(error[:, k], mask if mask.ndim == 1 else mask[:, k])
         row_mask = np.broadcast_to(mask if mask.ndim == true.ndim else mask[:, None], true.shape)
         if spec.key == 'omega':
-            spinning = row_mask & (np.abs(true) > cfg.omega_min)
+            # the RMS of the error over the RMS of the truth, as `evaluation._extras`
+            spinning = row_mask & (np.abs(true) > cfg.omega_min) & np.isfinite(error)
             with np.errstate(divide='ignore', invalid='ignore'):
-                ratio = (np.abs(estimate - true) - 0.0) / np.abs(true)
+                ratio = np.abs(error) / np.abs(true)
             self.relative.add(ratio, spinning)
+            self.spinning_error.add(error, spinning)
+            self.spinning_truth.add(true, spinning)
         elif spec.key == 'fx' and row_mask.any():
             self.peak = float(np.maximum(self.peak, np.abs(true[row_mask]).max()))
             self.peak_seen = True
@@ -592,7 +597,9 @@ class _Quantity:
         extras: dict[str, float] = {}
         if spec.key == 'omega':
             rel = self.relative.result()
-            extras['rel_rms_pct'] = 100.0 * rel.rms
+            extras['rel_rms_pct'] = (
+                100.0 * self.spinning_error.result().rms / self.spinning_truth.result().rms
+            )
             extras['rel_max_pct'] = 100.0 * rel.max_abs
         elif spec.key == 'fx':
             peak = self.peak if self.peak_seen else math.nan
