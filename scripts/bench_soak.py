@@ -61,7 +61,7 @@ def count_role(out_path: str) -> None:
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import AccelStamped
     from rclpy.node import Node
-    from vd_common.ros_common import DIAGNOSTICS_QOS, STREAM_QOS
+    from vd_common.ros.qos import DIAGNOSTICS_QOS, STREAM_QOS
 
     from vd_msgs.msg import Friction, Resistances, Slope, TireForces, WheelStates
 
@@ -110,7 +110,8 @@ def feed(minutes: float, rate_hz: float, node_pids: dict[str, int]) -> dict[str,
     import rclpy
     from geometry_msgs.msg import TwistStamped
     from rclpy.node import Node
-    from vd_common.ros_common import STREAM_QOS, ns_to_time
+    from vd_common.ros.qos import STREAM_QOS
+    from vd_common.ros.stamps import ns_to_time
     from vd_common.vehicle.params import default_vehicle_file
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
     from vd_observer_node.testing.synthetic import synthetic_trajectory

@@ -61,7 +61,7 @@ COMMON_LAYERS: dict[str, set[str]] = {
     'yaml_reader': set(),
     'settings_log': set(),
     'vehicle': {'errors', 'yaml_reader'},
-    'ros_common': {'errors', 'params_file', 'entry', 'settings_log'},
+    'ros': {'errors', 'params_file', 'entry', 'settings_log'},
 }
 #: modules at a package's top level that belong to its nodes
 _NODE_PLUMBING = {'entry'}

@@ -31,7 +31,8 @@ FEED_AND_CAPTURE = textwrap.dedent(
     from vd_msgs.msg import Friction, Slope, TireForces, WheelAngles, WheelStates, WheelTorques
     from vd_observer_node.testing.synthetic import synthetic_trajectory
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
-    from vd_common.ros_common import DIAGNOSTICS_QOS, STREAM_QOS, ns_to_time
+    from vd_common.ros.qos import DIAGNOSTICS_QOS, STREAM_QOS
+    from vd_common.ros.stamps import ns_to_time
     from vd_common import topics
     from vd_common.vehicle.params import default_vehicle_file
 

@@ -1,11 +1,11 @@
-"""`ros_common.SubscriberGate`: when a simulator or player may send its first message."""
+"""`vd_common.ros.publishing.SubscriberGate`: when a simulator or player may send first."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import pytest
-from vd_common.ros_common import SubscriberGate
+from vd_common.ros.publishing import SubscriberGate
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""`ros_common.TeardownWatchdog`: a hung middleware teardown ends the process with the exit
+"""`lifecycle.TeardownWatchdog`: a hung middleware teardown ends the process with the exit
 code it was going to have: 0 after a stop, 2 after a refusal."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 
 _HANGS = """
 import time
-from vd_common.ros_common import TeardownWatchdog
+from vd_common.ros.lifecycle import TeardownWatchdog
 print('outputs closed', flush=True)
 with TeardownWatchdog({timeout}):
     time.sleep({sleep})  # stands for an executor shutdown that does not return
@@ -53,7 +53,7 @@ def test_a_teardown_in_time_is_left_alone() -> None:
 _REFUSED_THEN_HANGS = """
 import time
 import rclpy.node
-from vd_common import ros_common
+from vd_common.ros import lifecycle, parameters
 
 class MiddlewareTeardown:
     def __del__(self):  # runs when the half-built node is released
@@ -64,10 +64,10 @@ class Refused(rclpy.node.Node):
     def __init__(self):
         super().__init__('refused')
         self.middleware = MiddlewareTeardown()
-        raise ros_common.InvalidParameterError('max_gap must be > 0, got -1.0')
+        raise parameters.InvalidParameterError('max_gap must be > 0, got -1.0')
 
-ros_common.TEARDOWN_TIMEOUT_S = 0.5
-raise SystemExit(ros_common.run_node(Refused, []))
+lifecycle.TEARDOWN_TIMEOUT_S = 0.5
+raise SystemExit(lifecycle.run_node(Refused, []))
 """
 
 
@@ -93,10 +93,10 @@ def test_a_refused_node_whose_teardown_hangs_exits_with_code_2(ros_env: dict[str
 # waiting; the backstop (faulthandler, a C thread) ends the process, code 1, with the stacks.
 _HANGS_HOLDING_THE_GIL = """
 import ctypes
-from vd_common import ros_common
+from vd_common.ros import lifecycle, parameters
 print('outputs closed', flush=True)
-ros_common.TEARDOWN_BACKSTOP_GRACE_S = 0.5
-with ros_common.TeardownWatchdog(0.5):
+lifecycle.TEARDOWN_BACKSTOP_GRACE_S = 0.5
+with lifecycle.TeardownWatchdog(0.5):
     ctypes.PyDLL(None).sleep(30)  # libc sleep, GIL held: a Fast DDS deadlock in rclpy
 print('teardown finished', flush=True)
 """

@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 from rclpy._rclpy_pybind11 import RCLError
-from vd_common.ros_common import GuardedPublisher, PublishRefusals
+from vd_common.ros.publishing import GuardedPublisher, PublishRefusals
 
 
 class _Logger:

@@ -29,7 +29,7 @@ def test_settings_line_names_each_origin() -> None:
 
 
 def test_given_parameters_are_the_ones_not_at_their_defaults() -> None:
-    from vd_common.ros_common import ParamSpec, given_parameters
+    from vd_common.ros.parameters import ParamSpec, given_parameters
 
     specs = [
         ParamSpec('rate_hz', 1000.0, 'rate'),

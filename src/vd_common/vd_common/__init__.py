@@ -9,8 +9,9 @@
   parsers).
 - `params_file`, `entry`: the ROS-free half of the node plumbing (``--params-file`` check,
   the console-script guard).
-- `ros_common`: the ROS 2 node plumbing (QoS, stamps, parameters, diagnostics, `run_node`),
-  the only module here that imports rclpy.
+- `ros`: the ROS 2 node plumbing, a module a concern (`qos`, `stamps`, `parameters`,
+  `diagnostics`, `publishing`, `lifecycle` with `run_node`), the only modules here that
+  import rclpy.
 
 Nothing here imports vd_sim_node or vd_observer_node: both are built on this package.
 """

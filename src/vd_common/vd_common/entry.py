@@ -3,7 +3,7 @@
 Importing rclpy, numpy and a node module takes about a second. A SIGINT in that time would end
 the process with a KeyboardInterrupt traceback, a SIGTERM with the signal's default exit code;
 `guarded_main` notes the signal, lets the imports finish and exits with one line and code 0,
-or hands over to the node's ``main``, whose `ros_common.run_node` installs its own handlers at
+or hands over to the node's ``main``, whose `ros.lifecycle.run_node` installs its own handlers at
 once and picks up a signal noted in between. Only the standard
 library is imported here, so the guard is in place within milliseconds of the interpreter
 starting (what remains unguarded is Python's own start-up).
@@ -20,7 +20,7 @@ import sys
 __all__ = ['guarded_main']
 
 
-#: Stop signals received before the node's own handlers took over (`ros_common.StopSignals`
+#: Stop signals received before the node's own handlers took over (`ros.lifecycle.StopSignals`
 #: reads it, so none is lost in between).
 received: list[int] = []
 

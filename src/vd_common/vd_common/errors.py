@@ -17,7 +17,7 @@ class VdError(Exception):
     """Base class of every error a vd package raises for bad input, files or settings.
 
     The errors of the packages built on this one derive from it, so the node plumbing
-    (`vd_common.ros_common.run_node`) reports any of them as one line without importing
+    (`vd_common.ros.lifecycle.run_node`) reports any of them as one line without importing
     those packages.
     """
 

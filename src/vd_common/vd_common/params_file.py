@@ -1,7 +1,7 @@
 """Early check of a node's ``--params-file`` arguments (ROS-free).
 
 rcl refuses a missing or malformed parameter file inside ``rclpy.init`` with a traceback;
-`vd_common.ros_common.run_node` calls `params_file_problem` first, so every node refuses it
+`vd_common.ros.lifecycle.run_node` calls `params_file_problem` first, so every node refuses it
 with one line instead.
 """
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import struct
 
 import pytest
-from vd_common.ros_common import header_stamp_ns
+from vd_common.ros.stamps import header_stamp_ns
 from vd_sim_node.lockstep import Lockstep, LockstepError
 
 MS = 1_000_000

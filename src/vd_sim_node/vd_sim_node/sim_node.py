@@ -36,23 +36,17 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Header
-from vd_common.ros_common import (
-    CLOCK_QOS,
-    DIAGNOSTICS_QOS,
-    STREAM_QOS,
-    ParamSpec,
+from vd_common.ros.diagnostics import diagnostic_array
+from vd_common.ros.lifecycle import finish, run_node
+from vd_common.ros.parameters import ParamSpec, declare_parameters, log_settings
+from vd_common.ros.publishing import (
     PublishRefusals,
     SubscriberGate,
-    declare_parameters,
     deliver_pending,
-    diagnostic_array,
-    finish,
-    header_stamp_ns,
-    log_settings,
-    ns_to_time,
     ros_message_class,
-    run_node,
 )
+from vd_common.ros.qos import CLOCK_QOS, DIAGNOSTICS_QOS, STREAM_QOS
+from vd_common.ros.stamps import header_stamp_ns, ns_to_time
 from vd_common.topics import (
     SENSORS_BODY_VELOCITY,
     SENSORS_IMU,

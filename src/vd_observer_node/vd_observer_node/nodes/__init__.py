@@ -5,7 +5,7 @@ One module per node (``observer_node``, ``estimator_node``, ``alerts_node``,
 configuration and messages to arrays, and their helpers: `node_params` (the declared
 parameters), `raw_io` (CDR bytes in, stamp matching, bytes out; ROS-free) and `entry_points`
 (the console scripts: ``ros2 run vd_observer_node observer_node`` and so on). The ROS
-plumbing they share with the simulator's node is ``vd_common.ros_common``.
+plumbing they share with the simulator's node is ``vd_common.ros``.
 """
 
 __all__: list[str] = []

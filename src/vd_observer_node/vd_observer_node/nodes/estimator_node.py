@@ -23,15 +23,11 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import AccelStamped, TwistStamped
 from rclpy.node import Node
-from vd_common.ros_common import (
-    DIAGNOSTICS_QOS,
-    STREAM_QOS,
-    PublishRefusals,
-    declare_parameters,
-    log_settings,
-    node_status,
-    run_node,
-)
+from vd_common.ros.diagnostics import node_status
+from vd_common.ros.lifecycle import run_node
+from vd_common.ros.parameters import declare_parameters, log_settings
+from vd_common.ros.publishing import PublishRefusals
+from vd_common.ros.qos import DIAGNOSTICS_QOS, STREAM_QOS
 from vd_common.topics import (
     ESTIMATES_FRICTION,
     ESTIMATES_MASS,

@@ -17,7 +17,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, Final
 
-from vd_common.ros_common import ParamSpec, dataclass_param_specs, ros_message_class
+from vd_common.ros.parameters import ParamSpec, dataclass_param_specs
+from vd_common.ros.publishing import ros_message_class
 from vd_common.topics import (
     ESTIMATES_COMBINED,
     ESTIMATES_NAMESPACE,

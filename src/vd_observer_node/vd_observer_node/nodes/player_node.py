@@ -25,22 +25,17 @@ from rclpy.clock import Clock
 from rclpy.clock_type import ClockType
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock as ClockMsg
-from vd_common.ros_common import (
-    CLOCK_QOS,
-    DIAGNOSTICS_QOS,
-    STREAM_QOS,
-    ParamSpec,
+from vd_common.ros.diagnostics import node_status
+from vd_common.ros.lifecycle import finish, run_node
+from vd_common.ros.parameters import ParamSpec, declare_parameters, log_settings
+from vd_common.ros.publishing import (
     PublishRefusals,
     SubscriberGate,
-    declare_parameters,
     deliver_pending,
-    finish,
-    log_settings,
-    node_status,
-    ns_to_time,
     ros_message_class,
-    run_node,
 )
+from vd_common.ros.qos import CLOCK_QOS, DIAGNOSTICS_QOS, STREAM_QOS
+from vd_common.ros.stamps import ns_to_time
 from vd_common.topics import SENSORS_BODY_VELOCITY, SENSORS_WHEEL_ANGLES, SENSORS_WHEEL_TORQUES
 
 from vd_observer_node.bag import BagReader

@@ -38,20 +38,12 @@ from rclpy.clock_type import ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from std_msgs.msg import Header
-from vd_common.ros_common import (
-    CLOCK_QOS,
-    DIAGNOSTICS_QOS,
-    STREAM_QOS,
-    ParamSpec,
-    PublishRefusals,
-    declare_parameters,
-    header_stamp_ns,
-    log_settings,
-    node_status,
-    ns_to_time,
-    ros_message_class,
-    run_node,
-)
+from vd_common.ros.diagnostics import node_status
+from vd_common.ros.lifecycle import run_node
+from vd_common.ros.parameters import ParamSpec, declare_parameters, log_settings
+from vd_common.ros.publishing import PublishRefusals, ros_message_class
+from vd_common.ros.qos import CLOCK_QOS, DIAGNOSTICS_QOS, STREAM_QOS
+from vd_common.ros.stamps import header_stamp_ns, ns_to_time
 from vd_common.topics import CONTRACT, NAMESPACE, ON_CHANGE, STATUS, STATUS_RECORDER_PROGRESS
 
 from vd_observer_node.bag import BagWriter
