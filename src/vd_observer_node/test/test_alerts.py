@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from vd_observer_node.errors import InputShapeError, ObserverError
 from vd_observer_node.kernel._jit import new_record
 from vd_observer_node.situation.alerts import (
-    ALERT_KINDS,
+    ALERT_INPUT,
     ALERT_STATE,
     LEVEL_CRITICAL,
     LEVEL_OK,
@@ -164,8 +164,11 @@ def test_metrics_gates() -> None:
     p = alert_params(cfg)
 
     def metrics(torque: np.ndarray, slip_peak: np.ndarray) -> np.ndarray:
+        inp = new_record(ALERT_INPUT)
+        inp.slip[:], inp.slip_velocity[:], inp.torque[:], inp.mu[:] = slip, sv, torque, mu
+        inp.mu_valid[:], inp.mu_max[:], inp.slip_peak[:] = valid, mmax, slip_peak
         out = np.empty((3, 4))
-        alert_metrics(p, slip, sv, torque, mu, valid, mmax, slip_peak, out)
+        alert_metrics(p, inp, out)
         return out
 
     m = metrics(torque, far_peak)
@@ -190,38 +193,34 @@ def test_slip_velocity() -> None:
     )
 
 
-def test_monitor_equals_the_step_functions() -> None:
-    """The wrapper against alert_metrics, classify_level and step_channel per channel."""
+def test_monitor_raises_and_releases_after_the_holds() -> None:
+    """Oracle from the definitions (module docstring), not from the step functions: a front
+    left wheel spinning (slip 0.3, past the critical 0.25) from 0.5 s to 1.5 s at 1 kHz is
+    a critical traction alert from 0.5 s + raise_hold on, with onset 0.5 s, and OK again
+    release_hold after it stops; the other wheels and kinds stay OK throughout."""
     cfg = AlertConfig()
     monitor = AlertMonitor(cfg)
-    rng = np.random.default_rng(4)
-    p = alert_params(cfg)
-    state = new_record(ALERT_STATE)
-    alerts_reset(state)
-    metrics = np.empty((3, 4))
-    for k in range(2000):
+    mmax, speak = np.full(4, 0.9), np.full(4, 0.5)  # far from the utilisation alert
+    torque = np.full(4, 500.0)
+    raised = released = math.nan
+    for k in range(3000):
         t = k * 0.001
-        phase = math.sin(2 * math.pi * t * 2.0)
-        slip = 0.3 * phase + rng.normal(0, 0.02, 4)
-        sv = 5.0 * slip
-        mu = 0.3 * np.sign(slip) + rng.normal(0, 0.02, 4)
-        valid = rng.uniform(size=4) > 0.05
-        mmax = np.full(4, 0.35)
-        speak = np.full(4, 0.1)
-        torque = 800.0 * np.sign(slip)
-        records = monitor.update(t, slip, sv, torque, mu, valid, mmax, speak)
-        alert_metrics(p, slip, sv, torque, mu, valid, mmax, speak, metrics)
-        for kind in range(3):
-            for w in range(4):
-                target = classify_level(metrics[kind, w], state.level[kind, w], p.thresholds[kind])
-                step_channel(state, kind, w, t, target, cfg.raise_hold, cfg.release_hold)
-                rec = records[4 * kind + w]
-                assert (rec.kind, rec.wheel) == (ALERT_KINDS[kind], w)
-                assert rec.level == state.level[kind, w]
-                np.testing.assert_array_equal(  # nan == nan: inactive alerts have no onset
-                    [rec.onset, rec.detected], [state.onset[kind, w], state.detected[kind, w]]
-                )
-    assert any(r.active for r in monitor.last)  # the signal did raise alerts
+        spinning = 0.5 <= t < 1.5
+        slip = np.array([0.3 if spinning else 0.0, 0.0, 0.0, 0.0])
+        sv = 5.0 * slip  # 5 m/s of slip velocity: over the 0.3 m/s gate while spinning
+        records = monitor.update(t, slip, sv, torque, 0.3 * slip, [True] * 4, mmax, speak)
+        fl = records[0]
+        assert (fl.kind, fl.wheel) == ('traction', 0)
+        assert all(r.level == LEVEL_OK for r in records[1:])
+        if fl.level == LEVEL_CRITICAL and math.isnan(raised):
+            raised = t
+            assert fl.onset == pytest.approx(0.5, abs=1e-9)
+            assert fl.detected == t
+        if fl.level == LEVEL_OK and not math.isnan(raised) and math.isnan(released):
+            released = t
+    # the stamps are 1 ms apart: a hold is over at the first stamp at least hold later
+    assert raised == pytest.approx(0.5 + cfg.raise_hold, abs=1.5e-3)
+    assert released == pytest.approx(1.5 + cfg.release_hold, abs=1.5e-3)
     # a stale stamp changes nothing
     before = monitor.last
     ones = np.ones(4)

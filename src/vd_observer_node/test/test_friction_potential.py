@@ -19,10 +19,8 @@ from vd_common.vehicle.tire import magic_formula_fx
 from vd_observer_node.errors import InputShapeError, ObserverError
 from vd_observer_node.kernel._jit import new_record
 from vd_observer_node.situation.friction_fit import (
-    FIT_STATE,
     POTENTIAL,
     classify_road,
-    fit_reset,
     fit_solution,
     fit_step,
     mu_at_scales,
@@ -231,19 +229,7 @@ def test_ignored_samples_leave_the_fit_unchanged() -> None:
 
     def step(t: float, sv: list[float], speed: float, mu: list[float], ok: list[bool]) -> bool:
         return bool(
-            fit_step(
-                est.params,
-                est.tyre,
-                est.scales,
-                est.state,
-                est.cost,
-                t,
-                np.asarray(sv),
-                speed,
-                np.asarray(mu),
-                np.asarray(ok),
-                loads,
-            )
+            fit_step(est.parts, t, np.asarray(sv), speed, np.asarray(mu), np.asarray(ok), loads)
         )
 
     assert step(0.0, [2.0] * 4, SPEED, [0.5] * 4, [True] * 4)
@@ -266,31 +252,6 @@ def test_ignored_samples_leave_the_fit_unchanged() -> None:
     assert est.state.t == 0.002
     with pytest.raises(InputShapeError):
         est.update(1.0, [0.1] * 3, SPEED, [0.5] * 4, [True] * 4, loads)
-
-
-def test_wrapper_equals_the_step_functions() -> None:
-    """The estimator against fit_step and fit_solution driven directly on records."""
-    cfg = FrictionPotentialConfig()
-    rng = np.random.default_rng(1)
-    est = FrictionPotentialEstimator(curves(), STATIC, cfg)
-    p, tyre, table = friction_params(cfg), curves().record(), curves().peak_table()
-    scales = np.asarray(cfg.road_scales)
-    state, pot = new_record(FIT_STATE), new_record(POTENTIAL)
-    cost = np.zeros((2, scales.size))
-    fit_reset(p, scales, table, np.asarray(STATIC), state, cost, pot)
-    for k in range(300):
-        t = k / RATE
-        slip = rng.uniform(-0.3, 0.3, 4)
-        sv = slip_velocity_of(slip)
-        mu = true_mu(slip, 0.5) + rng.normal(0.0, 0.01, 4)
-        valid = rng.uniform(size=4) > 0.1
-        loads = rng.uniform(2000.0, 4000.0, 4)
-        out = est.update(t, sv, SPEED, mu, valid, loads)
-        assert fit_step(p, tyre, scales, state, cost, t, sv, SPEED, mu, valid, loads)
-        fit_solution(p, scales, table, state, cost, pot)
-        np.testing.assert_array_equal(out.mu_max, pot.mu_max)
-        np.testing.assert_array_equal(out.confidence, pot.confidence)
-        np.testing.assert_array_equal(out.road_class, pot.road_class)
 
 
 def test_road_class_bands_and_hysteresis() -> None:

@@ -43,6 +43,7 @@ from vd_observer_node.errors import InputShapeError, ObserverError
 from vd_observer_node.kernel._jit import jit, new_record
 
 __all__ = [
+    'ALERT_INPUT',
     'ALERT_KINDS',
     'ALERT_PARAMS',
     'ALERT_STATE',
@@ -220,6 +221,22 @@ ALERT_STATE: Final = np.dtype(
     ],
     align=True,
 )
+#: One stamp's inputs of the alerts, per wheel (order FL, FR, RL, RR): slip [-] (positive
+#: driving), slip_velocity [m/s] omega R - v, torque [N m] drive minus brake, mu [-] utilised
+#: friction and mu_valid (0 or 1), mu_max [-] the available friction of the wheel's axle and
+#: slip_peak [-] the slip magnitude at mu_max.
+ALERT_INPUT: Final = np.dtype(
+    [
+        ('slip', 'f8', (4,)),
+        ('slip_velocity', 'f8', (4,)),
+        ('torque', 'f8', (4,)),
+        ('mu', 'f8', (4,)),
+        ('mu_valid', 'u1', (4,)),  # bool; numba cannot nest an array of b1 in a record
+        ('mu_max', 'f8', (4,)),
+        ('slip_peak', 'f8', (4,)),
+    ],
+    align=True,
+)
 
 
 def alert_params(config: AlertConfig) -> Any:
@@ -284,32 +301,18 @@ def classify_level(value: float, level: int, th: FloatArray) -> int:
 
 
 @jit
-def alert_metrics(
-    p: Any,
-    slip: FloatArray,
-    sv: FloatArray,
-    torque: FloatArray,
-    mu: FloatArray,
-    mu_valid: BoolArray,
-    mu_max: FloatArray,
-    slip_peak: FloatArray,
-    out: FloatArray,
-) -> None:
+def alert_metrics(p: Any, inp: Any, out: FloatArray) -> None:
     """Metric of every (kind, wheel) channel (the module docstring defines them).
 
     Args:
         p: `ALERT_PARAMS` record (gates min_slip_velocity, min_wheel_torque).
-        slip: shape (4,), [-] slip ratio, positive driving.
-        sv: shape (4,), [m/s] omega R - v.
-        torque: shape (4,), [N m] drive minus brake torque.
-        mu: shape (4,), [-] utilised friction.
-        mu_valid: shape (4,), bool.
-        mu_max: shape (4,), [-] available friction of each wheel's axle.
-        slip_peak: shape (4,), [-] slip magnitude at mu_max.
+        inp: `ALERT_INPUT` record.
         out: shape (3, 4), written: rows traction, lock, low_friction; 0 where a gate is
             closed, nan for non-finite inputs (treated as OK by `classify_level`).
     """
     gate, min_torque = p.min_slip_velocity, p.min_wheel_torque
+    slip, sv, torque, mu = inp.slip, inp.slip_velocity, inp.torque, inp.mu
+    mu_valid, mu_max, slip_peak = inp.mu_valid, inp.mu_max, inp.slip_peak
     for w in range(4):
         s, v, tq, m, ok = slip[w], sv[w], torque[w], mu[w], mu_valid[w]
         driving = ((not ok) or m >= 0.0) and tq > min_torque
@@ -392,18 +395,7 @@ def alerts_reset(s: Any) -> None:
 
 
 @jit
-def alerts_update(
-    p: Any,
-    s: Any,
-    t: float,
-    slip: FloatArray,
-    sv: FloatArray,
-    torque: FloatArray,
-    mu: FloatArray,
-    mu_valid: BoolArray,
-    mu_max: FloatArray,
-    slip_peak: FloatArray,
-) -> bool:
+def alerts_update(p: Any, s: Any, t: float, inp: Any) -> bool:
     """Advance all channels to stamp t: `alert_metrics`, `classify_level`, `step_channel`.
 
     Args:
@@ -411,8 +403,7 @@ def alerts_update(
         s: `ALERT_STATE` record, advanced in place; a non-finite or non-increasing stamp
             leaves it unchanged.
         t: stamp [s].
-        slip, sv, torque, mu, mu_valid, mu_max, slip_peak: shape (4,) each, as
-            `alert_metrics`.
+        inp: `ALERT_INPUT` record.
 
     Returns:
         Whether a reported level changed.
@@ -421,7 +412,7 @@ def alerts_update(
         return False
     s.t = t
     metrics = np.empty((3, 4))
-    alert_metrics(p, slip, sv, torque, mu, mu_valid, mu_max, slip_peak, metrics)
+    alert_metrics(p, inp, metrics)
     changed = False
     for k in range(3):
         for w in range(4):
@@ -510,6 +501,8 @@ class AlertMonitor:
         self.config = config or AlertConfig()
         self.params = alert_params(self.config)
         self.state = new_record(ALERT_STATE)
+        #: the inputs of the stamp `update` is given (a buffer, overwritten each call)
+        self.input = new_record(ALERT_INPUT)
         self.reset()
 
     def reset(self) -> None:
@@ -549,18 +542,15 @@ class AlertMonitor:
         Raises:
             InputShapeError: an input is not shape (4,).
         """
-        changed = alerts_update(
-            self.params,
-            self.state,
-            float(t),
-            _wheels('slip', slip),
-            _wheels('slip_velocity', slip_vel),
-            _wheels('wheel_torque', wheel_torque),
-            _wheels('mu', mu),
-            _wheels('mu_valid', mu_valid, np.bool_),
-            _wheels('mu_max', mu_max),
-            _wheels('slip_peak', slip_peak),
-        )
+        inp = self.input
+        inp.slip[:] = _wheels('slip', slip)
+        inp.slip_velocity[:] = _wheels('slip_velocity', slip_vel)
+        inp.torque[:] = _wheels('wheel_torque', wheel_torque)
+        inp.mu[:] = _wheels('mu', mu)
+        inp.mu_valid[:] = _wheels('mu_valid', mu_valid, np.bool_)
+        inp.mu_max[:] = _wheels('mu_max', mu_max)
+        inp.slip_peak[:] = _wheels('slip_peak', slip_peak)
+        changed = alerts_update(self.params, self.state, float(t), inp)
         if changed:
             self.last = alert_records(self.state)
         return self.last

@@ -23,7 +23,7 @@ Road class codes: 0 unknown, 1 ice, 2 snow, 3 wet, 4 dry (`vd_common.vehicle.fri
 from __future__ import annotations
 
 import math
-from typing import Any, Final
+from typing import Any, Final, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -35,6 +35,7 @@ __all__ = [
     'FRICTION_PARAMS',
     'POTENTIAL',
     'TYRE',
+    'FrictionFit',
     'classify_road',
     'fit_reset',
     'fit_solution',
@@ -131,6 +132,33 @@ _SLOPE_STEP: Final = 1e-4
 _ROAD_UNKNOWN: Final = 0
 _ROAD_ICE: Final = 1
 _ROAD_DRY: Final = 4
+
+
+class FrictionFit(NamedTuple):
+    """The fit's records and arrays, as its step functions take them (each record as the
+    1-element array it lives in, `kernel._jit.record_array`: numba types arrays on its fast
+    path; a NamedTuple because numba cannot nest arrays of a length set by the settings in a
+    record).
+
+    Attributes:
+        params: shape (1,), `FRICTION_PARAMS`.
+        tyre: shape (1,), `TYRE`.
+        scales: shape (M,), [-] the road scales.
+        table: shape (5, L), the tyre's peaks at road scale 1 against the load.
+        static_load: shape (2,), [N] wheel load per axle before any sample.
+        state: shape (1,), `FIT_STATE`.
+        cost: shape (2, M), the forgotten weighted squared residuals.
+        potential: shape (1,), `POTENTIAL`: the last solution.
+    """
+
+    params: NDArray[Any]
+    tyre: NDArray[Any]
+    scales: FloatArray
+    table: FloatArray
+    static_load: FloatArray
+    state: NDArray[Any]
+    cost: FloatArray
+    potential: NDArray[Any]
 
 
 @jit
@@ -290,39 +318,27 @@ def fit_solution(
 
 
 @jit
-def fit_reset(
-    p: Any,
-    scales: FloatArray,
-    table: FloatArray,
-    static_load: FloatArray,
-    s: Any,
-    cost: FloatArray,
-    pot: Any,
-) -> None:
-    """Forget all data: empty statistics, and in ``pot`` the prior road, confidence 0.
+def fit_reset(fit: FrictionFit) -> None:
+    """Forget all data: empty statistics, and in the potential the prior road, confidence 0.
 
     Args:
-        p, scales, table: as `fit_solution`.
-        static_load: shape (2,), [N] wheel load per axle before any sample.
-        s, cost, pot: the state, overwritten.
+        fit: the fit's records and arrays; its state, cost and potential are overwritten
+            (``static_load`` is the wheel load per axle before any sample).
     """
+    s, pot, cost = fit.state[0], fit.potential[0], fit.cost
     cost[:, :] = 0.0
     s.count[:] = 0.0
-    s.load[:] = static_load
+    s.load[:] = fit.static_load
     s.direction[:] = 1.0
     s.t = math.nan
     s.last_sample[:] = math.nan
     pot.road_class[:] = _ROAD_UNKNOWN
-    fit_solution(p, scales, table, s, cost, pot)
+    fit_solution(fit.params[0], fit.scales, fit.table, s, cost, pot)
 
 
 @jit
 def fit_step(
-    p: Any,
-    tyre: Any,
-    scales: FloatArray,
-    s: Any,
-    cost: FloatArray,
+    fit: FrictionFit,
     t: float,
     sv: FloatArray,
     speed: float,
@@ -338,11 +354,7 @@ def fit_step(
     forgotten with ``forgetting_time`` only at stamps that bring samples.
 
     Args:
-        p: `FRICTION_PARAMS` record.
-        tyre: `TYRE` record.
-        scales: shape (M,), [-] road scales.
-        s: `FIT_STATE` record.
-        cost: shape (2, M).
+        fit: the fit's records and arrays (its state and cost are advanced).
         t: stamp [s].
         sv: shape (4,), [m/s] omega R - v, order FL, FR, RL, RR.
         speed: [m/s] body speed v.
@@ -357,6 +369,7 @@ def fit_step(
         ``min_slip_sigmas`` slip noise, and a mu of the opposite sign of the slip (a tyre
         force has the sign of its slip; the opposite is an estimation transient).
     """
+    p, tyre, scales, s, cost = fit.params[0], fit.tyre[0], fit.scales, fit.state[0], fit.cost
     st = s.t
     if not math.isfinite(t) or (math.isfinite(st) and t <= st):
         return False
@@ -429,13 +442,7 @@ def fit_step(
 
 @jit
 def friction_update(
-    p: Any,
-    tyre: Any,
-    scales: FloatArray,
-    table: FloatArray,
-    s: Any,
-    cost: FloatArray,
-    pot: Any,
+    fit: FrictionFit,
     t: float,
     sv: FloatArray,
     speed: float,
@@ -443,10 +450,10 @@ def friction_update(
     mu_valid: BoolArray,
     fz: FloatArray,
 ) -> bool:
-    """`fit_step`, then `fit_solution` into ``pot`` if the stamp was taken; returns that."""
-    if not fit_step(p, tyre, scales, s, cost, t, sv, speed, mu, mu_valid, fz):
+    """`fit_step`, then `fit_solution` into the potential if the stamp was taken; returns that."""
+    if not fit_step(fit, t, sv, speed, mu, mu_valid, fz):
         return False
-    fit_solution(p, scales, table, s, cost, pot)
+    fit_solution(fit.params[0], fit.scales, fit.table, fit.state[0], fit.cost, fit.potential[0])
     return True
 
 

@@ -54,12 +54,13 @@ from vd_common.vehicle.friction import (
 from vd_common.vehicle.params import TireParams
 
 from vd_observer_node.errors import InputShapeError, ObserverError
-from vd_observer_node.kernel._jit import new_record
+from vd_observer_node.kernel._jit import new_record, record_array
 from vd_observer_node.situation.friction_fit import (
     FIT_STATE,
     FRICTION_PARAMS,
     POTENTIAL,
     TYRE,
+    FrictionFit,
     fit_reset,
     friction_update,
     vehicle_road_class,
@@ -356,14 +357,18 @@ class FrictionPotentialEstimator:
         self.state = new_record(FIT_STATE)
         self.cost = np.zeros((2, self.scales.shape[0]))
         self.potential = new_record(POTENTIAL)
+        r = record_array
+        #: the records above (never replaced: every reset works in place) as the step
+        #: functions take them
+        self.parts = FrictionFit(
+            r(self.params), r(self.tyre), self.scales, self.table, self.static_load,
+            r(self.state), self.cost, r(self.potential),
+        )  # fmt: skip
         self.reset()
 
     def reset(self) -> None:
         """Forget all data (prior road, confidence 0)."""
-        fit_reset(
-            self.params, self.scales, self.table, self.static_load, self.state, self.cost,
-            self.potential,
-        )  # fmt: skip
+        fit_reset(self.parts)
         self.last = FrictionPotential.from_record(self.potential)
 
     def update(
@@ -389,13 +394,7 @@ class FrictionPotentialEstimator:
             InputShapeError: an input is not shape (4,).
         """
         taken = friction_update(
-            self.params,
-            self.tyre,
-            self.scales,
-            self.table,
-            self.state,
-            self.cost,
-            self.potential,
+            self.parts,
             float(t),
             _wheels('slip_velocity', slip_velocity),
             float(speed),

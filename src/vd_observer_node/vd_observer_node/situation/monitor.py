@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -32,9 +32,8 @@ from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.cascade import CascadeResult
 from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.observer import WHEEL_INPUTS, ObserverConfig
-from vd_observer_node.kernel._jit import new_record, record_array
+from vd_observer_node.kernel._jit import FixedCall, new_record, record_array
 from vd_observer_node.situation.alerts import (
-    ALERT_KINDS,
     Alert,
     AlertConfig,
     AlertMonitor,
@@ -51,6 +50,11 @@ from vd_observer_node.situation.monitor_step import (
     MONITOR_PARAMS,
     MONITOR_STATE,
     POTENTIAL_MOVED,
+    AlertParts,
+    FastObserver,
+    MonitorParts,
+    SituationBlock,
+    SituationInputs,
     situation_block,
 )
 
@@ -198,18 +202,30 @@ class SituationMonitor:
         self.params.max_observer_disagreement = self.config.max_observer_disagreement
         self.params.max_gap = fc.max_gap
         self.state = new_record(MONITOR_STATE)
-        self._args: tuple[Any, ...] | None = None
         self.slip = np.zeros(4)
         #: the output buffers of `update` (one stamp)
         self._one = SituationBlock.empty(1)
+        r = record_array
+        fast_params, lipschitz, fast_state, channels = self.fast.kernel_args
+        f, m = self.friction, self.monitor
+        #: the records above as `situation_block` takes them (never replaced: every reset
+        #: works in place, so they are built once)
+        self.parts = MonitorParts(
+            r(self.params), r(self.state),
+            # a recarray's attributes are Python lookups: the plain view
+            FastObserver(r(fast_params), lipschitz, r(fast_state), channels.view(np.ndarray)),
+            f.parts, AlertParts(r(m.params), r(m.state), r(m.input)),
+        )  # fmt: skip
         self.reset()
-        # compile (or load from numba's cache) now, not at the first sample: on copies
+        # compiled (or loaded from numba's cache) now, not at the first sample
         zeros = np.zeros((1, 4))
-        block: Any = situation_block
-        block(
-            *(a.copy() for a in self.args()), np.zeros(1), zeros, np.ones(1), zeros, zeros,
-            zeros, zeros != 0.0, np.ones((1, 4)), *SituationBlock.empty(1).outputs(),
-            np.zeros(4),
+        self._block = FixedCall(
+            situation_block, (self.parts,),
+            (
+                np.zeros(1),
+                SituationInputs(zeros, np.ones(1), zeros, zeros, zeros, zeros != 0.0, zeros),
+                SituationBlock.empty(1),
+            ),
         )  # fmt: skip
 
     def reset(self) -> None:
@@ -220,29 +236,13 @@ class SituationMonitor:
         self.state.t = math.nan
         self.last: Situation | None = None
 
-    def args(self) -> tuple[Any, ...]:
-        """`monitor_step.situation_block`'s leading arguments (the records as the 1-element
-        arrays they live in, advanced in place)."""
-        if self._args is not None:
-            return self._args
-        f, m, r = self.friction, self.monitor, record_array
-        fp, flip, fs, fch = self.fast.kernel_args
-        plain = fch.view(np.ndarray)  # a recarray's attributes are Python lookups
-        # the records are never replaced (every reset works in place): built once
-        self._args = (
-            r(fp), flip, r(fs), plain, r(self.params), r(self.state), r(f.params), r(f.tyre),
-            f.scales, f.table, f.static_load, r(f.state), f.cost, r(f.potential),
-            r(m.params), r(m.state),
-        )  # fmt: skip
-        return self._args
-
     def run(self, t: FloatArray, inputs: SituationInputs, out: SituationBlock) -> int:
         """`situation_block` over the N stamps `t` [s] (contiguous arrays, checked by the
         callers); returns the or-ed `monitor_step` flags and keeps `last` up to date."""
-        block: Any = situation_block  # its arguments come as tuples
-        flags: int = block(*self.args(), t, *inputs, *out.outputs(), self.slip)
+        flags: int = self._block(t, inputs, out)
         self.refresh(flags)
         if t.shape[0]:
+            self.slip = out.slip[-1].copy()
             self.last = Situation(
                 float(t[-1]), self.friction.last, self.monitor.last, self.slip.copy()
             )
@@ -301,85 +301,8 @@ class SituationMonitor:
         return self.last
 
 
-class SituationInputs(NamedTuple):
-    """The monitor's inputs over N stamps (contiguous; `situation_block`'s order).
-
-    Attributes:
-        angles: shape (N, 4), [rad] wheel angles (or speeds [rad/s]).
-        speeds: shape (N,), [m/s] measured body speed.
-        torques: shape (N, 4), [N m].
-        omega: shape (N, 4), [rad/s] the cascade's wheel speed.
-        mu: shape (N, 4), [-].
-        mu_valid: shape (N, 4), bool.
-        fz: shape (N, 4), [N].
-    """
-
-    angles: FloatArray
-    speeds: FloatArray
-    torques: FloatArray
-    omega: FloatArray
-    mu: FloatArray
-    mu_valid: BoolArray
-    fz: FloatArray
-
-
-@dataclass
-class SituationBlock:
-    """The monitor's outputs over N stamps (`situation_block` writes them; see
-    `SituationSeries` for the fields)."""
-
-    level: NDArray[np.int64]
-    onset: FloatArray
-    detected: FloatArray
-    mu_max: FloatArray
-    slip_peak: FloatArray
-    confidence: FloatArray
-    road_class: NDArray[np.int64]
-    vehicle_road_class: NDArray[np.int64]
-
-    @classmethod
-    def empty(cls, n: int) -> SituationBlock:
-        """Buffers for N stamps."""
-        kinds = len(ALERT_KINDS)
-        return cls(
-            np.zeros((n, kinds, 4), dtype=np.int64), np.full((n, kinds, 4), math.nan),
-            np.full((n, kinds, 4), math.nan), np.zeros((n, 2)), np.zeros((n, 2)),
-            np.zeros((n, 2)), np.zeros((n, 2), dtype=np.int64), np.zeros(n, dtype=np.int64),
-        )  # fmt: skip
-
-    def outputs(self) -> tuple[Any, ...]:
-        """`situation_block`'s written arguments (before ``slip``)."""
-        return (
-            self.level, self.onset, self.detected, self.mu_max, self.slip_peak,
-            self.confidence, self.road_class, self.vehicle_road_class,
-        )  # fmt: skip
-
-
-@dataclass(frozen=True)
-class SituationSeries:
-    """The monitor's outputs over a record of N stamps (offline replay, evaluation, tests).
-
-    Attributes:
-        t: shape (N,), [s].
-        level: shape (N, 3, 4), alert level per kind (ALERT_KINDS order) and wheel.
-        onset: shape (N, 3, 4), [s] onset stamp (nan while inactive).
-        detected: shape (N, 3, 4), [s] detection stamp (nan while inactive).
-        mu_max: shape (N, 2), [-] per axle.
-        slip_peak: shape (N, 2), [-] per axle.
-        confidence: shape (N, 2), [0..1] per axle.
-        road_class: shape (N, 2), ROAD_* code per axle.
-        vehicle_road_class: shape (N,), ROAD_* code.
-    """
-
-    t: FloatArray
-    level: NDArray[np.int64]
-    onset: FloatArray
-    detected: FloatArray
-    mu_max: FloatArray
-    slip_peak: FloatArray
-    confidence: FloatArray
-    road_class: NDArray[np.int64]
-    vehicle_road_class: NDArray[np.int64]
+#: The monitor's outputs over a whole record (`run_situation`): the block it writes.
+SituationSeries = SituationBlock
 
 
 def run_situation(
@@ -418,16 +341,5 @@ def run_situation(
         f64(cascade.fz, dtype=np.float64),
     )  # fmt: skip
     out = SituationBlock.empty(n)
-    t = f64(cascade.t, dtype=np.float64)
-    monitor.run(t, inputs, out)
-    return SituationSeries(
-        t=t.copy(),
-        level=out.level,
-        onset=out.onset,
-        detected=out.detected,
-        mu_max=out.mu_max,
-        slip_peak=out.slip_peak,
-        confidence=out.confidence,
-        road_class=out.road_class,
-        vehicle_road_class=out.vehicle_road_class,
-    )
+    monitor.run(f64(cascade.t, dtype=np.float64), inputs, out)
+    return out

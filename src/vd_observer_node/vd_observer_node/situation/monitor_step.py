@@ -10,15 +10,16 @@ and `alerts.alerts_update`); with ``VD_JIT=0`` the same source runs as plain Pyt
 from __future__ import annotations
 
 import math
-from typing import Any, Final
+from typing import Any, Final, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from vd_observer_node.estimation.levant_step import levant_reset, levant_update
 from vd_observer_node.kernel._jit import jit
-from vd_observer_node.situation.alerts import alerts_reset, alerts_update
+from vd_observer_node.situation.alerts import ALERT_KINDS, alerts_reset, alerts_update
 from vd_observer_node.situation.friction_fit import (
+    FrictionFit,
     fit_reset,
     friction_update,
     vehicle_road_class,
@@ -29,6 +30,11 @@ __all__ = [
     'MONITOR_PARAMS',
     'MONITOR_STATE',
     'POTENTIAL_MOVED',
+    'AlertParts',
+    'FastObserver',
+    'MonitorParts',
+    'SituationBlock',
+    'SituationInputs',
     'monitor_restarts',
     'monitor_step',
     'situation_block',
@@ -64,54 +70,140 @@ def monitor_restarts(p: Any, s: Any, t: float) -> bool:
     return not math.isnan(s.t) and t < s.t - p.max_gap
 
 
+class FastObserver(NamedTuple):
+    """The fast wheel observer's records and arrays (`LevantDifferentiator.kernel_args`):
+    params and state as the 1-element arrays they live in, the Lipschitz constants and the
+    per-channel records as plain arrays."""
+
+    params: NDArray[Any]
+    lipschitz: FloatArray
+    state: NDArray[Any]
+    #: the per-channel records as a plain ndarray view (`levant_step` reads them by field)
+    channels: Any
+
+
+class AlertParts(NamedTuple):
+    """The alerts' records, each as the 1-element array it lives in: `alerts.ALERT_PARAMS`,
+    `alerts.ALERT_STATE` and the stamp's `alerts.ALERT_INPUT` (a buffer)."""
+
+    params: NDArray[Any]
+    state: NDArray[Any]
+    input: NDArray[Any]
+
+
+class MonitorParts(NamedTuple):
+    """Everything `situation_block` advances, by part (records as the 1-element arrays they
+    live in: numba types arrays on its fast path). NamedTuples, not one nested record: the
+    parts hold arrays whose length is a setting (road scales, the tyre's peak table) or
+    arrays of per-channel records, which a numpy record cannot nest.
+
+    Attributes:
+        params: `MONITOR_PARAMS`.
+        state: `MONITOR_STATE`.
+        fast: the fast wheel observer.
+        friction: the friction fit (`friction_fit.FrictionFit`).
+        alerts: the alerts.
+    """
+
+    params: NDArray[Any]
+    state: NDArray[Any]
+    fast: FastObserver
+    friction: FrictionFit
+    alerts: AlertParts
+
+
+class SituationInputs(NamedTuple):
+    """The monitor's inputs over N stamps (contiguous arrays).
+
+    Attributes:
+        angles: shape (N, 4), [rad] wheel angles (or speeds [rad/s]).
+        speeds: shape (N,), [m/s] measured body speed.
+        torques: shape (N, 4), [N m] drive minus brake torque.
+        omega: shape (N, 4), [rad/s] the cascade observer's wheel speed.
+        mu: shape (N, 4), [-] utilised friction (estimator).
+        mu_valid: shape (N, 4), bool.
+        fz: shape (N, 4), [N] wheel loads (estimator).
+    """
+
+    angles: FloatArray
+    speeds: FloatArray
+    torques: FloatArray
+    omega: FloatArray
+    mu: FloatArray
+    mu_valid: BoolArray
+    fz: FloatArray
+
+
+class SituationBlock(NamedTuple):
+    """The monitor's outputs over N stamps, written by `situation_block`.
+
+    Attributes:
+        t: shape (N,), [s].
+        level: shape (N, 3, 4), alert level per kind (ALERT_KINDS order) and wheel.
+        onset: shape (N, 3, 4), [s] onset stamp (nan while inactive).
+        detected: shape (N, 3, 4), [s] detection stamp (nan while inactive).
+        mu_max: shape (N, 2), [-] per axle.
+        slip_peak: shape (N, 2), [-] per axle.
+        confidence: shape (N, 2), [0..1] per axle.
+        road_class: shape (N, 2), ROAD_* code per axle.
+        vehicle_road_class: shape (N,), ROAD_* code.
+        slip: shape (N, 4), [-] the fast slip the traction and lock alerts saw.
+    """
+
+    t: FloatArray
+    level: NDArray[np.int64]
+    onset: FloatArray
+    detected: FloatArray
+    mu_max: FloatArray
+    slip_peak: FloatArray
+    confidence: FloatArray
+    road_class: NDArray[np.int64]
+    vehicle_road_class: NDArray[np.int64]
+    slip: FloatArray
+
+    @classmethod
+    def empty(cls, n: int) -> SituationBlock:
+        """Buffers for N stamps."""
+        kinds = len(ALERT_KINDS)
+        return cls(
+            np.zeros(n), np.zeros((n, kinds, 4), dtype=np.int64),
+            np.full((n, kinds, 4), math.nan), np.full((n, kinds, 4), math.nan),
+            np.zeros((n, 2)), np.zeros((n, 2)), np.zeros((n, 2)),
+            np.zeros((n, 2), dtype=np.int64), np.zeros(n, dtype=np.int64), np.zeros((n, 4)),
+        )  # fmt: skip
+
+
 @jit
 def monitor_step(
-    p: Any,
-    s: Any,
-    fp: Any,
-    tyre: Any,
-    scales: FloatArray,
-    table: FloatArray,
-    fs: Any,
-    cost: FloatArray,
-    pot: Any,
-    ap: Any,
-    al: Any,
-    t: float,
-    fast_omega: FloatArray,
+    parts: MonitorParts, t: float, inputs: SituationInputs, k: int, fast_omega: FloatArray,
     fast_valid: BoolArray,
-    speed: float,
-    torque: FloatArray,
-    omega: FloatArray,
-    mu: FloatArray,
-    mu_valid: BoolArray,
-    fz: FloatArray,
-    slip: FloatArray,
-) -> int:
+) -> int:  # fmt: skip
     """One stamp of the monitor after its fast observer: friction potential, then alerts.
 
     Args:
-        p: `MONITOR_PARAMS` record.
-        s: `MONITOR_STATE` record.
-        fp, tyre, scales, table, fs, cost, pot: the friction fit's settings and state
-            (`friction_fit.friction_update`).
-        ap, al: the alerts' settings and state (`alerts.alerts_update`).
+        parts: the monitor's records, advanced in place; ``parts.alerts.input`` is written
+            with the stamp's alert inputs (its ``slip`` is the fast slip the traction and
+            lock alerts see).
         t: stamp [s].
+        inputs: the inputs; row `k` is the stamp's.
+        k: the stamp's row.
         fast_omega: shape (4,), [rad/s] the fast observer's wheel speed at t.
         fast_valid: shape (4,), its validity.
-        speed: [m/s] measured body speed.
-        torque: shape (4,), [N m] drive minus brake torque.
-        omega: shape (4,), [rad/s] the cascade observer's wheel speed.
-        mu: shape (4,), [-] utilised friction (estimator).
-        mu_valid: shape (4,), bool.
-        fz: shape (4,), [N] wheel loads (estimator).
-        slip: shape (4,), written: [-] the fast slip the traction and lock alerts see.
 
     Returns:
         `POTENTIAL_MOVED` | `LEVELS_CHANGED` flags.
     """
+    p, s = parts.params[0], parts.state[0]
+    alert = parts.alerts.input[0]
+    speed, omega, mu, mu_valid = (
+        inputs.speeds[k],
+        inputs.omega[k],
+        inputs.mu[k],
+        inputs.mu_valid[k],
+    )
     radius, gate = p.radius, p.max_observer_disagreement
-    sv_fast = np.empty(4)
+    sv_fast = alert.slip_velocity
+    slip = alert.slip
     sv_cascade = np.empty(4)
     steady = np.empty(4, dtype=np.bool_)
     for i in range(4):
@@ -124,18 +216,16 @@ def monitor_step(
         agree = abs(sv_fast[i] - sv_cascade[i]) <= gate if gate > 0.0 else True
         steady[i] = agree and mu_valid[i]
     flags = 0
-    if friction_update(
-        fp, tyre, scales, table, fs, cost, pot, t, sv_cascade, speed, mu, steady, fz
-    ):
+    if friction_update(parts.friction, t, sv_cascade, speed, mu, steady, inputs.fz[k]):
         flags |= POTENTIAL_MOVED
-    wheel_mu_max = np.empty(4)
-    wheel_slip_peak = np.empty(4)
+    pot = parts.friction.potential[0]
+    alert.torque[:] = inputs.torques[k]
+    alert.mu[:] = mu
+    alert.mu_valid[:] = mu_valid
     for i in range(4):
-        wheel_mu_max[i] = pot.mu_max[i // 2]
-        wheel_slip_peak[i] = pot.slip_peak[i // 2]
-    if alerts_update(
-        ap, al, t, slip, sv_fast, torque, mu, mu_valid, wheel_mu_max, wheel_slip_peak
-    ):
+        alert.mu_max[i] = pot.mu_max[i // 2]
+        alert.slip_peak[i] = pot.slip_peak[i // 2]
+    if alerts_update(parts.alerts.params[0], parts.alerts.state[0], t, alert):
         flags |= LEVELS_CHANGED
     s.t = t
     return flags
@@ -143,58 +233,44 @@ def monitor_step(
 
 @jit
 def situation_block(
-    fp_a: Any, flip: FloatArray, fs_a: Any, fch: np.recarray, mp_a: Any, ms_a: Any,
-    fp_b: Any, tyre_a: Any, scales: FloatArray, table: FloatArray, static_load: FloatArray,
-    fs_b: Any, cost: FloatArray, pot_a: Any, ap_a: Any, al_a: Any, t: FloatArray,
-    angles: FloatArray,
-    speeds: FloatArray, torques: FloatArray, omega: FloatArray, mu: FloatArray,
-    mu_valid: BoolArray, fz: FloatArray, level: NDArray[np.int64], onset: FloatArray,
-    det: FloatArray, mu_max: FloatArray, slip_peak: FloatArray, confidence: FloatArray,
-    road: NDArray[np.int64], vehicle_road: NDArray[np.int64], slip: FloatArray,
-) -> int:  # fmt: skip
+    parts: MonitorParts, t: FloatArray, inputs: SituationInputs, out: SituationBlock
+) -> int:
     """The monitor over N stamps; returns the `monitor_step` flags of all of them (or-ed; a
     restart sets both).
 
-    Args (each record as the 1-element array it lives in, `kernel._jit.record_array`):
-        fp_a, flip, fs_a, fch: the fast differentiator (`LevantDifferentiator.kernel_args`).
-        mp_a, ms_a: `MONITOR_PARAMS`, `MONITOR_STATE` records.
-        fp_b, tyre_a, scales, table, static_load, fs_b, cost, pot_a: the friction fit's
-            settings and state (`friction_fit.friction_update`, `fit_reset`).
-        ap_a, al_a: the alerts' settings and state.
-        t: shape (N,), [s]; angles (N, 4) wheel angles (or speeds); speeds (N,) measured
-            body speed [m/s]; torques (N, 4) [N m]; omega (N, 4) the cascade's wheel speed
-            [rad/s]; mu (N, 4); mu_valid (N, 4); fz (N, 4) [N].
-        level, onset, det: shape (N, 3, 4), written: each alert's level, onset and detection
-            stamps [s] after the stamp.
-        mu_max, slip_peak, confidence: shape (N, 2), written: the friction potential.
-        road: shape (N, 2), written: road class per axle; vehicle_road (N,) the vehicle's.
-        slip: shape (4,), written: the fast slip of the last stamp.
+    Args:
+        parts: the monitor's records, advanced in place.
+        t: shape (N,), [s].
+        inputs: the N stamps' inputs.
+        out: written, row k after stamp k.
     """
-    # the records come as the 1-element arrays they live in (`kernel._jit.record_array`)
-    fp_, fs_, mp, ms, fp, tyre = fp_a[0], fs_a[0], mp_a[0], ms_a[0], fp_b[0], tyre_a[0]
-    fs, pot, ap, al = fs_b[0], pot_a[0], ap_a[0], al_a[0]
+    fast_part, mp, ms = parts.fast, parts.params[0], parts.state[0]
+    fp, fs = fast_part.params[0], fast_part.state[0]
+    pot, al = parts.friction.potential[0], parts.alerts.state[0]
     fast = np.empty((3, 4))
     fast_valid = np.empty(4, dtype=np.bool_)
     flags = 0
     for k in range(t.shape[0]):
         if monitor_restarts(mp, ms, t[k]):
             # a looped bag or a restarted source: start again, as the observers do
-            levant_reset(fp_, fs_, fch)
-            fit_reset(fp, scales, table, static_load, fs, cost, pot)
+            levant_reset(fp, fs, fast_part.channels)
+            fit_reset(parts.friction)
             alerts_reset(al)
             ms.t = math.nan
             flags |= POTENTIAL_MOVED | LEVELS_CHANGED  # the results start again too
-        levant_update(fp_, flip, fs_, fch, t[k], angles[k], fast, fast_valid)
-        flags |= monitor_step(
-            mp, ms, fp, tyre, scales, table, fs, cost, pot, ap, al, t[k], fast[1], fast_valid,
-            speeds[k], torques[k], omega[k], mu[k], mu_valid[k], fz[k], slip,
+        levant_update(
+            fp, fast_part.lipschitz, fs, fast_part.channels, t[k], inputs.angles[k], fast,
+            fast_valid,
         )  # fmt: skip
-        level[k] = al.level
-        onset[k] = al.onset
-        det[k] = al.detected
-        mu_max[k] = pot.mu_max
-        slip_peak[k] = pot.slip_peak
-        confidence[k] = pot.confidence
-        road[k] = pot.road_class
-        vehicle_road[k] = vehicle_road_class(pot.road_class, pot.confidence)
+        flags |= monitor_step(parts, t[k], inputs, k, fast[1], fast_valid)
+        out.t[k] = t[k]
+        out.level[k] = al.level
+        out.onset[k] = al.onset
+        out.detected[k] = al.detected
+        out.mu_max[k] = pot.mu_max
+        out.slip_peak[k] = pot.slip_peak
+        out.confidence[k] = pot.confidence
+        out.road_class[k] = pot.road_class
+        out.vehicle_road_class[k] = vehicle_road_class(pot.road_class, pot.confidence)
+        out.slip[k] = parts.alerts.input[0].slip
     return flags
