@@ -17,15 +17,15 @@ import math
 import sys
 import time
 from dataclasses import dataclass, field, replace
-from typing import Any, Final, NamedTuple
+from typing import Final, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.brakes import Brakes, no_brakes
-from vd_observer_node.estimation.cascade import CascadeBlock, CascadeParts
-from vd_observer_node.estimation.cascade_step import cascade_block
+from vd_observer_node.estimation.cascade import CascadeParts, empty_outputs
+from vd_observer_node.estimation.cascade_step import CascadeInputs, cascade_block
 from vd_observer_node.estimation.drivetrain import (
     TORQUE_ENGINE,
     TORQUE_NONE,
@@ -38,6 +38,7 @@ from vd_observer_node.estimation.imu_grade import SOURCE_FORCE, ImuGradeConfig
 from vd_observer_node.estimation.observer import ObserverConfig, SpeedState, WheelState
 from vd_observer_node.estimation.torque_offset import TorqueOffset, offset_from_record
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params, vehicle_tire
+from vd_observer_node.kernel._jit import FixedCall
 from vd_observer_node.situation.alerts import AlertConfig
 from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
 from vd_observer_node.situation.monitor import (
@@ -193,16 +194,21 @@ class Chain:
             )
         self.engine_faults: FaultCounter | None = self.parts.engine_faults
         self._none = self.parts.source == TORQUE_NONE
-        self._out = CascadeBlock.empty(1, self.parts.offset_on)
-        #: the estimate as a plain structured array: its fields read without a recarray's
-        #: Python attribute lookup (the live chain reads them every stamp)
-        self._est_fields = self._out.est.view(np.ndarray)
-        self._situation = SituationBlock.empty(1)
-        self._no_engine = np.zeros((1, 4))
-        self._no_brake = no_brakes(1)
         if settings.imu is not None:
             self.parts.grade(settings.imu)
-        self._imu = np.full((1, 2), np.nan)
+        # one stamp's inputs and outputs: buffers filled and read at every `update`
+        self._in = CascadeInputs(
+            np.zeros(1), np.zeros((1, 4)), np.zeros(1), np.zeros((1, 4)), np.zeros((1, 4)),
+            no_brakes(1), np.full((1, 2), np.nan),
+        )  # fmt: skip
+        self._out = empty_outputs(1, self.parts.offset_on)
+        #: the estimate as a plain structured array: its fields read without a recarray's
+        #: Python attribute lookup (the live chain reads them every stamp)
+        self._est_fields = self._out.estimates
+        self._offsets = self._out.offsets.view(np.recarray)
+        self._grade = self._out.grade.view(np.recarray)
+        self._block = FixedCall(cascade_block, (self.parts.records(), self._in, self._out), ())
+        self._situation = SituationBlock.empty(1)
 
     def update(
         self,
@@ -243,23 +249,21 @@ class Chain:
                 f'{torques.shape}'
             )
         parts = self.parts
-        row = engine_row(engine)[None] if parts.engine_on else self._no_engine
-        if self._none:
-            torques = np.zeros(4)  # the replay's: no torque topic, zeros everywhere
-        stamp = np.array([float(t)])
-        speeds = np.array([float(speed)])
+        inputs = self._in
+        inputs.t[0] = float(t)
+        inputs.wheel_angle[0] = angles
+        inputs.body_speed[0] = float(speed)
+        # the replay's without torque: no torque topic, zeros everywhere
+        inputs.wheel_torque[0] = 0.0 if self._none else torques
+        if parts.engine_on:
+            inputs.engine[0] = engine_row(engine)
+        inputs.brake[0] = math.nan if brake is None else np.reshape(brake, 4)
+        inputs.imu[0] = imu if imu is not None else (math.nan, math.nan)
+        self._block()
         out = self._out
-        block: Any = cascade_block  # its arguments come as tuples
-        brakes = self._no_brake
-        if brake is not None:
-            brakes = np.ascontiguousarray(brake, dtype=np.float64).reshape(1, 4)
-        imu_row = self._imu
-        imu_row[0, :] = imu if imu is not None else (math.nan, math.nan)
-        block(
-            *parts.args(), stamp, angles[None], speeds, torques[None], row, brakes, imu_row,
-            *out.outputs(),
-        )  # fmt: skip
-        est = out.est[0]
+        stamp, speeds = inputs.t, inputs.body_speed
+        torques = inputs.wheel_torque[0]
+        est = out.estimates[0]
         if parts.engine_on or parts.bprm[0] != 0.0:
             # the torques the engine path and brakes gave the estimator (0 where none)
             torques = np.where(np.isfinite(out.used[0]), out.used[0], 0.0)
@@ -269,8 +273,8 @@ class Chain:
             fields = self._est_fields
             self.monitor.run(
                 stamp,
-                SituationInputs(
-                    angles[None],
+                SituationInputs(  # the buffers themselves: the monitor keeps none of them
+                    inputs.wheel_angle,
                     speeds,
                     torques[None],
                     out.wheel[:, 1].copy(),
@@ -284,14 +288,14 @@ class Chain:
             assert situation is not None  # run just set it
         offset = None
         if parts.offset_on:
-            offset = offset_from_record(out.offsets[0])
+            offset = offset_from_record(self._offsets[0])
             if offset.clamped and self.engine_faults is not None:
                 self.engine_faults.count('torque_offset_clamped')
         estimates = estimates_from_record(est)
         sources = SOURCE_FORCE if estimates.slope_valid else 0
         if parts.imu_on:
             # the IMU fusion's slope (`imu_grade`, run in the cascade step)
-            g = out.grade[0]
+            g = self._grade[0]
             estimates = replace(estimates, slope=float(g.slope), slope_valid=bool(g.slope_valid))
             sources = int(g.sources)
         return ChainOutput(

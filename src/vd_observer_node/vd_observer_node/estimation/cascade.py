@@ -16,7 +16,16 @@ from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.brakes import Brakes, new_brake_state, no_brakes
-from vd_observer_node.estimation.cascade_step import cascade_block
+from vd_observer_node.estimation.cascade_step import (
+    CASCADE_SWITCHES,
+    BrakeParts,
+    CascadeInputs,
+    CascadeOutputs,
+    CascadeRecords,
+    EnginePathParts,
+    ImuParts,
+    cascade_block,
+)
 from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.drivetrain import (
     TORQUE_ENGINE,
@@ -26,9 +35,10 @@ from vd_observer_node.estimation.drivetrain import (
     torque_source_code,
 )
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
-from vd_observer_node.estimation.estimator_step import ESTIMATES
+from vd_observer_node.estimation.estimator_step import ESTIMATES, ESTIMATOR_INPUT
 from vd_observer_node.estimation.faults import ENGINE_FAULTS, FaultCounter
 from vd_observer_node.estimation.imu_grade import (
+    GRADE_INPUT,
     GRADE_OUT,
     SOURCE_FORCE,
     ImuGrade,
@@ -43,10 +53,9 @@ from vd_observer_node.estimation.torque_offset import (
     offset_params,
 )
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
-from vd_observer_node.kernel._jit import record_array
+from vd_observer_node.kernel._jit import new_records, record_array
 
 __all__ = [
-    'CascadeBlock',
     'CascadeParts',
     'CascadeResult',
     'CascadeState',
@@ -55,6 +64,7 @@ __all__ = [
     'checked_brake',
     'checked_engine',
     'checked_record',
+    'empty_outputs',
     'offset_result_name',
     'run_cascade',
 ]
@@ -383,7 +393,7 @@ class CascadeParts:
         self.brakes = brakes if brakes is not None and self.source != TORQUE_NONE else Brakes()
         self.bprm = self.brakes.params_array()
         self.brake_state = new_brake_state()
-        self._args: tuple[Any, ...] | None = None
+        self._records: CascadeRecords | None = None
 
     def grade(self, config: ImuGradeConfig | None) -> ImuGrade:
         """Turn the IMU fusion on (on the first call, with `config`; defaults if None) and
@@ -392,7 +402,7 @@ class CascadeParts:
             v = self._vehicle
             self.imu_grade = ImuGrade(config, v.gravity, v.mass, v.rolling_c0, v.rolling_c1)
             self.imu_on = True
-            self._args = None
+            self._records = None
         return self.imu_grade
 
     @property
@@ -400,26 +410,31 @@ class CascadeParts:
         """The wheel torques come from the engine path."""
         return bool(self.dprm.shape[0] > 0)
 
-    def args(self) -> tuple[Any, ...]:
-        """`cascade_block`'s leading arguments (the records, as the 1-element arrays they
-        live in, advanced in place)."""
-        if self._args is not None:
-            return self._args
+    def records(self) -> CascadeRecords:
+        """Every part's records as `cascade_step.cascade_block` takes them (views of the live
+        records, which are never replaced: every reset works in place; built once, and again
+        when the IMU fusion is turned on)."""
+        if self._records is not None:
+            return self._records
         a = record_array
-        wp, wlip, ws, wch = self.wheels.kernel_args
-        sp, slip_, ss, sch = self.speed.kernel_args
-        es, fst, sst, vst = self.estimator.state.args
-        # the records are never replaced (every reset works in place): built once
-        # the channel tables as plain arrays too: a recarray's attributes are Python lookups
-        wplain, splain = wch.view(np.ndarray), sch.view(np.ndarray)
-        self._args = (
-            a(wp), wlip, a(ws), wplain, a(sp), slip_, a(ss), splain,
-            a(self.estimator.params), a(es), fst, sst, vst, self.measured, self.engine_on,
-            self.dprm, self.engine_state, self.offset_on, a(self.offset_params),
-            a(self.offset_state), a(self.offset_estimate), self.bprm, self.brake_state,
-            self.imu_on, a(self.imu_grade.params), a(self.imu_grade.state),
+        switches = new_records(CASCADE_SWITCHES, 1)
+        switches['measured_speed'] = self.measured
+        switches['engine_path'] = self.engine_on
+        switches['offset_learnt'] = self.offset_on
+        switches['imu_fused'] = self.imu_on
+        self._records = CascadeRecords(
+            switches, self.wheels.parts(), self.speed.parts(), self.estimator.parts,
+            new_records(ESTIMATOR_INPUT, 1),
+            EnginePathParts(
+                self.dprm, self.engine_state, a(self.offset_params), a(self.offset_state),
+                a(self.offset_estimate),
+            ),
+            BrakeParts(self.bprm, self.brake_state),
+            ImuParts(
+                a(self.imu_grade.params), a(self.imu_grade.state), new_records(GRADE_INPUT, 1)
+            ),
         )  # fmt: skip
-        return self._args
+        return self._records
 
     def faults(self) -> dict[str, int]:
         """Total fault counts per kind ('wheel.<kind>', 'speed.<kind>', 'estimator.<kind>',
@@ -438,51 +453,14 @@ class CascadeParts:
         return counts
 
 
-@dataclass
-class CascadeBlock:
-    """The outputs of `cascade_block` over N stamps (allocated for it, then read).
-
-    Attributes:
-        wheel: shape (N, 3, 4): angle, omega, omega_dot.
-        wheel_valid: shape (N, 4).
-        body: shape (N, 3): speed, accel, jerk.
-        body_valid: shape (N,).
-        used: shape (N, 4), [N m] the wheel torques the estimator got.
-        est: shape (N,) `estimator_step.ESTIMATES` records.
-        torque_valid: shape (N,).
-        offsets: shape (N,) `OFFSET_ESTIMATE_DTYPE` records where learnt, else (0,).
-        grade: shape (N,) `imu_grade.GRADE_OUT` records (written with the IMU fusion on).
-    """
-
-    wheel: FloatArray
-    wheel_valid: BoolArray
-    body: FloatArray
-    body_valid: BoolArray
-    used: FloatArray
-    est: np.recarray
-    torque_valid: BoolArray
-    offsets: np.recarray
-    grade: np.recarray
-
-    @classmethod
-    def empty(cls, n: int, offsets: bool) -> CascadeBlock:
-        """Buffers for N stamps."""
-        return cls(
-            np.zeros((n, 3, 4)), np.zeros((n, 4), dtype=np.bool_), np.zeros((n, 3)),
-            np.zeros(n, dtype=np.bool_), np.zeros((n, 4)),
-            np.zeros(n, ESTIMATES).view(np.recarray), np.zeros(n, dtype=np.bool_),
-            np.zeros(n if offsets else 0, OFFSET_ESTIMATE_DTYPE).view(np.recarray),
-            np.zeros(n, GRADE_OUT).view(np.recarray),
-        )  # fmt: skip
-
-    def outputs(self) -> tuple[Any, ...]:
-        """`cascade_block`'s trailing (written) arguments (the record arrays as plain
-        arrays: a recarray's attributes are Python lookups numba would pay for per call)."""
-        return (
-            self.wheel, self.wheel_valid, self.body, self.body_valid, self.used,
-            self.est.view(np.ndarray), self.torque_valid, self.offsets.view(np.ndarray),
-            self.grade.view(np.ndarray),
-        )  # fmt: skip
+def empty_outputs(n: int, offsets: bool) -> CascadeOutputs:
+    """`cascade_block`'s output buffers for N stamps (``offsets``: the offset is learnt)."""
+    return CascadeOutputs(
+        np.zeros((n, 3, 4)), np.zeros((n, 4), dtype=np.bool_), np.zeros((n, 3)),
+        np.zeros(n, dtype=np.bool_), np.zeros((n, 4)), new_records(ESTIMATES, n),
+        np.zeros(n, dtype=np.bool_), new_records(OFFSET_ESTIMATE_DTYPE, n if offsets else 0),
+        new_records(GRADE_OUT, n),
+    )  # fmt: skip
 
 
 def run_cascade(
@@ -568,12 +546,11 @@ def run_cascade(
                 f'{imu_record.shape}'
             )
         parts.grade(imu_config)
-    out = CascadeBlock.empty(n, parts.offset_on)
-    block: Any = cascade_block  # its arguments come as tuples
-    block(
-        *parts.args(), stamps, angles, speeds, torques, engine_record, brake_record,
-        imu_record, *out.outputs(),
-    )  # fmt: skip
+    out = empty_outputs(n, parts.offset_on)
+    inputs = CascadeInputs(
+        stamps, angles, speeds, torques, engine_record, brake_record, imu_record
+    )
+    cascade_block(parts.records(), inputs, out)
     if source == TORQUE_NONE:
         out.torque_valid[:] = False
     return cascade_result(stamps, source, parts, out)
@@ -585,11 +562,11 @@ def no_imu(n: int) -> FloatArray:
 
 
 def cascade_result(
-    stamps: FloatArray, source: int, parts: CascadeParts, out: CascadeBlock
+    stamps: FloatArray, source: int, parts: CascadeParts, out: CascadeOutputs
 ) -> CascadeResult:
     """The `CascadeResult` of a block's outputs (copies of its arrays)."""
-    est = out.est
-    offsets = out.offsets
+    est = out.estimates.view(np.recarray)
+    offsets = out.offsets.view(np.recarray)
     learnt = OffsetRecord(
         offsets.offset.copy(), offsets.offset_std.copy(), offsets.converged.copy(),
         offsets.used.copy(), offsets.episodes.copy(), offsets.clamped.copy(),
@@ -629,7 +606,7 @@ def cascade_result(
         slope_sources=np.where(est.slope_valid, SOURCE_FORCE, 0).astype(np.uint8),
         slope_force=est.slope.copy(),
     )
-    return replace(result, **_imu_fields(out.grade)) if parts.imu_on else result
+    return replace(result, **_imu_fields(out.grade.view(np.recarray))) if parts.imu_on else result
 
 
 def _imu_fields(grade: np.recarray) -> dict[str, Any]:

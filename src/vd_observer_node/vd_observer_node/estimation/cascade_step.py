@@ -7,11 +7,20 @@ its own module (`levant_step.levant_update`, `torque_offset.torque_offset_step`,
 `drivetrain.engine_torques`, `estimator_step.estimator_update`, and with an IMU
 `imu_grade.imu_grade_step`) on that part's records; with ``VD_JIT=0`` the same source runs as
 plain Python.
+
+The loop takes three groups, each a NamedTuple of named arrays (numba types NamedTuples and
+reads their fields by name; records live in 1-element arrays, as numba types arrays on its
+fast path): the parts (`CascadeRecords`: every part's parameters and state, owned by
+`cascade.CascadeParts`), the inputs (`CascadeInputs`: one row per stamp) and the outputs
+(`CascadeOutputs`: one row per stamp).
+A new input is a field of `CascadeInputs`, filled where the inputs are built
+(`cascade.cascade_inputs`, `chain.Chain`) and read by the part that uses it here.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Any, Final, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,13 +32,25 @@ from vd_observer_node.estimation.brakes import (
     brake_torques,
 )
 from vd_observer_node.estimation.drivetrain import TORQUE_NONE, engine_torques
-from vd_observer_node.estimation.estimator_step import estimator_update
+from vd_observer_node.estimation.estimator_step import EstimatorParts, estimator_update
 from vd_observer_node.estimation.imu_grade import imu_grade_step
-from vd_observer_node.estimation.levant_step import levant_update
+from vd_observer_node.estimation.levant_step import LevantParts, levant_update
 from vd_observer_node.estimation.torque_offset import torque_offset_step
 from vd_observer_node.kernel._jit import jit
 
-__all__ = ['CLUTCH_SETTLE', 'ENGINE_INERTIA', 'cascade_block', 'cascade_step']
+__all__ = [
+    'CASCADE_SWITCHES',
+    'CLUTCH_SETTLE',
+    'ENGINE_INERTIA',
+    'BrakeParts',
+    'CascadeInputs',
+    'CascadeOutputs',
+    'CascadeRecords',
+    'EnginePathParts',
+    'ImuParts',
+    'cascade_block',
+    'cascade_step',
+]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -38,75 +59,197 @@ BoolArray = NDArray[np.bool_]
 ENGINE_INERTIA = 4
 CLUTCH_SETTLE = 6
 
+#: Which parts run: measured_speed (the estimator gets the measured speed, else the speed
+#: observer's), engine_path (the wheel torques come from the engine torque and gear),
+#: offset_learnt (the engine path learns the engine-torque offset and subtracts it),
+#: imu_fused (the IMU fusion runs).
+CASCADE_SWITCHES: Final = np.dtype(
+    [
+        ('measured_speed', 'b1'),
+        ('engine_path', 'b1'),
+        ('offset_learnt', 'b1'),
+        ('imu_fused', 'b1'),
+    ],
+    align=True,
+)
+
+
+class EnginePathParts(NamedTuple):
+    """The engine path's records (empty and unused off it).
+
+    Attributes:
+        drivetrain: `Drivetrain.params_array` (empty off the engine path).
+        engine_state: shape (2,): the stamp the clutch last slipped or the gear changed
+            (-inf before), the last gear (nan before).
+        offset_params: shape (1,), the offset estimator's settings (`torque_offset`).
+        offset_state: shape (1,), its state.
+        offset_estimate: shape (1,), its estimate of the stamp.
+    """
+
+    drivetrain: FloatArray
+    engine_state: FloatArray
+    offset_params: NDArray[Any]
+    offset_state: NDArray[Any]
+    offset_estimate: NDArray[Any]
+
+
+class BrakeParts(NamedTuple):
+    """The brake input's records.
+
+    Attributes:
+        params: `brakes.Brakes.params_array` (kind `BRAKE_NONE`: none).
+        state: the learnt brake gain's state (`brakes.new_brake_state`).
+    """
+
+    params: FloatArray
+    state: FloatArray
+
+
+class ImuParts(NamedTuple):
+    """The IMU fusion's records (`imu_grade`), each as the 1-element array it lives in.
+
+    Attributes:
+        params: `imu_grade.GRADE_PARAMS`.
+        state: `imu_grade.GRADE_STATE`.
+        input: `imu_grade.GRADE_INPUT`, the stamp's (a buffer).
+    """
+
+    params: NDArray[Any]
+    state: NDArray[Any]
+    input: NDArray[Any]
+
+
+class CascadeRecords(NamedTuple):
+    """Every part of the cascade, advanced in place by `cascade_block`.
+
+    Attributes:
+        switches: shape (1,), `CASCADE_SWITCHES`.
+        wheel: the wheel observer (4 channels).
+        speed: the speed observer (1 channel).
+        estimator: the estimator (`estimator_step.EstimatorParts`).
+        estimator_input: shape (1,), `estimator_step.ESTIMATOR_INPUT` (a buffer).
+        engine: the engine path.
+        brakes: the brake input.
+        imu: the IMU fusion.
+    """
+
+    switches: NDArray[Any]
+    wheel: LevantParts
+    speed: LevantParts
+    estimator: EstimatorParts
+    estimator_input: NDArray[Any]
+    engine: EnginePathParts
+    brakes: BrakeParts
+    imu: ImuParts
+
+
+class CascadeInputs(NamedTuple):
+    """The cascade's inputs over N stamps (contiguous float64 arrays).
+
+    Attributes:
+        t: shape (N,), [s] stamps.
+        wheel_angle: shape (N, 4), [rad] wheel angles (or speeds [rad/s], as the observer
+            takes them), order FL, FR, RL, RR.
+        body_speed: shape (N,), [m/s] measured body speed.
+        wheel_torque: shape (N, 4), [N m] measured wheel torques (read off the engine path
+            only).
+        engine: shape (N, 4): engine torque [N m], gear, engine speed [rad/s], turbine speed
+            [rad/s] (engine path; the speeds nan where not logged).
+        brake: shape (N, 4), the brake input (`brakes.brake_torques`; nan: none).
+        imu: shape (N, 2): stamp [s] of the newest IMU sample (nan: none) and its forward
+            specific force [m/s^2] (read with the IMU fusion on).
+    """
+
+    t: FloatArray
+    wheel_angle: FloatArray
+    body_speed: FloatArray
+    wheel_torque: FloatArray
+    engine: FloatArray
+    brake: FloatArray
+    imu: FloatArray
+
+
+class CascadeOutputs(NamedTuple):
+    """The cascade's outputs over N stamps, written by `cascade_block` (row k after stamp k).
+
+    Attributes:
+        wheel: shape (N, 3, 4): the wheel observer's angle, omega, omega_dot.
+        wheel_valid: shape (N, 4).
+        body: shape (N, 3): the speed observer's speed, accel, jerk.
+        body_valid: shape (N,).
+        used: shape (N, 4), [N m] the wheel torques the estimator got.
+        estimates: shape (N,) `estimator_step.ESTIMATES` records.
+        torque_valid: shape (N,): the torque path held (the engine path: clutch engaged,
+            gear known, settled; the brakes: not braking with a switch only, the pressure's
+            torque known).
+        offsets: shape (N,) `torque_offset.OFFSET_ESTIMATE_DTYPE` records where the offset
+            is learnt, else shape (0,).
+        grade: shape (N,) `imu_grade.GRADE_OUT` records, written with the IMU fusion on.
+    """
+
+    wheel: FloatArray
+    wheel_valid: BoolArray
+    body: FloatArray
+    body_valid: BoolArray
+    used: FloatArray
+    estimates: NDArray[Any]
+    torque_valid: BoolArray
+    offsets: NDArray[Any]
+    grade: NDArray[Any]
+
 
 @jit
 def cascade_step(
-    wp: np.record, wlip: FloatArray, ws: np.record, wch: np.recarray,
-    sp: np.record, slip_: FloatArray, ss: np.record, sch: np.recarray,
-    ep: np.record, es: np.record, fst: FloatArray, sst: FloatArray, vst: FloatArray,
-    measured: bool, engine_on: bool, dprm: FloatArray, escl: FloatArray, offset_on: bool,
-    op: np.record, os_: np.record, oout: np.record, bprm: FloatArray, bst: FloatArray,
-    imu_on: bool, gp: np.record, gs: np.record,
-    t: float, angle: FloatArray, speed: float, torque: FloatArray, engine: FloatArray,
-    brake: FloatArray, imu: FloatArray, wheel: FloatArray, wheel_valid: BoolArray,
-    body: FloatArray, body_valid: BoolArray, used: FloatArray, est: np.record,
-    grade: np.record,
-) -> bool:  # fmt: skip
-    """One stamp: wheel and speed observers, the torque path, the estimator, then the IMU.
+    parts: CascadeRecords, inputs: CascadeInputs, k: int, out: CascadeOutputs
+) -> None:
+    """Stamp k: wheel and speed observers, the torque path, the estimator, then the IMU.
+
+    With the IMU fusion on, its regression's mass, once fitted, is the estimator's from the
+    next stamp on (with ``feedback``), and the mass fields of the estimate are the
+    regression's once it has data.
 
     Args:
-        wp, wlip, ws, wch: the wheel differentiator (`LevantDifferentiator.kernel_args`).
-        sp, slip_, ss, sch: the speed differentiator (one channel).
-        ep, es, fst, sst, vst: the estimator (`Estimator.params`, `EstimatorState.args`).
-        measured: the estimator gets the measured speed (else the observer's).
-        engine_on: the torque path is the engine's (`dprm`, `escl`, and with ``offset_on``
-            the offset estimator `op`, `os_`, `oout`); else `torque` is used as it is.
-        dprm: `Drivetrain.params_array` (empty off the engine path).
-        escl: shape (2,), the engine path's state: the stamp the clutch last slipped or the
-            gear changed (-inf before), the last gear (nan before).
-        offset_on: the engine path learns the engine-torque offset and subtracts it.
-        op, os_, oout: the offset estimator's settings, state and estimate records.
-        bprm: shape (11,), the brake input (`brakes.Brakes.params_array`; kind
-            `BRAKE_NONE`: none).
-        bst: shape (13,), the learnt brake gain's state (`brakes.new_brake_state`).
-        imu_on: the IMU fusion runs (`gp`, `gs`: `imu_grade.GRADE_PARAMS`, `GRADE_STATE`):
-            its regression's mass, once fitted, is the estimator's from the next stamp on
-            (with ``gp.feedback``), and the mass fields of `est` are the regression's once
-            it has data.
-        t: stamp [s].
-        angle: shape (4,), [rad] wheel angles (or speeds [rad/s], as the observer takes).
-        speed: [m/s] measured body speed.
-        torque: shape (4,), [N m] measured wheel torques (read off the engine path only).
-        engine: shape (4,), engine torque [N m], gear, engine speed [rad/s], turbine speed
-            [rad/s] (engine path; the speeds nan where not logged).
-        brake: shape (4,), the brake input (`brake_torques`).
-        imu: shape (2,): stamp [s] of the newest IMU sample (nan: none) and its forward
-            specific force [m/s^2] (read with ``imu_on``).
-        wheel: shape (3, 4), written: angle, omega, omega_dot.
-        wheel_valid: shape (4,), written.
-        body: shape (3, 1), written: speed, accel, jerk of the speed observer.
-        body_valid: shape (1,), written.
-        used: shape (4,), written: the wheel torques the estimator got [N m].
-        est: `estimator_step.ESTIMATES` record, written.
-        grade: `imu_grade.GRADE_OUT` record, written with ``imu_on``: the fused slope.
-
-    Returns:
-        Whether the torque path held (the engine path: clutch engaged, gear known, settled;
-        the brakes: not braking with a switch only, the pressure's torque known).
+        parts: every part, advanced in place.
+        inputs: the inputs; row k is the stamp's.
+        k: the stamp's row.
+        out: the outputs; row k is written.
     """
-    levant_update(wp, wlip, ws, wch, t, angle, wheel, wheel_valid)
+    switches = parts.switches[0]
+    t = inputs.t[k]
+    speed = inputs.body_speed[k]
+    wheel = out.wheel[k]
+    w, s = parts.wheel, parts.speed
+    levant_update(
+        w.params[0], w.lipschitz, w.state[0], w.channels, t, inputs.wheel_angle[k], wheel,
+        out.wheel_valid[k],
+    )  # fmt: skip
     sample = np.empty(1)
     sample[0] = speed
-    levant_update(sp, slip_, ss, sch, t, sample, body, body_valid)
-    v_est = speed if measured else body[0, 0]
+    body = np.empty((3, 1))
+    body_valid = np.empty(1, dtype=np.bool_)
+    levant_update(
+        s.params[0], s.lipschitz, s.state[0], s.channels, t, sample, body, body_valid
+    )  # fmt: skip
+    out.body[k, 0] = body[0, 0]
+    out.body[k, 1] = body[1, 0]
+    out.body[k, 2] = body[2, 0]
+    out.body_valid[k] = body_valid[0]
+    v_est = speed if switches.measured_speed else body[0, 0]
+    used = out.used[k]
     torque_ok = True
-    if engine_on:
+    if switches.engine_path:
+        engine = inputs.engine[k]
+        e = parts.engine
+        dprm, escl = e.drivetrain, e.engine_state
         engine_torque = engine[0]
-        if offset_on:
+        if switches.offset_learnt:
+            oout = e.offset_estimate[0]
             torque_offset_step(
-                op, dprm[ENGINE_INERTIA], os_, t, engine[0], engine[1], engine[2], oout
-            )
+                e.offset_params[0], dprm[ENGINE_INERTIA], e.offset_state[0], t, engine[0],
+                engine[1], engine[2], oout,
+            )  # fmt: skip
             engine_torque = engine_torque - oout.used
+            out.offsets[k] = oout
         engaged = engine_torques(
             dprm, engine_torque, engine[1], engine[2], engine[3], wheel[1], wheel[2], used
         )
@@ -115,7 +258,9 @@ def cascade_step(
         escl[1] = engine[1]
         torque_ok = engaged and t - escl[0] >= dprm[CLUTCH_SETTLE]
     else:
-        used[:] = torque
+        used[:] = inputs.wheel_torque[k]
+    bprm, bst = parts.brakes.params, parts.brakes.state
+    brake = inputs.brake[k]
     braked = bprm[0] != BRAKE_NONE
     learn = braked and bprm[5] > 0.0
     path_ok = torque_ok
@@ -124,29 +269,44 @@ def cascade_step(
         gains = np.empty(4)
         brake_gains(bprm, bst, gains)
         torque_ok = brake_torques(bprm, gains, brake, wheel[1], used) and torque_ok
-    estimator_update(
-        ep, es, fst, sst, vst, t, wheel[1], wheel[2], v_est, body[1, 0], used, torque_ok, est
-    )
+    inp = parts.estimator_input[0]
+    inp.omega[:] = wheel[1]
+    inp.omega_dot[:] = wheel[2]
+    inp.torque[:] = used
+    inp.speed = v_est
+    inp.accel = body[1, 0]
+    inp.torque_ok = torque_ok
+    est = out.estimates[k]
+    estimator_update(parts.estimator, t, inp, est)
     if learn:
-        brake_gain_update(bprm, bst, t, brake, wheel[1], drive, ep, v_est, path_ok, est)
-    if imu_on:
-        _imu_step(ep, es, gp, gs, t, imu, speed, torque_ok, est, grade)
-    return torque_ok
+        brake_gain_update(
+            bprm, bst, t, brake, wheel[1], drive, parts.estimator.params[0], v_est, path_ok,
+            est,
+        )  # fmt: skip
+    if switches.imu_fused:
+        _imu_step(parts, inputs, k, torque_ok, est, out.grade[k])
+    out.torque_valid[k] = torque_ok
 
 
 @jit
 def _imu_step(
-    ep: np.record, es: np.record, gp: np.record, gs: np.record, t: float, imu: FloatArray,
-    speed: float, torque_ok: bool, est: np.record, grade: np.record,
-) -> None:  # fmt: skip
+    parts: CascadeRecords, inputs: CascadeInputs, k: int, torque_ok: bool, est: Any, grade: Any
+) -> None:
     """The IMU fusion on the estimator's outputs, and its mass fed back (see `cascade_step`)."""
+    ep, es = parts.estimator.params[0], parts.estimator.state[0]
+    gp, gs, inp = parts.imu.params[0], parts.imu.state[0], parts.imu.input[0]
+    speed = inputs.body_speed[k]
     # the longitudinal balance without gravity and rolling: what the regression explains
     force = est.fx[0] + est.fx[1] + est.fx[2] + est.fx[3] - math.copysign(est.aero, speed)
-    ok = torque_ok and ep.torque_source != TORQUE_NONE and math.isfinite(force)
-    imu_grade_step(
-        gp, gs, t, imu[0], imu[1], speed, est.slope, est.slope_valid, force, ok,
-        est.mass_used, grade,
-    )  # fmt: skip
+    inp.imu_stamp = inputs.imu[k, 0]
+    inp.f_x = inputs.imu[k, 1]
+    inp.speed = speed
+    inp.slope_force = est.slope
+    inp.force_valid = est.slope_valid
+    inp.force = force
+    inp.force_ok = torque_ok and ep.torque_source != TORQUE_NONE and math.isfinite(force)
+    inp.mass_used = est.mass_used
+    imu_grade_step(gp, gs, inputs.t[k], inp, grade)
     if gs.fit_time > 0.0:
         # the mass published is the regression's once it has data (an IMU that never
         # delivers leaves the estimator's)
@@ -158,50 +318,13 @@ def _imu_step(
 
 
 @jit
-def cascade_block(
-    wp_: np.ndarray, wlip: FloatArray, ws_: np.ndarray, wch: np.recarray,
-    sp_: np.ndarray, slip_: FloatArray, ss_: np.ndarray, sch: np.recarray,
-    ep_: np.ndarray, es_: np.ndarray, fst: FloatArray, sst: FloatArray, vst: FloatArray,
-    measured: bool, engine_on: bool, dprm: FloatArray, escl: FloatArray, offset_on: bool,
-    op_: np.ndarray, os__: np.ndarray, oout_: np.ndarray, bprm: FloatArray, bst: FloatArray,
-    imu_on: bool, gp_: np.ndarray, gs_: np.ndarray,
-    t: FloatArray, angles: FloatArray, speeds: FloatArray, torques: FloatArray,
-    engine: FloatArray, brakes: FloatArray, imu: FloatArray, wheel: FloatArray,
-    wheel_valid: BoolArray, body: FloatArray,
-    body_valid: BoolArray, used: FloatArray, est: np.ndarray, torque_valid: BoolArray,
-    offsets: np.ndarray, grade: np.ndarray,
-) -> None:  # fmt: skip
-    """`cascade_step` over N stamps (the parts' records carry on from block to block).
+def cascade_block(parts: CascadeRecords, inputs: CascadeInputs, out: CascadeOutputs) -> None:
+    """`cascade_step` over the N stamps of `inputs` (the parts carry on from block to block).
 
     Args:
-        (parts): as `cascade_step`, each record as the 1-element array it lives in
-            (`kernel._jit.record_array`: numba types arrays on its fast path, records not).
-        t: shape (N,), [s].
-        angles: shape (N, 4); speeds (N,); torques (N, 4); engine (N, 4); brakes (N, 4);
-            imu (N, 2) (as `cascade_step`).
-        wheel: shape (N, 3, 4), written; wheel_valid (N, 4); body (N, 3); body_valid (N,).
-        used: shape (N, 4), written: the wheel torques the estimator got.
-        est: shape (N,) `estimator_step.ESTIMATES` records, written.
-        torque_valid: shape (N,), written.
-        offsets: shape (N,) `torque_offset.OFFSET_ESTIMATE_DTYPE` records written where the
-            offset is learnt, else shape (0,).
-        grade: shape (N,) `imu_grade.GRADE_OUT` records written with ``imu_on``.
+        parts: every part, advanced in place.
+        inputs: N stamps.
+        out: N rows, written.
     """
-    wp, ws, sp, ss, ep, es = wp_[0], ws_[0], sp_[0], ss_[0], ep_[0], es_[0]
-    op, os_, oout = op_[0], os__[0], oout_[0]
-    gp, gs = gp_[0], gs_[0]
-    body1 = np.empty((3, 1))
-    valid1 = np.empty(1, dtype=np.bool_)
-    for k in range(t.shape[0]):
-        torque_valid[k] = cascade_step(
-            wp, wlip, ws, wch, sp, slip_, ss, sch, ep, es, fst, sst, vst, measured, engine_on,
-            dprm, escl, offset_on, op, os_, oout, bprm, bst, imu_on, gp, gs, t[k], angles[k],
-            speeds[k], torques[k], engine[k], brakes[k], imu[k], wheel[k], wheel_valid[k],
-            body1, valid1, used[k], est[k], grade[k],
-        )  # fmt: skip
-        if offsets.shape[0] > 0:
-            offsets[k] = oout
-        body[k, 0] = body1[0, 0]
-        body[k, 1] = body1[1, 0]
-        body[k, 2] = body1[2, 0]
-        body_valid[k] = valid1[0]
+    for k in range(inputs.t.shape[0]):
+        cascade_step(parts, inputs, k, out)

@@ -31,6 +31,7 @@ from vd_observer_node.estimation.levant_step import (
     INPUT_DERIVATIVES,
     PARAMS_DTYPE,
     STATE_DTYPE,
+    LevantParts,
     levant_reset,
     levant_update,
     levant_update_arrays,
@@ -267,6 +268,14 @@ class LevantDifferentiator:
         levant_update(
             self.params, self.lipschitz, self.record.copy(), self.channels.copy(), 0.0,
             np.zeros(self._n), self._out, self._valid,
+        )  # fmt: skip
+
+    def parts(self) -> LevantParts:
+        """The records as the compiled loops take them (`levant_step.LevantParts`; views of
+        the live records, which are never replaced)."""
+        return LevantParts(
+            record_array(self.params), self.lipschitz, record_array(self.record),
+            self.channels.view(np.ndarray),
         )  # fmt: skip
 
     @property

@@ -58,9 +58,11 @@ from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.drivetrain import TORQUE_MEASURED, TORQUE_SOURCES
 from vd_observer_node.estimation.estimator_step import (
     ESTIMATES,
+    ESTIMATOR_INPUT,
     ESTIMATOR_PARAMS,
     ESTIMATOR_STATE,
     REJECTED_SLOT,
+    EstimatorParts,
     estimator_reset,
     estimator_update_arrays,
 )
@@ -495,14 +497,17 @@ class Estimator:
         self._faults = FaultCounter(ESTIMATOR_FAULTS)
         self._synced = np.zeros(len(ESTIMATOR_FAULTS), dtype=np.int64)
         self._est = new_record(ESTIMATES)
-        #: the records as the arrays they live in (`update`'s fast numba call)
-        self._arrays = tuple(record_array(r) for r in (self.params, self.state.record, self._est))
+        self._input = new_record(ESTIMATOR_INPUT)
+        #: the records (never replaced: a reset works in place) as `estimator_update` takes
+        #: them; input and output as the arrays they live in (`update`'s fast numba call)
+        self.parts = EstimatorParts(
+            record_array(self.params), record_array(self.state.record), *self.state.args[1:]
+        )
+        self._io = (record_array(self._input), record_array(self._est))
         self._last: Estimates | None = None  # what `last` and a rejected stamp return
         # compile (or load from numba's cache) now, on copies, not at the first stamp
-        p_a, s_a, e_a = (a.copy() for a in self._arrays)
-        f_st, s_st, v_st = (x.copy() for x in self.state.args[1:])
-        z = np.zeros(4)
-        estimator_update_arrays(p_a, s_a, f_st, s_st, v_st, 0.0, z, z, 0.0, 0.0, z, True, e_a)
+        copies = EstimatorParts(*(a.copy() for a in self.parts))
+        estimator_update_arrays(copies, 0.0, *(a.copy() for a in self._io))
 
     def reset(self) -> None:
         """Forget the history (slope back to 0, filters empty); fault counters stay."""
@@ -581,13 +586,12 @@ class Estimator:
             InputShapeError: a per-wheel input is not of shape (4,).
         """
         rejected = self.rejected_count
-        _, f_stages, s_stages, v_stages = self.state.args
-        p_a, s_a, est_a = self._arrays
-        estimator_update_arrays(
-            p_a, s_a, f_stages, s_stages, v_stages, float(t), _as_wheels('omega', omega),
-            _as_wheels('omega_dot', omega_dot), float(speed), float(accel),
-            _as_wheels('torque', torque), bool(torque_ok), est_a,
-        )  # fmt: skip
+        inp = self._input
+        inp.omega[:] = _as_wheels('omega', omega)
+        inp.omega_dot[:] = _as_wheels('omega_dot', omega_dot)
+        inp.torque[:] = _as_wheels('torque', torque)
+        inp.speed, inp.accel, inp.torque_ok = float(speed), float(accel), bool(torque_ok)
+        estimator_update_arrays(self.parts, float(t), *self._io)
         if self.rejected_count != rejected:
             # a rejected stamp: the last estimate itself, or a new empty one before any
             if self._last is not None and self.state.record.has_last:

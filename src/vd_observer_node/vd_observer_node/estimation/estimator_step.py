@@ -17,7 +17,7 @@ plain arrays next to them: force (order, 5), slope (order, 1), speed (order, 1).
 from __future__ import annotations
 
 import math
-from typing import Final
+from typing import Any, Final, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,10 +52,12 @@ from vd_observer_node.kernel._jit import jit
 
 __all__ = [
     'ESTIMATES',
+    'ESTIMATOR_INPUT',
     'ESTIMATOR_PARAMS',
     'ESTIMATOR_STATE',
     'GAP_FORCE_CHANGE',
     'REJECTED_SLOT',
+    'EstimatorParts',
     'estimator_reset',
     'estimator_update',
     'estimator_update_arrays',
@@ -178,6 +180,43 @@ ESTIMATOR_STATE: Final = np.dtype(
     ],
     align=True,
 )
+
+
+#: One stamp's inputs of the estimator: omega [rad/s] and omega_dot [rad/s^2] per wheel (the
+#: wheel observer's), torque [N m] per wheel (drive minus brake), speed [m/s] and accel
+#: [m/s^2] of the body, and torque_ok: False where the torque source cannot be trusted at
+#: the stamp (the engine path while the clutch slips: mu and slope are then invalid).
+ESTIMATOR_INPUT: Final = np.dtype(
+    [
+        ('omega', 'f8', (4,)),
+        ('omega_dot', 'f8', (4,)),
+        ('torque', 'f8', (4,)),
+        ('speed', 'f8'),
+        ('accel', 'f8'),
+        ('torque_ok', 'b1'),
+    ],
+    align=True,
+)
+
+
+class EstimatorParts(NamedTuple):
+    """The estimator's records and arrays, as its step function takes them (records as the
+    1-element arrays they live in: numba types arrays on its fast path; a NamedTuple, as the
+    low-pass stages' length is a setting).
+
+    Attributes:
+        params: shape (1,), `ESTIMATOR_PARAMS`.
+        state: shape (1,), `ESTIMATOR_STATE`.
+        force_stages: (order, 5) the force low-pass stages.
+        slope_stages: (order, 1) the slope low-pass stages.
+        speed_stages: (order, 1) the speed low-pass stages.
+    """
+
+    params: NDArray[Any]
+    state: NDArray[Any]
+    force_stages: FloatArray
+    slope_stages: FloatArray
+    speed_stages: FloatArray
 
 
 @jit
@@ -341,13 +380,14 @@ def _bridge_speed(
 
 @jit
 def _estimate(
-    p: np.record, s: np.record, f_stages: FloatArray, s_stages: FloatArray,
-    v_stages: FloatArray, t: float, dt: float, x: FloatArray, wheel_ok: BoolArray,
+    parts: EstimatorParts, t: float, dt: float, x: FloatArray, wheel_ok: BoolArray,
     body_ok: bool, torque_known: bool, est: np.record,
 ) -> None:  # fmt: skip
     """Every estimate of an accepted stamp from the packed inputs ``x`` (14,); without
     ``torque_known`` (a torque not finite at this stamp) no Fx is computed from an old one:
     Fx 0 and the load transfer from the acceleration, as without torque."""
+    p, s = parts.params[0], parts.state[0]
+    f_stages, s_stages, v_stages = parts.force_stages, parts.slope_stages, parts.speed_stages
     gravity = p.gravity
     v = x[12]
     accel = x[13]
@@ -485,34 +525,23 @@ def _reject(p: np.record, s: np.record, kind: int, t: float, est: np.record) -> 
 
 
 @jit
-def estimator_update(
-    p: np.record, s: np.record, f_stages: FloatArray, s_stages: FloatArray,
-    v_stages: FloatArray, t: float, omega: FloatArray, omega_dot: FloatArray, speed: float,
-    accel: float, torque: FloatArray, torque_ok: bool, est: np.record,
-) -> None:  # fmt: skip
+def estimator_update(parts: EstimatorParts, t: float, inp: np.record, est: np.record) -> None:
     """Estimate everything for stamp t into ``est`` (`estimator.Estimator.update`).
 
     Args:
-        p: `ESTIMATOR_PARAMS` record.
-        s: `ESTIMATOR_STATE` record (its fault counts are incremented).
-        f_stages: (order, 5) force low-pass stages.
-        s_stages: (order, 1) slope low-pass stages.
-        v_stages: (order, 1) speed low-pass stages.
+        parts: the estimator's records (its state advanced, its fault counts incremented).
         t: stamp [s].
-        omega: shape (4,), [rad/s] wheel speeds.
-        omega_dot: shape (4,), [rad/s^2] wheel accelerations.
-        speed: body speed [m/s].
-        accel: body acceleration [m/s^2].
-        torque: shape (4,), [N m] wheel torques.
-        torque_ok: False where the torque source cannot be trusted at this stamp.
+        inp: `ESTIMATOR_INPUT` record.
         est: `ESTIMATES` record written.
     """
+    p, s = parts.params[0], parts.state[0]
+    torque_ok = inp.torque_ok
     packed = np.empty(14)
-    packed[0:4] = omega
-    packed[4:8] = omega_dot
-    packed[8:12] = torque
-    packed[12] = speed
-    packed[13] = accel
+    packed[0:4] = inp.omega
+    packed[4:8] = inp.omega_dot
+    packed[8:12] = inp.torque
+    packed[12] = inp.speed
+    packed[13] = inp.accel
     if not math.isfinite(t):
         _reject(p, s, _NON_FINITE_STAMP, t, est)
         return
@@ -553,9 +582,7 @@ def estimator_update(
     if not torque_ok:
         wheel_ok[:] = False
         body_ok = False
-    _estimate(
-        p, s, f_stages, s_stages, v_stages, t, dt, packed, wheel_ok, body_ok, torque_known, est
-    )
+    _estimate(parts, t, dt, packed, wheel_ok, body_ok, torque_known, est)
     # one sum is the cheapest check: NaN/Inf anywhere makes it non-finite
     total = est.aero + est.slope
     for i in range(4):
@@ -572,14 +599,9 @@ def estimator_update(
 
 @jit
 def estimator_update_arrays(
-    p_a: np.ndarray, s_a: np.ndarray, f_stages: FloatArray, s_stages: FloatArray,
-    v_stages: FloatArray, t: float, omega: FloatArray, omega_dot: FloatArray, speed: float,
-    accel: float, torque: FloatArray, torque_ok: bool, est_a: np.ndarray,
-) -> None:  # fmt: skip
-    """`estimator_update` with its records as the 1-element arrays they live in
-    (`kernel._jit.record_array`): what `Estimator.update` calls once a stamp, as numba types
-    arrays on its fast path and records not."""
-    estimator_update(
-        p_a[0], s_a[0], f_stages, s_stages, v_stages, t, omega, omega_dot, speed, accel,
-        torque, torque_ok, est_a[0],
-    )  # fmt: skip
+    parts: EstimatorParts, t: float, inp_a: np.ndarray, est_a: np.ndarray
+) -> None:
+    """`estimator_update` with its input and output records as the 1-element arrays they
+    live in (`kernel._jit.record_array`): what `Estimator.update` calls once a stamp, as numba
+    types arrays on its fast path and records not."""
+    estimator_update(parts, t, inp_a[0], est_a[0])

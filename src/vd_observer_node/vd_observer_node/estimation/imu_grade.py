@@ -64,6 +64,7 @@ from vd_observer_node.estimation.rate_settings import REFERENCE_RATE_HZ
 from vd_observer_node.kernel._jit import jit, new_record
 
 __all__ = [
+    'GRADE_INPUT',
     'GRADE_OUT',
     'GRADE_PARAMS',
     'GRADE_STATE',
@@ -89,6 +90,25 @@ SOURCE_IMU: Final = 2
 _ORDER: Final = 3  # stages of the grade's low-pass on (f_x, v) (the lead reads 3)
 _FIT_ORDER: Final = 2  # stages of the regression's low-pass on (f_x, v, F)
 _KMH_REFERENCE: Final = 160.0  # [km/h] speed scale of paper eq. 7 (as estimator_step)
+#: One stamp's inputs of the fusion: imu_stamp [s] the stamp of the newest IMU sample (nan:
+#: none yet) and f_x [m/s^2] its longitudinal specific force in body axes; speed [m/s] the
+#: body's; slope_force [rad] the force balance's slope (`estimator_step`) and force_valid;
+#: force [N] the longitudinal force balance without gravity and rolling, sum(Fx) - aero
+#: (signed), and force_ok: the wheel torques held at the stamp (the regression may use it);
+#: mass_used [kg] the mass the force balance's slope used (`Estimates.mass_used`).
+GRADE_INPUT: Final = np.dtype(
+    [
+        ('imu_stamp', 'f8'),
+        ('f_x', 'f8'),
+        ('speed', 'f8'),
+        ('slope_force', 'f8'),
+        ('force_valid', 'b1'),
+        ('force', 'f8'),
+        ('force_ok', 'b1'),
+        ('mass_used', 'f8'),
+    ],
+    align=True,
+)
 
 GRADE_PARAMS: Final = np.dtype(
     [
@@ -516,37 +536,19 @@ def _mass_std(p: np.record, s: np.record) -> float:
 
 
 @jit
-def imu_grade_step(
-    p: np.record,
-    s: np.record,
-    t: float,
-    imu_stamp: float,
-    f_x: float,
-    speed: float,
-    slope_force: float,
-    force_valid: bool,
-    force: float,
-    force_ok: bool,
-    mass_used: float,
-    out: np.record,
-) -> None:
+def imu_grade_step(p: np.record, s: np.record, t: float, inp: np.record, out: np.record) -> None:
     """One stamp of the fusion.
 
     Args:
         p: `GRADE_PARAMS` record.
         s: `GRADE_STATE` record, advanced.
         t: stamp [s].
-        imu_stamp: stamp of the newest IMU sample at `t` [s] (nan: none yet).
-        f_x: its longitudinal specific force in body axes [m/s^2].
-        speed: body speed [m/s].
-        slope_force: the force balance's slope [rad] (`estimator_step`).
-        force_valid: whether that slope is valid.
-        force: the longitudinal force balance without gravity and rolling, sum(Fx) -
-            aero [N] (signed).
-        force_ok: the wheel torques held at the stamp (the regression may use it).
-        mass_used: the mass [kg] the force balance's slope used (`Estimates.mass_used`).
+        inp: `GRADE_INPUT` record.
         out: `GRADE_OUT` record, written.
     """
+    imu_stamp, f_x, speed = inp.imu_stamp, inp.f_x, inp.speed
+    slope_force, force_valid = inp.slope_force, inp.force_valid
+    force, force_ok, mass_used = inp.force, inp.force_ok, inp.mass_used
     dt = 0.0 if math.isnan(s.last_t) else t - s.last_t
     if dt < 0.0:  # a stamp out of order: the estimator rejected it too
         dt = 0.0

@@ -60,7 +60,7 @@ counter); the per-channel steps `euler_step`, `implicit_step`, `first_order_eule
 from __future__ import annotations
 
 import math
-from typing import Final
+from typing import Any, Final, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -75,6 +75,7 @@ __all__ = [
     'INPUT_DERIVATIVES',
     'PARAMS_DTYPE',
     'STATE_DTYPE',
+    'LevantParts',
     'euler_step',
     'first_order_euler_step',
     'first_order_implicit_step',
@@ -137,6 +138,26 @@ CHANNEL_DTYPE: Final = np.dtype(
 def new_channels(n: int) -> np.recarray[tuple[int], np.dtype[np.record]]:
     """A zeroed record array (n,) of `CHANNEL_DTYPE` (``channels[i].z`` is a view)."""
     return np.zeros(n, CHANNEL_DTYPE).view(np.recarray)
+
+
+class LevantParts(NamedTuple):
+    """One differentiator's records and arrays, as the compiled loops take them
+    (`differentiator.LevantDifferentiator.parts`): params and state as the 1-element arrays
+    they live in (numba types arrays on its fast path), the Lipschitz constants per channel,
+    and the per-channel records as a plain structured array (a recarray's attributes are
+    Python lookups).
+
+    Attributes:
+        params: shape (1,), `PARAMS_DTYPE`.
+        lipschitz: shape (n,), [input units / s^(order)] per channel.
+        state: shape (1,), `STATE_DTYPE`.
+        channels: shape (n,), `CHANNEL_DTYPE`.
+    """
+
+    params: NDArray[Any]
+    lipschitz: FloatArray
+    state: NDArray[Any]
+    channels: Any  # a plain structured array; `levant_update` types it as a recarray
 
 
 @jit

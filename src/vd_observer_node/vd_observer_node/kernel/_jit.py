@@ -28,6 +28,7 @@ __all__ = [
     'clear_stale_cache',
     'jit',
     'new_record',
+    'new_records',
     'record_array',
     'sources_digest',
 ]
@@ -135,6 +136,12 @@ def new_record(dtype: np.dtype[Any]) -> np.record:
     compiled or not), living in a 1-element array (`record_array` gives it back)."""
     record: np.record = np.zeros(1, dtype).view(np.recarray)[0]
     return record
+
+
+def new_records(dtype: np.dtype[Any], n: int) -> Any:
+    """N zeroed records of `dtype` as a plain ndarray whose elements are ``np.record``s:
+    fields read as attributes by the plain Python source (``VD_JIT=0``) as by numba."""
+    return np.zeros(n, dtype).view(np.recarray).view(np.ndarray)
 
 
 def record_array(record: Any) -> Any:

@@ -51,7 +51,6 @@ from vd_observer_node.situation.monitor_step import (
     MONITOR_STATE,
     POTENTIAL_MOVED,
     AlertParts,
-    FastObserver,
     MonitorParts,
     SituationBlock,
     SituationInputs,
@@ -206,14 +205,12 @@ class SituationMonitor:
         #: the output buffers of `update` (one stamp)
         self._one = SituationBlock.empty(1)
         r = record_array
-        fast_params, lipschitz, fast_state, channels = self.fast.kernel_args
         f, m = self.friction, self.monitor
         #: the records above as `situation_block` takes them (never replaced: every reset
         #: works in place, so they are built once)
         self.parts = MonitorParts(
             r(self.params), r(self.state),
-            # a recarray's attributes are Python lookups: the plain view
-            FastObserver(r(fast_params), lipschitz, r(fast_state), channels.view(np.ndarray)),
+            self.fast.parts(),
             f.parts, AlertParts(r(m.params), r(m.state), r(m.input)),
         )  # fmt: skip
         self.reset()

@@ -15,7 +15,7 @@ from typing import Any, Final, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from vd_observer_node.estimation.levant_step import levant_reset, levant_update
+from vd_observer_node.estimation.levant_step import LevantParts, levant_reset, levant_update
 from vd_observer_node.kernel._jit import jit
 from vd_observer_node.situation.alerts import ALERT_KINDS, alerts_reset, alerts_update
 from vd_observer_node.situation.friction_fit import (
@@ -31,7 +31,6 @@ __all__ = [
     'MONITOR_STATE',
     'POTENTIAL_MOVED',
     'AlertParts',
-    'FastObserver',
     'MonitorParts',
     'SituationBlock',
     'SituationInputs',
@@ -70,18 +69,6 @@ def monitor_restarts(p: Any, s: Any, t: float) -> bool:
     return not math.isnan(s.t) and t < s.t - p.max_gap
 
 
-class FastObserver(NamedTuple):
-    """The fast wheel observer's records and arrays (`LevantDifferentiator.kernel_args`):
-    params and state as the 1-element arrays they live in, the Lipschitz constants and the
-    per-channel records as plain arrays."""
-
-    params: NDArray[Any]
-    lipschitz: FloatArray
-    state: NDArray[Any]
-    #: the per-channel records as a plain ndarray view (`levant_step` reads them by field)
-    channels: Any
-
-
 class AlertParts(NamedTuple):
     """The alerts' records, each as the 1-element array it lives in: `alerts.ALERT_PARAMS`,
     `alerts.ALERT_STATE` and the stamp's `alerts.ALERT_INPUT` (a buffer)."""
@@ -107,7 +94,7 @@ class MonitorParts(NamedTuple):
 
     params: NDArray[Any]
     state: NDArray[Any]
-    fast: FastObserver
+    fast: LevantParts
     friction: FrictionFit
     alerts: AlertParts
 
