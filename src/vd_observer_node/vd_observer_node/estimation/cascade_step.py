@@ -200,7 +200,7 @@ class CascadeOutputs(NamedTuple):
 
 @jit
 def cascade_step(
-    parts: CascadeRecords, inputs: CascadeInputs, k: int, out: CascadeOutputs
+    parts: CascadeRecords, inputs: CascadeInputs, k: int, out: CascadeOutputs, body: FloatArray
 ) -> None:
     """Stamp k: wheel and speed observers, the torque path, the estimator, then the IMU.
 
@@ -213,6 +213,8 @@ def cascade_step(
         inputs: the inputs; row k is the stamp's.
         k: the stamp's row.
         out: the outputs; row k is written.
+        body: shape (3, 1), a buffer for the speed observer's output (allocated once a block:
+            the observer writes channel-major).
     """
     switches = parts.switches[0]
     t = inputs.t[k]
@@ -223,17 +225,13 @@ def cascade_step(
         w.params[0], w.lipschitz, w.state[0], w.channels, t, inputs.wheel_angle[k], wheel,
         out.wheel_valid[k],
     )  # fmt: skip
-    sample = np.empty(1)
-    sample[0] = speed
-    body = np.empty((3, 1))
-    body_valid = np.empty(1, dtype=np.bool_)
     levant_update(
-        s.params[0], s.lipschitz, s.state[0], s.channels, t, sample, body, body_valid
+        s.params[0], s.lipschitz, s.state[0], s.channels, t, inputs.body_speed[k : k + 1], body,
+        out.body_valid[k : k + 1],
     )  # fmt: skip
     out.body[k, 0] = body[0, 0]
     out.body[k, 1] = body[1, 0]
     out.body[k, 2] = body[2, 0]
-    out.body_valid[k] = body_valid[0]
     v_est = speed if switches.measured_speed else body[0, 0]
     used = out.used[k]
     torque_ok = True
@@ -326,5 +324,6 @@ def cascade_block(parts: CascadeRecords, inputs: CascadeInputs, out: CascadeOutp
         inputs: N stamps.
         out: N rows, written.
     """
+    body = np.empty((3, 1))
     for k in range(inputs.t.shape[0]):
-        cascade_step(parts, inputs, k, out)
+        cascade_step(parts, inputs, k, out, body)
