@@ -116,9 +116,9 @@ def test_the_vehicle_file_gives_the_automatic_gearbox_and_brakes() -> None:
     line = Drivetrain.from_params(params)
     assert line.driven_axle == 'all' and line.front_share == 0.7
     assert line.gear_efficiency == (0.9, 0.95) and line.converter is not None
-    assert Brakes.from_params('pressure', params).params_array()[:6].tolist() == [
-        2.0, 30.0, 30.0, 12.0, 12.0, 0.0,
-    ]  # fmt: skip
+    brake_params = Brakes.from_params('pressure', params).params()[0]
+    assert brake_params.kind == 2 and brake_params.gain.tolist() == [30.0, 30.0, 12.0, 12.0]
+    assert not brake_params.learn
     data['torque_converter']['torque_ratio'] = [2.0, 1.0]  # type: ignore[index]
     with pytest.raises(Exception, match=r'torque_converter\.torque_ratio must have one value'):
         parse_estimation_vehicle(data)
@@ -131,9 +131,9 @@ def test_the_vehicle_file_gives_the_automatic_gearbox_and_brakes() -> None:
 
 
 def test_brake_pressure_opposes_each_wheel_and_a_switch_makes_the_torque_unknown() -> None:
-    bprm = Brakes('pressure', 40.0, 15.0).params_array()
+    bprm = Brakes('pressure', 40.0, 15.0).params()[0]
     gains = np.empty(4)
-    brake_gains(bprm, new_brake_state(), gains)
+    brake_gains(bprm, new_brake_state()[0], gains)
     assert gains.tolist() == [40.0, 40.0, 15.0, 15.0]
     used = np.array([300.0, 300.0, 0.0, 0.0])
     omega = np.array([20.0, 20.0, -20.0, 20.0])
@@ -145,12 +145,12 @@ def test_brake_pressure_opposes_each_wheel_and_a_switch_makes_the_torque_unknown
     # a braked wheel at a standstill: a reaction, not held
     assert not brake_torques(bprm, gains, np.full(4, 5.0), np.zeros(4), np.zeros(4))
     # a gain still to be learnt: no brake torque known while the pressure is on
-    learn = Brakes('pressure', learn=True).params_array()
-    brake_gains(learn, new_brake_state(), gains)
+    learn = Brakes('pressure', learn=True).params()[0]
+    brake_gains(learn, new_brake_state()[0], gains)
     assert np.isnan(gains).all()
     assert brake_torques(learn, gains, np.zeros(4), omega, np.zeros(4))
     assert not brake_torques(learn, gains, np.full(4, 3.0), omega, np.zeros(4))
-    switch = Brakes('switch').params_array()
+    switch = Brakes('switch').params()[0]
     assert brake_torques(switch, gains, np.array([0.0, 0.0, 0.0, 0.0]), omega, used)
     assert not brake_torques(switch, gains, np.array([1.0, 1.0, 1.0, 1.0]), omega, used)
     assert not brake_torques(switch, gains, np.full(4, math.nan), omega, used)
@@ -203,8 +203,9 @@ def test_the_brake_gain_is_learnt_from_the_decelerations() -> None:
         brake=drive['brake'], brakes=Brakes('pressure', learn=True), state=state,
     )  # fmt: skip
     assert state.parts is not None
-    gain, _var, braking_time, converged = state.parts.brake_state[:4]
-    assert converged == 1.0 and braking_time >= 1.0
+    learnt = state.parts.brake_parts.state[0]
+    gain, braking_time = learnt.gain, learnt.excited_time
+    assert learnt.converged and braking_time >= 1.0
     assert gain == pytest.approx(30.0, rel=0.03)
     t = drive['t']
     first = (t >= 10.0) & (t < 12.0)

@@ -264,7 +264,7 @@ class Chain:
         stamp, speeds = inputs.t, inputs.body_speed
         torques = inputs.wheel_torque[0]
         est = out.estimates[0]
-        if parts.engine_on or parts.bprm[0] != 0.0:
+        if parts.engine_on or parts.brakes.kind != 'none':
             # the torques the engine path and brakes gave the estimator (0 where none)
             torques = np.where(np.isfinite(out.used[0]), out.used[0], 0.0)
         wheel = out.wheel[0]

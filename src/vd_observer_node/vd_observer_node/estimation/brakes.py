@@ -33,21 +33,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 from vd_common.vehicle.estimation import EstimationVehicleParams
 
 from vd_observer_node.errors import ConfigurationError
-from vd_observer_node.kernel._jit import jit
+from vd_observer_node.kernel._jit import jit, new_records
 
 __all__ = [
-    'BRAKE_GAIN_SLOTS',
     'BRAKE_KINDS',
     'BRAKE_NONE',
+    'BRAKE_PARAMS',
     'BRAKE_PRESSURE',
+    'BRAKE_STATE',
     'BRAKE_SWITCH',
+    'BrakeParts',
     'Brakes',
     'brake_gain_update',
     'brake_gains',
@@ -66,15 +68,55 @@ BRAKE_PRESSURE: Final = 2
 BRAKE_KINDS: Final = ('none', 'switch', 'pressure')
 #: [rad/s] below this wheel speed a brake torque's direction is unknown (a reaction)
 _STILL: Final = 0.5
-#: the learnt gain's state (`new_brake_state`): gain [N m per unit], its variance, braking
-#: time used [s], converged (0/1), the slope before the braking [rad] (nan: none), last stamp
-#: [s], then the two first-order stages of the force, the speed and the regressor, and the
-#: filtered speed of the stamp before (nan: filters not started)
-BRAKE_GAIN_SLOTS: Final = (
-    'gain', 'variance', 'excited_time', 'converged', 'theta', 't',
-    'f1', 'f2', 'v1', 'v2', 'p1', 'p2', 'v_prev',
-)  # fmt: skip
-_G, _VAR, _TIME, _CONV, _THETA, _T, _F1, _F2, _V1, _V2, _P1, _P2, _VP = range(13)
+#: The brake input's settings (`Brakes.params`): kind (`BRAKE_KINDS` code), gain [N m per
+#: unit] of each wheel FL, FR, RL, RR, learn (one gain learnt online), then the learnt gain's
+#: memory [s], force_noise [N], min_braking_time [s], converged_std_ratio [-] and
+#: filter_tau [s] (`Brakes`).
+BRAKE_PARAMS: Final = np.dtype(
+    [
+        ('kind', 'i8'),
+        ('gain', 'f8', (4,)),
+        ('learn', 'b1'),
+        ('memory', 'f8'),
+        ('force_noise', 'f8'),
+        ('min_braking_time', 'f8'),
+        ('converged_std_ratio', 'f8'),
+        ('filter_tau', 'f8'),
+    ],
+    align=True,
+)
+#: The learnt gain's state (`new_brake_state`): gain [N m per unit] and its variance, the
+#: braking time used [s], converged, theta [rad] the slope before the braking (nan: none), t
+#: [s] the last stamp, the two first-order stages of the balance's force [N], the speed
+#: [m/s] and the regressor (pressure sum / R), and speed_before [m/s] the filtered speed of
+#: the stamp before (force_stages[0] nan: the filters have not started).
+BRAKE_STATE: Final = np.dtype(
+    [
+        ('gain', 'f8'),
+        ('variance', 'f8'),
+        ('excited_time', 'f8'),
+        ('converged', 'b1'),
+        ('theta', 'f8'),
+        ('t', 'f8'),
+        ('force_stages', 'f8', (2,)),
+        ('speed_stages', 'f8', (2,)),
+        ('regressor_stages', 'f8', (2,)),
+        ('speed_before', 'f8'),
+    ],
+    align=True,
+)
+
+
+class BrakeParts(NamedTuple):
+    """The brake input's records, each as the 1-element array it lives in.
+
+    Attributes:
+        params: `BRAKE_PARAMS` (kind `BRAKE_NONE`: no brake input).
+        state: `BRAKE_STATE`.
+    """
+
+    params: NDArray[Any]
+    state: NDArray[Any]
 
 
 @dataclass(frozen=True)
@@ -141,21 +183,30 @@ class Brakes:
             return cls('pressure', learn=True)
         return cls('pressure', params.brakes.gain_front, params.brakes.gain_rear)
 
-    def params_array(self) -> FloatArray:
-        """shape (11,): the kind's code, the gain of FL, FR, RL, RR, learn (0/1), memory,
-        force noise, minimum braking time, converged standard-deviation ratio, filter tau."""
-        f, r = self.gain_front, self.gain_rear
-        return np.array(
-            [float(BRAKE_KINDS.index(self.kind)), f, f, r, r, float(self.learn), self.memory,
-             self.force_noise, self.min_braking_time, self.converged_std_ratio,
-             self.filter_tau]
-        )  # fmt: skip
+    def params(self) -> NDArray[Any]:
+        """The settings as a `BRAKE_PARAMS` record in the 1-element array it lives in."""
+        record: NDArray[Any] = new_records(BRAKE_PARAMS, 1)
+        record['kind'] = BRAKE_KINDS.index(self.kind)
+        record['gain'] = (self.gain_front, self.gain_front, self.gain_rear, self.gain_rear)
+        for name in ('learn', 'memory', 'force_noise', 'min_braking_time'):
+            record[name] = getattr(self, name)
+        record['converged_std_ratio'] = self.converged_std_ratio
+        record['filter_tau'] = self.filter_tau
+        return record
+
+    def parts(self) -> BrakeParts:
+        """Its settings and a learnt gain's state before any braking."""
+        return BrakeParts(self.params(), new_brake_state())
 
 
-def new_brake_state() -> FloatArray:
-    """shape (13,): a learnt gain's state before any braking (`BRAKE_GAIN_SLOTS`)."""
-    state = np.full(len(BRAKE_GAIN_SLOTS), math.nan)
-    state[:4] = [0.0, math.inf, 0.0, 0.0]
+def new_brake_state() -> NDArray[Any]:
+    """A learnt gain's state before any braking: a `BRAKE_STATE` record in the 1-element
+    array it lives in (gain 0 of infinite variance, nothing filtered)."""
+    state: NDArray[Any] = new_records(BRAKE_STATE, 1)
+    for name in ('theta', 't', 'force_stages', 'speed_stages', 'regressor_stages'):
+        state[name] = math.nan
+    state['speed_before'] = math.nan
+    state['variance'] = math.inf
     return state
 
 
@@ -165,24 +216,25 @@ def no_brakes(n: int) -> FloatArray:
 
 
 @jit
-def brake_gains(bprm: FloatArray, bst: FloatArray, gains: FloatArray) -> None:
-    """The gain of each wheel into ``gains`` (4,): the file's, or the learnt one once
-    converged (nan before: the brake torque is then unknown)."""
-    if bprm[5] > 0.0:
-        gains[:] = bst[_G] if bst[_CONV] > 0.0 else math.nan
+def brake_gains(p: np.record, s: np.record, gains: FloatArray) -> None:
+    """The gain of each wheel into ``gains`` (4,) from the `BRAKE_PARAMS` and `BRAKE_STATE`
+    records: the file's, or the learnt one once converged (nan before: the brake torque is
+    then unknown)."""
+    if p.learn:
+        gains[:] = s.gain if s.converged else math.nan
     else:
-        gains[:] = bprm[1:5]
+        gains[:] = p.gain
 
 
 @jit
 def brake_torques(
-    bprm: FloatArray, gains: FloatArray, brake: FloatArray, omega: FloatArray, used: FloatArray
+    p: np.record, gains: FloatArray, brake: FloatArray, omega: FloatArray, used: FloatArray
 ) -> bool:
     """Take the brake torques off the wheel torques ``used`` (4,) [N m], in place; returns
     whether the torques hold at this stamp.
 
     Args:
-        bprm: shape (10,), `Brakes.params_array`.
+        p: `BRAKE_PARAMS` record.
         gains: shape (4,), [N m per unit] (`brake_gains`; nan: not known yet).
         brake: shape (4,): each wheel's pressure (its axle's, or the one pressure), or the
             switch (0 off, else on) in ``brake[0]``; nan where not known at this stamp.
@@ -194,7 +246,7 @@ def brake_torques(
     pressure, a braked wheel slower than 0.5 rad/s has a torque of unknown direction (at a
     standstill it is a reaction), and a gain not learnt yet gives no torque: not held.
     """
-    kind = int(bprm[0])
+    kind = p.kind
     if kind == BRAKE_SWITCH:
         return bool(math.isfinite(brake[0]) and brake[0] == 0.0)
     if kind != BRAKE_PRESSURE:
@@ -219,26 +271,27 @@ def brake_torques(
 
 @jit
 def brake_gain_update(
-    bprm: FloatArray, bst: FloatArray, t: float, brake: FloatArray, omega: FloatArray,
-    drive: FloatArray, ep: np.record, speed: float, path_ok: bool, est: np.record,
+    brakes: BrakeParts, t: float, brake: FloatArray, drive: FloatArray, ep: np.record,
+    einp: np.record, path_ok: bool, est: np.record,
 ) -> None:  # fmt: skip
     """One stamp of the learnt gain (module docstring), after the estimator's.
 
     Args:
-        bprm: `Brakes.params_array` (learn on).
-        bst: shape (13,), the state (`new_brake_state`), advanced.
+        brakes: the records (learn on); the state is advanced.
         t: stamp [s].
         brake: shape (4,), the pressures.
-        omega: shape (4,), [rad/s] the wheel observer's.
         drive: shape (4,), [N m] the drive torques before the brakes.
         ep: the estimator's `estimator_step.ESTIMATOR_PARAMS` (wheel inertias, gravity).
-        speed: [m/s] the estimator's body speed.
+        einp: the estimator's `estimator_step.ESTIMATOR_INPUT` of this stamp (the wheel
+            observer's omega, the estimator's body speed).
         path_ok: the drive torques held (engine path engaged and settled).
         est: the estimator's `estimator_step.ESTIMATES` of this stamp (its radius, mass,
             resistances, and its slope: valid before the braking).
     """
-    dt = 0.0 if math.isnan(bst[_T]) else t - bst[_T]
-    bst[_T] = t
+    p, bs = brakes.params[0], brakes.state[0]
+    omega, speed = einp.omega, einp.speed
+    dt = 0.0 if math.isnan(bs.t) else t - bs.t
+    bs.t = t
     total = 0.0
     known = True
     for i in range(4):
@@ -251,49 +304,53 @@ def brake_gain_update(
     for i in range(4):
         forward = forward and omega[i] > _STILL
     if not braking and est.slope_valid:
-        bst[_THETA] = est.slope  # the grade the next braking starts on (the last valid one)
-    usable = known and forward and path_ok and math.isfinite(bst[_THETA]) and 0.0 <= dt < 0.5
+        bs.theta = est.slope  # the grade the next braking starts on (the last valid one)
+    usable = known and forward and path_ok and math.isfinite(bs.theta) and 0.0 <= dt < 0.5
     if not usable:
-        bst[_F1] = math.nan  # the filters start again at the next usable stamp
+        bs.force_stages[0] = math.nan  # the filters start again at the next usable stamp
         return
     # the balance without the brakes and the acceleration, on the grade before the braking
     radius = est.radius_used
     inertia = 2.0 * (ep.inertia_front + ep.inertia_rear)
-    force = -est.aero - est.mass_used * ep.gravity * math.sin(bst[_THETA])
+    force = -est.aero - est.mass_used * ep.gravity * math.sin(bs.theta)
     for i in range(4):
         force += drive[i] / radius - est.rolling[i]
     phi_raw = total / radius
-    if math.isnan(bst[_F1]) or dt == 0.0:
-        bst[_F1], bst[_F2] = force, force
-        bst[_V1], bst[_V2], bst[_VP] = speed, speed, speed
-        bst[_P1], bst[_P2] = phi_raw, phi_raw
+    if math.isnan(bs.force_stages[0]) or dt == 0.0:
+        bs.force_stages[0], bs.force_stages[1] = force, force
+        bs.speed_stages[0], bs.speed_stages[1], bs.speed_before = speed, speed, speed
+        bs.regressor_stages[0], bs.regressor_stages[1] = phi_raw, phi_raw
         return
-    w = -math.expm1(-dt / bprm[10])
-    bst[_F1] += w * (force - bst[_F1])
-    bst[_F2] += w * (bst[_F1] - bst[_F2])
-    bst[_V1] += w * (speed - bst[_V1])
-    bst[_V2] += w * (bst[_V1] - bst[_V2])
-    bst[_P1] += w * (phi_raw - bst[_P1])
-    bst[_P2] += w * (bst[_P1] - bst[_P2])
-    accel_f = (bst[_V2] - bst[_VP]) / dt
-    bst[_VP] = bst[_V2]
-    if not braking or bst[_P2] <= 0.0:
+    w = -math.expm1(-dt / p.filter_tau)
+    bs.force_stages[0] += w * (force - bs.force_stages[0])
+    bs.force_stages[1] += w * (bs.force_stages[0] - bs.force_stages[1])
+    bs.speed_stages[0] += w * (speed - bs.speed_stages[0])
+    bs.speed_stages[1] += w * (bs.speed_stages[0] - bs.speed_stages[1])
+    bs.regressor_stages[0] += w * (phi_raw - bs.regressor_stages[0])
+    bs.regressor_stages[1] += w * (bs.regressor_stages[0] - bs.regressor_stages[1])
+    accel_f = (bs.speed_stages[1] - bs.speed_before) / dt
+    bs.speed_before = bs.speed_stages[1]
+    if not braking or bs.regressor_stages[1] <= 0.0:
         return
     # the wheels' spin inertia moves with the body: (m + sum(J) / R^2) dv/dt
-    y = bst[_F2] - (est.mass_used + inertia / (radius * radius)) * accel_f
-    phi = bst[_P2]
-    lam = math.exp(-dt / bprm[6])
-    var = bst[_VAR] / lam
-    noise = bprm[7] * bprm[7]
+    y = bs.force_stages[1] - (est.mass_used + inertia / (radius * radius)) * accel_f
+    phi = bs.regressor_stages[1]
+    lam = math.exp(-dt / p.memory)
+    var = bs.variance / lam
+    noise = p.force_noise * p.force_noise
     if math.isinf(var):
         gain, var = y / phi, noise / (phi * phi)  # the first sample alone
     else:
         k = var * phi / (phi * phi * var + noise)
-        gain = bst[_G] + k * (y - phi * bst[_G])
+        gain = bs.gain + k * (y - phi * bs.gain)
         var = (1.0 - k * phi) * var
     if not (math.isfinite(gain) and math.isfinite(var)):
         return
-    bst[_G], bst[_VAR] = max(gain, 0.0), var
-    bst[_TIME] += dt
-    if bst[_TIME] >= bprm[8] and bst[_G] > 0.0 and math.sqrt(var) <= bprm[9] * bst[_G]:
-        bst[_CONV] = 1.0
+    bs.gain, bs.variance = max(gain, 0.0), var
+    bs.excited_time += dt
+    if (
+        bs.excited_time >= p.min_braking_time
+        and bs.gain > 0.0
+        and math.sqrt(var) <= p.converged_std_ratio * bs.gain
+    ):
+        bs.converged = True

@@ -15,10 +15,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.estimation.brakes import Brakes, new_brake_state, no_brakes
+from vd_observer_node.estimation.brakes import Brakes, no_brakes
 from vd_observer_node.estimation.cascade_step import (
     CASCADE_SWITCHES,
-    BrakeParts,
     CascadeInputs,
     CascadeOutputs,
     CascadeRecords,
@@ -329,8 +328,7 @@ class CascadeParts:
         offset_params, offset_state, offset_estimate: the offset estimator's records.
         engine_faults: the engine path's own fault counter where it learns the offset.
         brakes: the brake input (`brakes.Brakes`; kind 'none' without one).
-        bprm: its `Brakes.params_array`.
-        brake_state: shape (13,), the learnt brake gain (`brakes.BRAKE_GAIN_SLOTS`).
+        brake_parts: its records (`brakes.BrakeParts`: settings, the learnt gain's state).
     """
 
     def __init__(
@@ -391,8 +389,8 @@ class CascadeParts:
         self._vehicle = vehicle
         # without torque there is nothing to take a brake torque from
         self.brakes = brakes if brakes is not None and self.source != TORQUE_NONE else Brakes()
-        self.bprm = self.brakes.params_array()
-        self.brake_state = new_brake_state()
+        #: the brake input's records (`brakes.BRAKE_PARAMS`, `brakes.BRAKE_STATE`)
+        self.brake_parts = self.brakes.parts()
         self._records: CascadeRecords | None = None
 
     def grade(self, config: ImuGradeConfig | None) -> ImuGrade:
@@ -429,7 +427,7 @@ class CascadeParts:
                 self.dprm, self.engine_state, a(self.offset_params), a(self.offset_state),
                 a(self.offset_estimate),
             ),
-            BrakeParts(self.bprm, self.brake_state),
+            self.brake_parts,
             ImuParts(
                 a(self.imu_grade.params), a(self.imu_grade.state), new_records(GRADE_INPUT, 1)
             ),

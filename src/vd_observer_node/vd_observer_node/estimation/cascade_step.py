@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from vd_observer_node.estimation.brakes import (
     BRAKE_NONE,
+    BrakeParts,
     brake_gain_update,
     brake_gains,
     brake_torques,
@@ -42,7 +43,6 @@ __all__ = [
     'CASCADE_SWITCHES',
     'CLUTCH_SETTLE',
     'ENGINE_INERTIA',
-    'BrakeParts',
     'CascadeInputs',
     'CascadeOutputs',
     'CascadeRecords',
@@ -91,18 +91,6 @@ class EnginePathParts(NamedTuple):
     offset_params: NDArray[Any]
     offset_state: NDArray[Any]
     offset_estimate: NDArray[Any]
-
-
-class BrakeParts(NamedTuple):
-    """The brake input's records.
-
-    Attributes:
-        params: `brakes.Brakes.params_array` (kind `BRAKE_NONE`: none).
-        state: the learnt brake gain's state (`brakes.new_brake_state`).
-    """
-
-    params: FloatArray
-    state: FloatArray
 
 
 class ImuParts(NamedTuple):
@@ -257,16 +245,16 @@ def cascade_step(
         torque_ok = engaged and t - escl[0] >= dprm[CLUTCH_SETTLE]
     else:
         used[:] = inputs.wheel_torque[k]
-    bprm, bst = parts.brakes.params, parts.brakes.state
+    brake_params = parts.brakes.params[0]
     brake = inputs.brake[k]
-    braked = bprm[0] != BRAKE_NONE
-    learn = braked and bprm[5] > 0.0
+    braked = brake_params.kind != BRAKE_NONE
+    learn = braked and brake_params.learn
     path_ok = torque_ok
     drive = used.copy() if learn else used
     if braked:
         gains = np.empty(4)
-        brake_gains(bprm, bst, gains)
-        torque_ok = brake_torques(bprm, gains, brake, wheel[1], used) and torque_ok
+        brake_gains(brake_params, parts.brakes.state[0], gains)
+        torque_ok = brake_torques(brake_params, gains, brake, wheel[1], used) and torque_ok
     inp = parts.estimator_input[0]
     inp.omega[:] = wheel[1]
     inp.omega_dot[:] = wheel[2]
@@ -278,9 +266,8 @@ def cascade_step(
     estimator_update(parts.estimator, t, inp, est)
     if learn:
         brake_gain_update(
-            bprm, bst, t, brake, wheel[1], drive, parts.estimator.params[0], v_est, path_ok,
-            est,
-        )  # fmt: skip
+            parts.brakes, t, brake, drive, parts.estimator.params[0], inp, path_ok, est
+        )
     if switches.imu_fused:
         _imu_step(parts, inputs, k, torque_ok, est, out.grade[k])
     out.torque_valid[k] = torque_ok

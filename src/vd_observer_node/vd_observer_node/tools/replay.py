@@ -461,7 +461,8 @@ def replay_bag(
     wall = time.perf_counter() - started
     parts = run.state.parts
     if brakes is not None and brakes.learn and parts is not None:
-        gain, _var, braking, converged = parts.brake_state[:4].tolist()
+        learnt = parts.brake_parts.state[0]
+        gain, braking, converged = learnt.gain, learnt.excited_time, learnt.converged
         notes.append(
             f'brake gain learnt online: {gain:.3g} N m per unit of the brake pressure after '
             f'{braking:.1f} s of braking ({"converged" if converged else "not converged"})'
