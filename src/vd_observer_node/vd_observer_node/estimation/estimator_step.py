@@ -33,6 +33,7 @@ from vd_observer_node.estimation.filters import (
     lowpass_reset,
     lowpass_update,
 )
+from vd_observer_node.estimation.formulas import rolling_coefficient_at
 from vd_observer_node.estimation.mass_grade_step import (
     MASS_PARAMS,
     MASS_STATE,
@@ -143,7 +144,6 @@ REJECTED_SLOT: Final = len(ESTIMATOR_FAULTS)
 assert ESTIMATOR_FAULTS[_RADIUS_CLAMPED] == 'radius_clamped'
 assert ESTIMATOR_FAULTS[_NON_FINITE_OUTPUT] == 'non_finite_output'
 _M_CLAMPED: Final = 6  # 'mass_clamped' in MASS_GRADE_FAULTS, 'radius_clamped' likewise
-_KMH_REFERENCE: Final = 160.0  # [km/h] speed scale of paper eq. 7 (estimation.formulas)
 #: A gap the slope low-pass bridges (`filters.lowpass_gap`) after which the balance's input
 #: (the forces, or forces - m*dv/dt) is further than this share of the weight [-] from the
 #: trend before the gap hid a transient the bridge could only interpolate: the slope is then
@@ -421,7 +421,7 @@ def _estimate(
     direction = math.tanh(v / reg) if reg > 0.0 else (1.0 if v > 0 else (-1.0 if v < 0 else v))
     aero = p.drag * v * v
     aero_signed = math.copysign(aero, v)
-    c_roll = p.rolling_c0 * (1.0 + p.rolling_c1 * abs(v) / _KMH_REFERENCE)
+    c_roll = rolling_coefficient_at(p.rolling_c0, p.rolling_c1, v)
     cos_prev, sin_prev = math.cos(s.slope), math.sin(s.slope)
     weight = mass * gravity
     # sum(Fz) = m g cos(alpha) in both load-transfer forms: the rolling sum needs no transfer

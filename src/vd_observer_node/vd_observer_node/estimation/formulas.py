@@ -11,17 +11,21 @@ scalars per stamp shape (...).
 from __future__ import annotations
 
 import math
+from typing import Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from vd_common.vehicle.tire import slip_ratio as tire_slip_ratio
 
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
+from vd_observer_node.kernel._jit import jit
 
 __all__ = [
+    'KMH_REFERENCE',
     'aero_drag',
     'motion_direction',
     'rolling_coefficient',
+    'rolling_coefficient_at',
     'rolling_resistance',
     'slip_ratio',
     'slope_from_forces',
@@ -32,7 +36,14 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-_KMH_REFERENCE = 160.0  # [km/h] speed scale of paper eq. 7
+#: [km/h] speed scale of paper eq. 7's rolling coefficient
+KMH_REFERENCE: Final = 160.0
+
+
+@jit
+def rolling_coefficient_at(c0: float, c1: float, speed: float) -> float:
+    """c0 * (1 + c1 * |v| / 160) of paper eq. 7 at one speed [m/s] (the compiled steps')."""
+    return c0 * (1.0 + c1 * abs(speed) / KMH_REFERENCE)
 
 
 def tire_longitudinal_force(
@@ -94,7 +105,7 @@ def rolling_coefficient(speed: ArrayLike, vehicle: EstimatorVehicle) -> FloatArr
         shape (...), [-].
     """
     v = np.abs(np.asarray(speed, dtype=np.float64))
-    return vehicle.rolling_c0 * (1.0 + vehicle.rolling_c1 * v / _KMH_REFERENCE)
+    return vehicle.rolling_c0 * (1.0 + vehicle.rolling_c1 * v / KMH_REFERENCE)
 
 
 def rolling_resistance(speed: ArrayLike, fz: ArrayLike, vehicle: EstimatorVehicle) -> FloatArray:

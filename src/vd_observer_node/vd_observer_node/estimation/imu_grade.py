@@ -60,6 +60,7 @@ from vd_observer_node.estimation.filters import (
     lowpass_reset,
     lowpass_update,
 )
+from vd_observer_node.estimation.formulas import rolling_coefficient_at
 from vd_observer_node.estimation.rate_settings import REFERENCE_RATE_HZ
 from vd_observer_node.kernel._jit import jit, new_record
 
@@ -89,7 +90,6 @@ SOURCE_FORCE: Final = 1
 SOURCE_IMU: Final = 2
 _ORDER: Final = 3  # stages of the grade's low-pass on (f_x, v) (the lead reads 3)
 _FIT_ORDER: Final = 2  # stages of the regression's low-pass on (f_x, v, F)
-_KMH_REFERENCE: Final = 160.0  # [km/h] speed scale of paper eq. 7 (as estimator_step)
 #: One stamp's inputs of the fusion: imu_stamp [s] the stamp of the newest IMU sample (nan:
 #: none yet) and f_x [m/s^2] its longitudinal specific force in body axes; speed [m/s] the
 #: body's; slope_force [rad] the force balance's slope (`estimator_step`) and force_valid;
@@ -477,7 +477,7 @@ def _regression(p: np.record, s: np.record, dt: float, u: float, y: float, speed
     """
     s.cov[0, 0] += p.mass_q * dt
     s.cov[1, 1] += p.bias_q * dt * (s.theta[0] / p.gravity) ** 2
-    c_roll = p.rolling_c0 * (1.0 + p.rolling_c1 * abs(speed) / _KMH_REFERENCE)
+    c_roll = rolling_coefficient_at(p.rolling_c0, p.rolling_c1, speed)
     cos_grade = math.sqrt(max(1.0 - s.sine * s.sine, 0.0))
     phi0 = u / p.gravity + c_roll * cos_grade * (1.0 + p.pitch_gain * _mass(p, s))
     phi1 = -1.0

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vd_observer_node.estimation.faults import STAMP_FAULTS, stamp_step
+from vd_observer_node.estimation.formulas import rolling_coefficient_at
 from vd_observer_node.kernel._jit import jit
 
 __all__ = [
@@ -42,7 +43,6 @@ BoolArray = NDArray[np.bool_]
 MASS_GRADE_FAULTS: Final = (*STAMP_FAULTS, 'mass_clamped')
 _NON_FINITE_STAMP, _NON_FINITE_VALUE = 0, 1
 _CLAMPED: Final = len(STAMP_FAULTS)
-_KMH_REFERENCE: Final = 160.0  # [km/h] speed scale of paper eq. 7 (as estimation.formulas)
 
 #: The settings in the units the step uses (`mass_grade.mass_params`): the nominal vehicle
 #: [kg, m/s^2, kg/m, -, -], the `MassGradeConfig` fields, 1/m bounds [1/kg], the slope bound
@@ -331,7 +331,7 @@ def mass_update(p: np.record, s: np.record, t: float, sum_fx: float, speed: floa
         force_rate = (f2 - s.f2) / dt
     s.f1, s.f2, s.v1, s.v2 = f1, f2, v1, v2
     f_lp, v_lp = f2, v2
-    c_r = p.rolling_c0 * (1.0 + p.rolling_c1 * abs(v_lp) / _KMH_REFERENCE)
+    c_r = rolling_coefficient_at(p.rolling_c0, p.rolling_c1, v_lp)
     y = accel + direction * g * c_r * math.cos(s.slope)
     # The high-pass removes a grade that is constant over grade_tau (same on both sides).
     if dt == 0.0 or math.isnan(s.f_slow):
