@@ -37,7 +37,7 @@ from vd_observer_node.estimation.estimator_step import EstimatorParts, estimator
 from vd_observer_node.estimation.imu_grade import imu_grade_step
 from vd_observer_node.estimation.levant_step import LevantParts, levant_update
 from vd_observer_node.estimation.torque_offset import torque_offset_step
-from vd_observer_node.kernel._jit import jit
+from vd_observer_node.kernel._jit import jit, jit_inlined
 
 __all__ = [
     'CASCADE_SWITCHES',
@@ -186,7 +186,7 @@ class CascadeOutputs(NamedTuple):
     grade: NDArray[Any]
 
 
-@jit
+@jit_inlined
 def cascade_step(
     parts: CascadeRecords, inputs: CascadeInputs, k: int, out: CascadeOutputs, body: FloatArray
 ) -> None:

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from vd_observer_node.estimation.levant_step import LevantParts, levant_reset, levant_update
-from vd_observer_node.kernel._jit import jit
+from vd_observer_node.kernel._jit import jit, jit_inlined
 from vd_observer_node.situation.alerts import ALERT_KINDS, alerts_reset, alerts_update
 from vd_observer_node.situation.friction_fit import (
     FrictionFit,
@@ -160,7 +160,7 @@ class SituationBlock(NamedTuple):
         )  # fmt: skip
 
 
-@jit
+@jit_inlined
 def monitor_step(
     parts: MonitorParts, t: float, inputs: SituationInputs, k: int, fast_omega: FloatArray,
     fast_valid: BoolArray,
