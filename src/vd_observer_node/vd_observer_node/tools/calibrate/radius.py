@@ -78,7 +78,7 @@ def fit_rolling_radius(
     start = float(np.clip(np.median(speed_used / omega_used), *bounds_m))
 
     def speed_error(radius: FloatArray) -> FloatArray:
-        return radius[0] * omega_used - speed_used
+        return float(radius[0]) * omega_used - speed_used
 
     result = least_squares(
         speed_error,
