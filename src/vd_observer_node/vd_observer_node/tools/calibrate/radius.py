@@ -16,7 +16,7 @@ from scipy.optimize import least_squares
 
 from vd_observer_node.tools.calibrate.errors import CalibrationError, NotDeterminedError
 
-__all__ = ['FittedValue', 'fit_rolling_radius']
+__all__ = ['FittedValue', 'fit_proportional', 'fit_rolling_radius']
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -60,32 +60,61 @@ def fit_rolling_radius(
     Raises:
         CalibrationError: Arrays of different shapes.
         NotDeterminedError: Fewer than 50 finite samples above 3 m/s.
+        Reference speeds are in m/s.
     """
-    omega = np.asarray(wheel_speed_radps, dtype=np.float64)
-    speed = np.asarray(reference_speed_mps, dtype=np.float64)
-    if omega.shape != speed.shape or omega.ndim != 1:
-        raise CalibrationError(
-            f'wheel speed {omega.shape} and reference speed {speed.shape} differ in shape'
-        )
-    usable = np.isfinite(omega) & np.isfinite(speed) & (speed > _MIN_SPEED_MPS) & (omega > 0.0)
+    return fit_proportional(
+        wheel_speed_radps,
+        reference_speed_mps,
+        'rolling radius',
+        bounds_m,
+        min_response=_MIN_SPEED_MPS,
+    )
+
+
+def fit_proportional(
+    regressor: FloatArray,
+    response: FloatArray,
+    name: str,
+    bounds: tuple[float, float],
+    min_response: float,
+    f_scale: float = 0.1,
+) -> FittedValue:
+    """Fit ``response = k * regressor`` robustly (soft-L1 loss) within bounds.
+
+    Args:
+        regressor: Shape (n,), e.g. wheel speed in rad/s.
+        response: Shape (n,), e.g. reference speed in m/s or engine speed in rad/s.
+        name: What is fitted, for the error messages.
+        bounds: Physical bounds of k.
+        min_response: Samples with a smaller response are left out (quantisation, standstill).
+        f_scale: Residual size (response unit) above which the loss turns linear.
+
+    Returns:
+        k with its standard deviation and the number of samples used.
+
+    Raises:
+        CalibrationError: Arrays of different shapes.
+        NotDeterminedError: Fewer than 50 usable samples.
+    """
+    x = np.asarray(regressor, dtype=np.float64)
+    y = np.asarray(response, dtype=np.float64)
+    if x.shape != y.shape or x.ndim != 1:
+        raise CalibrationError(f'{name}: inputs of shapes {x.shape} and {y.shape} differ in shape')
+    usable = np.isfinite(x) & np.isfinite(y) & (y > min_response) & (x > 0.0)
     count = int(np.count_nonzero(usable))
     if count < _MIN_SAMPLES:
         raise NotDeterminedError(
-            f'rolling radius: {count} samples above {_MIN_SPEED_MPS} m/s, need {_MIN_SAMPLES}'
+            f'{name}: {count} samples above {min_response:g}, need {_MIN_SAMPLES}'
         )
-    omega_used = omega[usable]
-    speed_used = speed[usable]
-    start = float(np.clip(np.median(speed_used / omega_used), *bounds_m))
+    x_used = x[usable]
+    y_used = y[usable]
+    start = float(np.clip(np.median(y_used / x_used), *bounds))
 
-    def speed_error(radius: FloatArray) -> FloatArray:
-        return float(radius[0]) * omega_used - speed_used
+    def error(k: FloatArray) -> FloatArray:
+        return float(k[0]) * x_used - y_used
 
     result = least_squares(
-        speed_error,
-        x0=[start],
-        bounds=([bounds_m[0]], [bounds_m[1]]),
-        loss='soft_l1',
-        f_scale=0.1,
+        error, x0=[start], bounds=([bounds[0]], [bounds[1]]), loss='soft_l1', f_scale=f_scale
     )
     residual = np.asarray(result.fun, dtype=np.float64)
     jacobian = np.asarray(result.jac, dtype=np.float64)[:, 0]
