@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import hashlib
-import importlib.util
 import json
 import sys
 import tempfile
@@ -39,18 +38,7 @@ RAV4_VEHICLE = ROOT / 'src' / 'vd_common' / 'config' / 'toyota_rav4_2017_estimat
 ADAPT = 'estimator:\n  mass_adaptation: true\n  radius_adaptation: true\n'
 
 
-def _import_rav4(out: Path) -> None:
-    spec = importlib.util.spec_from_file_location(
-        'import_comma2k19', ROOT / 'scripts' / 'import_comma2k19.py'
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    module.main([str(RAV4), '--out', str(out)])
-
-
-def _cases(work: Path) -> dict[str, list[str] | None]:
+def _cases(work: Path, wanted: set[str]) -> dict[str, list[str] | None]:
     paper = ROOT / 'bags' / 'paper_table1_100hz'
     adapt = work / 'adapt.yaml'
     adapt.write_text(ADAPT, encoding='utf-8')
@@ -60,9 +48,12 @@ def _cases(work: Path) -> dict[str, list[str] | None]:
         'rav4': None,
         'rav4_imu': None,
     }
-    if RAV4.exists():
+    if RAV4.exists() and wanted & {'rav4', 'rav4_imu'}:
+        # scripts/ is on sys.path: this file runs as a script
+        import import_comma2k19
+
         bag = work / 'rav4'
-        _import_rav4(bag)
+        import_comma2k19.main([str(RAV4), '--out', str(bag)])
         common = [
             '--vehicle',
             str(RAV4_VEHICLE),
@@ -107,8 +98,10 @@ def main(argv: list[str] | None = None) -> int:
     result: dict[str, dict[str, list[Any]]] = {}
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        for name, replay in _cases(work).items():
-            if args.cases and name not in args.cases.split(','):
+        names = ('paper', 'paper_adapt', 'rav4', 'rav4_imu')
+        wanted = set(args.cases.split(',')) if args.cases else set(names)
+        for name, replay in _cases(work, wanted).items():
+            if name not in wanted:
                 continue
             if replay is None:
                 print(f'{name}: skipped (its input is not on this machine)')

@@ -10,8 +10,8 @@
 - `params_file`, `entry`: the ROS-free half of the node plumbing (``--params-file`` check,
   the console-script guard).
 - `ros`: the ROS 2 node plumbing, a module a concern (`qos`, `stamps`, `parameters`,
-  `diagnostics`, `publishing`, `lifecycle` with `run_node`), the only modules here that
-  import rclpy.
+  `diagnostics`, `publishing`, `lifecycle` with `run_node`), the only modules here built on
+  rclpy.
 
 Nothing here imports vd_sim_node or vd_observer_node: both are built on this package.
 """

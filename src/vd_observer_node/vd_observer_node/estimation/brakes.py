@@ -60,7 +60,7 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: the brake input's kinds (slot 0 of `Brakes.params_array`), by code
+#: the brake input's kinds (`BRAKE_PARAMS.kind`), by code
 BRAKE_NONE: Final = 0
 BRAKE_SWITCH: Final = 1
 BRAKE_PRESSURE: Final = 2
@@ -188,10 +188,10 @@ class Brakes:
         record: NDArray[Any] = new_records(BRAKE_PARAMS, 1)
         record['kind'] = BRAKE_KINDS.index(self.kind)
         record['gain'] = (self.gain_front, self.gain_front, self.gain_rear, self.gain_rear)
-        for name in ('learn', 'memory', 'force_noise', 'min_braking_time'):
+        learning = ('learn', 'memory', 'force_noise', 'min_braking_time',
+                    'converged_std_ratio', 'filter_tau')  # fmt: skip
+        for name in learning:  # the fields of the same name
             record[name] = getattr(self, name)
-        record['converged_std_ratio'] = self.converged_std_ratio
-        record['filter_tau'] = self.filter_tau
         return record
 
     def parts(self) -> BrakeParts:
@@ -203,9 +203,9 @@ def new_brake_state() -> NDArray[Any]:
     """A learnt gain's state before any braking: a `BRAKE_STATE` record in the 1-element
     array it lives in (gain 0 of infinite variance, nothing filtered)."""
     state: NDArray[Any] = new_records(BRAKE_STATE, 1)
-    for name in ('theta', 't', 'force_stages', 'speed_stages', 'regressor_stages'):
+    unseen = ('theta', 't', 'force_stages', 'speed_stages', 'regressor_stages', 'speed_before')
+    for name in unseen:
         state[name] = math.nan
-    state['speed_before'] = math.nan
     state['variance'] = math.inf
     return state
 

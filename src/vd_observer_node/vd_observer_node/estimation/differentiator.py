@@ -279,11 +279,6 @@ class LevantDifferentiator:
         )  # fmt: skip
 
     @property
-    def kernel_args(self) -> tuple[np.record, FloatArray, np.record, np.recarray]:
-        """The arguments of `levant_step.levant_update` before the stamp (the live records)."""
-        return self.params, self.lipschitz, self.record, self.channels
-
-    @property
     def discretization(self) -> str:
         """Discretization name."""
         return self._discretization

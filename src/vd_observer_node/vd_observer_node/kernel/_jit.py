@@ -148,7 +148,7 @@ def jit_inlined(fn: F) -> F:
 def new_record(dtype: np.dtype[Any]) -> np.record:
     """A zeroed record of `dtype` (an ``np.record``: fields read and written as attributes,
     compiled or not), living in a 1-element array (`record_array` gives it back)."""
-    record: np.record = np.zeros(1, dtype).view(np.recarray)[0]
+    record: np.record = new_records(dtype, 1)[0]
     return record
 
 
