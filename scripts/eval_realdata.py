@@ -18,6 +18,7 @@ Without the segment it says so and exits 0 (``make bench`` runs everywhere).
 
 Usage:
     python scripts/eval_realdata.py [--segment DIR] [--config FILE] [--mapping FILE]
+        [--vehicle FILE]
 """
 
 from __future__ import annotations
@@ -49,7 +50,11 @@ def _importer() -> Any:
 
 
 def evaluate(
-    segment: Path, config: Path | None, work: Path, mapping: Path | None = None
+    segment: Path,
+    config: Path | None,
+    work: Path,
+    mapping: Path | None = None,
+    vehicle: Path = VEHICLE,
 ) -> dict[str, float]:
     """Replay the segment and measure it (see the module docstring); the figures by name."""
     from scipy.signal import savgol_filter
@@ -70,7 +75,7 @@ def evaluate(
         work / 'out',
         progress=False,
         mapping=load_input_mapping(mapping or CONFIG / 'input_mapping_comma2k19.yaml'),
-        vehicle_file=VEHICLE,
+        vehicle_file=vehicle,
         observer_config=settings.observer if settings else None,
         estimator_config=settings.estimator if settings else None,
     )
@@ -93,7 +98,7 @@ def evaluate(
     speed = np.interp(t, pose_t, pose_v)
     moving = ref_ok & (speed >= 0.5)
     valid = moving & np.asarray(slope['valid'], dtype=bool)
-    params = load_vehicle_params(VEHICLE)
+    params = load_vehicle_params(vehicle)
     mass, g = params.chassis.mass, params.environment.gravity
     dt = float(np.median(np.diff(pose_t)))
     accel = np.interp(t, pose_t, savgol_filter(pose_v, 21, 2, deriv=1, delta=dt))
@@ -135,12 +140,18 @@ def main(argv: list[str] | None = None) -> int:
         default=CONFIG / 'input_mapping_comma2k19.yaml',
         help='input mapping (input_mapping_comma2k19_imu.yaml: with the IMU fused)',
     )
+    parser.add_argument(
+        '--vehicle',
+        type=Path,
+        default=VEHICLE,
+        help='vehicle file (e.g. one vd calibrate wrote; default: the hand-built RAV4 file)',
+    )
     args = parser.parse_args(argv)
     if not (args.segment / 'processed_log').is_dir():
         print(f'eval_realdata: the real drive is not at {args.segment}: skipped')
         return 0
     with tempfile.TemporaryDirectory() as tmp:
-        f = evaluate(args.segment, args.config, Path(tmp), args.mapping)
+        f = evaluate(args.segment, args.config, Path(tmp), args.mapping, args.vehicle)
     print(
         f'RAV4 segment ({int(f["samples"])} samples, torque path valid '
         f'{100 * f["torque_valid"]:.1f} %):\n'

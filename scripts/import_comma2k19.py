@@ -20,6 +20,8 @@ topic                       type                                values, units (a
                                                                 has a brake switch only)
 ``/imu``                    sensor_msgs/msg/Imu                 the windscreen device's own axes
 ``/vd/truth/slope``         vd_msgs/msg/Slope                   reference grade from the pose
+``/pose/odom``              nav_msgs/msg/Odometry               the pose's speed (twist.linear.x,
+                                                                the norm of its velocity [m/s])
 ==========================  ==================================  ==================================
 
 Each CAN topic is written at the rate of the frame that leads it (wheel speeds 0xAA, vehicle
@@ -69,6 +71,7 @@ VEHICLE_SPEED: Final = '/can/vehicle_speed'
 POWERTRAIN: Final = '/can/powertrain'
 BRAKE: Final = '/can/brake'
 IMU: Final = '/imu'
+POSE_ODOM: Final = '/pose/odom'
 FLOAT_ARRAY: Final = 'std_msgs/msg/Float64MultiArray'
 _NS: Final = 1_000_000_000
 #: WGS-84
@@ -213,6 +216,30 @@ def _slope(stamp_ns: int, angle: float, valid: bool) -> Any:
     )
 
 
+def _odometry(stamp_ns: int, speed: float) -> Any:
+    """The pose's speed as a GNSS/INS receiver's Odometry gives it (twist in the body frame)."""
+    twist = message_class('geometry_msgs/msg/Twist')(
+        linear=message_class('geometry_msgs/msg/Vector3')(x=speed, y=0.0, z=0.0),
+        angular=message_class('geometry_msgs/msg/Vector3')(x=0.0, y=0.0, z=0.0),
+    )
+    return message_class('nav_msgs/msg/Odometry')(
+        header=header(stamp_ns, 'map'),
+        child_frame_id='base_link',
+        pose=message_class('geometry_msgs/msg/PoseWithCovariance')(
+            pose=message_class('geometry_msgs/msg/Pose')(
+                position=message_class('geometry_msgs/msg/Point')(x=0.0, y=0.0, z=0.0),
+                orientation=message_class('geometry_msgs/msg/Quaternion')(
+                    x=0.0, y=0.0, z=0.0, w=1.0
+                ),
+            ),
+            covariance=np.zeros(36),
+        ),
+        twist=message_class('geometry_msgs/msg/TwistWithCovariance')(
+            twist=twist, covariance=np.zeros(36)
+        ),
+    )
+
+
 def _ns(t: float) -> int:
     return round(t * _NS)
 
@@ -279,6 +306,11 @@ def import_segment(segment: Path, out: Path, grade_window: float = 40.0) -> dict
         (_ns(t), TRUTH_SLOPE, serialize(_slope(_ns(t), float(g), bool(ok))))
         for t, g, ok in zip(pose_t, grade, valid, strict=True)
     ]
+    speed_mps = np.linalg.norm(np.load(pose / 'frame_velocities'), axis=1)
+    rows += [
+        (_ns(t), POSE_ODOM, serialize(_odometry(_ns(t), float(v))))
+        for t, v in zip(pose_t, speed_mps, strict=True)
+    ]
     rows.sort(key=lambda row: row[0])
     types = {
         WHEEL_SPEEDS: FLOAT_ARRAY,
@@ -287,6 +319,7 @@ def import_segment(segment: Path, out: Path, grade_window: float = 40.0) -> dict
         BRAKE: FLOAT_ARRAY,
         IMU: 'sensor_msgs/msg/Imu',
         TRUTH_SLOPE: 'vd_msgs/msg/Slope',
+        POSE_ODOM: 'nav_msgs/msg/Odometry',
     }
     counts = dict.fromkeys(types, 0)
     with BagWriter(out) as writer:

@@ -53,3 +53,14 @@ def test_ratios_without_gears_are_not_determined() -> None:
         fit_gear_ratios(wheel, engine, np.zeros_like(gear))
     with pytest.raises(NotDeterminedError, match='no fitted gear has a gearbox ratio'):
         fit_final_drive(fit_gear_ratios(wheel, engine, gear), {})
+
+
+def test_the_gear_offset_is_the_one_that_makes_the_final_drive_one_number() -> None:
+    from vd_observer_node.tools.calibrate import FittedValue
+    from vd_observer_node.tools.calibrate.ratios import fit_gear_offset
+
+    # a bus that logs gears 3..6 as 2..5 (the RAV4's SFTOUT): offset +1
+    logged = {g - 1: FittedValue(FINAL_DRIVE * GEARBOX[g], 0.01, 100) for g in (3, 4, 5, 6)}
+    assert fit_gear_offset(logged, GEARBOX) == 1
+    # one gear alone fits any offset: not determined
+    assert fit_gear_offset({4: logged[4]}, GEARBOX) is None

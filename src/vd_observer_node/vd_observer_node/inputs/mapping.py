@@ -120,6 +120,8 @@ from vd_common.topics import (
     SENSORS_BODY_VELOCITY,
     SENSORS_WHEEL_ANGLES,
     SENSORS_WHEEL_TORQUES,
+    TRUTH,
+    TRUTH_SLOPE,
 )
 
 from vd_observer_node.estimation.alignment import ALIGNMENTS
@@ -138,6 +140,7 @@ __all__ = [
     'INPUTS',
     'INPUT_KEYS',
     'PER_RADIUS_UNITS',
+    'REFERENCE_KEY',
     'SETTINGS',
     'SPEED_UNITS',
     'SUPPORTED_TYPES',
@@ -145,6 +148,7 @@ __all__ = [
     'UNITS',
     'InputMapping',
     'InputSpec',
+    'ReferenceMapping',
     'default_mapping',
     'forward_axis',
     'load_input_mapping',
@@ -167,6 +171,11 @@ BRAKE_SIGNALS: Final = ('pressure', 'switch')
 #: Where the wheel torques come from (`drivetrain.TORQUE_SOURCES`): a top-level key of the
 #: file (replay, report and pipeline_node; not a node parameter of its own).
 TORQUE_SOURCE_KEY: Final = 'torque_source'
+#: The calibration's reference (``vd calibrate``; the cascade does not read it): a speed
+#: (``reference.speed``, typed as ``body_speed``) and a road grade (``reference.grade``).
+REFERENCE_KEY: Final = 'reference'
+#: The reference's grade, an input of its own name (types and units below).
+GRADE_INPUT: Final = 'grade'
 
 # vd's own sensor types, as the topic contract gives them
 WHEEL_ANGLES_TYPE: Final = SENSORS[SENSORS_WHEEL_ANGLES]
@@ -177,6 +186,7 @@ TWIST_STAMPED: Final = SENSORS[SENSORS_BODY_VELOCITY]
 ODOMETRY: Final = 'nav_msgs/msg/Odometry'
 IMU_TYPE: Final = 'sensor_msgs/msg/Imu'
 ACCEL_STAMPED: Final = 'geometry_msgs/msg/AccelStamped'
+SLOPE_TYPE: Final = TRUTH[TRUTH_SLOPE]
 
 SUPPORTED_TYPES: Final[dict[str, tuple[str, ...]]] = {
     'wheel_angles': (WHEEL_ANGLES_TYPE, JOINT_STATE, FLOAT64_ARRAY),
@@ -186,6 +196,7 @@ SUPPORTED_TYPES: Final[dict[str, tuple[str, ...]]] = {
     ENGINE_INPUT: (WHEEL_TORQUES_TYPE, FLOAT64_ARRAY),
     IMU_INPUT: (IMU_TYPE, ACCEL_STAMPED, FLOAT64_ARRAY),
     BRAKE_INPUT: (FLOAT64_ARRAY,),
+    GRADE_INPUT: (SLOPE_TYPE, FLOAT64_ARRAY),
 }
 
 #: Factor to the SI unit of each input, by unit name; the first is the SI unit (the default).
@@ -202,6 +213,7 @@ UNITS: Final[dict[str, dict[str, float]]] = {
     'wheel_torques': {'N m': 1.0, 'kN m': 1000.0},
     ENGINE_INPUT: {'N m': 1.0, 'kN m': 1000.0},
     IMU_INPUT: {'m/s^2': 1.0, 'g': 9.80665},
+    GRADE_INPUT: {'rad': 1.0, 'deg': math.pi / 180.0},
     # to bar; '-' an uncalibrated pressure, taken as it is (the gain is then per its unit)
     BRAKE_INPUT: {
         'bar': 1.0,
@@ -281,6 +293,22 @@ class InputSpec:
 
 
 @dataclass(frozen=True)
+class ReferenceMapping:
+    """The calibration's reference (``reference`` of a mapping file; ``vd calibrate`` only).
+
+    Attributes:
+        speed: the longitudinal speed [m/s after conversion] of a reference that does not
+            slip (GNSS, a pose's odometry), typed as ``body_speed``; None: not mapped.
+        grade: the road grade [rad after conversion], positive uphill, from a
+            ``vd_msgs/msg/Slope`` (its ``valid`` flag honoured) or one element of a
+            Float64MultiArray; None: not mapped.
+    """
+
+    speed: InputSpec | None = None
+    grade: InputSpec | None = None
+
+
+@dataclass(frozen=True)
 class InputMapping:
     """The three inputs of the cascade (see the module docstring for the YAML form).
 
@@ -298,6 +326,7 @@ class InputMapping:
             the drivetrain) or 'none' (no torque).
         imu: the accelerometer (forward specific force [m/s^2] after conversion), or None.
         brake: the brake input (None: none).
+        reference: the calibration's speed and grade reference (None: none mapped).
     """
 
     wheels: InputSpec
@@ -310,6 +339,7 @@ class InputMapping:
     torque_source: str = 'measured'
     imu: InputSpec | None = None
     brake: InputSpec | None = None
+    reference: ReferenceMapping | None = None
 
     @property
     def engine(self) -> InputSpec:
@@ -557,7 +587,15 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
         data = {}
     if not isinstance(data, Mapping):
         raise MappingError(f'{source}: expected a mapping of {", ".join(INPUTS)}')
-    keys = (*INPUTS, *SETTINGS, ENGINE_INPUT, BRAKE_INPUT, IMU_INPUT, TORQUE_SOURCE_KEY)
+    keys = (
+        *INPUTS,
+        *SETTINGS,
+        ENGINE_INPUT,
+        BRAKE_INPUT,
+        IMU_INPUT,
+        TORQUE_SOURCE_KEY,
+        REFERENCE_KEY,
+    )
     unknown = sorted(set(data) - set(keys))
     if unknown:
         raise MappingError(f'{source}: {unknown[0]}: unknown input (use {", ".join(keys)})')
@@ -629,7 +667,26 @@ def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
         torque_source=torque_source,
         imu=imu,
         brake=brake,
+        reference=_reference(data.get(REFERENCE_KEY), f'{source}: {REFERENCE_KEY}'),
     )
+
+
+def _reference(data: Any, where: str) -> ReferenceMapping | None:
+    """The ``reference`` section: ``speed`` (as ``body_speed``) and ``grade``."""
+    if data is None:
+        return None
+    if not isinstance(data, Mapping):
+        raise MappingError(f'{where} must be a mapping with speed and/or grade')
+    unknown = sorted(set(data) - {'speed', GRADE_INPUT})
+    if unknown:
+        raise MappingError(f'{where}.{unknown[0]}: unknown key (use speed, {GRADE_INPUT})')
+    speed = _spec('body_speed', data['speed'], f'{where}.speed') if 'speed' in data else None
+    grade = (
+        _spec(GRADE_INPUT, data[GRADE_INPUT], f'{where}.{GRADE_INPUT}')
+        if GRADE_INPUT in data
+        else None
+    )
+    return ReferenceMapping(speed=speed, grade=grade)
 
 
 def mapping_from_params(

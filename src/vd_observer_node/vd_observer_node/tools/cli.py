@@ -6,6 +6,7 @@
               [--torque-source {measured,engine,none}] [--no-progress]
     vd report BAG [--out DIR] ...
     vd fleet BAGS... --out DIR [--workers N] [--engine local|dask] [--baseline OLD] ...
+    vd calibrate BAGS... --out FILE.yaml [--mapping FILE] [--vehicle BASE] [--report DIR]
 
 Errors (missing paths, corrupt bags, bad vehicle files) print one line on stderr and exit
 with status 2; no traceback.
@@ -18,9 +19,10 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from vd_common.errors import VdError
 from vd_common.topics import SENSORS_NAMESPACE
 
-from vd_observer_node.errors import ObserverError
+from vd_observer_node.tools.calibrate.cli import add_calibrate_parser
 from vd_observer_node.tools.fleet.cli import add_fleet_parser
 from vd_observer_node.tools.report.cli import add_report_parser
 
@@ -173,6 +175,7 @@ def _parser() -> argparse.ArgumentParser:
     replay.set_defaults(run=_replay)
     add_report_parser(commands)
     add_fleet_parser(commands)
+    add_calibrate_parser(commands)
     return parser
 
 
@@ -181,7 +184,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     try:
         status: int = args.run(args)
-    except ObserverError as exc:  # every bag, vehicle and configuration error
+    except VdError as exc:  # every bag, vehicle, mapping and configuration error
         hint = ''
         if type(exc).__name__ == 'BagCorruptError':
             hint = ' (see `vd bag info --recover`, fix with `vd bag repair`)'

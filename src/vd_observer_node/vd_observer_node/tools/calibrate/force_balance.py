@@ -3,21 +3,24 @@
 With the grade known from a reference, a known driving force (torque / radius; not braking,
 clutch engaged) balances
 
-    F = m * (a + g * sin(theta)) + m * g * c0 * cos(theta) + 0.5 * rho * CdA * v**2,
+    F = m * (a + g * sin(theta)) + m * g * c0 * (1 + c1 * |v| / 160) * cos(theta)
+        + 0.5 * rho * CdA * v**2,
 
-linear in (m, m * c0, CdA), fitted with a robust loss and bounds. Without speed above 60 km/h
+(the rolling resistance of paper eq. 7 with the base file's speed term c1), linear in
+(m, m * c0, CdA), fitted with a robust loss and bounds. Without speed above 60 km/h
 the drag term is not separable from c0 (both are then near-constant) and is reported as not
 determined.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
+from vd_observer_node.estimation.formulas import KMH_REFERENCE
 from vd_observer_node.tools.calibrate.errors import CalibrationError, NotDeterminedError
 from vd_observer_node.tools.calibrate.radius import FittedValue
 
@@ -39,12 +42,16 @@ class ForceBalanceFit:
     """Fitted mass (kg), rolling resistance c0 (-) and drag area (m^2, None if not determined).
 
     Without drag, c0 absorbs the drag at the drive's speeds and is an effective value.
+    ``residual_n`` (model minus force, [N]) is over the samples ``used`` marks (shape of the
+    input), for the report's figures.
     """
 
     mass_kg: FittedValue
     rolling_c0: FittedValue
     drag_area_m2: FittedValue | None
     not_determined: tuple[str, ...]
+    residual_n: FloatArray = field(default_factory=lambda: np.zeros(0))
+    used: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 def fit_force_balance(
@@ -52,6 +59,10 @@ def fit_force_balance(
     speed_mps: FloatArray,
     accel_mps2: FloatArray,
     slope_rad: FloatArray,
+    rolling_c1: float = 0.0,
+    gravity_mps2: float = GRAVITY_MPS2,
+    air_density_kgpm3: float = AIR_DENSITY_KGPM3,
+    known_drag_area_m2: float | None = None,
 ) -> ForceBalanceFit:
     """Fit mass, c0 and drag area from samples with a known driving force.
 
@@ -60,6 +71,11 @@ def fit_force_balance(
         speed_mps: Reference speed, shape (n,), m/s.
         accel_mps2: Reference longitudinal acceleration dv/dt, shape (n,), m/s^2.
         slope_rad: Road grade from the reference, shape (n,), rad (positive uphill).
+        rolling_c1: the rolling resistance's speed term c1 [km/h per m/s] (kept, not fitted).
+        gravity_mps2: g [m/s^2].
+        air_density_kgpm3: rho [kg/m^3].
+        known_drag_area_m2: a drag area [m^2] to take as known (subtracted, not fitted):
+            where the drive does not determine it, mass and c0 are then fitted alone.
 
     Returns:
         The fit; ``not_determined`` says why a value could not be fitted.
@@ -78,10 +94,13 @@ def fit_force_balance(
     if count < _MIN_SAMPLES:
         raise NotDeterminedError(f'force balance: {count} usable samples, need {_MIN_SAMPLES}')
     force, speed, accel, slope = force[usable], speed[usable], accel[usable], slope[usable]
-    with_drag = float(speed.max()) >= _MIN_TOP_SPEED_MPS
-    columns = [accel + GRAVITY_MPS2 * np.sin(slope), GRAVITY_MPS2 * np.cos(slope)]
+    with_drag = float(speed.max()) >= _MIN_TOP_SPEED_MPS and known_drag_area_m2 is None
+    if known_drag_area_m2 is not None:
+        force = force - 0.5 * air_density_kgpm3 * known_drag_area_m2 * speed**2
+    rolling = 1.0 + rolling_c1 * np.abs(speed) / KMH_REFERENCE
+    columns = [accel + gravity_mps2 * np.sin(slope), gravity_mps2 * rolling * np.cos(slope)]
     if with_drag:
-        columns.append(0.5 * AIR_DENSITY_KGPM3 * speed**2)
+        columns.append(0.5 * air_density_kgpm3 * speed**2)
     design = np.column_stack(columns)
     # Unknowns: mass (kg), mass * c0 (kg), drag area (m^2).
     lower = [200.0, 0.0, 0.1][: design.shape[1]]
@@ -107,7 +126,7 @@ def fit_force_balance(
     not_determined: tuple[str, ...] = ()
     if with_drag:
         drag = FittedValue(float(result.x[2]), float(np.sqrt(covariance[2, 2])), count)
-    else:
+    elif known_drag_area_m2 is None:
         not_determined = (
             f'drag area: never above {_MIN_TOP_SPEED_MPS * 3.6:.0f} km/h '
             f'(top {speed.max() * 3.6:.0f} km/h), drag not separable from rolling resistance',
@@ -117,4 +136,6 @@ def fit_force_balance(
         rolling_c0=FittedValue(c0, c0_std, count),
         drag_area_m2=drag,
         not_determined=not_determined,
+        residual_n=residual,
+        used=usable,
     )

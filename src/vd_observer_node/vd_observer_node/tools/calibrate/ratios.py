@@ -15,7 +15,7 @@ import numpy.typing as npt
 from vd_observer_node.tools.calibrate.errors import NotDeterminedError
 from vd_observer_node.tools.calibrate.radius import FittedValue, fit_proportional
 
-__all__ = ['fit_final_drive', 'fit_gear_ratios']
+__all__ = ['fit_final_drive', 'fit_gear_offset', 'fit_gear_ratios']
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -101,3 +101,35 @@ def fit_final_drive(
     return FittedValue(
         value=value, std=std, samples=sum(overall_ratios[g].samples for g in common)
     )
+
+
+def fit_gear_offset(
+    overall_ratios: Mapping[int, FittedValue], gearbox_ratios: Mapping[int, float]
+) -> int | None:
+    """The number to add to the logged gear to get the gearbox's (a bus that counts otherwise).
+
+    The final drive is one number: the right offset makes ``overall(logged) / gearbox(logged
+    + offset)`` the same in every gear. Each admissible offset (every shifted gear in the
+    gearbox) is scored by the relative spread of those quotients; the least wins.
+
+    Args:
+        overall_ratios: logged gear -> fitted overall ratio.
+        gearbox_ratios: gear -> gearbox ratio of the base file.
+
+    Returns:
+        The offset, or None when fewer than two gears were fitted (any offset fits one).
+    """
+    logged = sorted(overall_ratios)
+    if len(logged) < 2 or not gearbox_ratios:
+        return None
+    spreads: dict[int, float] = {}
+    for offset in range(min(gearbox_ratios) - logged[0], max(gearbox_ratios) - logged[-1] + 1):
+        if not all(g + offset in gearbox_ratios for g in logged):
+            continue
+        quotients = np.array(
+            [overall_ratios[g].value / gearbox_ratios[g + offset] for g in logged]
+        )
+        spreads[offset] = float(np.std(quotients) / np.mean(quotients))
+    if not spreads:
+        return None
+    return min(spreads, key=spreads.__getitem__)

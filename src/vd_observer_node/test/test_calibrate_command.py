@@ -1,0 +1,216 @@
+"""`vd calibrate` end to end on a simulated car that is not its file, and its bad inputs.
+
+The oracle is the simulator's true car (a loaded Clio on worn tyres, with more drag and
+another final drive than vd's Clio file, the calibration's base), driven on a seeded
+everyday drive with 96-count encoders and speed noise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from vd_common.vehicle.estimation import load_estimation_vehicle
+from vd_common.vehicle.params import VehicleParams, default_vehicle_file, load_vehicle
+from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
+from vd_observer_node.tools.calibrate.calibration import calibrate
+from vd_observer_node.tools.calibrate.drive import read_drive
+from vd_observer_node.tools.cli import main
+
+vehicle = pytest.importorskip('vd_sim_node.vehicle.everyday')
+simulation = pytest.importorskip('vd_sim_node.vehicle.simulation')
+variants = pytest.importorskip('vd_sim_node.vehicle.variants')
+scenario_module = pytest.importorskip('vd_sim_node.vehicle.scenario')
+
+RATE_HZ = 100.0
+SEED = 11  # an everyday drive the calibration was not written on (smoke runs: 300, 301)
+
+
+def _true_car(params: VehicleParams) -> tuple[VehicleParams, object]:
+    car = dataclasses.replace(
+        params,
+        aero=dataclasses.replace(params.aero, drag_coefficient=0.38),
+        gearbox=dataclasses.replace(params.gearbox, final_drive=3.9),
+    )
+    return car, scenario_module.VehicleVariant(extra_mass_kg=220.0, tyre_radius_scale=0.975)
+
+
+@pytest.fixture(scope='module')
+def drive(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, VehicleParams, object]:
+    """A 150 s everyday drive of the true car: the bag with truth, and the true parameters."""
+    params = load_vehicle(default_vehicle_file())
+    car, variant = _true_car(params)
+    # a driver who keeps 50-130 km/h: the drag needs speeds above 60 km/h (the default band's
+    # drive of this seed tops at 53 km/h, where the drag is rightly not determined)
+    settings = vehicle.EverydaySettings(
+        duration=150.0, rate_hz=RATE_HZ, speed_band=(50.0 / 3.6, 130.0 / 3.6)
+    )
+    scenario = dataclasses.replace(
+        vehicle.everyday_scenario(SEED, params, settings), true_vehicle=variant
+    )
+    sim = simulation.simulate(car, scenario, rate_hz=RATE_HZ)
+    folder = tmp_path_factory.mktemp('calibrate')
+    stamps = np.round(sim.t * 1e9).astype(np.int64)
+    write_topic_arrays_bag(folder / 'drive', stamps, sim_topics(sim))
+    write_topic_arrays_bag(folder / 'no_truth', stamps, sim_topics(sim, truth=False))
+    short = sim.t < 8.0
+    short_topics = {
+        topic: {k: v[short] for k, v in fields.items()}
+        for topic, fields in sim_topics(sim).items()
+    }
+    write_topic_arrays_bag(folder / 'short', stamps[short], short_topics)
+    return folder, variants.apply_variant(car, variant), sim
+
+
+def test_the_command_writes_a_file_the_estimators_load_with_the_true_values(
+    drive: tuple[Path, VehicleParams, object], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder, truth, _ = drive
+    out = tmp_path / 'car.yaml'
+    report = tmp_path / 'report'
+    assert (
+        main(['calibrate', str(folder / 'drive'), '--out', str(out), '--report', str(report)]) == 0
+    )
+    printed = capsys.readouterr().out
+    assert 'fitted chassis.mass' in printed
+    fitted = load_estimation_vehicle(out)
+    # issue #37's goals; measured on this drive: mass 0.1 %, radius 0.01 %, final drive
+    # 0.01 %, drag 1 %, c0 1 % (scripts/eval_calibrate.py prints eight cars)
+    assert fitted.chassis.mass == pytest.approx(truth.chassis.mass, rel=0.03)
+    assert fitted.wheel.effective_radius == pytest.approx(truth.wheel.effective_radius, rel=0.003)
+    assert fitted.require_driveline().final_drive == pytest.approx(3.9, rel=0.005)
+    assert fitted.aero.drag_coefficient == pytest.approx(0.38, rel=0.10)
+    assert fitted.rolling_resistance.c0 == pytest.approx(truth.rolling_resistance.c0, rel=0.20)
+    assert fitted.require_driveline().layout == 'FWD'
+    # what a drive never determines comes from the base, and says so
+    base = load_estimation_vehicle(default_vehicle_file())
+    assert fitted.chassis.wheelbase == base.chassis.wheelbase
+    lines = {
+        line.split(':')[0].strip(): line for line in out.read_text().splitlines() if ':' in line
+    }
+    assert '# fitted ±' in lines['mass'] and 'samples' in lines['mass']
+    assert lines['wheelbase'].endswith('# base')
+    summary = json.loads((report / 'calibration.json').read_text())
+    assert {f['key'] for f in summary['fitted']} >= {'chassis.mass', 'gearbox.final_drive'}
+    assert (report / 'residuals_force_balance.png').stat().st_size > 1000
+    assert '| `chassis.mass` |' in (report / 'calibration.md').read_text()
+
+
+def test_a_bag_without_a_speed_reference_is_one_line_and_writes_nothing(
+    drive: tuple[Path, VehicleParams, object], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder, _, _ = drive
+    out = tmp_path / 'car.yaml'
+    assert main(['calibrate', str(folder / 'no_truth'), '--out', str(out)]) == 2
+    error = capsys.readouterr().err
+    assert error.count('\n') == 1 and 'no speed reference' in error
+    assert not out.exists() and not list(tmp_path.iterdir())
+
+
+def test_a_drive_too_short_is_one_line_and_writes_nothing(
+    drive: tuple[Path, VehicleParams, object], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    folder, _, _ = drive
+    out = tmp_path / 'car.yaml'
+    assert main(['calibrate', str(folder / 'short'), '--out', str(out)]) == 2
+    error = capsys.readouterr().err
+    assert error.count('\n') == 1 and 'need 10 s' in error
+    assert not out.exists()
+
+
+def test_what_the_drive_lacks_is_not_determined_with_the_reason(
+    drive: tuple[Path, VehicleParams, object],
+) -> None:
+    folder, _, _ = drive
+    base = load_estimation_vehicle(default_vehicle_file())
+    full = read_drive(folder / 'drive', None, base.wheel.effective_radius)
+    no_engine_speed = dataclasses.replace(
+        full, engine_radps=np.full_like(full.speed_mps, np.nan), turbine_radps=None
+    )
+    result = calibrate(no_engine_speed, base)
+    assert 'engine (or turbine) speed' in result.not_determined['gearbox.final_drive']
+    slow = full.speed_mps < 50.0 / 3.6
+    crawl = dataclasses.replace(
+        full,
+        **{
+            f.name: getattr(full, f.name)[slow]
+            for f in dataclasses.fields(full)
+            if isinstance(getattr(full, f.name), np.ndarray)
+        },
+    )
+    result = calibrate(crawl, base)
+    assert 'never above 60 km/h' in result.not_determined['aero.drag_coefficient']
+    assert 'aero.drag_coefficient' not in result.fits
+    no_grade = dataclasses.replace(full, grade_rad=None)
+    result = calibrate(no_grade, base)
+    assert 'no grade reference' in result.not_determined['chassis.mass']
+
+
+def test_a_mapping_reference_replaces_the_truth_topics(
+    drive: tuple[Path, VehicleParams, object], tmp_path: Path
+) -> None:
+    folder, truth, _ = drive
+    mapping = tmp_path / 'mapping.yaml'
+    # the noisy sensor speed as the "GNSS" speed: the reference is the one the mapping names
+    mapping.write_text(
+        yaml.safe_dump(
+            {
+                'reference': {
+                    'speed': {
+                        'topic': '/vd/sensors/body_velocity',
+                        'type': 'geometry_msgs/msg/TwistStamped',
+                    },
+                    'grade': {'topic': '/vd/truth/slope', 'type': 'vd_msgs/msg/Slope'},
+                }
+            }
+        )
+    )
+    out = tmp_path / 'car.yaml'
+    assert (
+        main(['calibrate', str(folder / 'no_truth'), '--out', str(out), '--mapping', str(mapping)])
+        == 2
+    )
+    assert (
+        main(['calibrate', str(folder / 'drive'), '--out', str(out), '--mapping', str(mapping)])
+        == 0
+    )
+    fitted = load_estimation_vehicle(out)
+    assert fitted.wheel.effective_radius == pytest.approx(truth.wheel.effective_radius, rel=0.003)
+
+
+def test_the_brake_gain_from_a_pressure_against_the_deceleration(
+    drive: tuple[Path, VehicleParams, object],
+) -> None:
+    """The engine path with a brake pressure: one master-cylinder pressure for all wheels,
+    made from the simulator's true front brake torque at 100 N m per bar. One pressure
+    determines the sum of the gains only: the base's front/rear split (the true one, at half
+    the scale) divides it."""
+    from vd_common.vehicle.estimation import EstimationBrakes
+    from vd_observer_node.tools.calibrate.drive import WINDOW_S, _Windows
+
+    folder, _, sim = drive
+    base = load_estimation_vehicle(default_vehicle_file())
+    full = read_drive(folder / 'drive', None, base.wheel.effective_radius)
+    brake = np.asarray(sim.brake_torque)  # type: ignore[attr-defined]
+    pressure = brake[:, 0] / 100.0  # bar
+    pressed = brake[:, 0] > 1.0
+    ratio = float(np.median(brake[pressed, 2] / brake[pressed, 0]))
+    windows = _Windows(full.t, WINDOW_S)
+    bar = windows.mean(np.asarray(sim.t), np.repeat(pressure[:, None], 4, axis=1))  # type: ignore[attr-defined]
+    braking = windows.count(np.asarray(sim.t), pressed) > 0  # type: ignore[attr-defined]
+    with_pressure = dataclasses.replace(
+        full, brake_bar=bar, braking=braking, has_brake_input=True, engine_path=True
+    )
+    half = EstimationBrakes(gain_front=50.0, gain_rear=50.0 * ratio)
+    result = calibrate(with_pressure, dataclasses.replace(base, brakes=half))
+    assert 'chassis.mass' in result.fits  # the engine path's force balance
+    front = result.fits['brakes.gain_front'].value
+    rear = result.fits['brakes.gain_rear'].value
+    assert isinstance(front, float) and isinstance(rear, float)
+    # measured 1.9 % low on both (the window's edges at the brake's onset and release)
+    assert front == pytest.approx(100.0, rel=0.03)
+    assert rear == pytest.approx(100.0 * ratio, rel=0.03)
