@@ -91,6 +91,15 @@ than the vehicle file's ``gearbox.ratios`` (the RAV4's SFTOUT: 2 in third gear).
 With ``signal: switch`` (one index; 0 is off, anything else on) the brake torque is unknown
 while braking: Fx, mu and slope are flagged invalid there.
 
+``reference`` (optional; ``vd calibrate`` only, the cascade does not read it): a speed that
+does not slip (``speed``, typed as ``body_speed``) and the road grade (``grade``:
+``vd_msgs/msg/Slope`` or one element of a Float64MultiArray, ``unit`` rad or deg), where the
+bag has no ``/vd/truth/body_velocity`` and ``/vd/truth/slope`` (docs/calibrate.md)::
+
+    reference:
+      speed: {topic: /pose/odom, type: nav_msgs/msg/Odometry}
+      grade: {topic: /vd/truth/slope, type: vd_msgs/msg/Slope}
+
 
 Supported types per input (:data:`SUPPORTED_TYPES`): wheel angles from
 ``vd_msgs/msg/WheelAngles``, ``sensor_msgs/msg/JointState`` (position) or
