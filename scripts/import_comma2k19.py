@@ -22,6 +22,10 @@ topic                       type                                values, units (a
 ``/vd/truth/slope``         vd_msgs/msg/Slope                   reference grade from the pose
 ``/pose/odom``              nav_msgs/msg/Odometry               the pose's speed (twist.linear.x,
                                                                 the norm of its velocity [m/s])
+``/gnss/fix``               sensor_msgs/msg/NavSatFix           the u-blox receiver's fixes, 10 Hz
+                                                                (latitude, longitude [deg],
+                                                                altitude [m], its accuracy [m]
+                                                                as the covariance's diagonal)
 ==========================  ==================================  ==================================
 
 Each CAN topic is written at the rate of the frame that leads it (wheel speeds 0xAA, vehicle
@@ -72,6 +76,7 @@ POWERTRAIN: Final = '/can/powertrain'
 BRAKE: Final = '/can/brake'
 IMU: Final = '/imu'
 POSE_ODOM: Final = '/pose/odom'
+GNSS_FIX: Final = '/gnss/fix'
 FLOAT_ARRAY: Final = 'std_msgs/msg/Float64MultiArray'
 _NS: Final = 1_000_000_000
 #: WGS-84
@@ -240,6 +245,21 @@ def _odometry(stamp_ns: int, speed: float) -> Any:
     )
 
 
+def _fix(stamp_ns: int, fix: FloatArray) -> Any:
+    """A u-blox fix row (latitude, longitude [deg], speed, GPS time, altitude [m], accuracy
+    [m]) as a NavSatFix (covariance type 2: diagonal known)."""
+    status = message_class('sensor_msgs/msg/NavSatStatus')(status=0, service=1)
+    return message_class('sensor_msgs/msg/NavSatFix')(
+        header=header(stamp_ns, 'gnss'),
+        status=status,
+        latitude=float(fix[0]),
+        longitude=float(fix[1]),
+        altitude=float(fix[4]),
+        position_covariance=np.diag([float(fix[5]) ** 2] * 3).ravel(),
+        position_covariance_type=2,
+    )
+
+
 def _ns(t: float) -> int:
     return round(t * _NS)
 
@@ -311,6 +331,11 @@ def import_segment(segment: Path, out: Path, grade_window: float = 40.0) -> dict
         (_ns(t), POSE_ODOM, serialize(_odometry(_ns(t), float(v))))
         for t, v in zip(pose_t, speed_mps, strict=True)
     ]
+    gnss = segment / 'processed_log' / 'GNSS' / 'live_gnss_ublox'
+    rows += [
+        (_ns(t), GNSS_FIX, serialize(_fix(_ns(t), fix)))
+        for t, fix in zip(np.load(gnss / 't'), np.load(gnss / 'value'), strict=True)
+    ]
     rows.sort(key=lambda row: row[0])
     types = {
         WHEEL_SPEEDS: FLOAT_ARRAY,
@@ -320,6 +345,7 @@ def import_segment(segment: Path, out: Path, grade_window: float = 40.0) -> dict
         IMU: 'sensor_msgs/msg/Imu',
         TRUTH_SLOPE: 'vd_msgs/msg/Slope',
         POSE_ODOM: 'nav_msgs/msg/Odometry',
+        GNSS_FIX: 'sensor_msgs/msg/NavSatFix',
     }
     counts = dict.fromkeys(types, 0)
     with BagWriter(out) as writer:

@@ -90,3 +90,25 @@ def test_a_file_the_estimators_would_refuse_is_not_written(tmp_path: Path) -> No
     with pytest.raises(CalibrationError, match='would not load'):
         write_vehicle_file(out, 'chassis:\n  mass: -3\n')
     assert not out.exists() and not list(tmp_path.iterdir())
+
+
+def test_an_altitude_grade_is_the_hill_s_angle_and_holds_through_a_stop() -> None:
+    from vd_observer_node.tools.calibrate.drive import altitude_grade
+
+    # 3 deg up for 300 m, then level; a stop of 20 s on the hill (the distance stands still)
+    speed_t = np.linspace(0.0, 80.0, 8001)
+    speed = np.where((speed_t > 10.0) & (speed_t < 30.0), 0.0, 10.0)
+    distance = np.concatenate(
+        [[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(speed_t))]
+    )
+    alpha = math.radians(3.0)
+    height = np.minimum(distance, 300.0) * math.sin(alpha)
+    fix_t = speed_t[::10]  # 10 Hz fixes
+    t = np.linspace(0.0, 80.0, 1601)
+    grade = altitude_grade(t, fix_t, height[::10], speed_t, speed)
+    on_hill = np.interp(t, speed_t, distance)
+    up = (on_hill > 25.0) & (on_hill < 275.0)
+    level = on_hill > 325.0
+    np.testing.assert_allclose(grade[up], alpha, atol=1e-9)
+    np.testing.assert_allclose(grade[level & np.isfinite(grade)], 0.0, atol=1e-9)
+    assert np.isnan(grade[on_hill < 19.0]).all()  # the window leaves the first fix

@@ -93,8 +93,10 @@ while braking: Fx, mu and slope are flagged invalid there.
 
 ``reference`` (optional; ``vd calibrate`` only, the cascade does not read it): a speed that
 does not slip (``speed``, typed as ``body_speed``) and the road grade (``grade``:
-``vd_msgs/msg/Slope`` or one element of a Float64MultiArray, ``unit`` rad or deg), where the
-bag has no ``/vd/truth/body_velocity`` and ``/vd/truth/slope`` (docs/calibrate.md)::
+``vd_msgs/msg/Slope``, one element of a Float64MultiArray with ``unit`` rad or deg, or a
+``sensor_msgs/msg/NavSatFix`` whose altitude is differenced over 40 m of the speed's
+distance), where the bag has no ``/vd/truth/body_velocity`` and ``/vd/truth/slope``
+(docs/calibrate.md)::
 
     reference:
       speed: {topic: /pose/odom, type: nav_msgs/msg/Odometry}
@@ -196,6 +198,7 @@ ODOMETRY: Final = 'nav_msgs/msg/Odometry'
 IMU_TYPE: Final = 'sensor_msgs/msg/Imu'
 ACCEL_STAMPED: Final = 'geometry_msgs/msg/AccelStamped'
 SLOPE_TYPE: Final = TRUTH[TRUTH_SLOPE]
+NAVSATFIX: Final = 'sensor_msgs/msg/NavSatFix'
 
 SUPPORTED_TYPES: Final[dict[str, tuple[str, ...]]] = {
     'wheel_angles': (WHEEL_ANGLES_TYPE, JOINT_STATE, FLOAT64_ARRAY),
@@ -205,7 +208,7 @@ SUPPORTED_TYPES: Final[dict[str, tuple[str, ...]]] = {
     ENGINE_INPUT: (WHEEL_TORQUES_TYPE, FLOAT64_ARRAY),
     IMU_INPUT: (IMU_TYPE, ACCEL_STAMPED, FLOAT64_ARRAY),
     BRAKE_INPUT: (FLOAT64_ARRAY,),
-    GRADE_INPUT: (SLOPE_TYPE, FLOAT64_ARRAY),
+    GRADE_INPUT: (SLOPE_TYPE, FLOAT64_ARRAY, NAVSATFIX),
 }
 
 #: Factor to the SI unit of each input, by unit name; the first is the SI unit (the default).

@@ -16,6 +16,7 @@ brake where the mapping names them and the bag has their topic.
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -27,9 +28,11 @@ from vd_common.topics import TRUTH, TRUTH_BODY_VELOCITY, TRUTH_SLOPE
 
 from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.bag.reader import BagReader, TopicArrays
+from vd_observer_node.bag.typestore import deserialize
 from vd_observer_node.inputs.decode import decode_brake, decode_engine, decode_input
 from vd_observer_node.inputs.mapping import (
     GRADE_INPUT,
+    NAVSATFIX,
     SLOPE_TYPE,
     InputMapping,
     InputSpec,
@@ -37,7 +40,14 @@ from vd_observer_node.inputs.mapping import (
 )
 from vd_observer_node.tools.calibrate.errors import CalibrationError
 
-__all__ = ['GRID_HZ', 'WINDOW_S', 'CalibrationDrive', 'read_drive']
+__all__ = [
+    'GRADE_WINDOW_M',
+    'GRID_HZ',
+    'WINDOW_S',
+    'CalibrationDrive',
+    'altitude_grade',
+    'read_drive',
+]
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -49,6 +59,9 @@ WINDOW_S = 0.5
 GRID_HZ = 20.0
 #: A measured wheel torque below this [N m] is a brake acting (the measured path's braking).
 _BRAKE_TORQUE_NM = -20.0
+#: Path length over which a GNSS altitude is differenced to a grade [m]: a fix's altitude is
+#: good to a metre or so, 40 m makes that ~1.4 deg at worst and averages over ~4 s at 36 km/h.
+GRADE_WINDOW_M = 40.0
 #: Shortest drive worth calibrating on [s].
 MIN_DURATION_S = 10.0
 _NS = 1e-9
@@ -182,6 +195,46 @@ def _grade(spec: InputSpec, arrays: TopicArrays) -> tuple[npt.NDArray[np.int64],
     return fields.stamp_ns.astype(np.int64), np.where(fields.values['valid'], angle, np.nan)
 
 
+def _altitude(arrays: TopicArrays) -> tuple[npt.NDArray[np.int64], FloatArray]:
+    """NavSatFix altitudes [m] and their header stamps; nan where the receiver has no fix."""
+    stamps, heights = [], []
+    for data in arrays.datas:
+        msg = deserialize(bytes(data), NAVSATFIX)
+        stamps.append(int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec))
+        heights.append(float(msg.altitude) if int(msg.status.status) >= 0 else math.nan)
+    return np.asarray(stamps, dtype=np.int64), np.asarray(heights, dtype=np.float64)
+
+
+def altitude_grade(
+    t: FloatArray,
+    altitude_t: FloatArray,
+    altitude_m: FloatArray,
+    speed_t: FloatArray,
+    speed_mps: FloatArray,
+) -> FloatArray:
+    """The grade [rad] at ``t`` from altitudes along the path the reference speed travels.
+
+    ``sin(alpha) = (h(s + L/2) - h(s - L/2)) / L`` with ``s`` the distance (the speed's
+    integral) and ``L`` = ``GRADE_WINDOW_M``: a window in distance, so a stop does not
+    difference one altitude with itself. nan where the window leaves the fixes.
+    """
+    distance = np.concatenate(
+        [[0.0], np.cumsum(0.5 * (speed_mps[1:] + speed_mps[:-1]) * np.diff(speed_t))]
+    )
+    ok = np.isfinite(altitude_m)
+    along = np.interp(altitude_t[ok], speed_t, distance)
+    heights = altitude_m[ok]
+    rising = np.concatenate([[True], np.diff(along) > 0.0]) if along.size else along.astype(bool)
+    along, heights = along[rising], heights[rising]
+    if along.size < 2:
+        return np.full(t.shape, np.nan)
+    centre = np.interp(t, speed_t, distance)
+    lo, hi = centre - 0.5 * GRADE_WINDOW_M, centre + 0.5 * GRADE_WINDOW_M
+    rise = np.interp(hi, along, heights) - np.interp(lo, along, heights)
+    inside = (lo >= along[0]) & (hi <= along[-1])
+    return np.where(inside, np.arcsin(np.clip(rise / GRADE_WINDOW_M, -1.0, 1.0)), np.nan)
+
+
 def _references(
     mapping: InputMapping, topics: Mapping[str, object]
 ) -> tuple[InputSpec, InputSpec | None]:
@@ -254,7 +307,9 @@ def read_drive(
     spans = [(wheel_t[0], wheel_t[-1]), (speed_t[0], speed_t[-1])]
     grade_t = grade_v = None
     if grade_spec is not None:
-        grade_t, grade_v = _sorted(*_grade(grade_spec, arrays[grade_spec.topic]), t0)
+        raw = arrays[grade_spec.topic]
+        found = _altitude(raw) if grade_spec.msgtype == NAVSATFIX else _grade(grade_spec, raw)
+        grade_t, grade_v = _sorted(*found, t0)
         spans.append((grade_t[0], grade_t[-1]))
     start = max(s for s, _ in spans) + 0.5 * WINDOW_S
     stop = min(e for _, e in spans) - 0.5 * WINDOW_S
@@ -292,7 +347,7 @@ def read_drive(
         circumferential=mapping.wheels.per_radius,
         speed_mps=w.mean(speed_t, speed_v),
         accel_mps2=w.rate(speed_t, speed_v),
-        grade_rad=None if grade_t is None or grade_v is None else w.mean(grade_t, grade_v),
+        grade_rad=_grade_on(w, grade_spec, grade_t, grade_v, speed_t, speed_v),
         wheel_torque_nm=torque,
         engine_torque_nm=None if engine is None else engine[0],
         engine_radps=None if engine is None else engine[1],
@@ -304,6 +359,23 @@ def read_drive(
         has_brake_input=brake_spec is not None,
         engine_path=mapping.torque_source == 'engine',
     )
+
+
+def _grade_on(
+    w: _Windows,
+    spec: InputSpec | None,
+    stamps: FloatArray | None,
+    values: FloatArray | None,
+    speed_t: FloatArray,
+    speed_v: FloatArray,
+) -> FloatArray | None:
+    """The grade on the grid: a reference grade's window mean, or a NavSatFix altitude's
+    difference over distance."""
+    if spec is None or stamps is None or values is None:
+        return None
+    if spec.msgtype == NAVSATFIX:
+        return altitude_grade(w.lo + 0.5 * w.window, stamps, values, speed_t, speed_v)
+    return w.mean(stamps, values)
 
 
 def _engine(
