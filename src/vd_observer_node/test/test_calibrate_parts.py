@@ -112,3 +112,75 @@ def test_an_altitude_grade_is_the_hill_s_angle_and_holds_through_a_stop() -> Non
     np.testing.assert_allclose(grade[up], alpha, atol=1e-9)
     np.testing.assert_allclose(grade[level & np.isfinite(grade)], 0.0, atol=1e-9)
     assert np.isnan(grade[on_hill < 19.0]).all()  # the window leaves the first fix
+
+
+def test_the_converter_s_capacity_and_torque_ratio_from_a_modelled_automatic() -> None:
+    """An automatic car built from the converter's own equations (the oracle): pump torque
+    ``(rpm / K(SR))^2``, turbine torque ``TR(SR)`` times it, through gear 4 (logged as 3: a
+    bus offset of 1), the final drive and the efficiency to the wheels, and the motion that
+    torque makes on a known grade. The base file (the RAV4's) has other K and TR tables."""
+    from vd_common.vehicle.estimation import load_estimation_vehicle
+    from vd_common.vehicle.params import default_vehicle_file
+    from vd_observer_node.tools.calibrate.calibration import calibrate
+    from vd_observer_node.tools.calibrate.drive import CalibrationDrive
+
+    rav4 = Path(default_vehicle_file()).parent / 'toyota_rav4_2017_estimation.yaml'
+    base = load_estimation_vehicle(rav4)
+    line = base.driveline
+    assert line is not None and line.converter is not None
+    grid = np.asarray(line.converter.speed_ratio)
+    true_k = np.asarray(line.converter.capacity_factor) * 1.1
+    true_tr = np.where(
+        grid < 0.87, 1.0 + (np.asarray(line.converter.torque_ratio) - 1.0) * 0.8, 1.0
+    )
+    rng = np.random.default_rng(8)
+    n = 6000
+    speed_ratio = rng.uniform(0.45, 0.85, n)
+    pump = rng.uniform(150.0, 300.0, n)  # rad/s
+    pump_torque = (pump * 30.0 / math.pi / np.interp(speed_ratio, grid, true_k)) ** 2
+    turbine_torque = np.interp(speed_ratio, grid, true_tr) * pump_torque
+    overall = line.ratios[3] * line.final_drive
+    wheel_torque = turbine_torque * overall * line.efficiency[3]
+    radius = base.wheel.effective_radius
+    mass, g = base.chassis.mass, base.environment.gravity
+    grade = rng.uniform(-0.05, 0.05, n)
+    speed = pump * speed_ratio / overall * radius
+    rolling = base.rolling_resistance.c0 * (1.0 + base.rolling_resistance.c1 * speed / 160.0)
+    drag = 0.5 * base.aero.air_density * base.aero.drag_coefficient * base.aero.frontal_area
+    accel = (
+        wheel_torque / radius - mass * g * (np.sin(grade) + rolling * np.cos(grade))
+        - drag * speed**2
+    ) / mass  # fmt: skip
+    omega = np.repeat((speed / radius)[:, None], 4, axis=1)
+    drive = CalibrationDrive(
+        source='model',
+        t=np.arange(n) * 0.05,
+        wheel_radps=omega,
+        wheel_accel_radps2=np.zeros((n, 4)),  # the wheels' inertia left out of the model
+        circumferential=False,
+        speed_mps=speed,
+        accel_mps2=accel,
+        grade_rad=grade,
+        wheel_torque_nm=None,
+        engine_torque_nm=pump_torque,
+        engine_radps=pump,
+        engine_accel_radps2=np.zeros(n),
+        turbine_radps=pump * speed_ratio,
+        gear=np.full(n, 3, dtype=np.int64),
+        mapped_gear_offset=1,
+        braking=np.zeros(n, dtype=bool),
+        brake_bar=None,
+        has_brake_input=False,
+        engine_path=True,
+    )
+    result = calibrate(drive, base)
+    k = result.fits['torque_converter.capacity_factor']
+    tr = result.fits['torque_converter.torque_ratio']
+    assert isinstance(k.value, tuple) and isinstance(tr.value, tuple)
+    covered = (grid >= 0.5) & (grid <= 0.8)  # the drive's 0.45-0.85, +-0.05 per point
+    # the +-0.05 bin spans a slope of each table: within 1 % at the covered points
+    np.testing.assert_allclose(np.asarray(k.value)[covered], true_k[covered], rtol=0.01)
+    np.testing.assert_allclose(np.asarray(tr.value)[covered], true_tr[covered], rtol=0.01)
+    # where the drive does not reach, the base's values stay
+    assert k.value[0] == line.converter.capacity_factor[0]
+    assert tr.value[0] == line.converter.torque_ratio[0]

@@ -19,7 +19,12 @@ from scipy.optimize import least_squares
 from vd_common.vehicle.estimation import EstimationVehicleParams
 
 from vd_observer_node.estimation.formulas import KMH_REFERENCE
-from vd_observer_node.tools.calibrate.converter import fit_capacity_factor
+from vd_observer_node.tools.calibrate.converter import (
+    MIN_BIN_SAMPLES,
+    MIN_PUMP_TORQUE_NM,
+    binned_medians,
+    fit_capacity_factor,
+)
 from vd_observer_node.tools.calibrate.drive import GRID_HZ, WINDOW_S, CalibrationDrive
 from vd_observer_node.tools.calibrate.errors import NotDeterminedError
 from vd_observer_node.tools.calibrate.force_balance import fit_force_balance
@@ -96,6 +101,8 @@ class Calibration:
             speed scale, each axle's radius).
         residuals: figure name -> (x, residual, x label, residual label) for the report.
         drive_seconds: the drives' total duration [s].
+        gear_offset: added to the logged gear to give the gearbox's (fitted, else the
+            mapping's).
     """
 
     fits: dict[str, Fit] = field(default_factory=dict)
@@ -103,6 +110,7 @@ class Calibration:
     notes: list[str] = field(default_factory=list)
     residuals: dict[str, tuple[FloatArray, FloatArray, str, str]] = field(default_factory=dict)
     drive_seconds: float = 0.0
+    gear_offset: int = 0
 
     def value(self, key: str, default: float) -> float:
         """A fitted number, or ``default`` where the key was not fitted."""
@@ -150,6 +158,7 @@ def calibrate(drive: CalibrationDrive, base: EstimationVehicleParams) -> Calibra
     _ratios(drive, moving, layout, base, out)
     _converter(drive, base, out)
     _force_balance(drive, base, out)
+    _torque_ratio(drive, base, out)
     _brake_gain(drive, base, out)
     return out
 
@@ -309,10 +318,13 @@ def _ratios(
     gearbox = {g + 1: r for g, r in enumerate(ratios)}
     offset = fit_gear_offset(overall, gearbox)
     if offset is None:
-        offset_text = 'gear offset: not determined (one gear only), 0 assumed'
-        offset = 0
+        offset = drive.mapped_gear_offset
+        offset_text = f"gear offset: not determined (one gear only), the mapping's {offset} kept"
     else:
         offset_text = f"gear offset: {offset} (the mapping's engine_torque.gear_offset)"
+        if offset != drive.mapped_gear_offset:
+            offset_text += f'; the mapping says {drive.mapped_gear_offset}: correct it'
+    out.gear_offset = offset
     out.notes.append(offset_text)
     shifted = {g + offset: fit for g, fit in overall.items()}
     try:
@@ -367,9 +379,20 @@ def _converter(drive: CalibrationDrive, base: EstimationVehicleParams, out: Cali
     out.fits[key] = Fit(
         key, values, stds, count, f'engine rpm / sqrt(pump torque) at speed ratios {points}'
     )
-    out.not_determined['torque_converter.torque_ratio'] = (
-        "the turbine torque is not logged: the torque ratio is the base file's"
-    )
+
+
+def _gearbox_gear(logged: npt.NDArray[np.int64], offset: int, gears: int) -> npt.NDArray[np.int64]:
+    """The gearbox's gear of each sample: the logged one plus the offset, 0 in neutral and
+    where it changes (and beyond the gearbox)."""
+    gear = np.where(logged > 0, logged + offset, 0)
+    return np.asarray(np.where(gear <= gears, gear, 0), dtype=np.int64)
+
+
+def _efficiencies(given: tuple[float, ...], gears: int) -> tuple[float, ...]:
+    """The efficiency of each gear: the file's per-gear list, its one number, or 1."""
+    if len(given) == gears:
+        return given
+    return (given[0] if given else 1.0,) * gears
 
 
 def _drive_force(
@@ -391,12 +414,9 @@ def _drive_force(
         return None
     assert drive.engine_accel_radps2 is not None
     final = out.value('gearbox.final_drive', line.final_drive)
-    gear = np.clip(drive.gear, 0, len(line.ratios))
+    gear = _gearbox_gear(drive.gear, out.gear_offset, len(line.ratios))
     ratio = np.where(gear > 0, np.asarray((0.0, *line.ratios))[gear] * final, np.nan)
-    per_gear = line.efficiency or (1.0,)
-    if len(per_gear) != len(line.ratios):
-        per_gear = (per_gear[0],) * len(line.ratios)
-    efficiency = np.asarray((1.0, *per_gear))[gear]
+    efficiency = np.asarray((1.0, *_efficiencies(line.efficiency, len(line.ratios))))[gear]
     if drive.turbine_radps is not None:
         coupled = drive.turbine_radps > _COUPLED_SPEED_RATIO * drive.engine_radps
     else:
@@ -461,13 +481,131 @@ def _force_balance(
         for key in keys:
             out.not_determined[key] = str(error)
         return
-    out.add('chassis.mass', fit.mass_kg, how)
-    out.add('rolling_resistance.c0', fit.rolling_c0, how)
+    if out.add('chassis.mass', fit.mass_kg, how):
+        out.add('rolling_resistance.c0', fit.rolling_c0, how)
+    else:
+        # c0 alone, with the base's mass (and drag where not fitted): one unknown
+        grade = drive.grade_rad[usable]
+        speed = args[1]
+        g = base.environment.gravity
+        mass = base.chassis.mass
+        area_cd = out.value('aero.drag_coefficient', base.aero.drag_coefficient) * area
+        rolling = (
+            mass
+            * g
+            * np.cos(grade)
+            * (1.0 + base.rolling_resistance.c1 * np.abs(speed) / KMH_REFERENCE)
+        )
+        rest = (
+            args[0]
+            - mass * (args[2] + g * np.sin(grade))
+            - 0.5 * base.aero.air_density * area_cd * speed**2
+        )
+        c0 = float(rolling @ rest / (rolling @ rolling))
+        spread = rest - c0 * rolling
+        std = float(np.sqrt(spread @ spread / max(spread.size - 1, 1) / (rolling @ rolling)))
+        out.add(
+            'rolling_resistance.c0',
+            FittedValue(c0, std, int(spread.size)),
+            f"longitudinal force balance ({source}) with the base's mass {mass:g} kg",
+        )
     out.residuals['force balance'] = (
         drive.speed_mps[usable][fit.used],
         fit.residual_n,
         'reference speed [m/s]',
         'model - drive force [N]',
+    )
+
+
+def _needed_force(
+    drive: CalibrationDrive, base: EstimationVehicleParams, out: Calibration
+) -> FloatArray:
+    """The ground force the motion needs [N]: ``m (a + g sin(theta))``, rolling resistance
+    and drag, with the fitted values where fitted and the base's elsewhere."""
+    assert drive.grade_rad is not None
+    g = base.environment.gravity
+    mass = out.value('chassis.mass', base.chassis.mass)
+    c0 = out.value('rolling_resistance.c0', base.rolling_resistance.c0)
+    cd = out.value('aero.drag_coefficient', base.aero.drag_coefficient)
+    v, theta = drive.speed_mps, drive.grade_rad
+    rolling = c0 * (1.0 + base.rolling_resistance.c1 * np.abs(v) / KMH_REFERENCE)
+    drag = 0.5 * base.aero.air_density * cd * base.aero.frontal_area * v**2
+    return np.asarray(
+        mass * (drive.accel_mps2 + g * (np.sin(theta) + rolling * np.cos(theta))) + drag,
+        dtype=np.float64,
+    )
+
+
+def _torque_ratio(
+    drive: CalibrationDrive, base: EstimationVehicleParams, out: Calibration
+) -> None:
+    """The converter's torque ratio: the turbine torque the motion needs (through the gear,
+    the final drive and the efficiency) over the pump torque, where the converter slips."""
+    key = 'torque_converter.torque_ratio'
+    line = base.driveline
+    converter = line.converter if line is not None else None
+    if converter is None or line is None:
+        return
+    if drive.turbine_radps is None or drive.engine_torque_nm is None:
+        out.not_determined[key] = 'no turbine speed logged'
+        return
+    if drive.grade_rad is None or drive.gear is None or drive.engine_radps is None:
+        out.not_determined[key] = 'no grade reference (the motion gives the turbine torque)'
+        return
+    assert drive.engine_accel_radps2 is not None
+    radius = out.value('wheel.effective_radius', base.wheel.effective_radius)
+    final = out.value('gearbox.final_drive', line.final_drive)
+    gear = _gearbox_gear(drive.gear, out.gear_offset, len(line.ratios))
+    ratio = np.asarray((np.nan, *line.ratios))[gear] * final
+    efficiency = np.asarray((np.nan, *_efficiencies(line.efficiency, len(line.ratios))))[gear]
+    inertia = np.array([base.wheel.inertia_front] * 2 + [base.wheel.inertia_rear] * 2)
+    spin = (drive.wheel_accel_radps2 * inertia).sum(axis=1)
+    turbine = (_needed_force(drive, base, out) * radius + spin) / (ratio * efficiency)
+    pump = drive.engine_torque_nm - line.engine_inertia * drive.engine_accel_radps2
+    speed_ratio = drive.turbine_radps / np.where(
+        drive.engine_radps > 0.0, drive.engine_radps, np.nan
+    )
+    usable = (
+        (gear > 0)
+        & ~drive.braking
+        & (drive.speed_mps > _MIN_SPEED_MPS)
+        & (pump > MIN_PUMP_TORQUE_NM)
+        & np.isfinite(turbine)
+        & np.isfinite(speed_ratio)
+    )
+    # below the coupling point only: above it the ratio is 1 by construction
+    coupling = converter.speed_ratio[int(np.argmax(np.asarray(converter.torque_ratio) <= 1.0))]
+    below = usable & (speed_ratio < coupling)
+    fits = [
+        None if point >= coupling else fit
+        for point, fit in zip(
+            converter.speed_ratio,
+            binned_medians(converter.speed_ratio, speed_ratio, turbine / pump, below),
+            strict=True,
+        )
+    ]
+    fits = [
+        None if f is None else FittedValue(f.value, f.std * _CORRELATION, f.samples) for f in fits
+    ]
+    if all(f is None for f in fits):
+        out.not_determined[key] = (
+            f'no speed ratio below the coupling point ({coupling:g}) has {MIN_BIN_SAMPLES} '
+            'slipping samples'
+        )
+        return
+    points = ', '.join(
+        f'{sr:g}' for sr, f in zip(converter.speed_ratio, fits, strict=True) if f is not None
+    )
+    out.not_determined.pop(key, None)
+    out.fits[key] = Fit(
+        key,
+        tuple(
+            f.value if f is not None else float(b)
+            for f, b in zip(fits, converter.torque_ratio, strict=True)
+        ),
+        tuple(f.std if f is not None else math.nan for f in fits),
+        sum(f.samples for f in fits if f is not None),
+        f'turbine torque the motion needs over the pump torque at speed ratios {points}',
     )
 
 
@@ -482,29 +620,22 @@ def _brake_gain(drive: CalibrationDrive, base: EstimationVehicleParams, out: Cal
             if drive.has_brake_input
             else 'no brake pressure logged'
         )
-    elif 'chassis.mass' not in out.fits or drive.grade_rad is None:
-        reason = 'needs the force balance (mass, c0) first'
+    elif drive.grade_rad is None:
+        reason = 'no grade reference (the force balance needs the grade)'
     if reason is not None:
         if drive.has_brake_input or base.brakes is not None:
             for key in keys:
                 out.not_determined[key] = reason
         return
     assert drive.brake_bar is not None and drive.grade_rad is not None
-    g = base.environment.gravity
-    mass = out.value('chassis.mass', base.chassis.mass)
-    c0 = out.value('rolling_resistance.c0', base.rolling_resistance.c0)
-    cd = out.value('aero.drag_coefficient', base.aero.drag_coefficient)
     radius = out.value('wheel.effective_radius', base.wheel.effective_radius)
     v, theta = drive.speed_mps, drive.grade_rad
-    # the brakes' force: what the motion needs beyond gravity, rolling resistance and drag
-    rolling = c0 * (1.0 + base.rolling_resistance.c1 * np.abs(v) / KMH_REFERENCE)
-    resist = mass * g * (np.sin(theta) + rolling * np.cos(theta))
-    drag = 0.5 * base.aero.air_density * cd * base.aero.frontal_area * v**2
     found = _drive_force(drive, base, out)
     drive_force = np.zeros(v.shape)
     if found is not None:  # engine braking where the driveline is coupled; else decoupled
         drive_force = np.where(found[1], found[0], 0.0)
-    brake_torque = (drive_force - mass * drive.accel_mps2 - resist - drag) * radius
+    # the brakes' torque: what the motion needs beyond the drive's force
+    brake_torque = (drive_force - _needed_force(drive, base, out)) * radius
     p = drive.brake_bar
     columns = np.column_stack([p[:, 0] + p[:, 1], p[:, 2] + p[:, 3]])
     usable = (

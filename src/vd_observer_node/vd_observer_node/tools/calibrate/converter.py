@@ -19,18 +19,25 @@ import numpy.typing as npt
 from vd_observer_node.tools.calibrate.errors import NotDeterminedError
 from vd_observer_node.tools.calibrate.radius import FittedValue
 
-__all__ = ['fit_capacity_factor']
+__all__ = [
+    'MIN_BIN_SAMPLES',
+    'MIN_PUMP_TORQUE_NM',
+    'SPEED_RATIO_HALF_BIN',
+    'binned_medians',
+    'fit_capacity_factor',
+]
 
 FloatArray = npt.NDArray[np.float64]
 
 _RPM_PER_RADPS = 30.0 / math.pi
-# Below this pump torque [N m] the root is dominated by the torque signal's offset.
-_MIN_PUMP_TORQUE_NM = 30.0
+#: Below this pump torque [N m] the root is dominated by the torque signal's offset.
+MIN_PUMP_TORQUE_NM = 30.0
 # Below this pump speed [rad/s] the engine is at or under idle.
 _MIN_PUMP_RADPS = 60.0
-# Samples within this speed ratio of a grid point count for it.
-_HALF_BIN = 0.05
-_MIN_SAMPLES = 50
+#: Samples within this speed ratio of a grid point count for it.
+SPEED_RATIO_HALF_BIN = 0.05
+#: A grid point needs this many samples.
+MIN_BIN_SAMPLES = 50
 # The median absolute deviation of a normal sample is this times its standard deviation.
 _MAD_TO_STD = 1.4826
 
@@ -62,25 +69,38 @@ def fit_capacity_factor(
     usable = (
         np.isfinite(ratio)
         & np.isfinite(torque)
-        & (torque > _MIN_PUMP_TORQUE_NM)
+        & (torque > MIN_PUMP_TORQUE_NM)
         & (pump > _MIN_PUMP_RADPS)
     )
     k = np.full(pump.shape, np.nan)
     k[usable] = pump[usable] * _RPM_PER_RADPS / np.sqrt(torque[usable])
-    out: list[FittedValue | None] = []
-    for point in speed_ratio_grid:
-        near = usable & (np.abs(ratio - point) <= _HALF_BIN)
-        count = int(np.count_nonzero(near))
-        if count < _MIN_SAMPLES:
-            out.append(None)
-            continue
-        values = k[near]
-        median = float(np.median(values))
-        spread = _MAD_TO_STD * float(np.median(np.abs(values - median)))
-        out.append(FittedValue(median, spread / math.sqrt(count), count))
+    out = binned_medians(speed_ratio_grid, ratio, k, usable)
     if all(f is None for f in out):
         raise NotDeterminedError(
-            f'capacity factor: no speed ratio of the table has {_MIN_SAMPLES} samples with '
-            f'the pump torque above {_MIN_PUMP_TORQUE_NM:g} N m'
+            f'capacity factor: no speed ratio of the table has {MIN_BIN_SAMPLES} samples with '
+            f'the pump torque above {MIN_PUMP_TORQUE_NM:g} N m'
         )
+    return out
+
+
+def binned_medians(
+    grid: Sequence[float],
+    speed_ratio: FloatArray,
+    values: FloatArray,
+    usable: npt.NDArray[np.bool_],
+) -> list[FittedValue | None]:
+    """A robust mean of ``values`` near each speed ratio of ``grid``: the median of the usable
+    samples within `SPEED_RATIO_HALF_BIN`, its spread the median absolute deviation over the
+    root of their count; None where fewer than `MIN_BIN_SAMPLES`."""
+    out: list[FittedValue | None] = []
+    for point in grid:
+        near = usable & (np.abs(speed_ratio - point) <= SPEED_RATIO_HALF_BIN)
+        count = int(np.count_nonzero(near))
+        if count < MIN_BIN_SAMPLES:
+            out.append(None)
+            continue
+        chosen = values[near]
+        median = float(np.median(chosen))
+        spread = _MAD_TO_STD * float(np.median(np.abs(chosen - median)))
+        out.append(FittedValue(median, spread / math.sqrt(count), count))
     return out

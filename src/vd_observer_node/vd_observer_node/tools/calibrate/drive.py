@@ -89,8 +89,9 @@ class CalibrationDrive:
         engine_accel_radps2: shape (N,), [rad/s^2]; None without the engine input.
         turbine_radps: shape (N,), [rad/s]; None where the turbine speed is not logged.
         gear: shape (N,), int, the gear as the bus logs it (the mapping's ``gear_offset``
-            taken off again: the calibration fits the offset), 0 where it changes within
-            the window; None without the engine input.
+            taken off again: the calibration fits the offset), 0 in neutral, -1 where it
+            changes within the window; None without the engine input.
+        mapped_gear_offset: the mapping's ``engine_torque.gear_offset`` (0 without one).
         braking: shape (N,), bool: the brake input on, or a measured wheel torque below
             -20 N m, somewhere in the window.
         brake_bar: shape (N, 4), the brake pressure per wheel (the mapping's unit, bar by
@@ -113,6 +114,7 @@ class CalibrationDrive:
     engine_accel_radps2: FloatArray | None
     turbine_radps: FloatArray | None
     gear: npt.NDArray[np.int64] | None
+    mapped_gear_offset: int
     braking: npt.NDArray[np.bool_]
     brake_bar: FloatArray | None
     has_brake_input: bool
@@ -354,6 +356,7 @@ def read_drive(
         engine_accel_radps2=None if engine is None else engine[2],
         turbine_radps=None if engine is None else engine[3],
         gear=None if engine is None else engine[4],
+        mapped_gear_offset=0 if engine_spec is None else engine_spec.gear_offset,
         braking=braking,
         brake_bar=brake_bar,
         has_brake_input=brake_spec is not None,
@@ -382,13 +385,13 @@ def _engine(
     spec: InputSpec, arrays: Mapping[str, TopicArrays], w: _Windows, t0: int
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray | None, npt.NDArray[np.int64]]:
     """Engine torque, engine speed and acceleration, turbine speed (None if not logged) and
-    the logged gear (0 where it changes within the window)."""
+    the logged gear (-1 where it changes within the window)."""
     series = decode_engine(spec, arrays[spec.topic])
     t, v = _sorted(series.stamp_ns, series.values, t0)
     logged = v[:, 1] - spec.gear_offset
     shifts = np.concatenate([[False], np.diff(logged) != 0.0])
     gear = np.interp(w.lo + 0.5 * w.window, t, logged, left=0.0, right=0.0)
-    gear = np.where(w.count(t, shifts) > 0, 0.0, np.rint(gear))
+    gear = np.where(w.count(t, shifts) > 0, -1.0, np.rint(gear))
     turbine = v[:, 3]
     return (
         w.mean(t, v[:, 0]),
@@ -424,6 +427,7 @@ def concatenated(drives: Sequence[CalibrationDrive]) -> CalibrationDrive:
         engine_accel_radps2=cat('engine_accel_radps2'),  # type: ignore[arg-type]
         turbine_radps=cat('turbine_radps'),  # type: ignore[arg-type]
         gear=cat('gear'),  # type: ignore[arg-type]
+        mapped_gear_offset=first.mapped_gear_offset,
         braking=np.concatenate([d.braking for d in drives]),
         brake_bar=cat('brake_bar'),  # type: ignore[arg-type]
         has_brake_input=all(d.has_brake_input for d in drives),
