@@ -424,7 +424,10 @@ def _drive_force(
         coupled = np.abs(drive.engine_radps - ratio * wheel) < _CLUTCH_SLIP * drive.engine_radps
     pump = drive.engine_torque_nm - line.engine_inertia * drive.engine_accel_radps2
     force = (pump * ratio * efficiency - spin) / radius
-    known = (gear > 0) & coupled & np.isfinite(force)
+    # in neutral the drive torque is zero, known: a coast-down
+    neutral = drive.gear == 0
+    force = np.where(neutral, -spin / radius, force)
+    known = (((gear > 0) & coupled) | neutral) & np.isfinite(force)
     return force, known, 'engine torque through the coupled driveline'
 
 
@@ -458,7 +461,7 @@ def _force_balance(
     area = base.aero.frontal_area
     try:
         fit = fit_force_balance(*args, drive.grade_rad[usable], **settings)  # type: ignore[arg-type]
-        how = f'longitudinal force balance ({source}, grade from the reference)'
+        how = f'longitudinal force balance ({source}, grade from {drive.grade_source})'
         drag = fit.drag_area_m2
         drag_ok = drag is not None and out.add(
             'aero.drag_coefficient',

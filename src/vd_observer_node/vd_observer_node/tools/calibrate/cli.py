@@ -1,4 +1,4 @@
-"""``vd calibrate BAGS... --out FILE.yaml [--mapping] [--vehicle] [--report DIR]``.
+"""``vd calibrate BAGS... --out FILE.yaml [--mapping] [--vehicle] [--report DIR] [--level-road]``.
 
 Reads each drive (:mod:`.drive`), fits what they determine (:mod:`.calibration`), writes the
 estimation-only vehicle file (:mod:`.vehicle_file`) and, with ``--report``, the figures and
@@ -35,6 +35,12 @@ def add_calibrate_parser(commands: Any) -> None:
         help="base vehicle YAML: what the drive does not determine (default: vd's Clio file)",
     )
     parser.add_argument('--report', type=Path, help='folder for the figures and tables')
+    parser.add_argument(
+        '--level-road',
+        action='store_true',
+        help='the drives are on level road (coast-downs on a test track): grade 0 where the '
+        'bag has no grade reference',
+    )
     parser.set_defaults(run=run_calibrate)
 
 
@@ -68,7 +74,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
         else f"vd's default car file {Path(base_path).name} (no --vehicle given)"
     )
     mapping = load_input_mapping(args.mapping) if args.mapping else None
-    drives = [read_drive(bag, mapping, base.wheel.effective_radius) for bag in args.bags]
+    radius = base.wheel.effective_radius
+    level = bool(getattr(args, 'level_road', False))
+    drives = [read_drive(bag, mapping, radius, level_road=level) for bag in args.bags]
     calibration = calibrate(concatenated(drives), base)
     if not calibration.fits:
         reasons = '; '.join(f'{k}: {v}' for k, v in calibration.not_determined.items())

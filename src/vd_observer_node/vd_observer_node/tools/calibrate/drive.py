@@ -98,6 +98,7 @@ class CalibrationDrive:
             default); None without a pressure input.
         has_brake_input: the mapping has a brake input and the bag its topic.
         engine_path: the mapping's torque source is the engine (no measured torques).
+        grade_source: where the grade comes from, for the file's comments.
     """
 
     source: str
@@ -119,6 +120,7 @@ class CalibrationDrive:
     brake_bar: FloatArray | None
     has_brake_input: bool
     engine_path: bool
+    grade_source: str = 'the reference'
 
     @property
     def duration_s(self) -> float:
@@ -265,7 +267,10 @@ def _references(
 
 
 def read_drive(
-    bag: str | os.PathLike[str], mapping: InputMapping | None, base_radius_m: float
+    bag: str | os.PathLike[str],
+    mapping: InputMapping | None,
+    base_radius_m: float,
+    level_road: bool = False,
 ) -> CalibrationDrive:
     """Read one bag into a :class:`CalibrationDrive`.
 
@@ -274,18 +279,26 @@ def read_drive(
         mapping: the input mapping (None: vd's own topics).
         base_radius_m: the base file's effective rolling radius [m]: divides wheel speeds
             logged as a circumferential speed.
+        level_road: the drive is on level road (a test track's coast-downs): the grade is
+            0 throughout; refused where the bag or mapping has a grade reference.
 
     Returns:
         The drive on a ``GRID_HZ`` grid over the span every read signal covers.
 
     Raises:
-        CalibrationError: no speed reference, no wheel topic, or a drive shorter than 10 s.
+        CalibrationError: no speed reference, no wheel topic, a drive shorter than 10 s, or
+            ``level_road`` with a grade reference.
         MappingError, BagFormatError: as the replay raises them.
     """
     mapping = mapping or default_mapping()
     reader = BagReader(bag)
     topics = reader.topics
     speed_spec, grade_spec = _references(mapping, topics)
+    if level_road and grade_spec is not None:
+        raise CalibrationError(
+            f'--level-road: the drive has a grade reference ({grade_spec.topic}); it is for '
+            'drives without one'
+        )
     if mapping.wheels.topic not in topics:
         raise CalibrationError(
             f'{mapping.wheels.name}: the bag has no topic {mapping.wheels.topic}'
@@ -349,7 +362,9 @@ def read_drive(
         circumferential=mapping.wheels.per_radius,
         speed_mps=w.mean(speed_t, speed_v),
         accel_mps2=w.rate(speed_t, speed_v),
-        grade_rad=_grade_on(w, grade_spec, grade_t, grade_v, speed_t, speed_v),
+        grade_rad=np.zeros(t.shape)
+        if level_road
+        else _grade_on(w, grade_spec, grade_t, grade_v, speed_t, speed_v),
         wheel_torque_nm=torque,
         engine_torque_nm=None if engine is None else engine[0],
         engine_radps=None if engine is None else engine[1],
@@ -361,6 +376,7 @@ def read_drive(
         brake_bar=brake_bar,
         has_brake_input=brake_spec is not None,
         engine_path=mapping.torque_source == 'engine',
+        grade_source='level road (--level-road)' if level_road else 'the reference',
     )
 
 
@@ -432,4 +448,5 @@ def concatenated(drives: Sequence[CalibrationDrive]) -> CalibrationDrive:
         brake_bar=cat('brake_bar'),  # type: ignore[arg-type]
         has_brake_input=all(d.has_brake_input for d in drives),
         engine_path=first.engine_path,
+        grade_source=first.grade_source,
     )
