@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from vd_common.topics import SENSORS_BODY_VELOCITY, TRUTH_SLOPE
 from vd_common.vehicle.estimation import load_estimation_vehicle
 from vd_common.vehicle.params import VehicleParams, default_vehicle_file, load_vehicle
 from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
@@ -161,10 +162,10 @@ def test_a_mapping_reference_replaces_the_truth_topics(
             {
                 'reference': {
                     'speed': {
-                        'topic': '/vd/sensors/body_velocity',
+                        'topic': SENSORS_BODY_VELOCITY,
                         'type': 'geometry_msgs/msg/TwistStamped',
                     },
-                    'grade': {'topic': '/vd/truth/slope', 'type': 'vd_msgs/msg/Slope'},
+                    'grade': {'topic': TRUTH_SLOPE, 'type': 'vd_msgs/msg/Slope'},
                 }
             }
         )
@@ -219,8 +220,6 @@ def test_the_brake_gain_from_a_pressure_against_the_deceleration(
 def test_on_level_road_without_a_grade_reference(tmp_path: Path) -> None:
     """`--level-road`: a test track's drive with a speed reference and no grade reference
     (the simulator's road is level throughout; its slope topic is left out of the bag)."""
-    from vd_common.topics import TRUTH_SLOPE
-
     params = load_vehicle(default_vehicle_file())
     car, variant = _true_car(params)
     settings = vehicle.EverydaySettings(

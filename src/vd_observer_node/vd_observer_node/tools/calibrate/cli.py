@@ -13,6 +13,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from vd_common.topics import TRUTH_NAMESPACE
+
 __all__ = ['add_calibrate_parser', 'run_calibrate']
 
 
@@ -27,7 +29,7 @@ def add_calibrate_parser(commands: Any) -> None:
         '--mapping',
         type=Path,
         help='input mapping YAML (its reference section: the speed '
-        'and grade reference where the bag has no /vd/truth topics)',
+        f'and grade reference where the bag has no {TRUTH_NAMESPACE}* topics)',
     )
     parser.add_argument(
         '--vehicle',
