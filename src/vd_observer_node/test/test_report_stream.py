@@ -46,7 +46,8 @@ from vd_observer_node.tools.report.alerts import AlertSettings, truth_conditions
 from vd_observer_node.tools.report.errors import ReportInputError, StampOrderError
 from vd_observer_node.tools.report.evaluation import AccuracyReport, evaluate
 from vd_observer_node.tools.report.load import load_bag_series
-from vd_observer_node.tools.report.stream import evaluate_bag, iter_topic_blocks
+from vd_observer_node.tools.report.stream import evaluate_bag
+from vd_observer_node.tools.report.stream_join import iter_topic_blocks
 
 ROOT = Path(__file__).resolve().parents[3]
 CONFIG = ROOT / 'src' / 'vd_sim_node' / 'config'
@@ -314,10 +315,12 @@ def test_state_held_between_blocks_is_bounded_not_the_bag(
     a stamp join (at most a block) and the paired rows held for the events (0.5 s, 1 s at the
     start, plus a block) stay far below the bag's 2401 stamps."""
     from vd_observer_node.tools.report import stream
+    from vd_observer_node.tools.report.stream_alerts import AlertStream
+    from vd_observer_node.tools.report.stream_join import StampJoin
 
     kept: list[int] = []
     waiting: list[int] = []
-    feed, pop = stream._AlertStream.feed, stream._StampJoin.pop
+    feed, pop = AlertStream.feed, StampJoin.pop
 
     def feed_and_count(self: Any, data: Any) -> None:
         feed(self, data)
@@ -339,10 +342,10 @@ def test_state_held_between_blocks_is_bounded_not_the_bag(
         return out
 
     monkeypatch.setattr(stream, '_delayed_rows', delayed_and_count)
-    monkeypatch.setattr(stream._AlertStream, 'feed', feed_and_count)
-    monkeypatch.setattr(stream._StampJoin, 'pop', pop_and_count)
+    monkeypatch.setattr(AlertStream, 'feed', feed_and_count)
+    monkeypatch.setattr(StampJoin, 'pop', pop_and_count)
     evaluate_bag(paper[2], block_messages=1000)
-    probe = stream._AlertStream(AlertSettings(), judged=True, mu_max=True)
+    probe = AlertStream(AlertSettings(), judged=True, mu_max=True)
     window = round((probe.lookback + probe.lookahead) * RATE)  # rows either side of those scored
     block_stamps = 1000 // 16  # messages per block over the bag's topics per stamp (>= 16)
     assert len(kept) > 20 and window < max(kept) <= window + block_stamps < 2401

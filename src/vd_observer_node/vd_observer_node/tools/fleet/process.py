@@ -34,7 +34,8 @@ from vd_observer_node.tools.report.errors import (
     StampOrderError,
 )
 from vd_observer_node.tools.report.evaluation import AccuracyReport, target_values
-from vd_observer_node.tools.report.stream import DEFAULT_BLOCK_MESSAGES, evaluate_bag
+from vd_observer_node.tools.report.stream import evaluate_bag
+from vd_observer_node.tools.report.stream_join import DEFAULT_BLOCK_MESSAGES
 
 __all__ = [
     'RECORD_VERSION',

@@ -3,19 +3,20 @@
 :func:`evaluate_bag` gives the same :class:`~.evaluation.AccuracyReport` as
 ``evaluate(load_bag_series(bag))`` (the reference, kept for ``vd report`` and its figures)
 without holding the bag's series: it reads the bag in file order, in blocks of
-``block_messages`` messages decoded per topic (:func:`iter_topic_blocks`).
+``block_messages`` messages decoded per topic (:func:`~.stream_join.iter_topic_blocks`).
 
 * A first look reads each topic's first message only (t = 0 is the earliest stamp).
 * One pass then reads every topic: it checks the stamps' order and counts them (the last
-  stamp, the torque path, and for ``vd fleet`` the distance and the alert activations), finds
-  the true slope steps, gear changes and static loads as they come (:class:`_Scout`), pairs
-  estimate and truth by header stamp (:class:`_StampJoin`: rows wait only until every topic
-  of the pair has passed their stamp), holds the paired rows until the events that could
-  exclude them are known (a sample within +-0.5 s of a step or shift is excluded, also one
-  *before* it: rows wait until the slope truth and the gear are 0.5 s past them, and for the
-  first second's true forces), then adds them into running sums (:class:`_StatsSum`: sums
-  of squares, sums, maxima, counts) and the slope convergence trackers; the alert-episode
-  state machines (:class:`_AlertStream`: ~2 s of rows either side of the rows being scored,
+  stamp, the torque path, and for ``vd fleet`` the distance and the alert activations),
+  finds the true slope steps, gear changes and static loads as they come
+  (:class:`~.stream_join.Scout`), pairs estimate and truth by header stamp
+  (:class:`~.stream_join.StampJoin`: rows wait only until every topic of the pair has passed
+  their stamp), holds the paired rows until the events that could exclude them are known (a
+  sample within +-0.5 s of a step or shift is excluded, also one *before* it: rows wait
+  until the slope truth and the gear are 0.5 s past them, and for the first second's true
+  forces), then adds them into running sums (:class:`_StatsSum`: sums of squares, sums,
+  maxima, counts) and the slope convergence trackers; the alert-episode state machines
+  (:class:`~.stream_alerts.AlertStream`: ~2 s of rows either side of the rows being scored,
   since a false alarm and a detection look up to 1 s back and ahead) and the μ_max
   accumulators per axle and road segment take the paired alert rows.
 
@@ -37,51 +38,35 @@ caller falls back to the whole-bag path, which sorts).
 
 from __future__ import annotations
 
-import itertools
 import math
 import os
-from collections.abc import Iterator, Mapping, Sequence
-from dataclasses import dataclass, field, fields, replace
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 from vd_common.topics import (
     ESTIMATES_FRICTION,
-    ESTIMATES_TIRE_FORCES,
-    OBSERVER_BODY_VELOCITY,
-    SENSORS_BODY_VELOCITY,
     TRUTH_NAMESPACE,
     TRUTH_SLOPE,
     TRUTH_TIRE_FORCES,
 )
 
-from vd_observer_node.bag.reader import BagReader, TopicArrays
+from vd_observer_node.bag.reader import BagReader
 from vd_observer_node.tools.report.alerts import (
     ALERT_KINDS,
     NO_COMMON_STAMP,
-    AlertData,
-    AlertEpisode,
     AlertSettings,
     AlertsSection,
-    FalseAlarm,
-    MuMaxSegment,
-    activation_indices,
     alert_data_notes,
     alert_section_skip,
     alert_section_topics,
-    alerts_section,
-    axle_utilisation,
-    channel_episodes,
-    data_conditions,
-    false_alarms,
     paired_alert_data,
-    segments_from_peaks,
 )
 from vd_observer_node.tools.report.errors import (
     ReferenceClockError,
     ReportInputError,
-    StampOrderError,
 )
 from vd_observer_node.tools.report.evaluation import (
     _SPECS,
@@ -93,14 +78,22 @@ from vd_observer_node.tools.report.evaluation import (
     _targets,
     closing_notes,
     quantity_note,
-    torque_path_note,
 )
-from vd_observer_node.tools.report.load import TopicSeries, decode_topic, select_report_topics
+from vd_observer_node.tools.report.load import decode_topic, select_report_topics
 from vd_observer_node.tools.report.metrics import (
     ErrorStats,
     evaluation_mask,
     merge_times,
     selected_errors,
+)
+from vd_observer_node.tools.report.stream_alerts import AlertStream
+from vd_observer_node.tools.report.stream_join import (
+    DEFAULT_BLOCK_MESSAGES,
+    NEVER,
+    Paired,
+    Scout,
+    StampJoin,
+    iter_topic_blocks,
 )
 from vd_observer_node.tools.report.topics import (
     ALERT_TOPIC,
@@ -110,303 +103,12 @@ from vd_observer_node.tools.report.topics import (
     TRUTH_TOPICS,
 )
 
-__all__ = ['DEFAULT_BLOCK_MESSAGES', 'StreamedEvaluation', 'evaluate_bag', 'iter_topic_blocks']
+__all__ = ['StreamedEvaluation', 'evaluate_bag']
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
-#: Rows paired on common stamps: (stamps (M,), topic -> field -> rows, optional topic -> (M,)
-#: bool where it has the stamp).
-_Paired = tuple[np.ndarray, dict[str, dict[str, np.ndarray]], dict[str, BoolArray]]
 
-#: Messages per block: ~20 topics x 10 k stamps; a few tens of MiB decoded.
-DEFAULT_BLOCK_MESSAGES = 200_000
-_NEVER = np.iinfo(np.int64).max  # [ns] a join horizon past every stamp (end of the bag)
 _STEP_MERGE_S = 0.5  # [s] metrics.step_times' default merge window (the reference's)
-
-
-def iter_topic_blocks(
-    reader: BagReader, topics: list[str], block_messages: int = DEFAULT_BLOCK_MESSAGES
-) -> Iterator[dict[str, TopicSeries]]:
-    """The bag's messages of ``topics`` in file order, at most ``block_messages`` at a time,
-    decoded per topic (stamps in file order, not sorted).
-
-    Reads with :meth:`BagReader.topic_array_blocks` (per-topic batches of whole chunks, so no
-    per-message Python) and cuts each of its blocks into pieces of ``block_messages``,
-    merged across topics by log time (each topic's running maximum, so a topic's own order is
-    kept even where its log times go back).
-
-    Args:
-        reader: the bag.
-        topics: topic names (report topics with their expected types).
-        block_messages: messages per block (all topics together), >= 1.
-
-    Raises:
-        BagError: the bag cannot be read.
-    """
-    infos = reader.topics
-    kinds = {t: (infos[t].msgtype, reader.decoding_type(t)) for t in topics}
-    for arrays in reader.topic_array_blocks(topics, block_messages=block_messages):
-        for piece in _pieces(arrays, block_messages):
-            yield _decode(piece, kinds)
-
-
-def _pieces(
-    arrays: Mapping[str, TopicArrays], block_messages: int
-) -> Iterator[dict[str, Sequence[bytes]]]:
-    """One block of the reader cut into pieces of at most ``block_messages`` messages."""
-    names = [t for t in arrays if arrays[t].datas]
-    total = sum(len(arrays[t].datas) for t in names)
-    if total <= block_messages:
-        yield {t: arrays[t].datas for t in names}
-        return
-    keys = np.concatenate([np.maximum.accumulate(arrays[t].log_time_ns) for t in names])
-    which = np.concatenate([np.full(len(arrays[t].datas), k) for k, t in enumerate(names)])
-    order = np.argsort(keys, kind='stable')  # stable: a topic's rows stay in its order
-    taken = [0] * len(names)
-    for start in range(0, total, block_messages):
-        counts = np.bincount(which[order[start : start + block_messages]], minlength=len(names))
-        piece = {}
-        for k, name in enumerate(names):
-            if counts[k]:
-                piece[name] = arrays[name].datas[taken[k] : taken[k] + int(counts[k])]
-                taken[k] += int(counts[k])
-        yield piece
-
-
-def _decode(
-    pending: dict[str, Sequence[bytes]], kinds: Mapping[str, tuple[str, str]]
-) -> dict[str, TopicSeries]:
-    out = {}
-    for topic, datas in pending.items():
-        fields_ = decode_topic(*kinds[topic], datas)
-        out[topic] = TopicSeries(fields_.stamp_ns.astype(np.int64), dict(fields_.values))
-    return out
-
-
-def _with_previous(previous: np.ndarray | None, values: np.ndarray) -> tuple[np.ndarray, int]:
-    """``values`` behind the previous block's last row (if any), and that row count (0/1)."""
-    if previous is None:
-        return values, 0
-    return np.concatenate([previous[None], values]), 1
-
-
-# -- tallies and events ---------------------------------------------------------------------------
-
-
-class _Distance:
-    """[m] trapezoid integral of |speed| over the finite samples, as ``fleet.process`` does."""
-
-    def __init__(self) -> None:
-        self.first: int | None = None
-        self.stamps = 0
-        self.finite = 0
-        self.total = 0.0
-        self._last: tuple[float, float] | None = None  # (t [s], |v|) of the last finite sample
-
-    def feed(self, stamps: np.ndarray, speed: np.ndarray) -> None:
-        if self.first is None:
-            self.first = int(stamps[0])
-        self.stamps += stamps.size
-        t = (stamps - self.first) * 1e-9
-        v = speed.astype(np.float64)
-        ok = np.isfinite(v)
-        t, y = t[ok], np.abs(v[ok])
-        self.finite += int(t.size)
-        if self._last is not None:
-            t = np.concatenate([[self._last[0]], t])
-            y = np.concatenate([[self._last[1]], y])
-        if t.size > 1:
-            self.total += float(np.trapezoid(y, t))
-        if t.size:
-            self._last = (float(t[-1]), float(y[-1]))
-
-    def result(self) -> float | None:
-        return self.total if self.stamps >= 2 and self.finite > 1 else None
-
-
-class _Scout:
-    """Per topic: stamps in order, first and last stamps, counts; the slope steps, gear
-    changes and static loads found so far; the torque path, the distance and the alert
-    activations."""
-
-    def __init__(self, cfg: EvaluationSettings) -> None:
-        self.cfg = cfg
-        self.first: dict[str, int] = {}
-        self.last: dict[str, int] = {}
-        self.counts: dict[str, int] = {}
-        self.slope_jumps_ns: list[int] = []
-        self.gear_changes_ns: list[int] = []
-        self.torque_codes: set[int] = set()
-        self.torque_recorded = True
-        self.distance = {OBSERVER_BODY_VELOCITY: _Distance(), SENSORS_BODY_VELOCITY: _Distance()}
-        self.activations = np.zeros((len(ALERT_KINDS), 4), dtype=np.int64)
-        self._slope: np.ndarray | None = None
-        self._gear: np.ndarray | None = None
-        self._level: np.ndarray | None = None
-        self._loads: list[np.ndarray] = []
-        self._loads_until: int | None = None
-
-    def feed(self, block: Mapping[str, TopicSeries]) -> None:
-        for topic, part in block.items():
-            stamps = part.stamp_ns
-            if stamps.size == 0:
-                continue
-            back = topic in self.last and int(stamps[0]) < self.last[topic]
-            if back or bool(np.any(np.diff(stamps) < 0)):
-                raise StampOrderError(f'{topic}: header stamps go backwards in file order')
-            self.first.setdefault(topic, int(stamps[0]))
-            self.last[topic] = int(stamps[-1])
-            self.counts[topic] = self.counts.get(topic, 0) + int(stamps.size)
-            self._take(topic, part)
-
-    def _take(self, topic: str, part: TopicSeries) -> None:
-        stamps, values = part.stamp_ns, part.values
-        if topic == TRUTH_SLOPE:
-            deg = np.degrees(values['angle'].astype(np.float64))
-            ext, k = _with_previous(self._slope, deg)
-            jumps = np.flatnonzero(np.abs(np.diff(ext)) > self.cfg.slope_step_min_deg) + 1 - k
-            self.slope_jumps_ns.extend(stamps[jumps].tolist())
-            self._slope = deg[-1]
-        elif topic == GEAR_TOPIC:
-            gear = values['gear']
-            ext, k = _with_previous(self._gear, gear)
-            changes = np.flatnonzero(ext[1:] != ext[:-1]) + 1 - k
-            self.gear_changes_ns.extend(stamps[changes].tolist())
-            self._gear = gear[-1]
-        elif topic == TRUTH_TIRE_FORCES:
-            if self._loads_until is None:
-                self._loads_until = int(stamps[0]) + round(self.cfg.settle_s * 1e9)
-            first = stamps <= self._loads_until
-            if first.any():
-                self._loads.append(values['fz'][first])
-        elif topic == ESTIMATES_TIRE_FORCES:
-            codes = values.get('torque_source')
-            if codes is None:
-                self.torque_recorded = False
-            else:
-                self.torque_codes.update(np.unique(codes).tolist())
-        elif topic in self.distance:
-            self.distance[topic].feed(stamps, values['twist.linear.x'])
-        elif topic == ALERT_TOPIC:
-            active = values['level'] > 0
-            ext, k = _with_previous(self._level, active)
-            rising = ext[1:] & ~ext[:-1] if k else np.concatenate([ext[:1], ext[1:] & ~ext[:-1]])
-            self.activations += rising.sum(axis=0)
-            self._level = active[-1]
-
-    def loads_known(self) -> bool:
-        """The true forces of the first ``settle_s`` (the static loads) have all been read."""
-        until = self._loads_until
-        return until is not None and self.last.get(TRUTH_TIRE_FORCES, until) > until
-
-    def static_loads(self) -> FloatArray | None:
-        if not self._loads:
-            return None
-        loads: FloatArray = np.median(np.concatenate(self._loads).astype(np.float64), axis=0)
-        return loads
-
-    def torque_note(self) -> str:
-        if ESTIMATES_TIRE_FORCES not in self.first:
-            return ''
-        if not self.torque_recorded:
-            return torque_path_note(None)
-        return torque_path_note(np.array(sorted(self.torque_codes)))
-
-
-# -- pairing by stamp -----------------------------------------------------------------------------
-
-
-class _StampJoin:
-    """Rows of several topics paired on equal header stamps while the blocks stream in.
-
-    ``required`` topics are intersected (as ``np.intersect1d`` on the whole record: the first
-    row of a repeated stamp); ``optional`` ones are attached where they have the stamp (a
-    left join). A stamp is resolved once every topic has passed it, so rows wait only for
-    the slowest topic of the join.
-    """
-
-    def __init__(self, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> None:
-        self.required = required
-        self.optional = optional
-        self.names = required + optional
-        self._chunks: dict[str, list[TopicSeries]] = {n: [] for n in self.names}
-        self._seen: dict[str, int] = {}
-        self._done: int | None = None  # [ns] every stamp up to this one is resolved
-        self._empty: dict[str, TopicSeries] = {}  # zero rows of each topic, with its fields
-
-    def push(self, block: Mapping[str, TopicSeries]) -> None:
-        for name in self.names:
-            part = block.get(name)
-            if part is None or part.stamp_ns.size == 0:
-                continue
-            self._seen[name] = int(part.stamp_ns[-1])
-            self._empty.setdefault(name, _rows_of(part, slice(0, 0)))
-            if self._done is not None:  # a repeat of a resolved stamp: the first one counted
-                part = _rows_of(part, part.stamp_ns > self._done)
-            self._chunks[name].append(part)
-
-    def pop(self, final: bool) -> _Paired | None:
-        """Resolved rows: (common stamps (M,), topic -> field -> rows (M, ...), optional topic
-        -> (M,) bool where it has the stamp (its rows are meaningless elsewhere)); None while
-        a topic has not been seen (and not ``final``)."""
-        if final:
-            horizon = _NEVER
-        elif len(self._seen) < len(self.names):
-            return None
-        else:
-            horizon = min(self._seen.values())
-        parts: dict[str, TopicSeries] = {}
-        for name in self.names:
-            chunks = self._chunks[name]
-            if not chunks:
-                parts[name] = self._empty.get(name, TopicSeries(np.zeros(0, np.int64), {}))
-                continue
-            whole = _concat_series(chunks)
-            cut = int(np.searchsorted(whole.stamp_ns, horizon, side='right'))
-            rest = _rows_of(whole, slice(cut, None))
-            self._chunks[name] = [rest] if rest.stamp_ns.size else []
-            stamps = whole.stamp_ns[:cut]
-            first = np.ones(stamps.size, dtype=bool)  # the first row of a repeated stamp
-            first[1:] = stamps[1:] != stamps[:-1]
-            parts[name] = _rows_of(_rows_of(whole, slice(0, cut)), first)
-        self._done = horizon
-        common = parts[self.required[0]].stamp_ns
-        for name in self.required[1:]:
-            common = np.intersect1d(common, parts[name].stamp_ns, assume_unique=True)
-        rows: dict[str, dict[str, np.ndarray]] = {}
-        for name in self.required:
-            at = np.searchsorted(parts[name].stamp_ns, common)
-            rows[name] = {k: v[at] for k, v in parts[name].values.items()}
-        present: dict[str, BoolArray] = {}
-        for name in self.optional:
-            stamps = parts[name].stamp_ns
-            if stamps.size == 0:
-                present[name] = np.zeros(common.size, dtype=bool)
-                rows[name] = {
-                    k: np.zeros((common.size, *v.shape[1:]), v.dtype)
-                    for k, v in parts[name].values.items()
-                }
-                continue
-            at = np.minimum(np.searchsorted(stamps, common), stamps.size - 1)
-            present[name] = stamps[at] == common
-            rows[name] = {k: v[at] for k, v in parts[name].values.items()}
-        return common, rows, present
-
-
-def _concat_series(chunks: list[TopicSeries]) -> TopicSeries:
-    if len(chunks) == 1:
-        return chunks[0]
-    return TopicSeries(
-        np.concatenate([c.stamp_ns for c in chunks]),
-        {k: np.concatenate([c.values[k] for c in chunks]) for k in chunks[0].values},
-    )
-
-
-def _rows_of(series: TopicSeries, rows: slice | np.ndarray) -> TopicSeries:
-    return TopicSeries(series.stamp_ns[rows], {k: v[rows] for k, v in series.values.items()})
-
-
-# -- accuracy of the estimated quantities ---------------------------------------------------------
 
 
 class _StatsSum:
@@ -623,264 +325,6 @@ class _Quantity:
 # -- alerts and μ_max -----------------------------------------------------------------------------
 
 
-def _concat_data(a: AlertData | None, b: AlertData) -> AlertData:
-    if a is None:
-        return b
-    return replace(
-        a,
-        **{
-            f.name: np.concatenate([getattr(a, f.name), getattr(b, f.name)])
-            for f in fields(a)
-            if getattr(a, f.name) is not None
-        },
-    )
-
-
-def _tail(a: AlertData, start: int) -> AlertData:
-    return replace(
-        a,
-        **{
-            f.name: getattr(a, f.name)[start:] for f in fields(a) if getattr(a, f.name) is not None
-        },
-    )
-
-
-@dataclass
-class _AxleSegment:
-    """Running μ_max figures of one axle over one road segment (``alerts.mu_max_errors``)."""
-
-    excited_s: float | None = None
-    last_excited: float = -math.inf
-    n: int = 0
-    truth_sum: float = 0.0
-    estimate_sum: float = 0.0
-    squares: float = 0.0
-    max_abs: float = -math.inf
-    within: int = 0
-    last_miss: float | None = None
-    confidence_sum: float = 0.0
-    classes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    true_classes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    recent_n: int = 0
-    recent_squares: float = 0.0
-    recent_within: int = 0
-
-    def feed(
-        self,
-        t: FloatArray,
-        util: FloatArray,
-        truth: FloatArray,
-        est: FloatArray,
-        conf: FloatArray,
-        klass: np.ndarray,
-        tclass: np.ndarray,
-        cfg: AlertSettings,
-    ) -> None:
-        excited_mask = util >= cfg.excitation_ratio
-        last = np.maximum.accumulate(np.where(excited_mask, t, -np.inf))
-        last = np.maximum(last, self.last_excited)
-        self.last_excited = float(last[-1])
-        if self.excited_s is None:
-            excited = np.flatnonzero(excited_mask)
-            if excited.size == 0:
-                return
-            self.excited_s = float(t[excited[0]])
-            begin = int(excited[0])
-        else:
-            begin = 0
-        recent = (t - last <= cfg.excitation_window_s) & (
-            t >= self.excited_s + cfg.excitation_start_s
-        )
-        err_recent = est[recent] - truth[recent]
-        self.recent_n += int(err_recent.size)
-        self.recent_squares += float(np.sum(err_recent**2))
-        self.recent_within += int(np.sum(np.abs(err_recent) <= cfg.mu_max_goal))
-        err = est[begin:] - truth[begin:]
-        within = np.abs(err) <= cfg.mu_max_goal
-        bad = np.flatnonzero(~within)
-        self.n += int(err.size)
-        self.truth_sum += float(np.sum(truth[begin:]))
-        self.estimate_sum += float(np.sum(est[begin:]))
-        self.squares += float(np.sum(err**2))
-        self.max_abs = float(np.maximum(self.max_abs, np.abs(err).max()))
-        self.within += int(within.sum())
-        if bad.size:
-            self.last_miss = float(t[begin:][bad[-1]])
-        self.confidence_sum += float(np.sum(conf[begin:]))
-        self.classes = _add_counts(self.classes, klass[begin:])
-        self.true_classes = _add_counts(self.true_classes, tclass[begin:])
-
-    def result(self, axle: int, start_index: int, start_s: float, end_s: float) -> MuMaxSegment:
-        assert self.excited_s is not None
-        has_recent = self.recent_n > 0
-        return MuMaxSegment(
-            axle=axle,
-            start_index=start_index,
-            start_s=start_s,
-            end_s=end_s,
-            excited_s=self.excited_s,
-            true_mu_max=self.truth_sum / self.n,
-            true_road_class=int(self.true_classes.argmax()),
-            recent_samples=self.recent_n,
-            recent_rms=math.sqrt(self.recent_squares / self.recent_n) if has_recent else math.nan,
-            recent_within_pct=(
-                100.0 * self.recent_within / self.recent_n if has_recent else math.nan
-            ),
-            estimate_mean=self.estimate_sum / self.n,
-            max_abs=self.max_abs,
-            rms=math.sqrt(self.squares / self.n),
-            within_pct=100.0 * self.within / self.n,
-            last_miss_s=self.last_miss - self.excited_s if self.last_miss is not None else 0.0,
-            confidence_mean=self.confidence_sum / self.n,
-            road_class=int(self.classes.argmax()),
-        )
-
-
-def _add_counts(counts: np.ndarray, codes: np.ndarray) -> np.ndarray:
-    more = np.bincount(codes)
-    size = max(counts.size, more.size)
-    return np.pad(counts, (0, size - counts.size)) + np.pad(more, (0, size - more.size))
-
-
-@dataclass
-class _Channel:
-    last_start: float | None = None  # [s] the last raw onset (episodes merge against it)
-    episodes: list[AlertEpisode] = field(default_factory=list)
-    alarms: list[FalseAlarm] = field(default_factory=list)
-
-
-class _AlertStream:
-    """The alerts section from the paired rows in stamp order.
-
-    Rows are scored once the stream is ``lookahead`` past them (an activation is excused by
-    relaxed truth up to 0.1 s after it, an onset is detected up to 1 s after it), with
-    ``lookback`` of earlier rows kept as context (activations 1 s before an onset, relaxed
-    truth 0.5 s before an activation) plus the row before those (edges need it).
-    """
-
-    def __init__(self, cfg: AlertSettings, judged: bool, mu_max: bool) -> None:
-        self.cfg = cfg
-        self.judged = judged
-        self.mu_max = mu_max
-        self.lookback = max(cfg.early_s, cfg.false_before_s) + 1.0
-        self.lookahead = max(cfg.false_after_s, cfg.max_delay_s) + 1.0
-        self.buffer: AlertData | None = None
-        self.todo = 0  # first row of the buffer not yet scored
-        self.first_row_is_first = True  # the buffer starts at the stream's first row
-        self.rows = 0  # rows scored
-        self.channels = [[_Channel() for _ in range(4)] for _ in ALERT_KINDS]
-        self.segments: list[list[MuMaxSegment]] = [[], []]
-        self._segment: tuple[int, float, float] | None = None  # (start index, start_s, end_s)
-        self._axles = [_AxleSegment(), _AxleSegment()]
-        self._previous_peak: np.ndarray | None = None
-
-    def feed(self, data: AlertData) -> None:
-        """Add paired rows (after the earlier ones) and score those far enough behind."""
-        self.buffer = _concat_data(self.buffer, data)
-        self._score(final=False)
-
-    def finish(self) -> None:
-        """Score the rows left at the end of the bag."""
-        self._score(final=True)
-
-    def _score(self, final: bool) -> None:
-        buf = self.buffer
-        if buf is None or buf.t.size == 0:
-            return
-        tt = buf.t
-        limit = math.inf if final else float(tt[-1]) - self.lookahead
-        stop = int(np.searchsorted(tt, limit, side='right'))
-        if stop <= self.todo:
-            return
-        if self.mu_max:
-            self._mu_max(buf, self.todo, stop)
-        if self.judged:
-            self._episodes(buf, self.todo, stop)
-        self.rows += stop - self.todo
-        keep = max(0, int(np.searchsorted(tt, tt[stop - 1] - self.lookback, side='left')) - 1)
-        self.buffer = _tail(buf, keep)
-        self.todo = stop - keep
-        self.first_row_is_first = self.first_row_is_first and keep == 0
-
-    def _episodes(self, d: AlertData, lo: int, hi: int) -> None:
-        cfg, tt = self.cfg, d.t
-        assert d.level is not None
-        truth, relaxed = data_conditions(d, cfg)
-        floor = 0 if self.first_row_is_first else 1  # row 0 of a trimmed buffer has no edge
-        for kind, name in enumerate(ALERT_KINDS):
-            for wheel in range(4):
-                ch = self.channels[kind][wheel]
-                idx = activation_indices(d.level[:, kind, wheel])
-                idx = idx[idx >= floor]
-                acts = tt[idx]
-                scored = acts[(idx >= lo) & (idx < hi)]
-                for stamp in false_alarms(tt, scored, relaxed[:, kind, wheel], cfg).tolist():
-                    ch.alarms.append(FalseAlarm(name, wheel, stamp))
-                rising = activation_indices(truth[:, kind, wheel] & (tt >= cfg.settle_s))
-                starts = tt[rising[(rising >= max(lo, floor)) & (rising < hi)]]
-                if starts.size == 0:
-                    continue
-                previous = [] if ch.last_start is None else [ch.last_start]
-                chain = np.concatenate([previous, starts])
-                keep = np.diff(chain) > cfg.merge_s
-                if ch.last_start is None:
-                    keep = np.concatenate([[True], keep])
-                ch.last_start = float(starts[-1])
-                onsets = starts[keep]
-                ons = None if d.onset is None else d.onset[:, kind, wheel]
-                level = d.level[:, kind, wheel]
-                ch.episodes.extend(
-                    channel_episodes(name, wheel, tt, onsets, acts, level, ons, cfg)
-                )
-
-    def _mu_max(self, d: AlertData, lo: int, hi: int) -> None:
-        assert d.mu_max is not None and d.confidence is not None and d.road_class is not None
-        peaks = d.true_mu_max[lo:hi]
-        ext, k = _with_previous(self._previous_peak, peaks)
-        jumps = (segments_from_peaks(ext, self.cfg.road_jump)[1:] - k).tolist()
-        cuts = jumps if self._segment is not None else [0, *jumps]
-        self._previous_peak = peaks[-1]
-        util = axle_utilisation(d.mu[lo:hi], d.peak_mu[lo:hi])
-        t = d.t[lo:hi]
-        edges = sorted({0, *cuts, hi - lo})
-        for a, b in itertools.pairwise(edges):
-            if a in cuts:  # a new road segment starts at row a
-                self._close()
-                self._segment = (self.rows + a, float(t[a]), float(t[b - 1]))
-            else:
-                assert self._segment is not None
-                self._segment = (self._segment[0], self._segment[1], float(t[b - 1]))
-            for axle in range(2):
-                self._axles[axle].feed(
-                    t[a:b],
-                    util[a:b, axle],
-                    d.true_mu_max[lo + a : lo + b, axle],
-                    d.mu_max[lo + a : lo + b, axle],
-                    d.confidence[lo + a : lo + b, axle],
-                    d.road_class[lo + a : lo + b, axle],
-                    d.true_road_class[lo + a : lo + b, axle],
-                    self.cfg,
-                )
-
-    def _close(self) -> None:
-        if self._segment is not None:
-            for axle in range(2):
-                if self._axles[axle].excited_s is not None:
-                    self.segments[axle].append(self._axles[axle].result(axle, *self._segment))
-        self._axles = [_AxleSegment(), _AxleSegment()]
-        self._segment = None
-
-    def result(self, notes: tuple[str, ...]) -> AlertsSection:
-        self._close()
-        episodes = [e for kind in self.channels for ch in kind for e in ch.episodes]
-        alarms = [a for kind in self.channels for ch in kind for a in ch.alarms]
-        segments = [*self.segments[0], *self.segments[1]]
-        return alerts_section(self.cfg, self.rows, self.judged, episodes, alarms, segments, notes)
-
-
-# -- the evaluation ---------------------------------------------------------------------------
-
-
 @dataclass(frozen=True)
 class StreamedEvaluation:
     """What one streamed evaluation found.
@@ -944,7 +388,7 @@ def evaluate_bag(
     if not present:
         raise ReportInputError(f'{Path(path)}: none of the vd topics found in the bag')
     t0 = min(first.values())
-    tally = _Scout(cfg)
+    tally = Scout(cfg)
     report: AccuracyReport | None = None
     no_report = ''
     try:
@@ -991,7 +435,7 @@ def _first_stamps(reader: BagReader, topics: list[str]) -> dict[str, int]:
     return first
 
 
-def _delayed_rows(queue: list[_Paired], horizon: int) -> list[_Paired]:
+def _delayed_rows(queue: list[Paired], horizon: int) -> list[Paired]:
     """Take the paired rows with stamps up to ``horizon`` [ns] out of ``queue`` (in order)."""
     out = []
     while queue:
@@ -1021,7 +465,7 @@ def _delayed_rows(queue: list[_Paired], horizon: int) -> list[_Paired]:
 def _the_pass(
     reader: BagReader,
     path: str | os.PathLike[str],
-    tally: _Scout,
+    tally: Scout,
     present: list[str],
     skipped: dict[str, str],
     t0: int,
@@ -1065,17 +509,17 @@ def _the_pass(
         if loads_pending and (final or tally.loads_known()):
             known.loads = tally.static_loads()
         if final:
-            return _NEVER
+            return NEVER
         if loads_pending and TRUTH_TIRE_FORCES in have and not tally.loads_known():
             return -1
         seen = [tally.last.get(t) for t in event_topics]
         if any(s is None for s in seen):
             return -1
-        return min([_NEVER, *[int(s) - margin_ns for s in seen if s is not None]])
+        return min([NEVER, *[int(s) - margin_ns for s in seen if s is not None]])
 
     # one join per (estimate, truth) pair; μ also needs the true forces where they exist
-    joins: dict[tuple[str, str], tuple[_StampJoin, list[_Quantity]]] = {}
-    waiting: dict[tuple[str, str], list[_Paired]] = {}
+    joins: dict[tuple[str, str], tuple[StampJoin, list[_Quantity]]] = {}
+    waiting: dict[tuple[str, str], list[Paired]] = {}
     notes: list[str] = []
     for spec in _SPECS:
         has_est, has_truth = spec.est_topic in have, spec.truth_topic in have
@@ -1084,20 +528,20 @@ def _the_pass(
             if key not in joins:
                 forces = spec.est_topic == ESTIMATES_FRICTION and TRUTH_TIRE_FORCES in have
                 optional: tuple[str, ...] = (TRUTH_TIRE_FORCES,) if forces else ()
-                joins[key] = (_StampJoin(key, optional), [])
+                joins[key] = (StampJoin(key, optional), [])
                 waiting[key] = []
             joins[key][1].append(_Quantity(spec, cfg, t0, known))
     truth_topic = next(t for t in TRUTH_TOPICS if t in have)
     window = [0, 0]  # evaluated, all samples of the first truth topic
     truth_waiting: list[np.ndarray] = []
     section_skip = alert_section_skip(have)
-    alerts: _AlertStream | None = None
-    alert_join: _StampJoin | None = None
+    alerts: AlertStream | None = None
+    alert_join: StampJoin | None = None
     acfg = alert_settings or AlertSettings()
     if not section_skip:
         section_topics = tuple(alert_section_topics(have))
-        alert_join = _StampJoin(section_topics)
-        alerts = _AlertStream(acfg, ALERT_TOPIC in have, ESTIMATED_POTENTIAL_TOPIC in have)
+        alert_join = StampJoin(section_topics)
+        alerts = AlertStream(acfg, ALERT_TOPIC in have, ESTIMATED_POTENTIAL_TOPIC in have)
 
     def drain(final: bool) -> None:
         until = horizon(final)
