@@ -357,7 +357,8 @@ def test_a_reference_on_another_clock_is_interpolated_onto_the_estimates(
 
 
 def test_a_reference_with_gaps_is_not_interpolated_across_them(tmp_path: Path) -> None:
-    from vd_observer_node.tools.report.evaluation import EvaluationSettings, build_comparisons
+    from vd_observer_node.tools.report.evaluation import build_comparisons
+    from vd_observer_node.tools.report.results import EvaluationSettings
 
     t = np.arange(400) / RATE
     stamp = np.round(t * 1e9).astype(np.int64)

@@ -8,8 +8,8 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from matplotlib.figure import Figure
-from vd_observer_node.tools.report.evaluation import AccuracyReport, Comparison, EvaluationSettings
 from vd_observer_node.tools.report.figures import NO_VALID_SAMPLES, _quantity_figure, envelope
+from vd_observer_node.tools.report.results import AccuracyReport, Comparison, EvaluationSettings
 
 
 def test_short_series_is_returned_unchanged() -> None:

@@ -44,8 +44,9 @@ from vd_observer_node.tools.fleet.process import (
 )
 from vd_observer_node.tools.report.alerts import AlertSettings, truth_conditions
 from vd_observer_node.tools.report.errors import ReportInputError, StampOrderError
-from vd_observer_node.tools.report.evaluation import AccuracyReport, evaluate
+from vd_observer_node.tools.report.evaluation import evaluate
 from vd_observer_node.tools.report.load import load_bag_series
+from vd_observer_node.tools.report.results import AccuracyReport
 from vd_observer_node.tools.report.stream import evaluate_bag
 from vd_observer_node.tools.report.stream_join import iter_topic_blocks
 

@@ -33,7 +33,8 @@ from vd_observer_node.tools.report.errors import (
     ReportInputError,
     StampOrderError,
 )
-from vd_observer_node.tools.report.evaluation import AccuracyReport, target_values
+from vd_observer_node.tools.report.evaluation import target_values
+from vd_observer_node.tools.report.results import AccuracyReport
 from vd_observer_node.tools.report.stream import evaluate_bag
 from vd_observer_node.tools.report.stream_join import DEFAULT_BLOCK_MESSAGES
 

@@ -83,7 +83,7 @@ HIGHER_IS_BETTER: tuple[str, ...] = ('targets_met', 'detected')
 
 
 def _limits() -> dict[str, float]:
-    from vd_observer_node.tools.report.evaluation import TARGETS
+    from vd_observer_node.tools.report.results import TARGETS
 
     return {column: TARGETS[name][2] for name, column in TARGET_COLUMNS.items()}
 

@@ -13,17 +13,17 @@ from vd_observer_node.tools.lazy import lazy_exports
 if TYPE_CHECKING:  # the names as mypy and editors see them; imported on first use
     from vd_observer_node.tools.report.alerts import AlertSettings, AlertsSection
     from vd_observer_node.tools.report.errors import ReportError, ReportInputError
-    from vd_observer_node.tools.report.evaluation import (
+    from vd_observer_node.tools.report.evaluation import evaluate
+    from vd_observer_node.tools.report.format import report_json, report_markdown, report_text
+    from vd_observer_node.tools.report.load import BagSeries, TopicSeries, load_bag_series
+    from vd_observer_node.tools.report.metrics import ErrorStats
+    from vd_observer_node.tools.report.results import (
         AccuracyReport,
         Comparison,
         EvaluationSettings,
         QuantityMetrics,
         SlopeConvergence,
-        evaluate,
     )
-    from vd_observer_node.tools.report.format import report_json, report_markdown, report_text
-    from vd_observer_node.tools.report.load import BagSeries, TopicSeries, load_bag_series
-    from vd_observer_node.tools.report.metrics import ErrorStats
 
 __all__ = [
     'AccuracyReport',
@@ -48,17 +48,17 @@ __all__ = [
 __getattr__ = lazy_exports(
     __name__,
     {
-        'AccuracyReport': 'evaluation',
+        'AccuracyReport': 'results',
         'AlertSettings': 'alerts',
         'AlertsSection': 'alerts',
         'BagSeries': 'load',
-        'Comparison': 'evaluation',
+        'Comparison': 'results',
         'ErrorStats': 'metrics',
-        'EvaluationSettings': 'evaluation',
-        'QuantityMetrics': 'evaluation',
+        'EvaluationSettings': 'results',
+        'QuantityMetrics': 'results',
         'ReportError': 'errors',
         'ReportInputError': 'errors',
-        'SlopeConvergence': 'evaluation',
+        'SlopeConvergence': 'results',
         'TopicSeries': 'load',
         'evaluate': 'evaluation',
         'load_bag_series': 'load',

@@ -259,7 +259,8 @@ def _load_mapped(
 def _reference_first(bag: Path) -> bool:
     """Whether the bag holds a reference; says at once when it does not (before a replay)."""
     from vd_observer_node.bag.reader import BagReader
-    from vd_observer_node.tools.report.evaluation import NO_REFERENCE_HINT, has_reference
+    from vd_observer_node.tools.report.evaluation import has_reference
+    from vd_observer_node.tools.report.results import NO_REFERENCE_HINT
 
     if has_reference(BagReader(bag).topics):
         return True
@@ -317,7 +318,7 @@ def _run(args: argparse.Namespace) -> int:
 
         figures = write_figures(comparisons, report, out)
         if report.alerts is not None:
-            from vd_observer_node.tools.report.alerts import alert_data
+            from vd_observer_node.tools.report.alert_data import alert_data
             from vd_observer_node.tools.report.figures import write_alert_figures
 
             data, _ = alert_data(series)

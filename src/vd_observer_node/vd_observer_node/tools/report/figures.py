@@ -23,16 +23,16 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
+from vd_observer_node.tools.report.alert_data import AlertData
 from vd_observer_node.tools.report.alerts import (
     ALERT_KINDS,
     AXLE_NAMES,
-    AlertData,
     AlertsSection,
     axle_utilisation,
     truth_conditions,
 )
-from vd_observer_node.tools.report.evaluation import TARGETS_TITLE, AccuracyReport, Comparison
 from vd_observer_node.tools.report.metrics import error_stats
+from vd_observer_node.tools.report.results import TARGETS_TITLE, AccuracyReport, Comparison
 from vd_observer_node.tools.report.topics import WHEEL_NAMES
 
 __all__ = ['DPI', 'NO_VALID_SAMPLES', 'envelope', 'write_alert_figures', 'write_figures']

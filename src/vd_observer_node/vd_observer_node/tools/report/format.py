@@ -11,7 +11,7 @@ from typing import Any
 from vd_common.topics import TRUTH_NAMESPACE
 
 from vd_observer_node.tools.report.alerts import AXLE_NAMES, AlertsSection, road_name
-from vd_observer_node.tools.report.evaluation import (
+from vd_observer_node.tools.report.results import (
     NO_REFERENCE_HINT,
     TARGETS_TITLE,
     AccuracyReport,

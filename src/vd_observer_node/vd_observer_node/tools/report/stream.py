@@ -54,26 +54,20 @@ from vd_common.topics import (
 )
 
 from vd_observer_node.bag.reader import BagReader
-from vd_observer_node.tools.report.alerts import (
-    ALERT_KINDS,
+from vd_observer_node.tools.report.alert_data import (
     NO_COMMON_STAMP,
-    AlertSettings,
-    AlertsSection,
     alert_data_notes,
     alert_section_skip,
     alert_section_topics,
     paired_alert_data,
 )
+from vd_observer_node.tools.report.alerts import ALERT_KINDS, AlertSettings, AlertsSection
 from vd_observer_node.tools.report.errors import (
     ReferenceClockError,
     ReportInputError,
 )
 from vd_observer_node.tools.report.evaluation import (
     _SPECS,
-    AccuracyReport,
-    EvaluationSettings,
-    QuantityMetrics,
-    SlopeConvergence,
     _Spec,
     _targets,
     closing_notes,
@@ -85,6 +79,12 @@ from vd_observer_node.tools.report.metrics import (
     evaluation_mask,
     merge_times,
     selected_errors,
+)
+from vd_observer_node.tools.report.results import (
+    AccuracyReport,
+    EvaluationSettings,
+    QuantityMetrics,
+    SlopeConvergence,
 )
 from vd_observer_node.tools.report.stream_alerts import AlertStream
 from vd_observer_node.tools.report.stream_join import (

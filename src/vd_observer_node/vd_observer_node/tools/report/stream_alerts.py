@@ -16,9 +16,9 @@ from dataclasses import dataclass, field, fields, replace
 import numpy as np
 from numpy.typing import NDArray
 
+from vd_observer_node.tools.report.alert_data import AlertData
 from vd_observer_node.tools.report.alerts import (
     ALERT_KINDS,
-    AlertData,
     AlertEpisode,
     AlertSettings,
     AlertsSection,

@@ -28,11 +28,9 @@ from vd_observer_node.tools.report.alerts import (
 from vd_observer_node.tools.report.errors import (
     StampOrderError,
 )
-from vd_observer_node.tools.report.evaluation import (
-    EvaluationSettings,
-    torque_path_note,
-)
+from vd_observer_node.tools.report.evaluation import torque_path_note
 from vd_observer_node.tools.report.load import TopicSeries, decode_topic
+from vd_observer_node.tools.report.results import EvaluationSettings
 from vd_observer_node.tools.report.topics import (
     ALERT_TOPIC,
     GEAR_TOPIC,
