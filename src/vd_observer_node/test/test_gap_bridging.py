@@ -208,8 +208,9 @@ def test_the_cascade_rides_through_200_ms_gaps_on_the_analytic_trajectory() -> N
     lossless, lossless_share, _ = slope_rms(np.ones(t.size, bool))
     gapped, gapped_share, faults = slope_rms(keep)
     assert faults['wheel.gap'] == faults['speed.gap'] == faults['estimator.gap'] == 0
-    # the target on this trajectory, with every stamp after a gap estimated
-    assert gapped <= 1.5 * lossless, (gapped, lossless)
+    # with every stamp after a gap estimated: measured 1.22x (0.219 deg against 0.179, seeded);
+    # the bound leaves 6 % for another platform's floating point, far inside the 1.5x
+    assert gapped <= 1.3 * lossless, (gapped, lossless)
     assert gapped_share >= 0.95 * lossless_share
 
 
@@ -278,7 +279,8 @@ def test_a_bag_with_200_ms_gaps_replays_within_1_5_times_the_lossless_slope_erro
         figures[name] = (np.degrees(rms), float(valid.mean()))
     (lossless, lossless_valid), (gapped, gapped_valid) = figures['lossless'], figures['gap200']
     assert lossless < 0.3  # docs/performance.md: 0.249 deg
-    assert gapped <= 1.5 * lossless, figures  # the target (measured: 1.00x)
+    # measured 1.00x (0.2490 deg against 0.2494); the target was 1.5x
+    assert gapped <= 1.05 * lossless, figures
     # the slope settles after the gaps that hid a transient (launch, clutch, wheel spin,
     # shift): valid on 68 % of the stamps against 72 % without loss
     assert gapped_valid >= 0.9 * lossless_valid, figures
