@@ -20,7 +20,9 @@ Usage:
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import io
 import os
 import sys
 import tempfile
@@ -110,14 +112,12 @@ def drive_bag(
 
 def calibrated(bag: Path, out: Path) -> tuple[dict[str, float], float]:
     """Run the command's path; the fitted values by key and the wall time [s]."""
-    args = argparse.Namespace(bags=[bag], out=out, mapping=None, vehicle=None, report=None)
+    args = argparse.Namespace(
+        bags=[bag], out=out, mapping=None, vehicle=None, report=None, level_road=False
+    )
     started = time.perf_counter()
-    with open(os.devnull, 'w', encoding='utf-8') as quiet:
-        saved, sys.stdout = sys.stdout, quiet
-        try:
-            run_calibrate(args)
-        finally:
-            sys.stdout = saved
+    with contextlib.redirect_stdout(io.StringIO()):
+        run_calibrate(args)
     wall = time.perf_counter() - started
     fitted = load_estimation_vehicle(out)
     text = out.read_text(encoding='utf-8')

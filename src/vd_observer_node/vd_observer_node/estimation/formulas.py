@@ -27,6 +27,7 @@ __all__ = [
     'rolling_coefficient',
     'rolling_coefficient_at',
     'rolling_resistance',
+    'rolling_speed_factor',
     'slip_ratio',
     'slope_from_forces',
     'tire_longitudinal_force',
@@ -104,8 +105,21 @@ def rolling_coefficient(speed: ArrayLike, vehicle: EstimatorVehicle) -> FloatArr
     Returns:
         shape (...), [-].
     """
+    return vehicle.rolling_c0 * rolling_speed_factor(speed, vehicle.rolling_c1)
+
+
+def rolling_speed_factor(speed: ArrayLike, c1: float) -> FloatArray:
+    """1 + c1 * |v| / 160 of paper eq. 7: the rolling coefficient per unit of c0.
+
+    Args:
+        speed: shape (...), [m/s].
+        c1: [km/h per m/s].
+
+    Returns:
+        shape (...), [-].
+    """
     v = np.abs(np.asarray(speed, dtype=np.float64))
-    return vehicle.rolling_c0 * (1.0 + vehicle.rolling_c1 * v / KMH_REFERENCE)
+    return np.asarray(1.0 + c1 * v / KMH_REFERENCE, dtype=np.float64)
 
 
 def rolling_resistance(speed: ArrayLike, fz: ArrayLike, vehicle: EstimatorVehicle) -> FloatArray:

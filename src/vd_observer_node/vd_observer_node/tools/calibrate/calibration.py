@@ -18,7 +18,7 @@ import numpy.typing as npt
 from scipy.optimize import least_squares
 from vd_common.vehicle.estimation import EstimationVehicleParams
 
-from vd_observer_node.estimation.formulas import KMH_REFERENCE
+from vd_observer_node.estimation.formulas import rolling_speed_factor
 from vd_observer_node.tools.calibrate.converter import (
     MIN_BIN_SAMPLES,
     MIN_PUMP_TORQUE_NM,
@@ -28,7 +28,11 @@ from vd_observer_node.tools.calibrate.converter import (
 from vd_observer_node.tools.calibrate.drive import GRID_HZ, WINDOW_S, CalibrationDrive
 from vd_observer_node.tools.calibrate.errors import NotDeterminedError
 from vd_observer_node.tools.calibrate.force_balance import fit_force_balance
-from vd_observer_node.tools.calibrate.radius import FittedValue, fit_rolling_radius
+from vd_observer_node.tools.calibrate.radius import (
+    FittedValue,
+    fit_rolling_radius,
+    parameter_covariance,
+)
 from vd_observer_node.tools.calibrate.ratios import (
     fit_final_drive,
     fit_gear_offset,
@@ -212,7 +216,7 @@ def _driven_axle(
     design = np.column_stack([torque[ok], np.ones(count)])
     coef, *_ = np.linalg.lstsq(design, slip[ok], rcond=None)
     residual = slip[ok] - design @ coef
-    cov = np.linalg.inv(design.T @ design) * float(residual @ residual) / max(count - 2, 1)
+    cov = parameter_covariance(design, residual)
     gain, gain_std = float(coef[0]), float(np.sqrt(cov[0, 0]))
     how = f'front-rear slip grows {gain * 1e5:+.2f} ± {gain_std * 1e5:.2f} %/kN m of engine torque'
     out.residuals['driven axle'] = (
@@ -381,6 +385,12 @@ def _converter(drive: CalibrationDrive, base: EstimationVehicleParams, out: Cali
     )
 
 
+def _spin_torque(drive: CalibrationDrive, base: EstimationVehicleParams) -> FloatArray:
+    """The torque the four wheels' spin takes, sum of J_i omega_dot_i [N m], shape (N,)."""
+    inertia = np.array([base.wheel.inertia_front] * 2 + [base.wheel.inertia_rear] * 2)
+    return np.asarray((drive.wheel_accel_radps2 * inertia).sum(axis=1), dtype=np.float64)
+
+
 def _gearbox_gear(logged: npt.NDArray[np.int64], offset: int, gears: int) -> npt.NDArray[np.int64]:
     """The gearbox's gear of each sample: the logged one plus the offset, 0 in neutral and
     where it changes (and beyond the gearbox)."""
@@ -401,8 +411,7 @@ def _drive_force(
     """The drive force at the ground [N], where the drive torque is known (braking or not:
     a brake input only says the brakes add their own), and its source."""
     radius = out.value('wheel.effective_radius', base.wheel.effective_radius)
-    inertia = np.array([base.wheel.inertia_front] * 2 + [base.wheel.inertia_rear] * 2)
-    spin = (drive.wheel_accel_radps2 * inertia).sum(axis=1)
+    spin = _spin_torque(drive, base)
     if drive.wheel_torque_nm is not None and not drive.engine_path:
         force = (drive.wheel_torque_nm.sum(axis=1) - spin) / radius
         return force, np.ones(force.shape, dtype=bool), 'measured wheel torques'
@@ -494,10 +503,7 @@ def _force_balance(
         mass = base.chassis.mass
         area_cd = out.value('aero.drag_coefficient', base.aero.drag_coefficient) * area
         rolling = (
-            mass
-            * g
-            * np.cos(grade)
-            * (1.0 + base.rolling_resistance.c1 * np.abs(speed) / KMH_REFERENCE)
+            mass * g * np.cos(grade) * rolling_speed_factor(speed, base.rolling_resistance.c1)
         )
         rest = (
             args[0]
@@ -506,7 +512,7 @@ def _force_balance(
         )
         c0 = float(rolling @ rest / (rolling @ rolling))
         spread = rest - c0 * rolling
-        std = float(np.sqrt(spread @ spread / max(spread.size - 1, 1) / (rolling @ rolling)))
+        std = float(np.sqrt(parameter_covariance(rolling, spread)[0, 0]))
         out.add(
             'rolling_resistance.c0',
             FittedValue(c0, std, int(spread.size)),
@@ -531,7 +537,7 @@ def _needed_force(
     c0 = out.value('rolling_resistance.c0', base.rolling_resistance.c0)
     cd = out.value('aero.drag_coefficient', base.aero.drag_coefficient)
     v, theta = drive.speed_mps, drive.grade_rad
-    rolling = c0 * (1.0 + base.rolling_resistance.c1 * np.abs(v) / KMH_REFERENCE)
+    rolling = c0 * rolling_speed_factor(v, base.rolling_resistance.c1)
     drag = 0.5 * base.aero.air_density * cd * base.aero.frontal_area * v**2
     return np.asarray(
         mass * (drive.accel_mps2 + g * (np.sin(theta) + rolling * np.cos(theta))) + drag,
@@ -561,8 +567,7 @@ def _torque_ratio(
     gear = _gearbox_gear(drive.gear, out.gear_offset, len(line.ratios))
     ratio = np.asarray((np.nan, *line.ratios))[gear] * final
     efficiency = np.asarray((np.nan, *_efficiencies(line.efficiency, len(line.ratios))))[gear]
-    inertia = np.array([base.wheel.inertia_front] * 2 + [base.wheel.inertia_rear] * 2)
-    spin = (drive.wheel_accel_radps2 * inertia).sum(axis=1)
+    spin = _spin_torque(drive, base)
     turbine = (_needed_force(drive, base, out) * radius + spin) / (ratio * efficiency)
     pump = drive.engine_torque_nm - line.engine_inertia * drive.engine_accel_radps2
     speed_ratio = drive.turbine_radps / np.where(
@@ -686,7 +691,7 @@ def _brake_gain(drive: CalibrationDrive, base: EstimationVehicleParams, out: Cal
         )
         return
     gains, residual = _robust_linear(a, b)
-    cov = np.linalg.inv(a.T @ a) * float(residual @ residual) / max(count - 2, 1)
+    cov = parameter_covariance(a, residual)
     for k, key in enumerate(keys):
         out.add(
             key,

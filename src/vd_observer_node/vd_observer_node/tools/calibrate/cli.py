@@ -77,8 +77,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     )
     mapping = load_input_mapping(args.mapping) if args.mapping else None
     radius = base.wheel.effective_radius
-    level = bool(getattr(args, 'level_road', False))
-    drives = [read_drive(bag, mapping, radius, level_road=level) for bag in args.bags]
+    drives = [read_drive(bag, mapping, radius, level_road=args.level_road) for bag in args.bags]
     calibration = calibrate(concatenated(drives), base)
     if not calibration.fits:
         reasons = '; '.join(f'{k}: {v}' for k, v in calibration.not_determined.items())

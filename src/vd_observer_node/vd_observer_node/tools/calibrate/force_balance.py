@@ -20,9 +20,9 @@ import numpy as np
 import numpy.typing as npt
 from scipy.optimize import least_squares
 
-from vd_observer_node.estimation.formulas import KMH_REFERENCE
+from vd_observer_node.estimation.formulas import rolling_speed_factor
 from vd_observer_node.tools.calibrate.errors import CalibrationError, NotDeterminedError
-from vd_observer_node.tools.calibrate.radius import FittedValue
+from vd_observer_node.tools.calibrate.radius import FittedValue, parameter_covariance
 
 __all__ = ['ForceBalanceFit', 'fit_force_balance']
 
@@ -97,7 +97,7 @@ def fit_force_balance(
     with_drag = float(speed.max()) >= _MIN_TOP_SPEED_MPS and known_drag_area_m2 is None
     if known_drag_area_m2 is not None:
         force = force - 0.5 * air_density_kgpm3 * known_drag_area_m2 * speed**2
-    rolling = 1.0 + rolling_c1 * np.abs(speed) / KMH_REFERENCE
+    rolling = rolling_speed_factor(speed, rolling_c1)
     columns = [accel + gravity_mps2 * np.sin(slope), gravity_mps2 * rolling * np.cos(slope)]
     if with_drag:
         columns.append(0.5 * air_density_kgpm3 * speed**2)
@@ -114,8 +114,7 @@ def fit_force_balance(
         error, x0=start, bounds=(lower, upper), loss='soft_l1', f_scale=_FORCE_F_SCALE
     )
     residual = np.asarray(result.fun, dtype=np.float64)
-    dof = max(count - design.shape[1], 1)
-    covariance = np.linalg.inv(design.T @ design) * float(residual @ residual) / dof
+    covariance = parameter_covariance(design, residual)
     mass = float(result.x[0])
     mass_c0 = float(result.x[1])
     c0 = mass_c0 / mass

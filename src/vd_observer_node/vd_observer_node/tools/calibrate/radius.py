@@ -16,7 +16,7 @@ from scipy.optimize import least_squares
 
 from vd_observer_node.tools.calibrate.errors import CalibrationError, NotDeterminedError
 
-__all__ = ['FittedValue', 'fit_proportional', 'fit_rolling_radius']
+__all__ = ['FittedValue', 'fit_proportional', 'fit_rolling_radius', 'parameter_covariance']
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -121,3 +121,19 @@ def fit_proportional(
     dof = max(count - 1, 1)
     variance = float(residual @ residual) / dof / float(jacobian @ jacobian)
     return FittedValue(value=float(result.x[0]), std=float(np.sqrt(variance)), samples=count)
+
+
+def parameter_covariance(design: FloatArray, residual: FloatArray) -> FloatArray:
+    """Covariance of a linear least-squares fit's unknowns: ``inv(A^T A)`` times the residual
+    variance (the residuals' sum of squares over the degrees of freedom).
+
+    Args:
+        design: shape (n, k), the regressors A.
+        residual: shape (n,), the fit's residuals.
+
+    Returns:
+        shape (k, k).
+    """
+    a = np.asarray(design, dtype=np.float64).reshape(len(residual), -1)
+    dof = max(a.shape[0] - a.shape[1], 1)
+    return np.asarray(np.linalg.inv(a.T @ a) * float(residual @ residual) / dof, dtype=np.float64)
