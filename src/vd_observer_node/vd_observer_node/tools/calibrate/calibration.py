@@ -276,7 +276,8 @@ def _radius(
         fitted = fits[free]
         how = f'free-rolling {free} axle against the reference speed'
     out.add(key, fitted, how)
-    omega = rear if free == 'rear' else front
+    # the speed the radius was fitted on: the free axle's, or the mean of both
+    omega = {'rear': rear, 'front': front}.get(free or '', 0.5 * (front + rear))
     residual = drive.speed_mps[steady] - fitted.value * omega[steady]
     out.residuals['rolling radius'] = (
         drive.speed_mps[steady],
