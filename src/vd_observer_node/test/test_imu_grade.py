@@ -17,6 +17,7 @@ from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.bag.reader import BagReader
 from vd_observer_node.chain import Chain, ChainSettings
 from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimation.body_pitch import vehicle_body_pitch
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.imu_grade import (
@@ -24,7 +25,7 @@ from vd_observer_node.estimation.imu_grade import (
     SOURCE_FORCE,
     SOURCE_IMU,
     ImuGradeConfig,
-    pitch_compliance,
+    imu_grade_config,
 )
 from vd_observer_node.inputs.mapping import mapping_from_dict
 from vd_observer_node.situation.friction_potential import TyreCurves
@@ -34,16 +35,8 @@ from vd_sim_node.vehicle.everyday import EverydaySettings, everyday_scenario
 from vd_sim_node.vehicle.simulation import SimResult, simulate
 
 RATE_HZ = 200.0
-SUSPENSION = PARAMS.suspension
-CONFIG = ImuGradeConfig(
-    pitch_compliance=pitch_compliance(
-        PARAMS.chassis.wheelbase,
-        PARAMS.chassis.cg_height,
-        SUSPENSION.stiffness_front,
-        SUSPENSION.stiffness_rear,
-        PARAMS.wheel.tyre_vertical_stiffness,
-    )
-)
+# the shipped Clio's body (its pitch compliance and mode), as the replay reads its file
+CONFIG = imu_grade_config(vehicle_body_pitch(None))
 
 
 @lru_cache(maxsize=2)
@@ -227,17 +220,20 @@ def test_the_imu_alone_is_valid_only_once_its_bias_is_known() -> None:
 def test_the_imu_record_and_settings_are_checked() -> None:
     sim = _drive()
     with pytest.raises(InputShapeError, match='imu must have shape'):
-        _run(sim, np.zeros((len(sim.t), 3)))
+        _run(sim, np.zeros((len(sim.t), 4)))
+    with pytest.raises(InputShapeError, match='imu must have shape'):
+        _run(sim, np.zeros((len(sim.t) - 1, 3)))
     with pytest.raises(ConfigurationError, match=r'imu\.tau'):
         ImuGradeConfig(tau=0.0)
     with pytest.raises(ConfigurationError, match=r'imu\.max_slope'):
         ImuGradeConfig(max_slope=2.0)
 
 
-def test_the_live_chain_fuses_as_the_cascade_does() -> None:
+@pytest.mark.parametrize('gyro', [False, True], ids=['specific-force', 'whole-imu'])
+def test_the_live_chain_fuses_as_the_cascade_does(gyro: bool) -> None:
     sim = _drive()
     n = int(40.0 * RATE_HZ)  # past the bias's convergence
-    imu = _imu(sim)[:n]
+    imu = (np.column_stack([_imu(sim), sim.gyro]) if gyro else _imu(sim))[:n]
     imu[2000:2100] = np.nan  # half a second without IMU messages (none held yet is nan too)
     offline = run_cascade(
         sim.t[:n], sim.wheel_angle[:n], sim.body_speed[:n], sim.wheel_torque[:n], VEHICLE,
@@ -250,7 +246,7 @@ def test_the_live_chain_fuses_as_the_cascade_does() -> None:
     mass_used = np.empty(n)
     sources = np.empty(n, dtype=np.uint8)
     for k in range(n):
-        held = None if np.isnan(imu[k, 0]) else (float(imu[k, 0]), float(imu[k, 1]))
+        held = None if np.isnan(imu[k, 0]) else tuple(float(x) for x in imu[k])
         out = chain.update(
             float(sim.t[k]), sim.wheel_angle[k], float(sim.body_speed[k]), sim.wheel_torque[k],
             imu=held,
@@ -294,7 +290,8 @@ def test_replay_reads_the_mapped_imu_and_marks_the_slope_sources(tmp_path: Path)
     t = stamps * 1e-9  # the replay's stamps: the header's nanoseconds
     expected = run_cascade(
         t, part.wheel_angle, part.body_speed, part.wheel_torque, VEHICLE,
-        estimator_config=fixed, imu=np.column_stack([t, part.imu[:, 0]]), imu_config=CONFIG,
+        estimator_config=fixed, imu=np.column_stack([t, part.imu[:, 0], part.gyro]),
+        imu_config=CONFIG,
     )  # fmt: skip
     np.testing.assert_array_equal(slope.values['angle'], expected.slope)
     np.testing.assert_array_equal(slope.values['sources'], expected.slope_sources)

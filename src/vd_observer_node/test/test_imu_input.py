@@ -127,7 +127,8 @@ def test_live_imu_parameters_build_the_mapping_of_the_file() -> None:
     for key in ('topic', 'type', 'indices', 'unit', 'scale', 'mount_rpy_deg'):
         assert f'inputs.imu.{key}' in names
     assert 'inputs.imu.fusion.tau' in names
-    assert 'inputs.imu.fusion.pitch_compliance' not in names  # from the vehicle file
+    for name in ('pitch_compliance', 'pitch_frequency', 'pitch_damping'):
+        assert f'inputs.imu.fusion.{name}' not in names  # from the vehicle file
     file_form = {
         **STANDARD_MAPPING,
         'imu': {

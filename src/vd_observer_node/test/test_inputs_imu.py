@@ -4,6 +4,7 @@ rotations."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -12,6 +13,7 @@ from scipy.spatial.transform import Rotation
 from vd_observer_node.bag.reader import TopicArrays
 from vd_observer_node.bag.typestore import message_class, serialize
 from vd_observer_node.errors import ConfigurationError
+from vd_observer_node.estimation.body_pitch import BodyPitch
 from vd_observer_node.estimation.imu_grade import ImuGradeConfig, imu_grade_config
 from vd_observer_node.inputs.decode import InputDecoder, decode_input
 from vd_observer_node.inputs.errors import MappingError
@@ -23,12 +25,14 @@ G = 9.80665
 RPY_DEG = [4.0, -7.0, 90.0]
 #: the body's specific force: 1.3 m/s^2 forward, 0.4 left, gravity
 BODY = np.array([1.3, 0.4, G])
+#: the body's angular rate: rolling, pitching (0.05 rad/s nose up: -0.05 in REP 103), yawing
+BODY_RATE = np.array([0.2, -0.05, 0.3])
 
 
-def _sensor_vector() -> np.ndarray:
+def _sensor_vector(body: np.ndarray = BODY) -> np.ndarray:
     # tf's convention: the sensor frame's orientation in the body is Rz(yaw) Ry(pitch) Rx(roll)
     mount = Rotation.from_euler('ZYX', RPY_DEG[::-1], degrees=True)
-    vector: np.ndarray = mount.inv().apply(BODY)
+    vector: np.ndarray = mount.inv().apply(body)
     return vector
 
 
@@ -39,15 +43,20 @@ def _header(stamp_ns: int) -> Any:
     return message_class('std_msgs/msg/Header')(stamp=time, frame_id='imu_link')
 
 
-def _imu_message(stamp_ns: int, a: np.ndarray) -> bytes:
+def _imu_message(stamp_ns: int, a: np.ndarray, w: np.ndarray | None = None) -> bytes:
+    """An Imu of specific force ``a`` and angular rate ``w`` (None: marked unknown, REP 145)."""
     vec = message_class('geometry_msgs/msg/Vector3')
     quat = message_class('geometry_msgs/msg/Quaternion')(x=0.0, y=0.0, z=0.0, w=1.0)
+    rate_covariance = np.zeros(9)
+    if w is None:
+        rate_covariance[0] = -1.0
+        w = np.zeros(3)
     msg = message_class('sensor_msgs/msg/Imu')(
         header=_header(stamp_ns),
         orientation=quat,
         orientation_covariance=np.zeros(9),
-        angular_velocity=vec(x=0.0, y=0.0, z=0.0),
-        angular_velocity_covariance=np.zeros(9),
+        angular_velocity=vec(x=float(w[0]), y=float(w[1]), z=float(w[2])),
+        angular_velocity_covariance=rate_covariance,
         linear_acceleration=vec(x=float(a[0]), y=float(a[1]), z=float(a[2])),
         linear_acceleration_covariance=np.zeros(9),
     )
@@ -118,14 +127,15 @@ def test_the_mapping_carries_the_sensor_s_fusion_settings() -> None:
         type='sensor_msgs/msg/Imu', fusion={'lag_compensation': False, 'tau': 0.2, 'step_tau': 0}
     )
     assert mapping.imu is not None
-    config = imu_grade_config(1e-6, mapping.imu.fusion)
+    config = imu_grade_config(BodyPitch(1e-6, 1.5, 0.4), mapping.imu.fusion)
     assert config.lag_compensation is False
     assert (config.tau, config.step_tau, config.pitch_compliance) == (0.2, 0.0, 1e-6)
-    assert imu_grade_config(0.0) == ImuGradeConfig()
+    assert (config.pitch_frequency, config.pitch_damping) == (1.5, 0.4)
+    assert imu_grade_config(BodyPitch()) == ImuGradeConfig()
     negative = _mapping(type='sensor_msgs/msg/Imu', fusion={'tau': -1}).imu
     assert negative is not None
     with pytest.raises(ConfigurationError, match=r'imu\.tau'):
-        imu_grade_config(0.0, negative.fusion)
+        imu_grade_config(BodyPitch(), negative.fusion)
 
 
 def test_imu_and_accel_stamped_give_the_body_forward_specific_force() -> None:
@@ -138,12 +148,29 @@ def test_imu_and_accel_stamped_give_the_body_forward_specific_force() -> None:
         assert spec is not None
         stamp, frame, row = InputDecoder(spec).decode(encode(1_500_000_000, a))
         assert stamp == 1_500_000_000 and frame == b'imu_link'
-        assert row == pytest.approx((BODY[0],), abs=1e-12)
+        assert row[0] == pytest.approx(BODY[0], abs=1e-12)
+        # no angular rate: an AccelStamped has none, this Imu marks its unknown
+        assert math.isnan(row[1])
         # the batch decoder of a bag gives the same
         arrays = TopicArrays(msgtype, np.array([7], dtype=np.int64), [encode(2_000, a)])
         series = decode_input(spec, arrays)
-        np.testing.assert_allclose(series.values, [[BODY[0]]], atol=1e-12)
+        np.testing.assert_allclose(series.values, [row], atol=1e-12)  # nan as nan
         assert series.stamp_ns.tolist() == [2_000]
+
+
+def test_the_imu_s_angular_velocity_gives_the_body_s_pitch_rate() -> None:
+    a, w = _sensor_vector(), _sensor_vector(BODY_RATE)
+    # in g: the specific force's unit; the rate is rad/s (REP 103) whatever it says
+    spec = _mapping(type='sensor_msgs/msg/Imu', mount_rpy_deg=RPY_DEG, unit='g').imu
+    assert spec is not None
+    message = _imu_message(3_000, a / G, w)
+    _, _, row = InputDecoder(spec).decode(message)
+    assert row == pytest.approx((BODY[0], BODY_RATE[1]), abs=1e-12)
+    arrays = TopicArrays(spec.msgtype, np.array([7], dtype=np.int64), [message])
+    np.testing.assert_allclose(decode_input(spec, arrays).values, [row], atol=1e-12)
+    # REP 145: a covariance of -1 marks the angular velocity unknown
+    _, _, row = InputDecoder(spec).decode(_imu_message(3_000, a / G, None))
+    assert row[0] == pytest.approx(BODY[0]) and math.isnan(row[1])
 
 
 def test_float64_array_with_three_axes_in_g_or_one_forward_element() -> None:
@@ -154,11 +181,11 @@ def test_float64_array_with_three_axes_in_g_or_one_forward_element() -> None:
     assert spec is not None
     # the array holds z, x, y at 0, 1, 2: indices name x, y, z's elements
     _, _, row = InputDecoder(spec).decode(_array_message([a[2], a[0], a[1]]), receive_ns=5)
-    assert row == pytest.approx((BODY[0],), abs=1e-12)
+    assert row[0] == pytest.approx(BODY[0], abs=1e-12) and math.isnan(row[1])
     forward = _mapping(type='std_msgs/msg/Float64MultiArray', indices=[1], sign=[-1]).imu
     assert forward is not None
     stamp, _, row = InputDecoder(forward).decode(_array_message([9.0, -0.8]), receive_ns=42)
-    assert stamp == 42 and row == pytest.approx((0.8,))
+    assert stamp == 42 and row[0] == pytest.approx(0.8) and math.isnan(row[1])
 
 
 def test_the_player_plays_a_recorded_imu_with_the_mapped_inputs() -> None:

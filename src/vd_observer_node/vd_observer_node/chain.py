@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.brakes import Brakes, no_brakes
-from vd_observer_node.estimation.cascade import CascadeParts, empty_outputs
+from vd_observer_node.estimation.cascade import CascadeParts, empty_outputs, no_imu
 from vd_observer_node.estimation.cascade_step import CascadeInputs, cascade_block
 from vd_observer_node.estimation.drivetrain import (
     TORQUE_ENGINE,
@@ -199,7 +199,7 @@ class Chain:
         # one stamp's inputs and outputs: buffers filled and read at every `update`
         self._in = CascadeInputs(
             np.zeros(1), np.zeros((1, 4)), np.zeros(1), np.zeros((1, 4)), np.zeros((1, 4)),
-            no_brakes(1), np.full((1, 2), np.nan),
+            no_brakes(1), no_imu(1),
         )  # fmt: skip
         self._out = empty_outputs(1, self.parts.offset_on)
         #: the estimate as a plain structured array: its fields read without a recarray's
@@ -217,7 +217,7 @@ class Chain:
         speed: float,
         wheel_torque: ArrayLike,
         engine: ArrayLike | None = None,
-        imu: tuple[float, float] | None = None,
+        imu: tuple[float, ...] | None = None,
         brake: ArrayLike | None = None,
     ) -> ChainOutput:
         """Advance to stamp t.
@@ -232,8 +232,9 @@ class Chain:
             engine: shape (3,) or (4,): engine torque [N m], gear, engine speed [rad/s] (nan
                 if not measured), turbine speed [rad/s] (nan or absent if not logged); read
                 on the engine path only, where it is required.
-            imu: the newest IMU sample: its stamp [s] and forward specific force [m/s^2]
-                (read with ``settings.imu`` only; None: none yet).
+            imu: the newest IMU sample: its stamp [s], forward specific force [m/s^2] and
+                the body's pitch rate [rad/s] (nose down positive; nan or absent: the sensor
+                gives none) (read with ``settings.imu`` only; None: none yet).
             brake: shape (4,): the brake input (`estimation.brakes.brake_torques`; nan where
                 unknown); None: nothing known at this stamp (with a brake input: invalid).
 
@@ -258,7 +259,9 @@ class Chain:
         if parts.engine_on:
             inputs.engine[0] = engine_row(engine)
         inputs.brake[0] = math.nan if brake is None else np.reshape(brake, 4)
-        inputs.imu[0] = imu if imu is not None else (math.nan, math.nan)
+        inputs.imu[0] = math.nan
+        if imu is not None:
+            inputs.imu[0, : len(imu)] = imu
         self._block()
         out = self._out
         stamp, speeds = inputs.t, inputs.body_speed

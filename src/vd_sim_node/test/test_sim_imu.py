@@ -7,6 +7,7 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 from vd_common.vehicle.params import load_vehicle
 from vd_sim_node.vehicle.model import VehicleModel
@@ -19,7 +20,9 @@ G = VP.environment.gravity
 MOUNT_DEG = 3.0  # the sensor's pitch on the body (REP 103: nose down)
 
 
-def _scenario(imu_noise: float = 0.0, imu_bias: float = 0.0) -> dict[str, object]:
+def _scenario(
+    imu_noise: float = 0.0, imu_bias: float = 0.0, gyro: tuple[float, float] = (0.0, 0.0)
+) -> dict[str, object]:
     return {
         'name': 'imu_check',
         'duration': 12.0,
@@ -36,13 +39,17 @@ def _scenario(imu_noise: float = 0.0, imu_bias: float = 0.0) -> dict[str, object
             'imu_noise_std': imu_noise,
             'imu_bias': imu_bias,
             'imu_mount_pitch_deg': MOUNT_DEG,
+            'imu_gyro_noise_std': gyro[0],
+            'imu_gyro_bias': gyro[1],
         },
     }
 
 
-@lru_cache(maxsize=2)
-def _run(imu_noise: float = 0.0, imu_bias: float = 0.0) -> SimResult:
-    return simulate(VehicleModel(VP), parse_scenario(_scenario(imu_noise, imu_bias)))
+@lru_cache(maxsize=3)
+def _run(
+    imu_noise: float = 0.0, imu_bias: float = 0.0, gyro: tuple[float, float] = (0.0, 0.0)
+) -> SimResult:
+    return simulate(VehicleModel(VP), parse_scenario(_scenario(imu_noise, imu_bias, gyro)))
 
 
 def test_imu_is_the_specific_force_rotated_into_the_sensor_frame() -> None:
@@ -90,3 +97,30 @@ def test_imu_noise_and_bias_have_their_settings_and_leave_the_other_sensors_alon
     # the IMU's noise is a generator of its own: the speed noise is what it was
     np.testing.assert_array_equal(noisy.body_speed, clean.body_speed)
     np.testing.assert_array_equal(noisy.imu_true, clean.imu_true)
+
+
+def test_the_gyro_turns_with_the_road_and_the_body() -> None:
+    run = _run()
+    dt = 1.0 / 200.0
+    turned = np.cumsum(run.gyro_true) * dt  # [rad] nose down since the start
+    # the scenario's grade steps from 4 to -3 deg at 5 s: the sensor turns 7 deg nose down
+    # within the sample period of the step (the body's pitch moves on over the next second)
+    step = round(5.0 / dt)
+    assert run.gyro_true[step] * dt == pytest.approx(math.radians(7.0), abs=math.radians(0.05))
+    # and over the run it has turned as the road and the body on its springs have (the pitch
+    # the IMU's specific force is rotated by)
+    tilt = run.pitch - run.slope
+    np.testing.assert_allclose(turned, tilt - tilt[0], atol=1e-12)
+    # the first sample has no period before it
+    assert run.gyro_true[0] == 0.0
+
+
+def test_gyro_noise_and_bias_have_their_settings_and_leave_the_other_sensors_alone() -> None:
+    clean, noisy = _run(), _run(gyro=(0.01, 0.002))
+    error = noisy.gyro - noisy.gyro_true
+    assert abs(error.mean() - 0.002) < 4.0 * 0.01 / math.sqrt(len(error))
+    assert 0.0095 < error.std() < 0.0105
+    np.testing.assert_array_equal(clean.gyro, clean.gyro_true)
+    # a generator of its own: the accelerometer and the speed are what they were
+    np.testing.assert_array_equal(noisy.imu, clean.imu)
+    np.testing.assert_array_equal(noisy.body_speed, clean.body_speed)

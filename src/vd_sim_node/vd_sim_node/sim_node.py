@@ -123,6 +123,13 @@ PARAMS = [
         low=-1.0,
         high=100.0,
     ),
+    ParamSpec(
+        'imu_gyro_noise_std',
+        -1.0,
+        "noise of the IMU's pitch rate [rad/s] (-1 = scenario setting)",
+        low=-1.0,
+        high=10.0,
+    ),
     ParamSpec('seed', -1, 'noise seed (-1 = scenario setting)', low=-1, high=2**31 - 1),
     ParamSpec('publish_truth', True, f'publish the {TRUTH_NAMESPACE}* topics'),
     ParamSpec('frame_id', 'base_link', 'frame_id of every header'),
@@ -229,6 +236,8 @@ def _with_sensor_overrides(scenario: Scenario, values: dict[str, Any]) -> Scenar
     if values['imu_noise_std'] >= 0.0:
         changes['imu'] = True
         changes['imu_noise_std'] = values['imu_noise_std']
+    if values['imu_gyro_noise_std'] >= 0.0:
+        changes['imu_gyro_noise_std'] = values['imu_gyro_noise_std']
     if values['seed'] >= 0:
         changes['seed'] = values['seed']
     return dataclasses.replace(scenario, sensors=dataclasses.replace(sensors, **changes))
@@ -429,7 +438,12 @@ class SimNode(Node):
         if self.p_imu is not None:
             imu = Imu(header=header)
             imu.orientation_covariance[0] = -1.0  # REP 145: no orientation
-            imu.angular_velocity_covariance[0] = -1.0  # nor angular velocity
+            # the pitch rate only (y): the car does not roll or yaw; its covariance the noise's
+            gyro_var = self.sim.scenario.sensors.imu_gyro_noise_std**2
+            imu.angular_velocity_covariance[0] = gyro_var
+            imu.angular_velocity_covariance[4] = gyro_var
+            imu.angular_velocity_covariance[8] = gyro_var
+            imu.angular_velocity.y = float(f.gyro)
             imu.linear_acceleration.x = float(f.imu[0])
             imu.linear_acceleration.z = float(f.imu[1])
             self.p_imu.publish(imu)

@@ -64,6 +64,7 @@ __all__ = [
     'checked_engine',
     'checked_record',
     'empty_outputs',
+    'no_imu',
     'offset_result_name',
     'run_cascade',
 ]
@@ -505,9 +506,11 @@ def run_cascade(
         drivetrain: the vehicle's driveline; needed by the engine path only.
         state: carried from the previous block of the record (`CascadeState`); None: the
             record is whole. ``faults`` are then the totals since the first block.
-        imu: shape (N, 2): stamp [s] of the newest IMU sample at each stamp (nan: none) and
-            its longitudinal specific force in body axes [m/s^2]; the slope is then the
-            fusion of `imu_grade` (None: the force balance's slope, as without an IMU).
+        imu: shape (N, 3) or (N, 2): stamp [s] of the newest IMU sample at each stamp (nan:
+            none), its longitudinal specific force in body axes [m/s^2] and the body's pitch
+            rate [rad/s] (REP 103, nose down positive; nan or absent: no angular rate); the
+            slope is then the fusion of `imu_grade` (None: the force balance's slope, as
+            without an IMU).
         imu_config: the fusion's settings (defaults if None).
         brake: shape (N, 4): the brake input per wheel (`brakes.brake_torques`: pressures,
             or the switch in column 0; nan where unknown); None: no brake input.
@@ -537,12 +540,13 @@ def run_cascade(
             state.parts = parts
     imu_record = no_imu(n)
     if imu is not None:
-        imu_record = np.ascontiguousarray(imu, dtype=np.float64)
-        if imu_record.shape != (n, 2):
+        given = np.asarray(imu, dtype=np.float64)
+        if given.ndim != 2 or given.shape[0] != n or given.shape[1] not in (2, 3):
             raise InputShapeError(
-                f'imu must have shape ({n}, 2) (sample stamp, specific force), got '
-                f'{imu_record.shape}'
+                f'imu must have shape ({n}, 3) (sample stamp, specific force, pitch rate) or '
+                f'({n}, 2), got {given.shape}'
             )
+        imu_record[:, : given.shape[1]] = given
         parts.grade(imu_config)
     out = empty_outputs(n, parts.offset_on)
     inputs = CascadeInputs(
@@ -555,8 +559,8 @@ def run_cascade(
 
 
 def no_imu(n: int) -> FloatArray:
-    """The IMU input of N stamps without an IMU (no sample: nan), shape (N, 2)."""
-    return np.full((n, 2), np.nan)
+    """The IMU input of N stamps without an IMU (no sample: nan), shape (N, 3)."""
+    return np.full((n, 3), np.nan)
 
 
 def cascade_result(

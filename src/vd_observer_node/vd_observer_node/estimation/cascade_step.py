@@ -144,8 +144,9 @@ class CascadeInputs(NamedTuple):
         engine: shape (N, 4): engine torque [N m], gear, engine speed [rad/s], turbine speed
             [rad/s] (engine path; the speeds nan where not logged).
         brake: shape (N, 4), the brake input (`brakes.brake_torques`; nan: none).
-        imu: shape (N, 2): stamp [s] of the newest IMU sample (nan: none) and its forward
-            specific force [m/s^2] (read with the IMU fusion on).
+        imu: shape (N, 3): stamp [s] of the newest IMU sample (nan: none), its forward
+            specific force [m/s^2] and the body's pitch rate [rad/s] (nose down positive;
+            nan: none) (read with the IMU fusion on).
     """
 
     t: FloatArray
@@ -285,6 +286,7 @@ def _imu_step(
     force = est.fx[0] + est.fx[1] + est.fx[2] + est.fx[3] - math.copysign(est.aero, speed)
     inp.imu_stamp = inputs.imu[k, 0]
     inp.f_x = inputs.imu[k, 1]
+    inp.pitch_rate = inputs.imu[k, 2]
     inp.speed = speed
     inp.slope_force = est.slope
     inp.force_valid = est.slope_valid

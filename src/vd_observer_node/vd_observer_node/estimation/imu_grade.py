@@ -43,24 +43,35 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
-from vd_common.errors import ParameterError
-from vd_common.vehicle.params import default_vehicle_file, load_vehicle
 
 from vd_observer_node.errors import ConfigurationError
+from vd_observer_node.estimation.body_pitch import BodyPitch
 from vd_observer_node.estimation.filters import (
     LOWPASS_META,
     lowpass_derivative,
     lowpass_reset,
     lowpass_update,
 )
-from vd_observer_node.estimation.formulas import rolling_coefficient_at
+from vd_observer_node.estimation.gyro_grade import (
+    GYRO_PARAMS,
+    GYRO_STATE,
+    gyro_advance,
+    gyro_reset,
+    gyro_sine,
+    gyro_start_on_ramp,
+)
+from vd_observer_node.estimation.imu_regression import (
+    FIT_ORDER,
+    regression_bias,
+    regression_mass,
+    regression_mass_std,
+    regression_update,
+)
 from vd_observer_node.estimation.rate_settings import REFERENCE_RATE_HZ
 from vd_observer_node.kernel._jit import jit, new_record
 
@@ -73,13 +84,12 @@ __all__ = [
     'REFERENCE_RATE_FOLLOWING',
     'SOURCE_FORCE',
     'SOURCE_IMU',
+    'VEHICLE_FIELDS',
     'ImuGrade',
     'ImuGradeConfig',
     'imu_grade_config',
     'imu_grade_step',
-    'pitch_compliance',
     'tau_for_rate',
-    'vehicle_pitch_compliance',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -89,17 +99,19 @@ SOURCE_FORCE: Final = 1
 #: bit of ``sources``: the IMU's specific force contributed
 SOURCE_IMU: Final = 2
 _ORDER: Final = 3  # stages of the grade's low-pass on (f_x, v) (the lead reads 3)
-_FIT_ORDER: Final = 2  # stages of the regression's low-pass on (f_x, v, F)
 #: One stamp's inputs of the fusion: imu_stamp [s] the stamp of the newest IMU sample (nan:
 #: none yet) and f_x [m/s^2] its longitudinal specific force in body axes; speed [m/s] the
 #: body's; slope_force [rad] the force balance's slope (`estimator_step`) and force_valid;
 #: force [N] the longitudinal force balance without gravity and rolling, sum(Fx) - aero
 #: (signed), and force_ok: the wheel torques held at the stamp (the regression may use it);
-#: mass_used [kg] the mass the force balance's slope used (`Estimates.mass_used`).
+#: mass_used [kg] the mass the force balance's slope used (`Estimates.mass_used`);
+#: pitch_rate [rad/s] the body's pitch rate of the same IMU sample (REP 103: nose down
+#: positive; nan: the sensor gives none).
 GRADE_INPUT: Final = np.dtype(
     [
         ('imu_stamp', 'f8'),
         ('f_x', 'f8'),
+        ('pitch_rate', 'f8'),
         ('speed', 'f8'),
         ('slope_force', 'f8'),
         ('force_valid', 'b1'),
@@ -139,6 +151,7 @@ GRADE_PARAMS: Final = np.dtype(
         ('rolling_c0', 'f8'),
         ('rolling_c1', 'f8'),
         ('feedback', 'b1'),
+        ('gyro', GYRO_PARAMS),
     ],
     align=True,
 )
@@ -147,7 +160,7 @@ GRADE_STATE: Final = np.dtype(
         ('stages', 'f8', (_ORDER, 2)),  # the grade's low-pass of (f_x, v)
         ('prev', 'f8', (2, 2)),  # filters.lowpass_update: last output and last input
         ('lp', LOWPASS_META),
-        ('fit_stages', 'f8', (_FIT_ORDER, 3)),  # the regression's low-pass of (f_x, v, F)
+        ('fit_stages', 'f8', (FIT_ORDER, 3)),  # the regression's low-pass of (f_x, v, F)
         ('fit_prev', 'f8', (2, 3)),
         ('fit_lp', LOWPASS_META),
         ('step_stages', 'f8', (_ORDER, 2)),  # the short low-pass of (f_x, v), no lead
@@ -169,13 +182,16 @@ GRADE_STATE: Final = np.dtype(
         ('fitted', 'b1'),  # the regression's mass has converged (latched until a reset)
         ('trusted', 'b1'),  # the regression's bias has converged (latched until a reset)
         ('stepping', 'b1'),  # the grade is the short low-pass's (a step, `step_tau`)
+        ('gyro', GYRO_STATE),  # the angular rate's grade (`gyro_grade`)
     ],
     align=True,
 )
 #: One stamp's fusion: the fused slope [rad] and whether it is valid, the sources it used
 #: (`SOURCE_FORCE` | `SOURCE_IMU`), the IMU's own bias-corrected slope [rad] (nan where it
 #: has none), the learnt bias of the longitudinal specific force [m/s^2], the filtered
-#: acceleration dv/dt [m/s^2].
+#: acceleration dv/dt [m/s^2], the mass [kg] the regression found and its standard deviation,
+#: whether it has converged, the bias's standard deviation [m/s^2], whether it is trusted,
+#: and whether the IMU's grade used the angular rate (`ImuGradeConfig.gyro`).
 GRADE_OUT: Final = np.dtype(
     [
         ('slope', 'f8'),
@@ -189,6 +205,7 @@ GRADE_OUT: Final = np.dtype(
         ('fitted', 'b1'),
         ('bias_std', 'f8'),
         ('trusted', 'b1'),
+        ('gyro', 'b1'),
     ],
     align=True,
 )
@@ -252,6 +269,19 @@ class ImuGradeConfig:
         mass_feedback: once the regression's mass has converged, the estimator uses it (the
             force balance's slope, the tyre loads; `cascade_step`); False: the estimator
             keeps its own (the file's or the online mass).
+        gyro: where the IMU gives its angular rate, the grade is a complementary filter of
+            the pitch rate and the specific force (`gyro_grade`): no lag on ramps and steps,
+            the accelerometer's vibration and the speed's noise filtered by ``gyro_tau``, a
+            gyro bias rejected (the rate's path has no gain at 0 Hz); the lead and the step
+            switch are then not used. False: the specific force alone, as without an
+            angular rate.
+        gyro_tau: time constant of each of the 3 stages of that filter, [s]: below
+            ``1 / gyro_tau`` the grade is the specific force's, above it the integrated
+            pitch rate's.
+        pitch_frequency: the body's pitch mode on its springs, [Hz] (`body_pitch`; 0: it
+            settles at once). With ``pitch_compliance`` and ``pitch_damping`` a vehicle's,
+            not a sensor's (`imu_grade_config`).
+        pitch_damping: the damping ratio of that mode, [-].
     """
 
     tau: float | None = None
@@ -277,18 +307,23 @@ class ImuGradeConfig:
     alone_bias_std: float = 0.1
     force_slope_std: float = 0.01
     mass_feedback: bool = True
+    gyro: bool = True
+    gyro_tau: float = 1.0
+    pitch_frequency: float = 0.0
+    pitch_damping: float = 0.5
 
     def __post_init__(self) -> None:
         for name in ('tau', 'fit_tau', 'max_age', 'saturation', 'max_slope', 'mass_std',
                      'bias_std', 'force_std', 'mass_tol', 'bias_tol', 'alone_bias_std',
-                     'force_slope_std'):  # fmt: skip
+                     'force_slope_std', 'gyro_tau'):  # fmt: skip
             value = getattr(self, name)
             if value is None and name in RATE_FOLLOWING:
                 continue
             if not (math.isfinite(value) and value > 0.0):
                 raise ConfigurationError(f'imu.{name} must be finite and > 0, got {value}')
         for name in ('settle', 'min_speed', 'mass_drift', 'bias_drift', 'pitch_compliance',
-                     'warmup', 'fit_delay', 'step_tau', 'step_slope'):  # fmt: skip
+                     'warmup', 'fit_delay', 'step_tau', 'step_slope', 'pitch_frequency',
+                     'pitch_damping'):  # fmt: skip
             value = getattr(self, name)
             if value is None and name in RATE_FOLLOWING:
                 continue
@@ -357,11 +392,15 @@ def tau_for_rate(name: str, rate_hz: float) -> float:
     return float(reference * max(1.0, REFERENCE_RATE_HZ / rate_hz) ** 0.25)
 
 
+#: the `ImuGradeConfig` fields a vehicle file sets (`imu_grade_config`), not a sensor's mapping
+VEHICLE_FIELDS: Final = ('pitch_compliance', 'pitch_frequency', 'pitch_damping')
+
+
 def imu_grade_config(
-    pitch_compliance: float, settings: tuple[tuple[str, float], ...] = ()
+    body: BodyPitch, settings: tuple[tuple[str, float], ...] = ()
 ) -> ImuGradeConfig:
-    """The settings of a vehicle (`vehicle_pitch_compliance`) and of a sensor (the input
-    mapping's ``imu.fusion``: field, value; the boolean fields as 0 or 1).
+    """The settings of a vehicle (its body's pitch, `body_pitch.vehicle_body_pitch`) and of
+    a sensor (the input mapping's ``imu.fusion``: field, value; the boolean fields as 0 or 1).
 
     Raises:
         ConfigurationError: a value out of its range (unknown fields the mapping rejects).
@@ -370,7 +409,10 @@ def imu_grade_config(
     changes: dict[str, Any] = {
         key: bool(value) if kinds.get(key) in (bool, 'bool') else value for key, value in settings
     }
-    return ImuGradeConfig(pitch_compliance=pitch_compliance, **changes)
+    return ImuGradeConfig(
+        pitch_compliance=body.compliance, pitch_frequency=body.frequency,
+        pitch_damping=body.damping, **changes,
+    )  # fmt: skip
 
 
 def grade_params(
@@ -406,6 +448,11 @@ def grade_params(
     p.rolling_c0 = rolling_c0
     p.rolling_c1 = rolling_c1
     p.feedback = config.mass_feedback
+    p.gyro.on = config.gyro
+    p.gyro.tau = config.gyro_tau
+    p.gyro.pitch_omega = 2.0 * math.pi * config.pitch_frequency
+    p.gyro.pitch_zeta = config.pitch_damping
+    p.gyro.gravity = gravity
     return p
 
 
@@ -415,6 +462,7 @@ def imu_grade_reset(p: np.record, s: np.record) -> None:
     lowpass_reset(s.lp)
     lowpass_reset(s.fit_lp)
     lowpass_reset(s.step_lp)
+    gyro_reset(s.gyro)
     s.last_t = math.nan
     s.since = math.nan
     s.bias = 0.0
@@ -467,72 +515,39 @@ def _force_only(out: np.record, slope_force: float, force_valid: bool) -> None:
 
 
 @jit
-def _regression(p: np.record, s: np.record, dt: float, u: float, y: float, speed: float) -> None:
-    """One Kalman update of ``theta = [m', m' b / g]`` from the filtered balance
-
-    ``y = (F - aero) / g = m' (u / g + c_r cos(alpha) (1 + k)) - m' b / g``
-
-    where ``F - aero = m f + c_r m g cos(alpha)`` (``f = dv/dt + g sin(alpha)``), the IMU
-    reads ``u = (1 + k) f + b`` and ``m' = m / (1 + k)``, ``k = pitch_gain m``.
-    """
-    s.cov[0, 0] += p.mass_q * dt
-    s.cov[1, 1] += p.bias_q * dt * (s.theta[0] / p.gravity) ** 2
-    c_roll = rolling_coefficient_at(p.rolling_c0, p.rolling_c1, speed)
-    cos_grade = math.sqrt(max(1.0 - s.sine * s.sine, 0.0))
-    phi0 = u / p.gravity + c_roll * cos_grade * (1.0 + p.pitch_gain * _mass(p, s))
-    phi1 = -1.0
-    # successive stamps see the same filtered error: one independent value per 2 order tau
-    inflation = max(1.0, 2.0 * _FIT_ORDER * p.fit_tau / dt)
-    r = (p.force_std / p.gravity) ** 2 * inflation
-    c = s.cov
-    pf0 = c[0, 0] * phi0 + c[0, 1] * phi1
-    pf1 = c[1, 0] * phi0 + c[1, 1] * phi1
-    innovation_var = phi0 * pf0 + phi1 * pf1 + r
-    k0 = pf0 / innovation_var
-    k1 = pf1 / innovation_var
-    e = y - (phi0 * s.theta[0] + phi1 * s.theta[1])
-    s.theta[0] += k0 * e
-    s.theta[1] += k1 * e
-    c00 = c[0, 0] - k0 * pf0
-    c01 = c[0, 1] - k0 * pf1
-    c11 = c[1, 1] - k1 * pf1
-    c[0, 0] = c00
-    c[0, 1] = c01
-    c[1, 0] = c01
-    c[1, 1] = c11
-    s.fit_time += dt
-
-
-@jit
-def _mass(p: np.record, s: np.record) -> float:
-    """The mass [kg] of the regression's m' = m / (1 + pitch_gain m)."""
-    reduced = s.theta[0]
-    den = 1.0 - p.pitch_gain * reduced
-    return reduced / den if den > 0.0 else math.inf
-
-
-@jit
-def _bias(p: np.record, s: np.record) -> tuple[float, float]:
-    """The IMU's bias b [m/s^2] of the regression's m' b / g, and its standard deviation
-    (first order in both parameters)."""
-    reduced = s.theta[0]
-    if not reduced > 0.0:
-        return 0.0, math.inf
-    b = s.theta[1] * p.gravity / reduced
-    # d b = g / m' d theta1 - b / m' d m'
-    j0 = -b / reduced
-    j1 = p.gravity / reduced
-    c = s.cov
-    var = j0 * j0 * c[0, 0] + 2.0 * j0 * j1 * c[0, 1] + j1 * j1 * c[1, 1]
-    return b, math.sqrt(max(var, 0.0))
-
-
-@jit
-def _mass_std(p: np.record, s: np.record) -> float:
-    """Standard deviation [kg] of `_mass` (its derivative times that of m')."""
-    den = 1.0 - p.pitch_gain * s.theta[0]
-    std = math.sqrt(max(s.cov[0, 0], 0.0))
-    return std / (den * den) if den > 0.0 else math.inf
+def _accel_sine(
+    p: np.record,
+    s: np.record,
+    y: FloatArray,
+    v_dot: float,
+    ys: FloatArray,
+    dys: FloatArray,
+    bias: float,
+    scale: float,
+) -> float:
+    """The grade's sine from the specific force alone: the low-passed ``(f_x, v)`` (``y``,
+    ``v_dot``; the short low-pass's ``ys``, ``dys``) with the lead and the step switch of
+    `ImuGradeConfig` (``bias`` [m/s^2], ``scale`` = 1 + k)."""
+    lagged = y[0] / scale - v_dot
+    # the lead: a ramp through the stages lags by order tau; adding that times the rate
+    # makes the grade's filter (1 + order tau s) / (1 + tau s)^order, without lag on ramps.
+    # The rate from the stages (each stage's rate is its input minus itself over tau), not
+    # by differencing the output: no noise from irregular stamps (a real log's 0.2 ms after
+    # 20 ms), and a step of the learnt bias or mass is no rate.
+    st = s.stages
+    rate = (st[1, 0] - st[2, 0]) / scale - (st[0, 1] - 2.0 * st[1, 1] + st[2, 1]) / p.tau
+    rate /= p.tau
+    sine = (lagged + p.lead * rate - bias / scale) / p.gravity
+    # a step of the grade: the lead overshoots it for a few tau, the short low-pass
+    # (`step_tau`, no lead) has followed it; from where they differ by more than the short
+    # one's noise until they agree again (a quarter of that), the short one's
+    if p.step_tau > 0.0:
+        fast = ((ys[0] - bias) / scale - dys[1]) / p.gravity
+        apart = abs(fast - sine)
+        s.stepping = apart > (0.25 * p.step_sine if s.stepping else p.step_sine)
+        if s.stepping:
+            sine = fast
+    return float(sine)
 
 
 @jit
@@ -556,13 +571,14 @@ def imu_grade_step(p: np.record, s: np.record, t: float, inp: np.record, out: np
     fresh = not math.isnan(imu_stamp) and t - imu_stamp <= p.max_age
     saturated = abs(f_x) >= p.saturation
     ok = fresh and not saturated and math.isfinite(f_x) and math.isfinite(speed)
-    m = _mass(p, s)
+    m = regression_mass(p, s)
     out.mass = m
-    out.mass_std = _mass_std(p, s)
+    out.mass_std = regression_mass_std(p, s)
     out.fitted = s.fitted
     out.trusted = s.trusted
-    out.bias, out.bias_std = _bias(p, s)
+    out.bias, out.bias_std = regression_bias(p, s)
     out.accel = math.nan
+    out.gyro = False
     if not ok:
         if not math.isnan(s.since):
             s.dropouts += 1
@@ -571,6 +587,7 @@ def imu_grade_step(p: np.record, s: np.record, t: float, inp: np.record, out: np
         lowpass_reset(s.lp)
         lowpass_reset(s.fit_lp)
         lowpass_reset(s.step_lp)
+        gyro_reset(s.gyro)
         s.since = math.nan
         s.stepping = False
         _force_only(out, slope_force, force_valid)
@@ -586,7 +603,7 @@ def imu_grade_step(p: np.record, s: np.record, t: float, inp: np.record, out: np
         _force_only(out, slope_force, force_valid)
         return
     # two filter banks: (f_x, v) for the grade (`tau`, `_ORDER` stages, with a lead) and
-    # (f_x, v, F) for the regression (`fit_tau`, `_FIT_ORDER` stages: faster, its lag does
+    # (f_x, v, F) for the regression (`fit_tau`, `FIT_ORDER` stages: faster, its lag does
     # not matter as long as the three carry the same)
     x = np.empty(2)
     y = np.empty(2)
@@ -596,8 +613,10 @@ def imu_grade_step(p: np.record, s: np.record, t: float, inp: np.record, out: np
     dyf = np.empty(3)
     ys = np.empty(2)
     dys = np.empty(2)
+    u_in, v_in = f_x, speed
     if not s.lp.started:
         v_now, v_rate, u_mean = _line(s.start, t - s.since, speed, f_x)
+        u_in, v_in = u_mean, v_now
         xf[0] = x[0] = u_mean
         xf[1] = x[1] = v_now
         xf[2] = force if usable else 0.0
@@ -608,7 +627,7 @@ def imu_grade_step(p: np.record, s: np.record, t: float, inp: np.record, out: np
         for j in range(_ORDER):
             s.stages[j, 1] = v_now - (j + 1) * p.tau * v_rate
             s.step_stages[j, 1] = v_now - (j + 1) * p.step_tau * v_rate
-        for j in range(_FIT_ORDER):
+        for j in range(FIT_ORDER):
             s.fit_stages[j, 1] = v_now - (j + 1) * p.fit_tau * v_rate
         dy[1] = dyf[1] = dys[1] = v_rate
     elif dt <= 0.0:
@@ -638,11 +657,11 @@ def imu_grade_step(p: np.record, s: np.record, t: float, inp: np.record, out: np
     # not before the filters have forgotten the force balance's value at their start
     settled = t - s.since >= p.warmup + p.fit_delay
     if usable and settled and speed >= p.min_speed and dt > 0.0:
-        _regression(p, s, dt, yf[0], yf[2] / p.gravity, speed)
-        m = _mass(p, s)
+        regression_update(p, s, dt, yf[0], yf[2] / p.gravity, speed)
+        m = regression_mass(p, s)
         out.mass = m
-        out.mass_std = _mass_std(p, s)
-        out.bias, out.bias_std = _bias(p, s)
+        out.mass_std = regression_mass_std(p, s)
+        out.bias, out.bias_std = regression_bias(p, s)
         if s.fit_time >= p.bias_settle:
             s.fitted = s.fitted or out.mass_std <= p.mass_tol * m
             s.trusted = s.trusted or out.bias_std <= p.bias_tol
@@ -650,25 +669,26 @@ def imu_grade_step(p: np.record, s: np.record, t: float, inp: np.record, out: np
         out.trusted = s.trusted
     bias = out.bias
     scale = 1.0 + p.pitch_gain * m
-    lagged = y[0] / scale - v_dot
-    # the lead: a ramp through the stages lags by order tau; adding that times the rate
-    # makes the grade's filter (1 + order tau s) / (1 + tau s)^order, without lag on ramps.
-    # The rate from the stages (each stage's rate is its input minus itself over tau), not
-    # by differencing the output: no noise from irregular stamps (a real log's 0.2 ms after
-    # 20 ms), and a step of the learnt bias or mass is no rate.
-    st = s.stages
-    rate = (st[1, 0] - st[2, 0]) / scale - (st[0, 1] - 2.0 * st[1, 1] + st[2, 1]) / p.tau
-    rate /= p.tau
-    sine = (lagged + p.lead * rate - bias / scale) / p.gravity
-    # a step of the grade: the lead overshoots it for a few tau, the short low-pass
-    # (`step_tau`, no lead) has followed it; from where they differ by more than the short
-    # one's noise until they agree again (a quarter of that), the short one's
-    if p.step_tau > 0.0:
-        fast = ((ys[0] - bias) / scale - dys[1]) / p.gravity
-        apart = abs(fast - sine)
-        s.stepping = apart > (0.25 * p.step_sine if s.stepping else p.step_sine)
-        if s.stepping:
-            sine = fast
+    if p.gyro.on and math.isfinite(inp.pitch_rate):
+        g = s.gyro
+        starting = not g.lp.started
+        # the sine's rate of a nose-up pitch (REP 103's pitch rate is nose down)
+        up_rate = -inp.pitch_rate * math.sqrt(max(1.0 - s.sine * s.sine, 0.0))
+        settled = (scale - 1.0) * (u_in - bias) / (scale * p.gravity)
+        gyro_advance(p.gyro, g, t, dt, u_in, v_in, up_rate, settled)
+        if starting:
+            gyro_start_on_ramp(p.gyro, g, v_in, v_dot)
+        sine = gyro_sine(p.gyro, g, bias, scale)
+        # its start: the filter holds the pitch the body had then as the one it keeps (a
+        # body still settling on its springs is a step the rate's path passes for a few
+        # tau); fade from the specific force's grade to it over that time
+        fade = math.exp(-(t - g.since) / p.gyro.tau)
+        if fade > 1e-6:
+            sine += fade * (_accel_sine(p, s, y, v_dot, ys, dys, bias, scale) - sine)
+        out.gyro = True
+    else:
+        gyro_reset(s.gyro)
+        sine = _accel_sine(p, s, y, v_dot, ys, dys, bias, scale)
     valid = abs(sine) <= p.max_sine
     slope_imu = math.asin(max(-1.0, min(1.0, sine)))
     s.sine = sine
@@ -696,45 +716,6 @@ def imu_grade_step(p: np.record, s: np.record, t: float, inp: np.record, out: np
         out.slope = weight * slope_imu + (1.0 - weight) * slope_force
         out.slope_valid = True
         out.sources = (SOURCE_IMU if weight > 0.01 else 0) | (SOURCE_FORCE if weight < 0.99 else 0)
-
-
-def pitch_compliance(
-    wheelbase: float,
-    cg_height: float,
-    front_stiffness: float,
-    rear_stiffness: float,
-    tyre_stiffness: float,
-) -> float:
-    """Body pitch per newton of longitudinal ground force [rad/N] of a car on its springs.
-
-    The ground force ``F`` acts ``cg_height`` below the CG: a moment ``h F`` taken up by the
-    axles as ``+-h F / L``; each axle's corner springs (two per axle, the suspension in series
-    with the tyre) deflect by that over their stiffness, and the body pitches by the
-    difference over the wheelbase: ``h (1/k_f + 1/k_r) / L^2``.
-
-    Args:
-        wheelbase: L [m].
-        cg_height: h [m].
-        front_stiffness, rear_stiffness: one corner's suspension spring [N/m].
-        tyre_stiffness: one tyre's vertical stiffness [N/m].
-    """
-    front = 1.0 / (0.5 / front_stiffness + 0.5 / tyre_stiffness)
-    rear = 1.0 / (0.5 / rear_stiffness + 0.5 / tyre_stiffness)
-    return cg_height * (1.0 / front + 1.0 / rear) / wheelbase**2
-
-
-def vehicle_pitch_compliance(path: str | os.PathLike[str] | None) -> float:
-    """`pitch_compliance` [rad/N] of a full vehicle file's suspension and tyres; 0 (a rigid
-    body) for a file that has none (an estimation-only file), None: the shipped Clio."""
-    try:
-        vp = load_vehicle(Path(path) if path is not None else default_vehicle_file())
-    except ParameterError:
-        return 0.0
-    s = vp.suspension
-    return pitch_compliance(
-        vp.chassis.wheelbase, vp.chassis.cg_height, s.stiffness_front, s.stiffness_rear,
-        vp.wheel.tyre_vertical_stiffness,
-    )  # fmt: skip
 
 
 class ImuGrade:

@@ -167,27 +167,52 @@ def has_header(spec: InputSpec) -> bool:
 
 
 def _imu(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[float], bytes]]:
-    """The IMU's forward specific force: the mounting's first row times the sensor's vector
-    (Imu.linear_acceleration, AccelStamped.accel.linear, or a Float64MultiArray's x, y, z;
-    one element of an array is already the forward specific force)."""
+    """The IMU's forward specific force (the mounting's first row times the sensor's vector:
+    Imu.linear_acceleration, AccelStamped.accel.linear, or a Float64MultiArray's x, y, z; one
+    element of an array is already the forward specific force) and the body's pitch rate
+    [rad/s] (the mounting's second row times Imu.angular_velocity; nan for the other types
+    and for an Imu that marks its angular velocity unknown, REP 145's covariance -1)."""
     ax, ay, az = spec.axis if spec.axis else (1.0, 0.0, 0.0)
+    rx, ry, rz = spec.pitch_axis if spec.pitch_axis else (0.0, 1.0, 0.0)
 
-    def vector(msg: Any, _log: int) -> tuple[int, Sequence[float], bytes]:
-        a = msg.linear_acceleration if spec.msgtype == IMU_TYPE else msg.accel.linear
-        row = [ax * float(a.x) + ay * float(a.y) + az * float(a.z)]
+    def imu(msg: Any, _log: int) -> tuple[int, Sequence[float], bytes]:
+        a, w = msg.linear_acceleration, msg.angular_velocity
+        rate = math.nan
+        if msg.angular_velocity_covariance[0] != -1.0:
+            rate = rx * float(w.x) + ry * float(w.y) + rz * float(w.z)
+        row = [ax * float(a.x) + ay * float(a.y) + az * float(a.z), rate]
         return _stamp(msg.header), row, msg.header.frame_id.encode()
 
-    if spec.msgtype in (IMU_TYPE, ACCEL_STAMPED):
-        return vector
+    def accel(msg: Any, _log: int) -> tuple[int, Sequence[float], bytes]:
+        a = msg.accel.linear
+        row = [ax * float(a.x) + ay * float(a.y) + az * float(a.z), math.nan]
+        return _stamp(msg.header), row, msg.header.frame_id.encode()
+
+    if spec.msgtype == IMU_TYPE:
+        return imu
+    if spec.msgtype == ACCEL_STAMPED:
+        return accel
     array = _float64_array(spec)
-    if not spec.axis:
-        return array
 
     def mounted(msg: Any, log: int) -> tuple[int, Sequence[float], bytes]:
-        stamp, (x, y, z), frame = array(msg, log)
-        return stamp, [ax * x + ay * y + az * z], frame
+        stamp, values, frame = array(msg, log)
+        if not spec.axis:
+            return stamp, [values[0], math.nan], frame
+        x, y, z = values
+        return stamp, [ax * x + ay * y + az * z, math.nan], frame
 
     return mounted
+
+
+def _gain(spec: InputSpec, radius: float | None) -> tuple[float, ...] | None:
+    """Each value's factor to SI units (unit, scale and sign); None where every one is 1
+    (the default mapping's values pass bit for bit, without a multiplication). The IMU's
+    unit and scale are its specific force's: its angular rate is in rad/s (REP 103)."""
+    factor = _factor(spec, radius)
+    if factor == 1.0 and all(s == 1.0 for s in spec.sign):
+        return None
+    gain = tuple((factor * np.asarray(spec.sign, dtype=np.float64)).tolist())
+    return (gain[0], 1.0) if spec.name == IMU_INPUT else gain
 
 
 def _extractor(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[float], bytes]]:
@@ -271,12 +296,7 @@ class InputDecoder:
             self._field = self._codec.fields.index(_BATCH_FIELD[spec.msgtype])
         else:
             self._extract = _extractor(spec)
-        factor = _factor(spec, radius)
-        gain = factor * np.asarray(spec.sign, dtype=np.float64)
-        # None: the default mapping's values pass unchanged (no multiplication at all)
-        self._gain = (
-            None if factor == 1.0 and all(s == 1.0 for s in spec.sign) else tuple(gain.tolist())
-        )
+        self._gain = _gain(spec, radius)
 
     def decode(self, data: bytes, receive_ns: int = 0) -> tuple[int, bytes, tuple[float, ...]]:
         """Stamp [ns], header.frame_id and the ``spec.width`` SI values of one message.
@@ -331,10 +351,9 @@ def decode_input(spec: InputSpec, arrays: TopicArrays, radius: float | None = No
         stamps, values, frames = fields.stamp_ns, raw.astype(np.float64), fields.frame_id
     else:  # _extractor refuses a type without decoder (the mapping refuses it first)
         stamps, values, frames = _per_message(spec, arrays, _extractor(spec))
-    factor = _factor(spec, radius)
-    if factor != 1.0 or any(s != 1.0 for s in spec.sign):
-        # only then: the default mapping's values pass bit for bit
-        values = values * (factor * np.asarray(spec.sign))
+    gain = _gain(spec, radius)
+    if gain is not None:
+        values = values * np.asarray(gain)
     return InputSeries(stamps.astype(np.int64), values, frames)
 
 

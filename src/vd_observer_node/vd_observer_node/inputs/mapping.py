@@ -137,7 +137,7 @@ from vd_common.topics import (
 
 from vd_observer_node.estimation.alignment import ALIGNMENTS
 from vd_observer_node.estimation.drivetrain import TORQUE_SOURCES
-from vd_observer_node.estimation.imu_grade import ImuGradeConfig
+from vd_observer_node.estimation.imu_grade import VEHICLE_FIELDS, ImuGradeConfig
 from vd_observer_node.inputs.errors import MappingError
 
 __all__ = [
@@ -162,6 +162,7 @@ __all__ = [
     'ReferenceMapping',
     'default_mapping',
     'forward_axis',
+    'lateral_axis',
     'load_input_mapping',
     'mapping_from_dict',
     'mapping_from_params',
@@ -273,6 +274,10 @@ class InputSpec:
         axis: ``imu`` only: shape (3,), the body's forward axis in the sensor's frame (the
             first row of the mounting rotation): f_x = axis . (f_sx, f_sy, f_sz); () for a
             Float64MultiArray with one element (already the forward specific force).
+        pitch_axis: ``imu`` only: shape (3,), the body's lateral (y, REP 103) axis in the
+            sensor's frame (the second row of the mounting rotation): the body's pitch rate
+            (nose down positive) is pitch_axis . (w_sx, w_sy, w_sz) of an Imu's
+            ``angular_velocity``; () where the type carries no angular rate.
         gear_offset: ``engine_torque`` only: added to the logged gear.
         signal: ``brake`` only: 'pressure' or 'switch'.
         fusion: ``imu`` only: settings of the IMU fusion for this sensor (field of
@@ -290,6 +295,7 @@ class InputSpec:
     per_radius: bool = False
     speed_factor: float = 1.0
     axis: tuple[float, ...] = ()
+    pitch_axis: tuple[float, ...] = ()
     gear_offset: int = 0
     signal: str = ''
     fusion: tuple[tuple[str, float], ...] = ()
@@ -297,10 +303,13 @@ class InputSpec:
     @property
     def width(self) -> int:
         """Values per sample: 4 for the per-wheel inputs and the brake (its value of each
-        wheel, or the switch), 1 for the body speed and the IMU (its forward specific force),
-        4 for the engine (torque, gear, engine speed, turbine speed)."""
+        wheel, or the switch), 1 for the body speed, 2 for the IMU (its forward specific
+        force and the body's pitch rate, nan where the sensor gives none), 4 for the engine
+        (torque, gear, engine speed, turbine speed)."""
         if self.name == ENGINE_INPUT:
             return 4
+        if self.name == IMU_INPUT:
+            return 2
         return 4 if self.name in _PER_WHEEL or self.name == BRAKE_INPUT else 1
 
 
@@ -529,6 +538,7 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
     if any(s not in (1.0, -1.0) for s in sign):
         raise MappingError(f'{where}.sign must list {width} values of +1 or -1')
     axis: tuple[float, ...] = ()
+    pitch_axis: tuple[float, ...] = ()
     if name == IMU_INPUT:
         rpy = data.get('mount_rpy_deg', [0.0, 0.0, 0.0])
         if not isinstance(rpy, list) or len(rpy) != 3:
@@ -540,6 +550,7 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
                 f'{where}.mount_rpy_deg needs the 3 axes (indices of x, y, z), not one element'
             )
         axis = () if one_element else forward_axis(*angles)
+        pitch_axis = lateral_axis(*angles) if msgtype == IMU_TYPE else ()
     fusion = _fusion(where, data.get('fusion', {}))
     return InputSpec(
         name=name,
@@ -552,6 +563,7 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         per_radius=name == 'wheel_speeds' and unit in PER_RADIUS_UNITS,
         speed_factor=speed_factor,
         axis=axis,
+        pitch_axis=pitch_axis,
         gear_offset=gear_offset,
         signal=signal,
         fusion=fusion,
@@ -563,7 +575,7 @@ def _fusion(where: str, raw: Any) -> tuple[tuple[str, float], ...]:
     booleans (checked by the config when it is made)."""
     if not isinstance(raw, dict):
         raise MappingError(f'{where}.fusion must map settings to values')
-    known = {f.name for f in fields(ImuGradeConfig)} - {'pitch_compliance'}
+    known = {f.name for f in fields(ImuGradeConfig)} - set(VEHICLE_FIELDS)
     items = []
     for key, value in raw.items():
         if key not in known:
@@ -583,6 +595,16 @@ def forward_axis(roll: float, pitch: float, yaw: float) -> tuple[float, float, f
     cp, sp = math.cos(pitch), math.sin(pitch)
     cy, sy = math.cos(yaw), math.sin(yaw)
     return (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr)
+
+
+def lateral_axis(roll: float, pitch: float, yaw: float) -> tuple[float, float, float]:
+    """The second row of the rotation body <- sensor of `forward_axis`'s mounting: the
+    body's rate about its y axis (pitch, nose down positive) is this row times the sensor's
+    angular velocity (x, y, z)."""
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    return (sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr)
 
 
 def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:

@@ -42,7 +42,7 @@ from vd_observer_node.estimation.estimator import (
     TORQUE_OFFSET_PREFIX,
     EstimatorConfig,
 )
-from vd_observer_node.estimation.imu_grade import ImuGradeConfig
+from vd_observer_node.estimation.imu_grade import VEHICLE_FIELDS, ImuGradeConfig
 from vd_observer_node.estimation.mass_grade import MassGradeConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.rolling_radius import RollingRadiusConfig
@@ -153,7 +153,7 @@ INPUT_PARAMS: Final = [
             + ('follows the input rate' if spec.default is None else f'{spec.default}')
             + f'): {spec.description}',
         )
-        for spec in dataclass_param_specs(ImuGradeConfig, skip=('pitch_compliance',))
+        for spec in dataclass_param_specs(ImuGradeConfig, skip=VEHICLE_FIELDS)
     ),
 ]
 

@@ -78,12 +78,13 @@ from vd_msgs.msg import (
 from vd_observer_node.bag.cdr_message import MessageCodec
 from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.chain import Chain, ChainOutput, ChainSettings
+from vd_observer_node.estimation.body_pitch import vehicle_body_pitch
 from vd_observer_node.estimation.brakes import Brakes
 from vd_observer_node.estimation.differentiator import LevantGains
 from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import ERROR
-from vd_observer_node.estimation.imu_grade import imu_grade_config, vehicle_pitch_compliance
+from vd_observer_node.estimation.imu_grade import imu_grade_config
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.rate_settings import RateMeter, follow_rate_hz
 from vd_observer_node.estimation.vehicle import (
@@ -226,7 +227,7 @@ class PipelineNode(Node):
             # the IMU fusion, with the body's pitch under the ground force from a full file
             settings = replace(
                 settings,
-                imu=imu_grade_config(vehicle_pitch_compliance(vehicle_file), mapping.imu.fusion),
+                imu=imu_grade_config(vehicle_body_pitch(vehicle_file), mapping.imu.fusion),
             )
         # Builds (or loads from numba's disk cache) the compiled chain now, before any sample.
         self.chain = Chain(settings)
@@ -292,10 +293,11 @@ class PipelineNode(Node):
                 radius=settings.vehicle.effective_radius,
             )
             self.create_subscription(cls, spec.topic, callback, STREAM_QOS, raw=True)
-        # the IMU samples received (stamp [s], forward specific force [m/s^2]), the last few:
+        # the IMU samples received (stamp [s], forward specific force [m/s^2], pitch rate
+        # [rad/s] or nan), the last few:
         # each stamp takes the newest not later than it, as the replay holds them; the
         # fusion judges its age
-        self._imu: deque[tuple[float, float]] = deque(maxlen=_IMU_HELD)
+        self._imu: deque[tuple[float, float, float]] = deque(maxlen=_IMU_HELD)
         if mapping.imu is not None:
             imu_decoder = InputDecoder(mapping.imu)
             imu_topic, imu_stamped = mapping.imu.topic, has_header(mapping.imu)
@@ -314,7 +316,7 @@ class PipelineNode(Node):
                     return
                 if imu_stamped:
                     self.watch.stamped(imu_topic, stamp, now - stamp)
-                self._imu.append((stamp * 1e-9, row[0]))
+                self._imu.append((stamp * 1e-9, row[0], row[1]))
 
             self.create_subscription(
                 input_message_class(mapping.imu), mapping.imu.topic, on_imu, STREAM_QOS,

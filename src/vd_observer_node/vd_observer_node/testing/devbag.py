@@ -130,8 +130,9 @@ def sim_topics(
         sim: a simulator run's ``SimResult`` (duck-typed: only its arrays).
         truth: include the ``/vd/truth/*`` topics.
         imu: include the IMU (``/vd/sensors/imu``: ``sim.imu``'s specific force in
-            ``linear_acceleration`` x and z, orientation and angular velocity marked unknown
-            as REP 145 says), as the simulator node publishes it for a scenario with an IMU.
+            ``linear_acceleration`` x and z, ``sim.gyro``'s pitch rate in
+            ``angular_velocity.y``, the orientation marked unknown as REP 145 says), as the
+            simulator node publishes it for a scenario with an IMU.
     """
     topics: dict[str, dict[str, np.ndarray]] = {
         SENSORS_WHEEL_ANGLES: {'angle': sim.wheel_angle},
@@ -150,7 +151,8 @@ def sim_topics(
         topics[SENSORS_IMU] = {
             'orientation.w': np.ones(n),
             'orientation_covariance': unknown,
-            'angular_velocity_covariance': unknown,
+            'angular_velocity_covariance': np.zeros((n, 9)),
+            'angular_velocity.y': sim.gyro,
             'linear_acceleration.x': sim.imu[:, 0],
             'linear_acceleration.z': sim.imu[:, 1],
         }

@@ -51,6 +51,7 @@ from vd_observer_node.bag.read_ahead import read_ahead
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.errors import ConfigurationError
+from vd_observer_node.estimation.body_pitch import vehicle_body_pitch
 from vd_observer_node.estimation.brakes import Brakes
 from vd_observer_node.estimation.cascade import (
     CascadeResult,
@@ -63,10 +64,7 @@ from vd_observer_node.estimation.drivetrain import (
 from vd_observer_node.estimation.estimator import (
     EstimatorConfig,
 )
-from vd_observer_node.estimation.imu_grade import (
-    imu_grade_config,
-    vehicle_pitch_compliance,
-)
+from vd_observer_node.estimation.imu_grade import imu_grade_config
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.mapping import (
@@ -286,7 +284,7 @@ def replay_bag(
         # the body's pitch under the ground force, from a full vehicle file's springs
         # and the sensor's own settings from the mapping
         extra['imu_config'] = imu_grade_config(
-            vehicle_pitch_compliance(vehicle_file), mapping.imu.fusion
+            vehicle_body_pitch(vehicle_file), mapping.imu.fusion
         )
     torque_kwargs: dict[str, Any] = {}
     if source != 'measured':  # the default call stays as it was (injected cascades)

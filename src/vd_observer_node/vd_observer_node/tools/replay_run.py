@@ -291,12 +291,13 @@ class ReplayRun:
         # where it changes, as pipeline_node publishes it
         self.offset_last: tuple[int, bool] | None = None
         # the newest IMU sample of the blocks so far: stamp [ns], forward specific force
-        self.imu_last: tuple[int, float] | None = None
+        self.imu_last: tuple[int, np.ndarray] | None = None
 
     def held_imu(self, arrays: Mapping[str, TopicArrays], common: np.ndarray) -> np.ndarray:
-        """Shape (N, 2): for each stamp of ``common`` [ns] the stamp [s] of the newest IMU
-        sample not later than it (nan: none yet) and its forward specific force [m/s^2]
-        (sample and hold, as a live node sees it; the fusion judges the age)."""
+        """Shape (N, 3): for each stamp of ``common`` [ns] the stamp [s] of the newest IMU
+        sample not later than it (nan: none yet), its forward specific force [m/s^2] and
+        the body's pitch rate [rad/s] (nan: none) (sample and hold, as a live node sees it;
+        the fusion judges the age)."""
         spec = self.mapping.imu
         assert spec is not None  # called with an IMU only
         series = self._decode(spec, arrays)
@@ -304,17 +305,17 @@ class ReplayRun:
             self.imu_gaps.add(series.stamp_ns)
         order = np.argsort(series.stamp_ns, kind='stable')
         stamps = series.stamp_ns[order]
-        values = series.values[order, 0]
+        values = series.values[order]
         if self.imu_last is not None:
             stamps = np.concatenate([[self.imu_last[0]], stamps])
-            values = np.concatenate([[self.imu_last[1]], values])
-        out = np.full((common.shape[0], 2), np.nan)
+            values = np.concatenate([self.imu_last[1][None, :], values])
+        out = np.full((common.shape[0], 3), np.nan)
         if stamps.size:
             idx = np.searchsorted(stamps, common, side='right') - 1
             have = idx >= 0
             out[have, 0] = stamps[idx[have]] * 1e-9
-            out[have, 1] = values[idx[have]]
-            self.imu_last = (int(stamps[-1]), float(values[-1]))
+            out[have, 1:] = values[idx[have]]
+            self.imu_last = (int(stamps[-1]), values[-1].copy())
         return out
 
     def _follow_rate(self, wheel_stamps: list[int]) -> None:

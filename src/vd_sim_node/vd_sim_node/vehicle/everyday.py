@@ -19,7 +19,7 @@ Everything is drawn from ``numpy.random.default_rng(seed)``: a seed is a drive.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from vd_common.vehicle.params import VehicleParams
@@ -54,6 +54,9 @@ class EverydaySettings:
         imu_noise: IMU noise per axis, [m/s^2].
         imu_bias: largest |bias| of the IMU's longitudinal axis, [m/s^2].
         imu_mount_deg: largest |mounting pitch| not told to the estimator, [deg].
+        gyro_noise: noise of the IMU's pitch rate, [rad/s] (a consumer MEMS gyro's 0.01
+            deg/s/sqrt(Hz) over 500 Hz is 0.004 rad/s).
+        gyro_bias: largest |bias| of the IMU's pitch rate, [rad/s] (0.3 deg/s, uncalibrated).
     """
 
     duration: float = 120.0
@@ -67,6 +70,8 @@ class EverydaySettings:
     imu_noise: float = 0.05
     imu_bias: float = 0.1
     imu_mount_deg: float = 1.0
+    gyro_noise: float = 0.004
+    gyro_bias: float = 0.005
 
 
 def _grid(t: float) -> float:
@@ -177,6 +182,9 @@ def everyday_scenario(
         load_position_m=float(rng.uniform(0.3, 2.2)),
         tyre_radius_scale=radius,
     )
+    # drawn last: the drives' other draws stay what they were before the gyro
+    gyro_bias = float(rng.uniform(-s.gyro_bias, s.gyro_bias))
+    sensors = replace(sensors, imu_gyro_noise_std=s.gyro_noise, imu_gyro_bias=gyro_bias)
     return Scenario(
         name=f'everyday_{seed}',
         duration=s.duration,

@@ -23,6 +23,8 @@ A scenario file (``config/scenarios/*.yaml``)::
       imu_noise_std: 0.0         # [m/s^2] Gaussian noise on each specific-force axis
       imu_bias: 0.0              # [m/s^2] constant bias of the longitudinal axis
       imu_mount_pitch_deg: 0.0   # [deg] IMU's pitch on the body (about y, REP 103: + nose down)
+      imu_gyro_noise_std: 0.0    # [rad/s] Gaussian noise on the IMU's pitch rate
+      imu_gyro_bias: 0.0         # [rad/s] constant bias of the IMU's pitch rate
     true_vehicle:                # optional: the car driven is not the vehicle file
       extra_mass_kg: 0.0         # [kg] load added to the body (negative: removed)
       cg_shift_m: 0.1            # [m] rearward CG shift it causes, or instead:
@@ -117,6 +119,9 @@ class SensorSettings:
         imu_bias: constant bias of the longitudinal specific force, [m/s^2].
         imu_mount_pitch: pitch of the IMU's frame in the body frame, about the body's y axis
             (REP 103: positive nose down, as an input mapping's ``mount_rpy_deg``), [rad].
+        imu_gyro_noise_std: standard deviation of the noise on the IMU's pitch rate (its y
+            axis), [rad/s].
+        imu_gyro_bias: constant bias of the IMU's pitch rate, [rad/s].
     """
 
     rate_hz: float = 1000.0
@@ -128,6 +133,8 @@ class SensorSettings:
     imu_noise_std: float = 0.0
     imu_bias: float = 0.0
     imu_mount_pitch: float = 0.0
+    imu_gyro_noise_std: float = 0.0
+    imu_gyro_bias: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -268,6 +275,8 @@ def parse_scenario(data: object, default_name: str = 'scenario') -> Scenario:
         imu_mount_pitch=math.radians(
             sens.number('imu_mount_pitch_deg', 'deg', ge=-30.0, le=30.0, default=0.0)
         ),
+        imu_gyro_noise_std=sens.number('imu_gyro_noise_std', 'rad/s', ge=0.0, default=0.0),
+        imu_gyro_bias=sens.number('imu_gyro_bias', 'rad/s', ge=-1.0, le=1.0, default=0.0),
     )
     truth = r.optional_section('true_vehicle')
     true_vehicle = VehicleVariant() if truth is None else _variant(truth)

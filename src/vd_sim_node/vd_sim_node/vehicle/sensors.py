@@ -83,11 +83,13 @@ class SensorModel:
         """
         self.settings = settings
         seq = np.random.SeedSequence(settings.seed if seed is None else seed)
-        # the IMU's stream is a third child: the first two (speed, torque) stay as they were
-        speed_seq, torque_seq, imu_seq = seq.spawn(3)
+        # the IMU's stream is a third child, its gyro's a fourth: the first ones stay as they
+        # were (a SeedSequence's children do not depend on how many are spawned)
+        speed_seq, torque_seq, imu_seq, gyro_seq = seq.spawn(4)
         self._speed_rng = np.random.default_rng(speed_seq)
         self._torque_rng = np.random.default_rng(torque_seq)
         self._imu_rng = np.random.default_rng(imu_seq)
+        self._gyro_rng = np.random.default_rng(gyro_seq)
 
     def measure(
         self, angle: FloatArray, speed: FloatArray, torque: FloatArray
@@ -127,4 +129,19 @@ class SensorModel:
         out[:, 0] += s.imu_bias
         if s.imu_noise_std > 0.0:
             out += s.imu_noise_std * self._imu_rng.standard_normal(out.shape)
+        return out
+
+    def measure_gyro(self, rate: FloatArray) -> FloatArray:
+        """The IMU's reading of a block of true pitch rates (bias and noise added).
+
+        Args:
+            rate: shape (M,), the sensor's rate about its y axis, [rad/s].
+
+        Returns:
+            Same shape, [rad/s].
+        """
+        s = self.settings
+        out = np.asarray(rate, dtype=float) + s.imu_gyro_bias
+        if s.imu_gyro_noise_std > 0.0:
+            out = out + s.imu_gyro_noise_std * self._gyro_rng.standard_normal(out.shape)
         return out

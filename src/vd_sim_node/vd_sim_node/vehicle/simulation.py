@@ -101,6 +101,11 @@ class SimResult:
             (its mounting pitch applied; the body's motion normal to the road neglected).
         imu: shape (N, 2), [m/s^2], the IMU's reading: ``imu_true`` with the bias and noise
             of the scenario's sensors (whether or not ``sensors.imu`` publishes it).
+        gyro_true: shape (N,), [rad/s], the IMU's true rate about its y axis (REP 103: nose
+            down positive): the body's pitch rate on the road plus the road's grade changes,
+            each sample the mean over the sample period before it (the change of the
+            sensor's pitch over the period; 0 at the first), as an integrating gyro gives it.
+        gyro: shape (N,), [rad/s], its reading with the scenario's gyro bias and noise.
         events: (time [s], description) of scenario steps, gear shifts, clutch events.
     """
 
@@ -134,6 +139,8 @@ class SimResult:
     pitch: FloatArray
     imu_true: FloatArray
     imu: FloatArray
+    gyro_true: FloatArray
+    gyro: FloatArray
     events: tuple[tuple[float, str], ...]
 
 
@@ -174,6 +181,8 @@ class SampleFrame:
     pitch: float
     imu_true: FloatArray
     imu: FloatArray
+    gyro_true: float
+    gyro: float
 
 
 _SERIES = tuple(f.name for f in fields(SampleFrame))
@@ -253,6 +262,7 @@ class Simulator:
         self._pitch_reference = self._deflection_pitch(
             self.model.static_state(0.0, vp.engine.idle_speed)[:, None]
         )[0]
+        self._last_tilt = math.nan  # [rad] the sensor's pitch at the last sample (the gyro)
         self._k = 0  # next sample index to compute
         self._t = 0.0  # time of the state self._x
         self._drv, self._x = self._initial_conditions()
@@ -589,6 +599,7 @@ class Simulator:
             accel, full(M, u[2]), pitch, self.scenario.sensors.imu_mount_pitch,
             vp.environment.gravity,
         )  # fmt: skip
+        gyro_true = self._gyro_rate(ts, pitch - full(M, u[2]))
         potential = true_friction_potential(self._friction_table, fz, fx, full(M, u[3]))
         return {
             't': ts.copy(),
@@ -621,7 +632,19 @@ class Simulator:
             'pitch': pitch,
             'imu_true': imu_true,
             'imu': self._sensors.measure_imu(imu_true),
+            'gyro_true': gyro_true,
+            'gyro': self._sensors.measure_gyro(gyro_true),
         }
+
+    def _gyro_rate(self, ts: FloatArray, tilt: FloatArray) -> FloatArray:
+        """[rad/s] the mean rate of the sensor's pitch ``tilt`` (nose down, against the
+        level; shape (M,), [rad]) over each sample period ``ts`` [s] ends (0 at the first
+        sample of the run); the last tilt is kept for the next block."""
+        before = np.concatenate([[tilt[0] if math.isnan(self._last_tilt) else self._last_tilt],
+                                 tilt[:-1]])  # fmt: skip
+        rate: FloatArray = (tilt - before) * self.rate_hz
+        self._last_tilt = float(tilt[-1])
+        return rate
 
 
 def _empty_block() -> dict[str, Any]:
