@@ -24,6 +24,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from vd_common.vehicle.params import default_vehicle_file, load_vehicle
@@ -98,6 +99,36 @@ def uncompiled(name: str) -> tuple[float, float]:
     return cc, cs
 
 
+def imu_cost(vehicle: object) -> None:
+    """The cascade's CPU per sample without an IMU, with its specific force, and with its
+    pitch rate too (issue 36's budget: the whole IMU within 3 us of today's fusion)."""
+    scenario = load_scenario(SCENARIOS / 'paper_table1.yaml')
+    sensors = dataclasses.replace(ENCODER, imu=True, imu_noise_std=0.05, imu_gyro_noise_std=0.004)
+    sim = simulate(
+        load_vehicle(default_vehicle_file()),
+        dataclasses.replace(scenario, duration=30.0, sensors=sensors),
+    )
+    n = len(sim.t)
+    inputs: dict[str, dict[str, Any]] = {
+        'no IMU': {},
+        'specific force': {'imu': np.column_stack([sim.t, sim.imu[:, 0]])},
+        'whole IMU': {'imu': np.column_stack([sim.t, sim.imu[:, 0], sim.gyro])},
+    }
+    costs = {}
+    for name, imu in inputs.items():
+        runs = []
+        for _ in range(5):
+            start = time.process_time()
+            run_cascade(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, vehicle, **imu)
+            runs.append((time.process_time() - start) / n * 1e6)
+        costs[name] = statistics.median(runs)
+    print(
+        '  paper_table1 30 s: '
+        + ', '.join(f'{name} {cost:5.2f} us' for name, cost in costs.items())
+        + f'; the pitch rate adds {costs["whole IMU"] - costs["specific force"]:+5.2f} us'
+    )
+
+
 def per_stamp(vehicle: object, curves: TyreCurves) -> None:
     t, angle, speed, torque = record('launch_low_mu', 5.0)
     chain = Chain(ChainSettings(vehicle=vehicle, curves=curves))  # type: ignore[arg-type]
@@ -135,6 +166,8 @@ def main() -> int:
     print('== cascade + situation monitor per 4-wheel sample (CPU time), offline blocks')
     for name in ('paper_table1', 'launch_low_mu'):
         blocks(name, vehicle, curves)
+    print('== the IMU fusion: cascade CPU per sample, median of 5')
+    imu_cost(vehicle)
     print('== per stamp, as the live pipeline node')
     per_stamp(vehicle, curves)
     print('== node start-up to "ready" (warm numba cache), median of 3')

@@ -62,6 +62,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         '--imu-noise', type=float, default=0.05, help="the IMU's noise per axis [m/s^2]"
     )
     parser.add_argument(
+        '--gyro-noise',
+        type=float,
+        default=0.004,
+        help="the IMU's pitch-rate noise [rad/s] (a consumer MEMS gyro's at 1 kHz)",
+    )
+    parser.add_argument(
         '--no-imu',
         action='store_true',
         help='no IMU: the split observer, estimator and alerts nodes (launch/demo.launch.py)',
@@ -140,6 +146,7 @@ def main(argv: list[str] | None = None) -> int:
                     'encoder_counts_per_rev': args.encoder_counts,
                     'speed_noise_std': args.speed_noise,
                     'imu_noise_std': -1.0 if args.no_imu else args.imu_noise,
+                    'imu_gyro_noise_std': -1.0 if args.no_imu else args.gyro_noise,
                     'progress_period': 1.0,
                     **lockstep,
                 },

@@ -35,13 +35,11 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
+from vd_observer_node.estimation.body_pitch import vehicle_body_pitch  # noqa: E402
 from vd_observer_node.estimation.cascade import CascadeResult, run_cascade  # noqa: E402
 from vd_observer_node.estimation.drivetrain import Drivetrain  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
-from vd_observer_node.estimation.imu_grade import (  # noqa: E402
-    ImuGradeConfig,
-    vehicle_pitch_compliance,
-)
+from vd_observer_node.estimation.imu_grade import imu_grade_config  # noqa: E402
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_estimator_vehicle  # noqa: E402
 
@@ -169,8 +167,12 @@ def main() -> None:
     parser.add_argument('--torque-paths', default='measured,engine,none')
     parser.add_argument(
         '--imu', action='store_true',
-        help='the car carries an IMU (0.05 m/s^2 noise, 0.08 m/s^2 bias) and the cascade '
-        'fuses it (estimation.imu_grade)',
+        help='the car carries an IMU (0.05 m/s^2 noise, 0.08 m/s^2 bias; gyro 0.004 rad/s '
+        'noise, 0.003 rad/s bias) and the cascade fuses it (estimation.imu_grade)',
+    )  # fmt: skip
+    parser.add_argument(
+        '--no-gyro', action='store_true',
+        help='with --imu: fuse its specific force alone (ImuGradeConfig.gyro = False)',
     )  # fmt: skip
     args = parser.parse_args()
 
@@ -201,7 +203,10 @@ def main() -> None:
             scenario.sensors, encoder_counts_per_rev=counts, speed_noise_std=noise
         )
         if args.imu:
-            sensors = dataclasses.replace(sensors, imu=True, imu_noise_std=0.05, imu_bias=0.08)
+            sensors = dataclasses.replace(
+                sensors, imu=True, imu_noise_std=0.05, imu_bias=0.08, imu_gyro_noise_std=0.004,
+                imu_gyro_bias=0.003,
+            )  # fmt: skip
         t0 = time.perf_counter()
         sim = simulate(sim_vehicle, dataclasses.replace(scenario, sensors=sensors))
         t_sim = time.perf_counter() - t0
@@ -210,9 +215,10 @@ def main() -> None:
         t0 = time.perf_counter()
         imu: dict[str, Any] = {}
         if args.imu:
-            imu['imu'] = np.column_stack([sim.t, sim.imu[:, 0]])
-            imu['imu_config'] = ImuGradeConfig(
-                pitch_compliance=vehicle_pitch_compliance(args.vehicle)
+            # the whole sensor: specific force and pitch rate (`--no-gyro`: the first alone)
+            imu['imu'] = np.column_stack([sim.t, sim.imu[:, 0], sim.gyro])
+            imu['imu_config'] = dataclasses.replace(
+                imu_grade_config(vehicle_body_pitch(args.vehicle)), gyro=not args.no_gyro
             )
         est = run_cascade(
             sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, vehicle, obs_cfg, est_cfg,
