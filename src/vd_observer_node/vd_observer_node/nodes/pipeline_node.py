@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections import deque
 from dataclasses import replace
 from typing import Any
 
@@ -94,6 +93,7 @@ from vd_observer_node.estimation.vehicle import (
 )
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
+from vd_observer_node.inputs.imu_hold import ImuHold
 from vd_observer_node.inputs.mapping import BRAKE_INPUT, ENGINE_INPUT
 from vd_observer_node.nodes.node_params import (
     INPUT_PARAMS,
@@ -148,8 +148,6 @@ _OUTPUTS = (
 )
 #: the per-quantity outputs that ``estimate_topics: combined`` carries in one message
 _SEPARATE = ('states', 'accel', 'velocity', 'forces', 'friction', 'resistances', 'slope')
-#: IMU samples kept for the stamps to come (an IMU ahead of the wheels by up to this many)
-_IMU_HELD = 64
 _OBSERVER_KEYS = {f for f in ObserverConfig.__dataclass_fields__ if f != 'gains'}
 _GAIN_KEYS = set(LevantGains.__dataclass_fields__)
 
@@ -294,11 +292,14 @@ class PipelineNode(Node):
             )
             self.create_subscription(cls, spec.topic, callback, STREAM_QOS, raw=True)
         # the IMU samples received (stamp [s], forward specific force [m/s^2], pitch rate
-        # [rad/s] or nan), the last few:
-        # each stamp takes the newest not later than it, as the replay holds them; the
+        # [rad/s] or nan): each stamp takes the newest not later than it, as the replay holds
+        # them, whatever the order the executor takes the subscriptions in (`ImuHold`); the
         # fusion judges its age
-        self._imu: deque[tuple[float, float, float]] = deque(maxlen=_IMU_HELD)
+        self._imu: ImuHold[dict[str, Any]] | None = None
+        self._imu_held_before = 0
         if mapping.imu is not None:
+            assert settings.imu is not None  # made from the mapping's imu
+            self._imu = ImuHold(settings.imu.max_age)
             imu_decoder = InputDecoder(mapping.imu)
             imu_topic, imu_stamped = mapping.imu.topic, has_header(mapping.imu)
 
@@ -316,7 +317,9 @@ class PipelineNode(Node):
                     return
                 if imu_stamped:
                     self.watch.stamped(imu_topic, stamp, now - stamp)
-                self._imu.append((stamp * 1e-9, row[0], row[1]))
+                assert self._imu is not None
+                for ready in self._imu.sample((stamp * 1e-9, row[0], row[1])):
+                    self._estimate(*ready)
 
             self.create_subscription(
                 input_message_class(mapping.imu), mapping.imu.topic, on_imu, STREAM_QOS,
@@ -340,6 +343,16 @@ class PipelineNode(Node):
         return self.encoders(self._types[key], frame)
 
     def process(self, stamp_ns: int, m: dict[str, Any]) -> None:
+        """A completed set of inputs: estimated now, or with an IMU once its sample is known."""
+        if self._imu is None:
+            self._estimate(stamp_ns, m, None)
+            return
+        for ready in self._imu.stamp(stamp_ns, dict(m)):
+            self._estimate(*ready)
+
+    def _estimate(
+        self, stamp_ns: int, m: dict[str, Any], imu: tuple[float, float, float] | None
+    ) -> None:
         # SI values with the mapping's signs (raw_io.mapped_input)
         frame, angles = m[self._wheels]  # angles [rad] or speeds [rad/s]
         speed = float(m['body_speed'][1][0])
@@ -348,7 +361,6 @@ class PipelineNode(Node):
         engine = m[ENGINE_INPUT][1] if source == 'engine' else None
         brake = m[BRAKE_INPUT][1] if BRAKE_INPUT in m else None
         t = stamp_ns * 1e-9
-        imu = next((sample for sample in reversed(self._imu) if sample[0] <= t), None)
         out = self.chain.update(t, angles, speed, torques, engine, imu=imu, brake=brake)
         if self._wheel_rate is not None and self._wheel_rate.add(stamp_ns):
             # from the next stamp on, as vd replay does (rate_settings.FOLLOW_AFTER)
@@ -495,6 +507,14 @@ class PipelineNode(Node):
         )
 
     def publish_diagnostics(self) -> None:
+        if self._imu is not None:
+            # stamps still held back after a whole period without a new one (the drive
+            # ended before its IMU's last sample came): estimated with what there is
+            held = self._imu.waiting
+            if held and held == self._imu_held_before:
+                for ready in self._imu.flush():
+                    self._estimate(*ready)
+            self._imu_held_before = self._imu.waiting
         # Level and message name the faults of the last period; the counters are totals.
         report = self.chain.fault_report()
         level, message = report.level, report.message
