@@ -6,9 +6,8 @@ of a stamp and the stamp's last wheel message is taken first depends on the exec
 the newest IMU sample *received* made the fused slope differ from run to run (0.04-0.1 deg on
 the lockstep demo). `ImuHold` holds a completed stamp back until the IMU has delivered a
 sample at or after it, so that every stamp takes what the replay takes, unless the IMU is
-behind the newest wheel stamp by more than ``max_age`` (the fusion's own dropout age: it is
-then no sample the fusion would use; an IMU not heard from yet is awaited that long from the
-first stamp), when the stamps go on without it.
+behind the newest wheel stamp by more than ``max_age`` (an IMU not heard from yet is awaited
+that long from the first stamp), when the stamps go on without it.
 """
 
 from __future__ import annotations
@@ -46,6 +45,11 @@ class ImuHold(Generic[T]):
     def waiting(self) -> int:
         """Stamps held back now."""
         return len(self._stamps)
+
+    @property
+    def oldest(self) -> int | None:
+        """[ns] the oldest stamp held back (None: none)."""
+        return self._stamps[0][0] if self._stamps else None
 
     def sample(self, sample: ImuSample) -> list[tuple[int, T, ImuSample | None]]:
         """An IMU sample arrived; the stamps it releases, in order (see `stamp`)."""

@@ -148,6 +148,10 @@ _OUTPUTS = (
 )
 #: the per-quantity outputs that ``estimate_topics: combined`` carries in one message
 _SEPARATE = ('states', 'accel', 'velocity', 'forces', 'friction', 'resistances', 'slope')
+#: [s] how far the IMU may be behind the newest completed stamp before the stamps go on
+#: without it (`ImuHold`): a busy executor taking the IMU's queue late is not a dropout (the
+#: fusion judges the sample's age by its stamp); as the lockstep demo's window
+_IMU_WAIT = 0.5
 _OBSERVER_KEYS = {f for f in ObserverConfig.__dataclass_fields__ if f != 'gains'}
 _GAIN_KEYS = set(LevantGains.__dataclass_fields__)
 
@@ -296,10 +300,9 @@ class PipelineNode(Node):
         # them, whatever the order the executor takes the subscriptions in (`ImuHold`); the
         # fusion judges its age
         self._imu: ImuHold[dict[str, Any]] | None = None
-        self._imu_held_before = 0
+        self._imu_oldest_before: int | None = None
         if mapping.imu is not None:
-            assert settings.imu is not None  # made from the mapping's imu
-            self._imu = ImuHold(settings.imu.max_age)
+            self._imu = ImuHold(_IMU_WAIT)
             imu_decoder = InputDecoder(mapping.imu)
             imu_topic, imu_stamped = mapping.imu.topic, has_header(mapping.imu)
 
@@ -508,13 +511,14 @@ class PipelineNode(Node):
 
     def publish_diagnostics(self) -> None:
         if self._imu is not None:
-            # stamps still held back after a whole period without a new one (the drive
-            # ended before its IMU's last sample came): estimated with what there is
-            held = self._imu.waiting
-            if held and held == self._imu_held_before:
+            # the oldest stamp held back is still the one of a period ago: its IMU sample is
+            # not coming (the drive ended before the IMU's last sample came); estimated with
+            # what there is
+            oldest = self._imu.oldest
+            if oldest is not None and oldest == self._imu_oldest_before:
                 for ready in self._imu.flush():
                     self._estimate(*ready)
-            self._imu_held_before = self._imu.waiting
+            self._imu_oldest_before = self._imu.oldest
         # Level and message name the faults of the last period; the counters are totals.
         report = self.chain.fault_report()
         level, message = report.level, report.message

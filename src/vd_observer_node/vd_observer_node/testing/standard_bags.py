@@ -168,9 +168,11 @@ def odometry(stamp_ns: int, speed: float) -> Any:
     )
 
 
-def imu(stamp_ns: int, forward: float) -> Any:
+def imu(stamp_ns: int, forward: float, pitch_rate: float | None = None) -> Any:
     """A sensor_msgs/Imu (rosbags class) reading ``forward`` [m/s^2] on its x axis, gravity
-    on z; orientation unknown (covariance[0] = -1, as the message's comment says)."""
+    on z, and ``pitch_rate`` [rad/s] about y (None: the angular velocity unknown, as an ESC
+    cluster's forward acceleration logged alone); orientation unknown (covariance[0] = -1, as
+    the message's comment says)."""
     vec = message_class('geometry_msgs/msg/Vector3')
     quat = message_class('geometry_msgs/msg/Quaternion')(x=0.0, y=0.0, z=0.0, w=1.0)
     unknown = np.zeros(9)
@@ -179,8 +181,8 @@ def imu(stamp_ns: int, forward: float) -> Any:
         header=header(stamp_ns, 'imu_link'),
         orientation=quat,
         orientation_covariance=unknown,
-        angular_velocity=vec(x=0.0, y=0.0, z=0.0),
-        angular_velocity_covariance=np.zeros(9),
+        angular_velocity=vec(x=0.0, y=pitch_rate or 0.0, z=0.0),
+        angular_velocity_covariance=unknown if pitch_rate is None else np.zeros(9),
         linear_acceleration=vec(x=forward, y=0.0, z=9.81),
         linear_acceleration_covariance=np.zeros(9),
     )
