@@ -278,7 +278,7 @@ def test_replay_reads_the_mapped_imu_and_marks_the_slope_sources(tmp_path: Path)
     # the slope filter set: left unset, the replay follows the bag's rate after 200 stamps
     # (rate_settings; tested in test_bag_replay)
     fixed = EstimatorConfig(slope_filter_tau=0.1)
-    replay_bag(
+    report = replay_bag(
         tmp_path / 'in',
         tmp_path / 'out',
         mapping=mapping,
@@ -296,3 +296,13 @@ def test_replay_reads_the_mapped_imu_and_marks_the_slope_sources(tmp_path: Path)
     np.testing.assert_array_equal(slope.values['angle'], expected.slope)
     np.testing.assert_array_equal(slope.values['sources'], expected.slope_sources)
     assert np.any(slope.values['sources'] == SOURCE_FORCE | SOURCE_IMU)
+    # the summary says what the fusion used and learnt: the simulator's gyro at every stamp
+    # after the warm-up, the bias it was given (0.1 m/s^2, no mounting), when it was trusted
+    used = float(report.imu.split('angular rate used on ')[1].split(' %')[0])
+    bias = float(report.imu.split('bias ')[1].split(' m/s^2')[0])
+    trusted = float(report.imu.split('trusted after ')[1].split(' s')[0])
+    first = int(np.argmax(expected.imu_trusted))
+    assert used == pytest.approx(100.0 * expected.imu_gyro.mean(), abs=0.05) and used > 95.0
+    assert bias == pytest.approx(expected.imu_bias[-1], abs=5e-4)
+    assert abs(bias - 0.1) < 0.02
+    assert trusted == pytest.approx(t[first] - t[0], abs=0.05)

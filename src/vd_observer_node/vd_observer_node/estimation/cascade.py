@@ -134,6 +134,7 @@ class CascadeResult:
             without IMU); imu_mass_std its standard deviation.
         imu_fitted: shape (N,), bool, the regression's mass has converged.
         imu_trusted: shape (N,), bool, its bias has converged: the slope is the IMU's.
+        imu_gyro: shape (N,), bool, the IMU's grade used its angular rate (`gyro_grade`).
     """
 
     t: FloatArray
@@ -184,6 +185,7 @@ class CascadeResult:
     imu_mass_std: FloatArray = field(default_factory=lambda: np.zeros(0))
     imu_fitted: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     imu_trusted: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    imu_gyro: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
 @dataclass
@@ -623,4 +625,5 @@ def _imu_fields(grade: np.recarray) -> dict[str, Any]:
         'imu_mass_std': grade.mass_std.copy(),
         'imu_fitted': grade.fitted.copy(),
         'imu_trusted': grade.trusted.copy(),
+        'imu_gyro': grade.gyro.copy(),
     }

@@ -121,6 +121,8 @@ def _replay(args: argparse.Namespace) -> int:
     for stats in report.inputs:
         print(f'  input {stats.text()}')
     print(f'torque path: {path}')
+    if report.imu:
+        print(f'imu: {report.imu}')
     print(f'vehicle: {report.vehicle}')
     # the IMU fusion's are named as the mapping names them (imu.fusion.*)
     derived = {

@@ -129,6 +129,9 @@ class ReplayReport:
         rate_settings: the settings left unset that followed `input_rate_hz` from the next
             stamp on, by name (the estimator's ``'slope_filter_tau'``; the IMU fusion's
             ``'imu.fusion.tau'``, ``'imu.fusion.step_tau'``), with the value used.
+        imu: what the IMU fusion used and learnt, one line ('' without an IMU): the share of
+            the stamps whose grade used the angular rate, the bias learnt [m/s^2] and the
+            mounting pitch it amounts to, when it was trusted.
     """
 
     samples: int
@@ -148,6 +151,7 @@ class ReplayReport:
     notes: tuple[str, ...] = ()
     input_rate_hz: float = math.nan
     rate_settings: dict[str, float] = field(default_factory=dict)
+    imu: str = ''
 
     @property
     def real_time_factor(self) -> float:
@@ -272,6 +276,9 @@ class ReplayRun:
         self.sensor_messages = 0
         self.sensor_log = (np.iinfo(np.int64).max, np.iinfo(np.int64).min)
         self.torque_valid = 0
+        self.imu_gyro = 0  # stamps whose IMU grade used the angular rate
+        self.imu_trusted_at = math.nan  # [s] after the first stamp
+        self.first_stamp_s = math.nan
         self.cascade_time = 0.0
         self.situation_time = 0.0
         self.result: CascadeResult | None = None
@@ -290,8 +297,10 @@ class ReplayRun:
         # (episodes, converged) of the last engine-torque offset written: it is written
         # where it changes, as pipeline_node publishes it
         self.offset_last: tuple[int, bool] | None = None
-        # the newest IMU sample of the blocks so far: stamp [ns], forward specific force
-        self.imu_last: tuple[int, np.ndarray] | None = None
+        # the IMU samples of the blocks so far that later stamps may still take: the newest
+        # not later than the last stamp estimated, and every one after it (a block read by
+        # log time holds samples of the next block's stamps): stamps [ns], values (M, 2)
+        self.imu_carry: tuple[np.ndarray, np.ndarray] | None = None
 
     def held_imu(self, arrays: Mapping[str, TopicArrays], common: np.ndarray) -> np.ndarray:
         """Shape (N, 3): for each stamp of ``common`` [ns] the stamp [s] of the newest IMU
@@ -303,19 +312,20 @@ class ReplayRun:
         series = self._decode(spec, arrays)
         if self.imu_gaps is not None:
             self.imu_gaps.add(series.stamp_ns)
-        order = np.argsort(series.stamp_ns, kind='stable')
-        stamps = series.stamp_ns[order]
-        values = series.values[order]
-        if self.imu_last is not None:
-            stamps = np.concatenate([[self.imu_last[0]], stamps])
-            values = np.concatenate([self.imu_last[1][None, :], values])
+        stamps, values = series.stamp_ns, series.values
+        if self.imu_carry is not None:
+            stamps = np.concatenate([self.imu_carry[0], stamps])
+            values = np.concatenate([self.imu_carry[1], values])
+        order = np.argsort(stamps, kind='stable')
+        stamps, values = stamps[order], values[order]
         out = np.full((common.shape[0], 3), np.nan)
         if stamps.size:
             idx = np.searchsorted(stamps, common, side='right') - 1
             have = idx >= 0
             out[have, 0] = stamps[idx[have]] * 1e-9
             out[have, 1:] = values[idx[have]]
-            self.imu_last = (int(stamps[-1]), values[-1].copy())
+            keep = max(int(idx[-1]), 0) if common.size else 0
+            self.imu_carry = (stamps[keep:], values[keep:])
         return out
 
     def _follow_rate(self, wheel_stamps: list[int]) -> None:
@@ -464,6 +474,13 @@ class ReplayRun:
             self.result = result
             self.samples += n
             self.torque_valid += int(np.count_nonzero(result.torque_valid))
+            if math.isnan(self.first_stamp_s) and n:
+                self.first_stamp_s = float(result.t[0])
+            if result.imu_trusted.size:
+                self.imu_gyro += int(np.count_nonzero(result.imu_gyro))
+                if math.isnan(self.imu_trusted_at) and result.imu_trusted.any():
+                    first = int(np.argmax(result.imu_trusted))
+                    self.imu_trusted_at = float(result.t[first] - self.first_stamp_s)
 
         if meanwhile is None:
             cascade()
@@ -540,4 +557,23 @@ class ReplayRun:
             torque_valid_fraction=self.torque_valid / self.samples if self.samples else 0.0,
             input_rate_hz=self.input_rate_hz,
             rate_settings=dict(self.rate_settings),
+            imu=self._imu_line(result),
+        )
+
+    def _imu_line(self, result: CascadeResult) -> str:
+        """`ReplayReport.imu` from the last block's result and the totals."""
+        if not result.imu_bias.size:
+            return ''
+        bias = float(result.imu_bias[-1])
+        gravity = self.vehicle.gravity
+        mount = math.degrees(math.asin(max(-1.0, min(1.0, bias / gravity))))
+        trusted = (
+            f'trusted after {self.imu_trusted_at:.1f} s'
+            if math.isfinite(self.imu_trusted_at)
+            else 'never trusted (the force balance did not teach it; the IMU alone invalid)'
+        )
+        share = 100.0 * self.imu_gyro / self.samples if self.samples else 0.0
+        return (
+            f'angular rate used on {share:.1f} % of the stamps; bias {bias:+.3f} m/s^2 '
+            f'(a sensor pitched {mount:+.2f} deg, nose up +), {trusted}'
         )
