@@ -37,6 +37,11 @@ regression is kept).
 feeds the regression's mass back once it has converged (``mass_feedback``: the estimator's
 force balance, slope and tyre loads use it from the next stamp on). `ImuGrade` holds the
 records.
+
+Where the IMU gives its angular rate (``GRADE_INPUT.pitch_rate`` finite, ``gyro`` on) the
+grade is `gyro_grade`'s complementary filter of the rate and the specific force instead of
+the low-pass with its lead and step switch above; the regression (`imu_regression`), the bias
+and the weighting are the same either way.
 """
 
 from __future__ import annotations
