@@ -11,8 +11,9 @@ The two paths add up to the grade at every frequency, so neither lags: below ``1
 grade is the specific force's (low-passed: the speed's noise and the vibration filtered),
 above it the integrated rate's. The rate's path ``(1 - G) / s = tau^2 s (3 + tau s) /
 (1 + tau s)^3`` has no gain at 0 Hz: a gyro bias does not reach the grade. The body's pitch is
-`body_pitch`'s model driven by the force (its settled pitch ``k f / g``, the pitch mode of the
-vehicle file), so the grade keeps the road's turning only.
+a second-order model driven by the force (`_body_pitch_step`: towards its settled pitch
+``k f / g`` through the vehicle file's pitch mode, `body_pitch`), so the grade keeps the
+road's turning only.
 
 Everything is read from one bank of stages of ``(f_x, v, nose-up rate, body pitch)`` (stage
 ``j`` follows ``j - 1`` at ``(y_(j-1) - y_j) / tau``): ``G x = 3 y2 - 2 y3``,
