@@ -182,8 +182,10 @@ def test_pipeline_node_fuses_a_mapped_imu(procs: RosProcessGroup, tmp_path: Path
     sources = np.array([live[ESTIMATES_SLOPE][s].sources for s in stamps])
     assert np.any(sources & SOURCE_IMU), 'the live slope never used the IMU'
     offline_bag = tmp_path / 'offline'
-    replay_bag(bag, offline_bag, mapping=load_input_mapping(mapping), progress=False)
+    report = replay_bag(bag, offline_bag, mapping=load_input_mapping(mapping), progress=False)
     offline = by_topic(offline_bag, [ESTIMATES_SLOPE])
+    # the bias it learnt is logged once trusted, where the replay trusted it too
+    assert ('IMU bias learnt' in pipe.output()) == ('trusted after' in report.imu), report.imu
     for field in ('angle', 'sources', 'valid'):
         a = np.array([getattr(live[ESTIMATES_SLOPE][s], field) for s in stamps])
         b = np.array([getattr(offline[ESTIMATES_SLOPE][s], field) for s in stamps])

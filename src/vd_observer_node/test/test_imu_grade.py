@@ -101,7 +101,7 @@ def test_without_feedback_the_fusion_changes_the_slope_and_the_published_mass_on
     plain = _plain()
     fused = _run(sim, _imu(sim), dataclasses.replace(CONFIG, mass_feedback=False))
     untouched = {'slope', 'slope_valid', 'slope_sources', 'slope_imu', 'imu_bias', 'imu_mass'}
-    untouched |= {'imu_mass_std', 'imu_fitted', 'imu_trusted', 'faults'}
+    untouched |= {'imu_mass_std', 'imu_fitted', 'imu_trusted', 'imu_gyro', 'faults'}
     # the published mass is the regression's once it has data
     untouched |= {'mass', 'mass_std', 'mass_converged'}
     for field in dataclasses.fields(CascadeResult):
@@ -258,6 +258,14 @@ def test_the_live_chain_fuses_as_the_cascade_does(gyro: bool) -> None:
     np.testing.assert_array_equal(mass_used, offline.mass_used)  # the IMU's mass fed back
     np.testing.assert_array_equal(sources, offline.slope_sources)
     assert np.any(sources == SOURCE_FORCE | SOURCE_IMU)
+    # what it has learnt, as the pipeline node logs and publishes it on /diagnostics
+    learnt = chain.imu_learnt()
+    assert learnt is not None
+    assert learnt.bias == offline.imu_bias[-1] and learnt.trusted == offline.imu_trusted[-1]
+    assert learnt.gyro is gyro and learnt.trusted
+    assert learnt.pitch_deg == pytest.approx(math.degrees(math.asin(learnt.bias / 9.81)))
+    curves = TyreCurves.from_tire(PARAMS.tire)
+    assert Chain(ChainSettings(vehicle=VEHICLE, curves=curves)).imu_learnt() is None
 
 
 def test_replay_reads_the_mapped_imu_and_marks_the_slope_sources(tmp_path: Path) -> None:

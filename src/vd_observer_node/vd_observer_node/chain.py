@@ -35,6 +35,7 @@ from vd_observer_node.estimation.drivetrain import (
 from vd_observer_node.estimation.estimator import Estimates, EstimatorConfig, estimates_from_record
 from vd_observer_node.estimation.faults import FaultCounter, FaultReport, merge_reports
 from vd_observer_node.estimation.imu_grade import SOURCE_FORCE, ImuGradeConfig
+from vd_observer_node.estimation.imu_regression import bias_pitch_deg
 from vd_observer_node.estimation.observer import ObserverConfig, SpeedState, WheelState
 from vd_observer_node.estimation.torque_offset import TorqueOffset, offset_from_record
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params, vehicle_tire
@@ -54,6 +55,7 @@ __all__ = [
     'Chain',
     'ChainOutput',
     'ChainSettings',
+    'ImuLearnt',
     'chain_faults',
     'engine_row',
     'main',
@@ -133,6 +135,25 @@ def engine_row(engine: ArrayLike | None) -> NDArray[np.float64]:
     if row.shape != (4,):
         raise InputShapeError(f'engine must have shape (3,) or (4,), got {row.shape}')
     return row
+
+
+class ImuLearnt(NamedTuple):
+    """What the IMU fusion has learnt (`imu_grade`).
+
+    Attributes:
+        bias: [m/s^2] the IMU's bias of the forward specific force (a mounting pitch left
+            over, ``g sin(pitch)``, and the sensor's offset); bias_std its standard deviation.
+        pitch_deg: [deg] the sensor pitch (nose up) the bias amounts to
+            (`imu_regression.bias_pitch_deg`).
+        trusted: the bias has converged: the slope is the IMU's.
+        gyro: the last stamp's grade used the angular rate (`gyro_grade`).
+    """
+
+    bias: float
+    bias_std: float
+    pitch_deg: float
+    trusted: bool
+    gyro: bool
 
 
 class ChainOutput(NamedTuple):
@@ -311,6 +332,19 @@ class Chain:
             offset,
             sources,
         )
+
+    @property
+    def imu_trusted(self) -> bool:
+        """The IMU fusion's bias has converged at the last stamp (False: not, or no IMU)."""
+        return self.parts.imu_on and bool(self._grade[0].trusted)
+
+    def imu_learnt(self) -> ImuLearnt | None:
+        """What the IMU fusion has learnt up to the last stamp (None: no IMU fused)."""
+        if not self.parts.imu_on:
+            return None
+        g = self._grade[0]
+        pitch = bias_pitch_deg(float(g.bias), self.parts.imu_grade.params.gravity)
+        return ImuLearnt(float(g.bias), float(g.bias_std), pitch, bool(g.trusted), bool(g.gyro))
 
     def fault_report(self) -> FaultReport:
         """Faults since the previous call, per part ('wheel', 'speed', 'estimator', and

@@ -24,6 +24,7 @@ from vd_observer_node.kernel._jit import jit
 
 __all__ = [
     'FIT_ORDER',
+    'bias_pitch_deg',
     'regression_bias',
     'regression_mass',
     'regression_mass_std',
@@ -33,6 +34,12 @@ __all__ = [
 #: stages of the regression's low-pass on (f_x, v, F): successive stamps see the same
 #: filtered error, one independent value per ``2 FIT_ORDER fit_tau``
 FIT_ORDER: Final = 2
+
+
+def bias_pitch_deg(bias: float, gravity: float) -> float:
+    """[deg] the sensor pitch (nose up) a bias of the forward specific force [m/s^2] amounts
+    to if it all were mounting: ``asin(b / g)``."""
+    return math.degrees(math.asin(max(-1.0, min(1.0, bias / gravity))))
 
 
 @jit

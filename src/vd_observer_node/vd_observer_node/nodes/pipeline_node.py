@@ -301,6 +301,7 @@ class PipelineNode(Node):
         # fusion judges its age
         self._imu: ImuHold[dict[str, Any]] | None = None
         self._imu_oldest_before: int | None = None
+        self._imu_said = False  # the learnt bias logged once it is trusted
         if mapping.imu is not None:
             self._imu = ImuHold(_IMU_WAIT)
             imu_decoder = InputDecoder(mapping.imu)
@@ -382,10 +383,23 @@ class PipelineNode(Node):
                     )
             self._wheel_rate = None
         self.counts['estimates'] += 1
+        if self._imu is not None and not self._imu_said and self.chain.imu_trusted:
+            self._say_imu_learnt(t)
         if not self._finite(out):
             self.counts['withheld_non_finite'] += 1
             return
         self._publish(stamp_ns, frame, out)
+
+    def _say_imu_learnt(self, t: float) -> None:
+        """Log once what the IMU fusion learnt, at the stamp [s] its bias became trusted."""
+        self._imu_said = True
+        learnt = self.chain.imu_learnt()
+        assert learnt is not None  # an IMU is fused
+        self.get_logger().info(
+            f'IMU bias learnt at {t:.3f} s: {learnt.bias:+.3f} +- {learnt.bias_std:.3f} m/s^2 '
+            f'(a sensor pitched {learnt.pitch_deg:+.2f} deg, nose up +); the slope is the '
+            "IMU's grade from now on" + (' (with its angular rate)' if learnt.gyro else '')
+        )
 
     @staticmethod
     def _finite(out: ChainOutput) -> bool:
@@ -539,6 +553,17 @@ class PipelineNode(Node):
             self._capacity,
             log=self.get_logger().warning,  # inputs whose stamps never meet: once
         )
+        learnt = self.chain.imu_learnt()
+        imu_values: dict[str, Any] = {}
+        if learnt is not None:
+            # what the IMU fusion has learnt (logged once, when it is trusted: `_estimate`)
+            imu_values = {
+                'imu_bias_mps2': round(learnt.bias, 4),
+                'imu_bias_std_mps2': round(learnt.bias_std, 4),
+                'imu_sensor_pitch_deg': round(learnt.pitch_deg, 3),
+                'imu_trusted': learnt.trusted,
+                'imu_angular_rate_used': learnt.gyro,
+            }
         values = {
             'torque_source': self.torque_source,
             **({'situation': self._situation_off} if self._situation_off is not None else {}),
@@ -546,6 +571,7 @@ class PipelineNode(Node):
             **self.aligner.counts(),
             **report.counts,
             **watch_values,
+            **imu_values,
         }
         self.pub_diag.publish(
             node_status(

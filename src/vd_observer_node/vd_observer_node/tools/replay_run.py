@@ -44,6 +44,7 @@ from vd_observer_node.estimation.imu_grade import (
     RATE_FOLLOWING,
     ImuGradeConfig,
 )
+from vd_observer_node.estimation.imu_regression import bias_pitch_deg
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.rate_settings import (
     SPEED_STAMPS_KEPT,
@@ -565,8 +566,7 @@ class ReplayRun:
         if not result.imu_bias.size:
             return ''
         bias = float(result.imu_bias[-1])
-        gravity = self.vehicle.gravity
-        mount = math.degrees(math.asin(max(-1.0, min(1.0, bias / gravity))))
+        mount = bias_pitch_deg(bias, self.vehicle.gravity)
         trusted = (
             f'trusted after {self.imu_trusted_at:.1f} s'
             if math.isfinite(self.imu_trusted_at)
