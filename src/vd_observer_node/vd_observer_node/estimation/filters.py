@@ -36,6 +36,7 @@ __all__ = [
     'lowpass_derivative',
     'lowpass_gap',
     'lowpass_input',
+    'lowpass_on_ramp',
     'lowpass_reset',
     'lowpass_update',
 ]
@@ -117,6 +118,14 @@ def lowpass_bridge(
                 stages[j, i] += alpha * (signal - stages[j, i])
                 signal = stages[j, i]
         prev[1, i] = x0[i] + (rate[i] + curve[i] * span) * span
+
+
+@jit
+def lowpass_on_ramp(tau: float, stages: FloatArray, i: int, value: float, rate: float) -> None:
+    """Put channel ``i``'s stages where a ramp through ``value`` now at ``rate`` [unit/s]
+    has left them: stage j lags (j + 1) tau behind it (a steady start of a moving signal)."""
+    for j in range(stages.shape[0]):
+        stages[j, i] = value - (j + 1) * tau * rate
 
 
 @jit

@@ -32,7 +32,12 @@ from typing import Final
 
 import numpy as np
 
-from vd_observer_node.estimation.filters import LOWPASS_META, lowpass_reset, lowpass_update
+from vd_observer_node.estimation.filters import (
+    LOWPASS_META,
+    lowpass_on_ramp,
+    lowpass_reset,
+    lowpass_update,
+)
 from vd_observer_node.kernel._jit import jit
 
 __all__ = [
@@ -139,9 +144,8 @@ def gyro_start_on_ramp(p: np.record, s: np.record, v: float, accel: float) -> No
     """Put the speed's stages on the ramp the car is on (``v`` [m/s] now, ``accel``
     [m/s^2]: stage j lags (j + 1) tau), and the pitch as if it had not turned before (stages
     at a turning body's rate would be a pitch turning for ever before: degrees that last)."""
-    for j in range(_ORDER):
-        s.stages[j, 1] = v - (j + 1) * p.tau * accel
-        s.stages[j, 2] = 0.0
+    lowpass_on_ramp(p.tau, s.stages, 1, v, accel)
+    s.stages[:, 2] = 0.0
 
 
 @jit

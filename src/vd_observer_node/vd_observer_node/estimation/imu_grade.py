@@ -59,6 +59,7 @@ from vd_observer_node.estimation.body_pitch import BodyPitch
 from vd_observer_node.estimation.filters import (
     LOWPASS_META,
     lowpass_derivative,
+    lowpass_on_ramp,
     lowpass_reset,
     lowpass_update,
 )
@@ -628,12 +629,10 @@ def imu_grade_step(p: np.record, s: np.record, t: float, inp: np.record, out: np
         lowpass_update(p.tau, s.stages, s.prev, s.lp, dt, x, y)
         lowpass_update(p.fit_tau, s.fit_stages, s.fit_prev, s.fit_lp, dt, xf, yf)
         lowpass_update(p.step_tau, s.step_stages, s.step_prev, s.step_lp, dt, x, ys)
-        # on the ramp: stage j lags (j + 1) tau behind the speed
-        for j in range(_ORDER):
-            s.stages[j, 1] = v_now - (j + 1) * p.tau * v_rate
-            s.step_stages[j, 1] = v_now - (j + 1) * p.step_tau * v_rate
-        for j in range(FIT_ORDER):
-            s.fit_stages[j, 1] = v_now - (j + 1) * p.fit_tau * v_rate
+        # on the ramp the car is on: the speed's stages lag it
+        lowpass_on_ramp(p.tau, s.stages, 1, v_now, v_rate)
+        lowpass_on_ramp(p.step_tau, s.step_stages, 1, v_now, v_rate)
+        lowpass_on_ramp(p.fit_tau, s.fit_stages, 1, v_now, v_rate)
         dy[1] = dyf[1] = dys[1] = v_rate
     elif dt <= 0.0:
         # a repeated stamp: no time has passed, the filters hold (a derivative over no time
