@@ -72,3 +72,12 @@ def test_the_last_stamps_of_a_drive_go_when_flushed() -> None:
     assert hold.stamp(2_000_000, 2) == []  # the IMU of 2 ms may still come
     assert hold.waiting == 1
     assert hold.flush() == [(2_000_000, 2, (0.001, 1.0, 0.0))]
+
+
+def test_a_sample_out_of_stamp_order_goes_where_the_replay_s_sort_puts_it() -> None:
+    hold: ImuHold[int] = ImuHold(MAX_AGE)
+    for sample in ((0.000, 0.0, 0.0), (0.003, 3.0, 0.0), (0.001, 1.0, 0.0)):
+        assert hold.sample(sample) == []
+    assert hold.late == 1
+    # the stamp of 2 ms takes the sample of 1 ms that came late, as the sorted bag gives it
+    assert hold.stamp(2_000_000, 2) == [(2_000_000, 2, (0.001, 1.0, 0.0))]

@@ -12,6 +12,7 @@ that long from the first stamp), when the stamps go on without it.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from typing import Generic, TypeVar
@@ -28,6 +29,9 @@ class ImuHold(Generic[T]):
 
     Attributes:
         max_age: [s] an IMU this far behind the newest stamp is not waited for.
+        late: IMU samples that came out of stamp order (each is put where the replay's sort
+            puts it, for the stamps still to come; a stamp released before it came took the
+            older sample).
     """
 
     def __init__(self, max_age: float, held: int = 4096) -> None:
@@ -40,6 +44,7 @@ class ImuHold(Generic[T]):
         self._samples: deque[ImuSample] = deque(maxlen=held)
         self._stamps: deque[tuple[int, T]] = deque()
         self._first = math.nan  # [s] the first stamp: an IMU not heard from yet is awaited since
+        self.late = 0
 
     @property
     def waiting(self) -> int:
@@ -54,8 +59,12 @@ class ImuHold(Generic[T]):
     def sample(self, sample: ImuSample) -> list[tuple[int, T, ImuSample | None]]:
         """An IMU sample arrived; the stamps it releases, in order (see `stamp`)."""
         if self._samples and sample[0] < self._samples[-1][0]:
-            return self._release()  # out of order: not held (the replay sorts, a node cannot)
-        self._samples.append(sample)
+            self.late += 1
+            ordered = list(self._samples)
+            bisect.insort(ordered, sample, key=lambda s: s[0])  # after equal stamps, as sorted
+            self._samples = deque(ordered, maxlen=self._samples.maxlen)
+        else:
+            self._samples.append(sample)
         return self._release()
 
     def stamp(self, stamp_ns: int, item: T) -> list[tuple[int, T, ImuSample | None]]:

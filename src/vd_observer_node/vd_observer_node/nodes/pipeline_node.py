@@ -557,7 +557,9 @@ class PipelineNode(Node):
         imu_values: dict[str, Any] = {}
         if learnt is not None:
             # what the IMU fusion has learnt (logged once, when it is trusted: `_estimate`)
+            assert self._imu is not None  # an IMU is mapped
             imu_values = {
+                'imu_late_samples': self._imu.late,
                 'imu_bias_mps2': round(learnt.bias, 4),
                 'imu_bias_std_mps2': round(learnt.bias_std, 4),
                 'imu_sensor_pitch_deg': round(learnt.pitch_deg, 3),
