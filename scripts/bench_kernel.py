@@ -24,14 +24,14 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from vd_common.vehicle.params import default_vehicle_file, load_vehicle
-from vd_observer_node.chain import Chain, ChainSettings, warm_up
-from vd_observer_node.estimation.cascade import run_cascade
+from vd_observer_node.chain import Chain, warm_up
+from vd_observer_node.estimation.cascade import CascadeSeries, CascadeSettings, run_cascade
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.kernel._jit import JIT_ENABLED
+from vd_observer_node.situation.chain_settings import ChainSettings
 from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_observer_node.situation.monitor import SituationMonitor, run_situation
 from vd_observer_node.testing.launcher import NodeSpec
@@ -64,7 +64,7 @@ def _block_cost(
     for _ in range(5 if JIT_ENABLED else 1):
         monitor = SituationMonitor(curves, loads, radius)
         start = time.process_time()
-        cascade = run_cascade(t, angle, speed, torque, vehicle)
+        cascade = run_cascade(CascadeSeries(t, angle, speed, torque), CascadeSettings(vehicle))
         mid = time.process_time()
         run_situation(monitor, angle, speed, torque, cascade)
         end = time.process_time()
@@ -109,17 +109,21 @@ def imu_cost(vehicle: object) -> None:
         dataclasses.replace(scenario, duration=30.0, sensors=sensors),
     )
     n = len(sim.t)
-    inputs: dict[str, dict[str, Any]] = {
-        'no IMU': {},
-        'specific force': {'imu': np.column_stack([sim.t, sim.imu[:, 0]])},
-        'whole IMU': {'imu': np.column_stack([sim.t, sim.imu[:, 0], sim.gyro])},
+    inputs = {
+        'no IMU': None,
+        'specific force': np.column_stack([sim.t, sim.imu[:, 0]]),
+        'whole IMU': np.column_stack([sim.t, sim.imu[:, 0], sim.gyro]),
     }
+    settings = CascadeSettings(vehicle)
     costs = {}
     for name, imu in inputs.items():
         runs = []
         for _ in range(5):
             start = time.process_time()
-            run_cascade(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, vehicle, **imu)
+            series = CascadeSeries(
+                sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, imu=imu
+            )
+            run_cascade(series, settings)
             runs.append((time.process_time() - start) / n * 1e6)
         costs[name] = statistics.median(runs)
     print(

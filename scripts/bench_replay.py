@@ -44,13 +44,14 @@ from vd_common.topics import (
 from vd_observer_node.bag import BagReader, BagWriter
 from vd_observer_node.bag.cdr_batch import decode_batch, encode_batch, flat_fields
 from vd_observer_node.bag.writer import DEFAULT_CHUNK_DURATION_S, DEFAULT_CHUNK_SIZE
-from vd_observer_node.estimation.cascade import CascadeResult
+from vd_observer_node.estimation.cascade import CascadeResult, CascadeSeries
 from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
 from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
 
 
-def _null_cascade(t: np.ndarray, angle: np.ndarray, *_: object, **__: object) -> CascadeResult:
+def _null_cascade(series: CascadeSeries, *_: object) -> CascadeResult:
     """Zero estimates of the right shapes: isolates the bag pipeline's own cost."""
+    t = np.asarray(series.t)
     n = len(t)
     w = np.zeros((n, 4))
     s = np.zeros(n)

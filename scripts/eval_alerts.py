@@ -42,7 +42,7 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
 from vd_common.vehicle.friction import axle_mean, road_class  # noqa: E402
-from vd_observer_node.estimation.cascade import run_cascade  # noqa: E402
+from vd_observer_node.estimation.cascade import CascadeSeries, CascadeSettings, run_cascade  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle  # noqa: E402
@@ -228,13 +228,8 @@ def main() -> None:
             )
             est_cfg = EstimatorConfig(slope_filter_tau=tuned['slope_filter_tau'])
             est = run_cascade(
-                sim.t,
-                sim.wheel_angle,
-                sim.body_speed,
-                sim.wheel_torque,
-                vehicle,
-                obs_cfg,
-                est_cfg,
+                CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque),
+                CascadeSettings(vehicle, observer=obs_cfg, estimator=est_cfg),
             )
             monitor = SituationMonitor(
                 curves,

@@ -36,7 +36,12 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
 from vd_observer_node.estimation.body_pitch import vehicle_body_pitch  # noqa: E402
-from vd_observer_node.estimation.cascade import CascadeResult, run_cascade  # noqa: E402
+from vd_observer_node.estimation.cascade import (  # noqa: E402
+    CascadeResult,
+    CascadeSeries,
+    CascadeSettings,
+    run_cascade,
+)
 from vd_observer_node.estimation.drivetrain import Drivetrain  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.estimation.imu_grade import imu_grade_config  # noqa: E402
@@ -213,16 +218,16 @@ def main() -> None:
         obs_cfg = ObserverConfig(**obs_kw)
         est_cfg = EstimatorConfig(**est_kw)
         t0 = time.perf_counter()
-        imu: dict[str, Any] = {}
+        imu, imu_config = None, None
         if args.imu:
             # the whole sensor: specific force and pitch rate (`--no-gyro`: the first alone)
-            imu['imu'] = np.column_stack([sim.t, sim.imu[:, 0], sim.gyro])
-            imu['imu_config'] = dataclasses.replace(
+            imu = np.column_stack([sim.t, sim.imu[:, 0], sim.gyro])
+            imu_config = dataclasses.replace(
                 imu_grade_config(vehicle_body_pitch(args.vehicle)), gyro=not args.no_gyro
             )
         est = run_cascade(
-            sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, vehicle, obs_cfg, est_cfg,
-            **imu,
+            CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, imu=imu),
+            CascadeSettings(vehicle, obs_cfg, est_cfg, imu=imu_config),
         )  # fmt: skip
         t_est = time.perf_counter() - t0
         mask = evaluation_mask(sim.t, sim.events)
@@ -252,16 +257,16 @@ def main() -> None:
         per_path = {}
         for path in paths:
             path_est = run_cascade(
-                sim.t,
-                sim.wheel_angle,
-                sim.body_speed,
-                sim.wheel_torque,
-                vehicle,
-                obs_cfg,
-                est_cfg,
-                torque_source=path,
-                engine=engine,
-                drivetrain=drivetrain,
+                CascadeSeries(
+                    sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, engine=engine
+                ),
+                CascadeSettings(
+                    vehicle,
+                    observer=obs_cfg,
+                    estimator=est_cfg,
+                    torque_source=path,
+                    drivetrain=drivetrain,
+                ),
             )
             per_path[path] = torque_path_figures(sim, path_est, vehicle, mask)
         keys = list(next(iter(per_path.values()), {}))

@@ -50,7 +50,12 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
 from vd_common.vehicle.params import default_vehicle_file, load_vehicle  # noqa: E402
 from vd_observer_node.estimation.body_pitch import vehicle_body_pitch  # noqa: E402
-from vd_observer_node.estimation.cascade import CascadeResult, run_cascade  # noqa: E402
+from vd_observer_node.estimation.cascade import (  # noqa: E402
+    CascadeResult,
+    CascadeSeries,
+    CascadeSettings,
+    run_cascade,
+)
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.estimation.imu_grade import ImuGradeConfig, imu_grade_config  # noqa: E402
 from vd_observer_node.estimation.vehicle import EstimatorVehicle  # noqa: E402
@@ -104,7 +109,8 @@ def evaluate(seed: int, params: Any, vehicle: EstimatorVehicle, settings: Everyd
     figures = DriveFigures({}, {}, {})
     for name, config in CONFIGS.items():
         plain = run_cascade(
-            sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, vehicle, None, config
+            CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque),
+            CascadeSettings(vehicle, estimator=config),
         )
         figures.slope_rms[name] = _slope_rms(plain, sim)
         if config.mass_adaptation:
@@ -112,9 +118,9 @@ def evaluate(seed: int, params: Any, vehicle: EstimatorVehicle, settings: Everyd
             figures.converged[name], figures.mass_error[name] = conv, err
         for sensor, imu in sensors.items():
             fused = run_cascade(
-                sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, vehicle, None, config,
-                imu=imu, imu_config=imu_config,
-            )  # fmt: skip
+                CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, imu=imu),
+                CascadeSettings(vehicle, estimator=config, imu=imu_config),
+            )
             key = f'{name}+{sensor}'
             figures.slope_rms[key] = _slope_rms(fused, sim)
             # the force balance's own slope with the IMU's mass fed back (its fallback)

@@ -59,6 +59,8 @@ from eval_estimators import evaluation_mask, rms  # noqa: E402
 from vd_common.vehicle.params import VehicleParams, load_vehicle  # noqa: E402
 from vd_observer_node.estimation.cascade import (  # noqa: E402
     CascadeResult,
+    CascadeSeries,
+    CascadeSettings,
     run_cascade,
 )
 from vd_observer_node.estimation.drivetrain import Drivetrain  # noqa: E402
@@ -134,20 +136,18 @@ def _cascade(
     """The compiled cascade of the nominal file on the true car's sensors: on the measured
     wheel torques, or with `drivetrain` on the engine path (engine torque, gear, speed)."""
     _, _, obs_kw, est_kw = SENSORS[sensors]
-    engine_path: dict[str, Any] = {}
+    engine = None
     if drivetrain is not None:
         engine = np.stack([sim.engine_torque, sim.gear.astype(float), sim.engine_speed], axis=1)
-        engine_path = {'torque_source': 'engine', 'engine': engine, 'drivetrain': drivetrain}
-    return run_cascade(
-        sim.t,
-        sim.wheel_angle,
-        sim.body_speed,
-        sim.wheel_torque,
+    settings = CascadeSettings(
         vehicle,
         ObserverConfig(**obs_kw),
         EstimatorConfig(**est_kw, **est),
-        **engine_path,
+        torque_source='engine' if drivetrain is not None else 'measured',
+        drivetrain=drivetrain,
     )
+    series = CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, engine)
+    return run_cascade(series, settings)
 
 
 def _errors(

@@ -63,22 +63,17 @@ def evaluate(
     from vd_observer_node.bag.cdr_batch import decode_batch
     from vd_observer_node.estimation.vehicle import load_vehicle_params
     from vd_observer_node.inputs.mapping import load_input_mapping
-    from vd_observer_node.tools.replay import ESTIMATE_TOPICS, load_replay_config, replay_bag
+    from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
     from vd_observer_node.tools.report.metrics import error_stats
+    from vd_observer_node.tools.settings_file import SettingsFile, load_settings_file
 
     importer = _importer()
     bag = work / 'bag'
     importer.import_segment(segment, bag)
-    settings = load_replay_config(config) if config is not None else None
-    report = replay_bag(
-        bag,
-        work / 'out',
-        progress=False,
-        mapping=load_input_mapping(mapping or CONFIG / 'input_mapping_comma2k19.yaml'),
-        vehicle_file=vehicle,
-        observer_config=settings.observer if settings else None,
-        estimator_config=settings.estimator if settings else None,
-    )
+    settings = load_settings_file(config) if config is not None else SettingsFile()
+    inputs = load_input_mapping(mapping or CONFIG / 'input_mapping_comma2k19.yaml')
+    chain = settings.settings(inputs, vehicle)
+    report = replay_bag(bag, work / 'out', chain, mapping=inputs, progress=False)
     out = BagReader(work / 'out')
     topics = [ESTIMATES_SLOPE, ESTIMATES_TIRE_FORCES, ESTIMATES_RESISTANCES]
     arrays = out.topic_arrays(topics)

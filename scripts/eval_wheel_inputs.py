@@ -42,7 +42,7 @@ from eval_estimators import (  # noqa: E402
     evaluation_mask,
     figures,
 )
-from vd_observer_node.estimation.cascade import run_cascade  # noqa: E402
+from vd_observer_node.estimation.cascade import CascadeSeries, CascadeSettings, run_cascade  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle  # noqa: E402
@@ -110,7 +110,8 @@ def main() -> None:
                 wheel_input=wheel_input,
             )
             est = run_cascade(
-                run.t, wheels, run.body_speed, run.wheel_torque, vehicle, observer, estimator
+                CascadeSeries(run.t, wheels, run.body_speed, run.wheel_torque),
+                CascadeSettings(vehicle, observer=observer, estimator=estimator),
             )
             result = figures(run, est, vehicle, mask)
             print(

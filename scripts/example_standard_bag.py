@@ -49,9 +49,9 @@ from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag  
 from vd_observer_node.testing.standard_bags import CarSensors, write_standard_bag  # noqa: E402
 from vd_observer_node.tools.replay import (  # noqa: E402
     ESTIMATE_TOPICS,
-    load_replay_config,
     replay_bag,
 )
+from vd_observer_node.tools.settings_file import load_settings_file  # noqa: E402
 
 CONFIG = ROOT / 'src' / 'vd_observer_node' / 'config'
 MAPPING_FILE = CONFIG / 'input_mapping_abs_example.yaml'
@@ -142,14 +142,9 @@ def main() -> None:
     write_standard_bag(standard_bag, sim, sensors)
     mapping = load_input_mapping(MAPPING_FILE)
     ours = replay_bag(vd_bag, out / 'vd_topics_replayed', progress=False)
-    settings = load_replay_config(REPLAY_FILE)
+    settings = load_settings_file(REPLAY_FILE).settings(mapping)
     theirs = replay_bag(
-        standard_bag,
-        out / 'standard_replayed',
-        progress=False,
-        mapping=mapping,
-        observer_config=settings.observer,
-        estimator_config=settings.estimator,
+        standard_bag, out / 'standard_replayed', settings, mapping=mapping, progress=False
     )
     # the same bag without settings: what follows the rate follows the measured one
     plain = replay_bag(standard_bag, out / 'standard_defaults', progress=False, mapping=mapping)

@@ -9,6 +9,7 @@ that used them (1e-9).
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +32,7 @@ from vd_common.topics import (
     SENSORS_WHEEL_ANGLES,
 )
 from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.situation.chain_settings import chain_settings
 from vd_observer_node.tools.replay import replay_bag
 
 #: every test here is a long end-to-end run (CI runs it; locally: make test-all)
@@ -114,7 +116,7 @@ def test_the_live_mass_is_recorded_and_equals_the_replays(
     assert any(live[ESTIMATES_ROLLING_RADIUS][s].free_wheels for s in stamps)
 
     offline_bag = tmp_path / 'offline'
-    replay_bag(bag, offline_bag, progress=False, estimator_config=CONFIG)
+    replay_bag(bag, offline_bag, replace(chain_settings(), estimator=CONFIG), progress=False)
     offline = by_topic(offline_bag, list(FIELDS))
     for topic, names in FIELDS.items():
         for s in stamps:

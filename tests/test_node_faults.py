@@ -193,15 +193,17 @@ def test_sensor_faults_through_the_live_nodes(procs: RosProcessGroup, tmp_path: 
     ), last
     # Recovery: after the loop the live estimates are exactly the offline cascade's on the
     # same messages, and the flags are set again.
-    from vd_observer_node.estimation.cascade import run_cascade
+    from vd_observer_node.estimation.cascade import CascadeSeries, CascadeSettings, run_cascade
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 
     offline = run_cascade(
-        [round(r['t'] * 1e9) * 1e-9 for r in sent],  # the nodes' stamp -> seconds
-        [r['angle'] for r in sent],
-        [r['speed'] for r in sent],
-        [r['torque'] for r in sent],
-        load_estimator_vehicle(VEHICLE_FILE),
+        CascadeSeries(
+            [round(r['t'] * 1e9) * 1e-9 for r in sent],
+            [r['angle'] for r in sent],
+            [r['speed'] for r in sent],
+            [r['torque'] for r in sent],
+        ),
+        CascadeSettings(load_estimator_vehicle(VEHICLE_FILE)),
     )
     loop = 200  # the last 200 samples: the replayed start after the jump back
     slope = np.array(got['slope'][-loop:])

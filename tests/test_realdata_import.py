@@ -183,25 +183,20 @@ def test_the_real_drive_replays_with_the_estimation_only_file(
     from vd_observer_node.bag import BagReader
     from vd_observer_node.bag.cdr_batch import decode_batch
     from vd_observer_node.inputs.mapping import load_input_mapping
-    from vd_observer_node.tools.replay import ESTIMATE_TOPICS, load_replay_config, replay_bag
+    from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
+    from vd_observer_node.tools.settings_file import load_settings_file
 
     module, segment, bag = imported
     config_dir = REPO_ROOT / 'src' / 'vd_observer_node' / 'config'
     vehicle = REPO_ROOT / 'src' / 'vd_common' / 'config' / 'toyota_rav4_2017_estimation.yaml'
-    config = load_replay_config(config_dir / 'replay_100hz_example.yaml')
-    report = replay_bag(
-        bag,
-        tmp_path / 'out',
-        progress=False,
-        mapping=load_input_mapping(config_dir / 'input_mapping_comma2k19.yaml'),
-        vehicle_file=vehicle,
-        observer_config=config.observer,
-        estimator_config=config.estimator,
-    )
+    config = load_settings_file(config_dir / 'replay_100hz_example.yaml')
+    mapping = load_input_mapping(config_dir / 'input_mapping_comma2k19.yaml')
+    settings = config.settings(mapping, vehicle)
+    report = replay_bag(bag, tmp_path / 'out', settings, mapping=mapping, progress=False)
     assert report.samples > 4900 and report.torque_source == 'engine'
     # the torque path holds outside braking, gear changes and their settling: a half
     assert 0.4 < report.torque_valid_fraction < 0.72
-    assert report.notes and 'no tire section' in report.notes[0]
+    assert report.notes and 'no tire in vehicle file' in report.notes[0]
     assert report.vehicle == f'Toyota RAV4 2017 ({vehicle})'
     out = BagReader(tmp_path / 'out')
     topics = [ESTIMATES_TIRE_FORCES, ESTIMATES_RESISTANCES, OBSERVER_WHEEL_STATES, ESTIMATES_SLOPE]

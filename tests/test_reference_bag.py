@@ -8,6 +8,7 @@ so the estimates must agree to rounding at every stamp.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,7 @@ from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.bag.typestore import message_definition
 from vd_observer_node.estimation.drivetrain import TORQUE_MEASURED
 from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.situation.chain_settings import chain_settings
 from vd_observer_node.tools.replay import replay_bag
 
 BAG = Path(__file__).resolve().parents[1] / 'bags' / 'paper_table1_100hz'
@@ -48,7 +50,8 @@ def test_offline_replay_reproduces_the_live_estimates(tmp_path: Path) -> None:
     out = tmp_path / 'replayed'
     # the live nodes that recorded it ran with slope_filter_tau 0.1 s, then the default at
     # every rate; left unset, the replay would follow the bag's 100 Hz (rate_settings)
-    replay_bag(BAG, out, progress=False, estimator_config=EstimatorConfig(slope_filter_tau=0.1))
+    settings = replace(chain_settings(), estimator=EstimatorConfig(slope_filter_tau=0.1))
+    replay_bag(BAG, out, settings, progress=False)
     live, offline = slopes_by_stamp(BAG), slopes_by_stamp(out)
     sensors = sum(1 for _ in BagReader(BAG).raw_messages([SENSORS_WHEEL_ANGLES]))
     assert len(offline) == sensors

@@ -17,13 +17,19 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from vd_common.vehicle.params import load_vehicle
-from vd_observer_node.chain import Chain, ChainSettings
-from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.chain import Chain
+from vd_observer_node.estimation.cascade import (
+    CascadeResult,
+    CascadeSeries,
+    CascadeSettings,
+    run_cascade,
+)
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import FaultReport
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
+from vd_observer_node.situation.chain_settings import ChainSettings
 from vd_observer_node.situation.friction_potential import TyreCurves
-from vd_observer_node.tools.replay import load_replay_config
+from vd_observer_node.tools.settings_file import load_settings_file
 from vd_sim_node.vehicle.scenario import (
     PiecewiseConstant,
     Scenario,
@@ -126,17 +132,16 @@ def steady_drive(
 def cascade(sim: SimResult, config: EstimatorConfig) -> CascadeResult:
     """`run_cascade` on the sensors of `sim` with the estimator settings `config`."""
     return run_cascade(
-        sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, VEHICLE, None, config
+        CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque),
+        CascadeSettings(VEHICLE, estimator=config),
     )
 
 
-def looped_record(
-    sim: SimResult, seconds: float
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """(t, wheel_angle, body_speed, wheel_torque) of `sim` as a looped bag holds them: its
-    first ``seconds`` again at the end (a jump back in time)."""
+def looped_record(sim: SimResult, seconds: float) -> CascadeSeries:
+    """The record of `sim` as a looped bag holds it: its first ``seconds`` again at the end
+    (a jump back in time)."""
     loop = sim.t < seconds
-    return (
+    return CascadeSeries(
         np.concatenate([sim.t, sim.t[loop]]),
         np.vstack([sim.wheel_angle, sim.wheel_angle[loop]]),
         np.concatenate([sim.body_speed, sim.body_speed[loop]]),
@@ -174,4 +179,4 @@ def replay_estimator_config(folder: Path, text: str) -> EstimatorConfig:
     """The estimator settings `vd replay` reads from a configuration file holding ``text``."""
     path = folder / 'replay.yaml'
     path.write_text(text, encoding='utf-8')
-    return load_replay_config(path).estimator
+    return load_settings_file(path).settings().estimator

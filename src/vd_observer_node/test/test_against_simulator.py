@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pytest
 from vd_observer_node.estimation import formulas as phys
-from vd_observer_node.estimation.cascade import run_cascade
+from vd_observer_node.estimation.cascade import CascadeSeries, CascadeSettings, run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
@@ -111,13 +111,12 @@ def test_quasi_static_loads_follow_the_dynamic_truth(sim: Any) -> None:
 @pytest.mark.slow
 def test_whole_cascade_on_simulated_sensors(sim: Any) -> None:
     est = run_cascade(
-        sim.t,
-        sim.wheel_angle,
-        sim.body_speed,
-        sim.wheel_torque,
-        VEHICLE,
-        ObserverConfig(wheel_lipschitz=10000.0, speed_lipschitz=2000.0),
-        EstimatorConfig(slope_filter_tau=0.05),
+        CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque),
+        CascadeSettings(
+            VEHICLE,
+            observer=ObserverConfig(wheel_lipschitz=10000.0, speed_lipschitz=2000.0),
+            estimator=EstimatorConfig(slope_filter_tau=0.05),
+        ),
     )
     window = _calm(sim)
     slope_err = np.degrees(est.slope - sim.slope)[window]

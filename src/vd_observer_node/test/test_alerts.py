@@ -238,7 +238,7 @@ def scenario_run(name: str, duration: float | None = None, noisy: bool = False) 
     96 counts/rev encoder and 0.05 m/s speed noise with the default observer settings.
     """
     from vd_common.vehicle.params import load_vehicle
-    from vd_observer_node.estimation.cascade import run_cascade
+    from vd_observer_node.estimation.cascade import CascadeSeries, CascadeSettings, run_cascade
     from vd_observer_node.estimation.estimator import EstimatorConfig
     from vd_observer_node.estimation.observer import ObserverConfig
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
@@ -269,7 +269,8 @@ def scenario_run(name: str, duration: float | None = None, noisy: bool = False) 
         fast = SituationConfig(alert_wheel_lipschitz=10000.0)
         est_cfg = EstimatorConfig(slope_filter_tau=0.05)
     est = run_cascade(
-        sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, vehicle, observer, est_cfg
+        CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque),
+        CascadeSettings(vehicle, observer=observer, estimator=est_cfg),
     )
     monitor = SituationMonitor(
         TyreCurves.from_tire(sim_vehicle.tire),

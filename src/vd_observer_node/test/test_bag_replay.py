@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -27,10 +29,17 @@ from vd_common.topics import (
 from vd_common.vehicle.params import default_vehicle_file
 from vd_observer_node.bag import BagReader, BagWriter, ReplayInputError
 from vd_observer_node.bag.cdr_batch import decode_batch
-from vd_observer_node.estimation.cascade import CascadeResult, CascadeState, run_cascade
+from vd_observer_node.estimation.cascade import (
+    CascadeResult,
+    CascadeSeries,
+    CascadeSettings,
+    CascadeState,
+    run_cascade,
+)
 from vd_observer_node.estimation.rate_settings import FOLLOW_AFTER
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.inputs.mapping import default_mapping
+from vd_observer_node.situation.chain_settings import chain_settings
 from vd_observer_node.testing.synthetic_bags import write_synthetic_drive_bag
 from vd_observer_node.tools.replay import (
     ALERT_TOPICS,
@@ -85,10 +94,18 @@ def _following_rate(
     FOLLOW_AFTER stamps at the reference rate's value, the rest at `rate_hz`'s."""
     state = CascadeState()
     k = FOLLOW_AFTER
-    head = run_cascade(t[:k], angle[:k], speed[:k], torque[:k], vehicle, state=state)
+    head = run_cascade(
+        CascadeSeries(t[:k], angle[:k], speed[:k], torque[:k]),
+        CascadeSettings(vehicle),
+        state=state,
+    )
     assert state.parts is not None
     state.parts.estimator.follow_rate(rate_hz)
-    tail = run_cascade(t[k:], angle[k:], speed[k:], torque[k:], vehicle, state=state)
+    tail = run_cascade(
+        CascadeSeries(t[k:], angle[k:], speed[k:], torque[k:]),
+        CascadeSettings(vehicle),
+        state=state,
+    )
     joined = {}
     for f in dataclasses.fields(head):
         a, b = getattr(head, f.name), getattr(tail, f.name)
@@ -187,39 +204,55 @@ def test_missing_sensor_topic(tmp_path: Path) -> None:
         replay_bag(tmp_path / 'empty', tmp_path / 'out', progress=False)
 
 
-def test_replay_config_reaches_the_cascade(tmp_path: Path) -> None:
+def test_the_settings_file_reaches_the_cascade(tmp_path: Path) -> None:
     from vd_observer_node.errors import ConfigurationError
     from vd_observer_node.estimation.observer import ObserverConfig
-    from vd_observer_node.tools.replay import load_replay_config
+    from vd_observer_node.tools.settings_file import load_settings_file
 
     write_synthetic_drive_bag(tmp_path / 'in', duration_s=1.0, rate_hz=100.0, with_truth=False)
     settings = tmp_path / 'settings.yaml'
-    settings.write_text('observer:\n  speed_lipschitz: 55.0\n')
-    config = load_replay_config(settings)
-    assert config.observer == ObserverConfig.from_mapping({'speed_lipschitz': 55.0})
-    assert config.estimator is None
-    calls: list[tuple[object, ...]] = []
-
-    def spy(*args: object, **kwargs: object) -> object:
-        calls.append((*args, kwargs))
-        return run_cascade(*args, **kwargs)  # type: ignore[arg-type]
-
-    replay_bag(
-        tmp_path / 'in',
-        tmp_path / 'out',
-        observer_config=config.observer,
-        cascade_kwargs={},
-        progress=False,
-        cascade=spy,  # type: ignore[arg-type]
+    settings.write_text(
+        'observer:\n  speed_lipschitz: 55.0\ncascade:\n  estimator_speed: observer\n'
     )
-    assert calls[0][5] == config.observer
+    config = load_settings_file(settings)
+    built = config.settings()
+    assert built.observer == ObserverConfig.from_mapping({'speed_lipschitz': 55.0})
+    assert built.estimator_speed == 'observer'
+    assert config.given == {
+        'observer.speed_lipschitz': 55.0,
+        'cascade.estimator_speed': 'observer',
+    }
+    calls: list[object] = []
+
+    def spy(*args: Any) -> object:
+        calls.append(args[1])
+        return run_cascade(*args)
+
+    replay_bag(tmp_path / 'in', tmp_path / 'out', built, progress=False, cascade=spy)
+    # what the cascade got is what the file said (its speed Lipschitz constant), not a default
+    assert calls and all(c == built for c in calls)
     bad = tmp_path / 'bad.yaml'
     bad.write_text('observer:\n  no_such_setting: 1\n')
-    with pytest.raises(ConfigurationError):
-        load_replay_config(bad)
+    with pytest.raises(ConfigurationError, match='no_such_setting'):
+        load_settings_file(bad)
+    bad.write_text('cascade:\n  imu_config: 1\n')
+    with pytest.raises(ConfigurationError, match='imu_config'):
+        load_settings_file(bad)
     bad.write_text('something: else\n')
     with pytest.raises(ConfigurationError, match='mapping'):
-        load_replay_config(bad)
+        load_settings_file(bad)
+
+
+def test_settings_for_another_mapping_are_refused(tmp_path: Path) -> None:
+    from vd_observer_node.errors import ConfigurationError
+    from vd_observer_node.inputs.mapping import default_mapping
+    from vd_observer_node.situation.chain_settings import chain_settings
+
+    write_synthetic_drive_bag(tmp_path / 'in', duration_s=1.0, rate_hz=100.0, with_truth=False)
+    engine = replace(default_mapping(), torque_source='engine')
+    with pytest.raises(ConfigurationError, match='torque_source'):
+        replay_bag(tmp_path / 'in', tmp_path / 'out', chain_settings(engine), progress=False)
+    assert not (tmp_path / 'out').exists()
 
 
 # -- friction potential and alerts (SituationMonitor) ------------------------------------------
@@ -413,7 +446,7 @@ def test_vehicle_file_supplies_the_tyre(tmp_path: Path) -> None:
     low = tmp_path / 'low_grip.yaml'
     low.write_text(yaml.safe_dump(data))
     replay_bag(tmp_path / 'in', tmp_path / 'default', progress=False)
-    replay_bag(tmp_path / 'in', tmp_path / 'low', progress=False, vehicle_file=low)
+    replay_bag(tmp_path / 'in', tmp_path / 'low', chain_settings(vehicle_file=low), progress=False)
 
     def mu_max(bag: Path) -> np.ndarray:
         arr = BagReader(bag).topic_arrays([ESTIMATES_FRICTION_POTENTIAL])
@@ -425,18 +458,19 @@ def test_vehicle_file_supplies_the_tyre(tmp_path: Path) -> None:
     np.testing.assert_allclose(lowered[-1], 0.5 * default[-1], rtol=0.05)
 
 
-def test_replay_config_reads_the_alert_sections(tmp_path: Path) -> None:
+def test_the_settings_file_reads_the_alert_sections(tmp_path: Path) -> None:
     from vd_observer_node.errors import ConfigurationError
     from vd_observer_node.situation.alerts import AlertConfig
+    from vd_observer_node.situation.friction_potential import FrictionPotentialConfig
     from vd_observer_node.situation.monitor import SituationConfig
-    from vd_observer_node.tools.replay import load_replay_config
+    from vd_observer_node.tools.settings_file import load_settings_file
 
     settings = tmp_path / 'settings.yaml'
     settings.write_text('situation:\n  alert_wheel_lipschitz: 10000.0\nalerts: {}\n')
-    config = load_replay_config(settings)
-    assert config.situation == SituationConfig(alert_wheel_lipschitz=10000.0)
-    assert config.alerts == AlertConfig()
-    assert config.friction is None
+    built = load_settings_file(settings).settings()
+    assert built.situation == SituationConfig(alert_wheel_lipschitz=10000.0)
+    assert built.alerts == AlertConfig()
+    assert built.friction == FrictionPotentialConfig()
     settings.write_text('situation:\n  no_such_setting: 1.0\n')
     with pytest.raises(ConfigurationError):
-        load_replay_config(settings)
+        load_settings_file(settings)

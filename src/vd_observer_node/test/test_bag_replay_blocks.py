@@ -109,7 +109,9 @@ def _check(bag: Path, tmp_path: Path, **kwargs: Any) -> ReplayReport:
 def test_vd_topics_in_tiny_blocks_equal_one_block(
     vd_bag: Path, tmp_path: Path, source: str
 ) -> None:
-    report = _check(vd_bag, tmp_path, torque_source=source)
+    report = _check(
+        vd_bag, tmp_path, mapping=dataclasses.replace(default_mapping(), torque_source=source)
+    )
     assert report.samples == 1201
     # the input summary, accumulated per block, is `input_stats` of each whole input
     mapping = dataclasses.replace(default_mapping(), torque_source=source)

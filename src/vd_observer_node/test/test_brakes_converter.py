@@ -20,7 +20,12 @@ from scipy.optimize import brentq
 from vd_common.vehicle.estimation import EstimationConverter, parse_estimation_vehicle
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.brakes import Brakes, brake_gains, brake_torques, new_brake_state
-from vd_observer_node.estimation.cascade import CascadeState, run_cascade
+from vd_observer_node.estimation.cascade import (
+    CascadeSeries,
+    CascadeSettings,
+    CascadeState,
+    run_cascade,
+)
 from vd_observer_node.estimation.drivetrain import Drivetrain, engine_torques
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
@@ -52,7 +57,7 @@ def test_converter_multiplies_the_pump_torque_by_the_torque_ratio_at_the_speed_r
     for sr in (0.2, 0.5, 0.85, 0.95, 1.1):
         turbine = i * 30.0
         held = engine_torques(
-            line.params_array(), 150.0, 3.0, turbine / sr, turbine, omega, np.zeros(4), out
+            line.params()[0], 150.0, 3.0, turbine / sr, turbine, omega, np.zeros(4), out
         )
         assert held
         expected = i * np.interp(sr, SPEED, TORQUE) * 150.0 * 0.92
@@ -73,7 +78,7 @@ def test_without_engine_speed_the_capacity_factor_gives_the_speed_ratio() -> Non
             return turbine_rpm / sr - np.interp(sr, SPEED, CAPACITY) * math.sqrt(torque)
 
         sr = brentq(balance, 1e-3, SPEED[-1])
-        engine_torques(line.params_array(), torque, 2.0, math.nan, math.nan, omega,
+        engine_torques(line.params()[0], torque, 2.0, math.nan, math.nan, omega,
                        np.zeros(4), out)  # fmt: skip
         expected = i * np.interp(sr, SPEED, TORQUE) * torque * 0.91
         assert out.sum() == pytest.approx(expected, rel=1e-6)
@@ -84,7 +89,7 @@ def test_the_converter_path_holds_where_the_turbine_turns_with_the_wheels() -> N
     omega = np.full(4, 20.0)
     i = 1.0 * 4.0
     out = np.empty(4)
-    p = line.params_array()
+    p = line.params()[0]
     assert engine_torques(p, 100.0, 4.0, 100.0, i * 20.0 + 1.0, omega, np.zeros(4), out)
     # all four driven, 60 % on the front axle
     np.testing.assert_allclose(out[:2] / out.sum(), [0.3, 0.3])
@@ -199,9 +204,12 @@ def test_the_brake_gain_is_learnt_from_the_decelerations() -> None:
     drive = _braking_drive(30.0, grade, vehicle)
     state = CascadeState()
     result = run_cascade(
-        drive['t'], drive['angle'], drive['speed'], drive['torque'], vehicle,
-        brake=drive['brake'], brakes=Brakes('pressure', learn=True), state=state,
-    )  # fmt: skip
+        CascadeSeries(
+            drive['t'], drive['angle'], drive['speed'], drive['torque'], brake=drive['brake']
+        ),
+        CascadeSettings(vehicle, brakes=Brakes('pressure', learn=True)),
+        state=state,
+    )
     assert state.parts is not None
     learnt = state.parts.brake_parts.state[0]
     gain, braking_time = learnt.gain, learnt.excited_time

@@ -18,7 +18,13 @@ from typing import Any
 import numpy as np
 import pytest
 from vd_common.vehicle.params import load_vehicle
-from vd_observer_node.estimation.cascade import CascadeResult, CascadeState, run_cascade
+from vd_observer_node.estimation.cascade import (
+    CascadeResult,
+    CascadeSeries,
+    CascadeSettings,
+    CascadeState,
+    run_cascade,
+)
 from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.observer import ObserverConfig
@@ -95,26 +101,26 @@ def test_blocks_with_a_carried_state_equal_the_whole_record(
     record: dict[str, np.ndarray], source: str, wheel_input: str,
     adaptation: str,
 ) -> None:  # fmt: skip
-    run: Any = run_cascade
     wheels = record['angle'] if wheel_input == 'angle' else record['omega']
-    observer = ObserverConfig(wheel_input=wheel_input)
     # the online mass and radius live in the estimator's state: carried with it
     estimator = EstimatorConfig(
         mass_adaptation=adaptation != 'off', radius_adaptation='radius' in adaptation
     )
-    kwargs: dict[str, Any] = {}
-    if source != 'measured':
-        kwargs = {'torque_source': source, 'drivetrain': DRIVETRAIN}
+    settings = CascadeSettings(
+        VEHICLE,
+        ObserverConfig(wheel_input=wheel_input),
+        estimator,
+        torque_source=source,
+        drivetrain=DRIVETRAIN if source != 'measured' else None,
+    )
     n = len(record['t'])
 
     def call(sl: slice, state: CascadeState | None) -> CascadeResult:
-        extra = dict(kwargs)
-        if source == 'engine':
-            extra['engine'] = record['engine'][sl]
-        return run(  # type: ignore[no-any-return]
-            record['t'][sl], wheels[sl], record['speed'][sl], record['torque'][sl], VEHICLE,
-            observer, estimator, state=state, **extra,
-        )  # fmt: skip
+        engine = record['engine'][sl] if source == 'engine' else None
+        series = CascadeSeries(
+            record['t'][sl], wheels[sl], record['speed'][sl], record['torque'][sl], engine
+        )
+        return run_cascade(series, settings, state)
 
     whole = call(slice(0, n), None)
     assert sum(whole.faults.values()) > 0  # the faults are counted, so carried

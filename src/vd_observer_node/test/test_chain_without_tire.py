@@ -6,12 +6,13 @@ import dataclasses
 
 import numpy as np
 from vd_common.vehicle.params import default_vehicle_file
-from vd_observer_node.chain import Chain, ChainOutput, ChainSettings
+from vd_observer_node.chain import Chain, ChainOutput
 from vd_observer_node.estimation.vehicle import (
     EstimatorVehicle,
     load_vehicle_params,
     no_tire_note,
 )
+from vd_observer_node.situation.chain_settings import ChainSettings
 from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_observer_node.testing.synthetic import synthetic_trajectory
 

@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 from vd_common.topics import ESTIMATES_MASS, ESTIMATES_ROLLING_RADIUS, ESTIMATES_TORQUE_OFFSET
 from vd_common.vehicle.params import default_vehicle_file
-from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.estimation.cascade import (
+    CascadeResult,
+    CascadeSeries,
+    CascadeSettings,
+    run_cascade,
+)
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.testing.devbag import cascade_topics
@@ -22,11 +27,8 @@ def result() -> CascadeResult:
     n = 50
     t = np.arange(n) * 1e-3
     return run_cascade(
-        t,
-        np.zeros((n, 4)),
-        np.zeros(n),
-        np.zeros((n, 4)),
-        load_estimator_vehicle(default_vehicle_file()),
+        CascadeSeries(t, np.zeros((n, 4)), np.zeros(n), np.zeros((n, 4))),
+        CascadeSettings(load_estimator_vehicle(default_vehicle_file())),
     )
 
 

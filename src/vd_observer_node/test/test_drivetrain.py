@@ -11,14 +11,19 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
 from vd_common.vehicle.params import load_vehicle
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.estimation.cascade import (
+    CascadeResult,
+    CascadeSeries,
+    CascadeSettings,
+    run_cascade,
+)
 from vd_observer_node.estimation.drivetrain import (
     NO_GEAR,
     TORQUE_ENGINE,
@@ -167,9 +172,10 @@ def test_ratios_efficiency_axles_reverse_and_bad_gears() -> None:
 
 def cascades(sim: SimResult, source: str, engine: np.ndarray) -> CascadeResult:
     """The cascade on one record with the torque source `source`."""
-    args: tuple[Any, ...] = (sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, VEHICLE)
-    kw: dict[str, Any] = {'torque_source': source, 'engine': engine, 'drivetrain': DRIVETRAIN}
-    return run_cascade(*args, **kw)
+    series = CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, engine)
+    return run_cascade(
+        series, CascadeSettings(VEHICLE, torque_source=source, drivetrain=DRIVETRAIN)
+    )
 
 
 @pytest.mark.parametrize('name', ['paper_table1', 'braking_low_mu'])
@@ -183,7 +189,10 @@ def test_each_torque_source_through_the_cascade(name: str) -> None:
     engine[1100, 1] = 2.5
     measured = cascades(sim, 'measured', engine)
     assert measured.torque_source == TORQUE_MEASURED and measured.torque_valid.all()
-    default = run_cascade(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, VEHICLE)
+    default = run_cascade(
+        CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque),
+        CascadeSettings(VEHICLE),
+    )
     np.testing.assert_array_equal(default.fx, measured.fx)  # the default is unchanged
     eng = cascades(sim, 'engine', engine)
     assert eng.torque_source == TORQUE_ENGINE
@@ -250,13 +259,16 @@ def test_the_estimator_refuses_unknown_sources_and_carries_its_own() -> None:
 
 def test_engine_path_needs_its_inputs() -> None:
     sim = sim_run('paper_table1', 10.0)
-    args = (sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, VEHICLE)
+    series = CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque)
     with pytest.raises(ConfigurationError, match='engine'):
-        run_cascade(*args, torque_source='engine')
+        CascadeSettings(VEHICLE, torque_source='engine')
+    engine_path = CascadeSettings(VEHICLE, torque_source='engine', drivetrain=DRIVETRAIN)
+    with pytest.raises(ConfigurationError, match='engine'):
+        run_cascade(series, engine_path)
     with pytest.raises(InputShapeError):
-        run_cascade(*args, torque_source='engine', engine=np.zeros((3, 3)), drivetrain=DRIVETRAIN)
+        run_cascade(replace(series, engine=np.zeros((3, 3))), engine_path)
     with pytest.raises(ConfigurationError):
-        run_cascade(*args, torque_source='wheel')
+        run_cascade(series, CascadeSettings(VEHICLE, torque_source='wheel'))
 
 
 def test_engine_path_while_braking() -> None:

@@ -10,7 +10,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from vd_observer_node.estimation.alignment import StampAligner
-from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.estimation.cascade import (
+    CascadeResult,
+    CascadeSeries,
+    CascadeSettings,
+    run_cascade,
+)
 from vd_observer_node.estimation.estimator import Estimates, Estimator, EstimatorConfig
 from vd_observer_node.estimation.faults import (
     ERROR,
@@ -323,7 +328,7 @@ def test_cascade_reports_fault_counts_and_replays_a_looped_record() -> None:
     angle = np.concatenate([traj.angle, traj.angle])
     speed = np.concatenate([traj.speed, traj.speed])
     torque = np.concatenate([traj.torque, traj.torque])
-    result = run_cascade(t, angle, speed, torque, VEHICLE)
+    result = run_cascade(CascadeSeries(t, angle, speed, torque), CascadeSettings(VEHICLE))
     assert _nonzero(result.faults) == {
         'wheel.time_jump_back': 1,
         'speed.time_jump_back': 1,
@@ -366,7 +371,7 @@ def test_any_garbage_gives_finite_outputs_and_counted_faults(
     angle = np.array(draw(st.lists(_VALUES, min_size=4 * n, max_size=4 * n))).reshape(n, 4)
     speed = np.array(draw(st.lists(_VALUES, min_size=n, max_size=n)))
     torque = np.array(draw(st.lists(_VALUES, min_size=4 * n, max_size=4 * n))).reshape(n, 4)
-    result = run_cascade(t, angle, speed, torque, VEHICLE)
+    result = run_cascade(CascadeSeries(t, angle, speed, torque), CascadeSettings(VEHICLE))
     assert _all_finite(result)
     assert set(result.faults) == {
         *(f'wheel.{k}' for k in OBSERVER_FAULTS),

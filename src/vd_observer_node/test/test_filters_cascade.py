@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.estimation.cascade import run_cascade
+from vd_observer_node.estimation.cascade import CascadeSeries, CascadeSettings, run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.filters import LowPass
 from vd_observer_node.estimation.observer import Observer, ObserverConfig
@@ -79,13 +79,12 @@ def test_cascade_on_synthetic_sensors_with_jittery_stamps() -> None:
     t = np.concatenate(([0.0], np.cumsum(rng.uniform(0.7e-3, 1.3e-3, 4000))))
     traj = synthetic_trajectory(t, VEHICLE)
     est = run_cascade(
-        t,
-        traj.angle,
-        traj.speed,
-        traj.torque,
-        VEHICLE,
-        ObserverConfig(wheel_lipschitz=1000.0, speed_lipschitz=100.0),
-        EstimatorConfig(slope_filter_tau=0.02),
+        CascadeSeries(t, traj.angle, traj.speed, traj.torque),
+        CascadeSettings(
+            VEHICLE,
+            observer=ObserverConfig(wheel_lipschitz=1000.0, speed_lipschitz=100.0),
+            estimator=EstimatorConfig(slope_filter_tau=0.02),
+        ),
     )
     late = t > 1.0
     # The slope filter (2 stages of 20 ms) delays the slowly varying slope by ~40 ms.
@@ -104,13 +103,12 @@ def test_cascade_on_synthetic_sensors_with_jittery_stamps() -> None:
 
 def test_cascade_rejects_bad_shapes() -> None:
     with pytest.raises(InputShapeError):
-        run_cascade(np.zeros(3), np.zeros((3, 4)), np.zeros(2), np.zeros((3, 4)), VEHICLE)
+        run_cascade(
+            CascadeSeries(np.zeros(3), np.zeros((3, 4)), np.zeros(2), np.zeros((3, 4))),
+            CascadeSettings(VEHICLE),
+        )
     with pytest.raises(ConfigurationError):
         run_cascade(
-            np.zeros(1),
-            np.zeros((1, 4)),
-            np.zeros(1),
-            np.zeros((1, 4)),
-            VEHICLE,
-            estimator_speed='guess',
+            CascadeSeries(np.zeros(1), np.zeros((1, 4)), np.zeros(1), np.zeros((1, 4))),
+            CascadeSettings(VEHICLE, estimator_speed='guess'),
         )

@@ -17,8 +17,8 @@ from vd_common.topics import ESTIMATES_SLOPE, SENSORS
 from vd_common.vehicle.params import load_vehicle
 from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.cdr_batch import decode_batch
-from vd_observer_node.chain import Chain, ChainSettings
-from vd_observer_node.estimation.cascade import run_cascade
+from vd_observer_node.chain import Chain
+from vd_observer_node.estimation.cascade import CascadeSeries, CascadeSettings, run_cascade
 from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.estimator_step import GAP_FORCE_CHANGE
@@ -32,6 +32,7 @@ from vd_observer_node.estimation.filters import (
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.kernel._jit import new_record
+from vd_observer_node.situation.chain_settings import ChainSettings
 from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
 from vd_observer_node.testing.synthetic import SyntheticTrajectory, synthetic_trajectory
@@ -198,8 +199,10 @@ def test_the_cascade_rides_through_200_ms_gaps_on_the_analytic_trajectory() -> N
     config = ObserverConfig(wheel_lipschitz=1000.0, speed_lipschitz=100.0)
 
     def slope_rms(mask: np.ndarray) -> tuple[float, float, dict[str, int]]:
-        est = run_cascade(t[mask], traj.angle[mask], speed[mask], traj.torque[mask], VEHICLE,
-                          config)  # fmt: skip
+        est = run_cascade(
+            CascadeSeries(t[mask], traj.angle[mask], speed[mask], traj.torque[mask]),
+            CascadeSettings(VEHICLE, observer=config),
+        )
         late = est.slope_valid & (t[mask] > 1.5)
         err = est.slope[late] - traj.slope[mask][late]
         share = float(est.slope_valid[t[mask] > 1.5].mean())
@@ -223,7 +226,7 @@ def test_the_live_chain_bridges_a_gap_as_the_offline_cascade() -> None:
         speed[keep][:n],
         traj.torque[keep][:n],
     )
-    offline = run_cascade(tk, angle, v, torque, VEHICLE)
+    offline = run_cascade(CascadeSeries(tk, angle, v, torque), CascadeSettings(VEHICLE))
     chain = Chain(ChainSettings(vehicle=VEHICLE, curves=TyreCurves.from_tire(PARAMS.tire)))
     for k in range(n):
         out = chain.update(float(tk[k]), angle[k], float(v[k]), torque[k])

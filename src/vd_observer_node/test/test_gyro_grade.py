@@ -15,7 +15,12 @@ import numpy as np
 import pytest
 from adaptation_setup import PARAMS, VEHICLE
 from vd_observer_node.estimation.body_pitch import BodyPitch, pitch_mode, vehicle_body_pitch
-from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.estimation.cascade import (
+    CascadeResult,
+    CascadeSeries,
+    CascadeSettings,
+    run_cascade,
+)
 from vd_observer_node.estimation.imu_grade import ImuGradeConfig, imu_grade_config
 from vd_sim_node.vehicle.everyday import EverydaySettings, everyday_scenario
 from vd_sim_node.vehicle.simulation import SimResult, simulate
@@ -52,9 +57,9 @@ def _closed_form_cascade(
 ) -> CascadeResult:
     """The cascade without torque: the IMU's grade with its bias prior (0, the truth)."""
     return run_cascade(
-        d['t'], d['angles'], d['v'], np.zeros((d['t'].size, 4)), VEHICLE, torque_source='none',
-        imu=imu, imu_config=config or ImuGradeConfig(),
-    )  # fmt: skip
+        CascadeSeries(d['t'], d['angles'], d['v'], np.zeros((d['t'].size, 4)), imu=imu),
+        CascadeSettings(VEHICLE, torque_source='none', imu=config or ImuGradeConfig()),
+    )
 
 
 @lru_cache(maxsize=2)
@@ -117,9 +122,15 @@ def _simulated() -> SimResult:
 
 def _simulated_run(sim: SimResult, config: ImuGradeConfig) -> CascadeResult:
     return run_cascade(
-        sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, VEHICLE,
-        imu=np.column_stack([sim.t, sim.imu[:, 0], sim.gyro]), imu_config=config,
-    )  # fmt: skip
+        CascadeSeries(
+            sim.t,
+            sim.wheel_angle,
+            sim.body_speed,
+            sim.wheel_torque,
+            imu=np.column_stack([sim.t, sim.imu[:, 0], sim.gyro]),
+        ),
+        CascadeSettings(VEHICLE, imu=config),
+    )
 
 
 def test_the_body_s_pitch_on_its_springs_is_kept_apart_from_the_grade() -> None:

@@ -15,10 +15,15 @@ from adaptation_setup import PARAMS, VEHICLE
 from vd_common.topics import ESTIMATES_SLOPE, SENSORS_IMU
 from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.bag.reader import BagReader
-from vd_observer_node.chain import Chain, ChainSettings
+from vd_observer_node.chain import Chain
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.body_pitch import vehicle_body_pitch
-from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.estimation.cascade import (
+    CascadeResult,
+    CascadeSeries,
+    CascadeSettings,
+    run_cascade,
+)
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.imu_grade import (
     REFERENCE_RATE_FOLLOWING,
@@ -28,6 +33,7 @@ from vd_observer_node.estimation.imu_grade import (
     imu_grade_config,
 )
 from vd_observer_node.inputs.mapping import mapping_from_dict
+from vd_observer_node.situation.chain_settings import ChainSettings, chain_settings
 from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
 from vd_observer_node.tools.replay import replay_bag
@@ -54,9 +60,9 @@ def _imu(sim: SimResult) -> np.ndarray:
 
 def _run(sim: SimResult, imu: np.ndarray | None, config: ImuGradeConfig = CONFIG) -> CascadeResult:
     return run_cascade(
-        sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, VEHICLE, imu=imu,
-        imu_config=config,
-    )  # fmt: skip
+        CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, imu=imu),
+        CascadeSettings(VEHICLE, imu=config),
+    )
 
 
 @lru_cache(maxsize=1)
@@ -201,8 +207,10 @@ def test_the_imu_alone_is_valid_only_once_its_bias_is_known() -> None:
     torque[first | later] = np.nan
 
     def run(config: ImuGradeConfig) -> CascadeResult:
-        return run_cascade(sim.t, sim.wheel_angle, sim.body_speed, torque, VEHICLE,
-                           imu=_imu(sim), imu_config=config)  # fmt: skip
+        return run_cascade(
+            CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, torque, imu=_imu(sim)),
+            CascadeSettings(VEHICLE, imu=config),
+        )
 
     out = run(CONFIG)
     moving = sim.speed_true > 1.0
@@ -236,9 +244,11 @@ def test_the_live_chain_fuses_as_the_cascade_does(gyro: bool) -> None:
     imu = (np.column_stack([_imu(sim), sim.gyro]) if gyro else _imu(sim))[:n]
     imu[2000:2100] = np.nan  # half a second without IMU messages (none held yet is nan too)
     offline = run_cascade(
-        sim.t[:n], sim.wheel_angle[:n], sim.body_speed[:n], sim.wheel_torque[:n], VEHICLE,
-        imu=imu, imu_config=CONFIG,
-    )  # fmt: skip
+        CascadeSeries(
+            sim.t[:n], sim.wheel_angle[:n], sim.body_speed[:n], sim.wheel_torque[:n], imu=imu
+        ),
+        CascadeSettings(VEHICLE, imu=CONFIG),
+    )
     chain = Chain(
         ChainSettings(vehicle=VEHICLE, curves=TyreCurves.from_tire(PARAMS.tire), imu=CONFIG)
     )
@@ -286,21 +296,23 @@ def test_replay_reads_the_mapped_imu_and_marks_the_slope_sources(tmp_path: Path)
     # the slope filter set: left unset, the replay follows the bag's rate after 200 stamps
     # (rate_settings; tested in test_bag_replay)
     fixed = EstimatorConfig(slope_filter_tau=0.1)
+    settings = dataclasses.replace(chain_settings(mapping), estimator=fixed)
     report = replay_bag(
-        tmp_path / 'in',
-        tmp_path / 'out',
-        mapping=mapping,
-        situation=False,
-        estimator_config=fixed,
+        tmp_path / 'in', tmp_path / 'out', settings, mapping=mapping, situation=False
     )
     arrays = BagReader(tmp_path / 'out').topic_arrays([ESTIMATES_SLOPE])[ESTIMATES_SLOPE]
     slope = decode_batch('vd_msgs/msg/Slope', arrays.datas)
     t = stamps * 1e-9  # the replay's stamps: the header's nanoseconds
     expected = run_cascade(
-        t, part.wheel_angle, part.body_speed, part.wheel_torque, VEHICLE,
-        estimator_config=fixed, imu=np.column_stack([t, part.imu[:, 0], part.gyro]),
-        imu_config=CONFIG,
-    )  # fmt: skip
+        CascadeSeries(
+            t,
+            part.wheel_angle,
+            part.body_speed,
+            part.wheel_torque,
+            imu=np.column_stack([t, part.imu[:, 0], part.gyro]),
+        ),
+        CascadeSettings(VEHICLE, estimator=fixed, imu=CONFIG),
+    )
     np.testing.assert_array_equal(slope.values['angle'], expected.slope)
     np.testing.assert_array_equal(slope.values['sources'], expected.slope_sources)
     assert np.any(slope.values['sources'] == SOURCE_FORCE | SOURCE_IMU)

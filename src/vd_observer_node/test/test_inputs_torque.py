@@ -27,7 +27,8 @@ from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation import drivetrain
 from vd_observer_node.inputs.decode import InputDecoder, decode_engine
 from vd_observer_node.inputs.errors import MappingError
-from vd_observer_node.inputs.mapping import default_mapping, mapping_from_dict
+from vd_observer_node.inputs.mapping import InputMapping, default_mapping, mapping_from_dict
+from vd_observer_node.situation.chain_settings import chain_settings
 from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag
 from vd_observer_node.tools.cli import main
 from vd_observer_node.tools.replay import replay_bag
@@ -217,12 +218,18 @@ def estimate_values(bag: Path) -> dict[str, dict[str, np.ndarray]]:
     return {t: decode_batch(a.msgtype, a.datas).values for t, a in arrays.items()}
 
 
+def on_path(source: str) -> InputMapping:
+    """vd's own topics with the torque source `source` (what ``vd replay --torque-source``
+    makes of the mapping)."""
+    return dataclasses.replace(default_mapping(), torque_source=source)
+
+
 def test_replay_on_each_torque_path(tmp_path: Path) -> None:
     write_bag(tmp_path / 'in', engine_topic=True)
     sources = {}
     for source in ('measured', 'engine', 'none'):
         report = replay_bag(
-            tmp_path / 'in', tmp_path / source, progress=False, torque_source=source
+            tmp_path / 'in', tmp_path / source, progress=False, mapping=on_path(source)
         )
         assert report.torque_source == source
         values = estimate_values(tmp_path / source)
@@ -267,19 +274,22 @@ def test_replay_without_any_torque_topic(tmp_path: Path) -> None:
     with pytest.raises(ReplayInputError, match=SENSORS_WHEEL_TORQUES):
         replay_bag(tmp_path / 'in', tmp_path / 'measured', progress=False)
     with pytest.raises(ReplayInputError, match=SENSORS_WHEEL_TORQUES):
-        replay_bag(tmp_path / 'in', tmp_path / 'engine', progress=False, torque_source='engine')
-    report = replay_bag(tmp_path / 'in', tmp_path / 'none', progress=False, torque_source='none')
+        replay_bag(tmp_path / 'in', tmp_path / 'engine', progress=False, mapping=on_path('engine'))
+    report = replay_bag(
+        tmp_path / 'in', tmp_path / 'none', progress=False, mapping=on_path('none')
+    )
     assert report.unmatched == 0 and report.samples == sim_run().t.size
     assert SENSORS_WHEEL_TORQUES not in BagReader(tmp_path / 'none').topics
     with pytest.raises(ConfigurationError, match='torque source'):
-        replay_bag(tmp_path / 'in', tmp_path / 'bad', progress=False, torque_source='guess')
-    with pytest.raises(ConfigurationError, match='set by the torque source'):
+        replay_bag(tmp_path / 'in', tmp_path / 'bad', progress=False, mapping=on_path('guess'))
+    # settings made for the engine path do not run a mapping without torque
+    with pytest.raises(ConfigurationError, match='torque_source'):
         replay_bag(
             tmp_path / 'in',
             tmp_path / 'bad2',
+            chain_settings(on_path('engine')),
             progress=False,
-            torque_source='none',
-            cascade_kwargs={'torque_source': 'engine'},
+            mapping=on_path('none'),
         )
 
 

@@ -19,7 +19,7 @@ from adaptation_setup import (
     simulated_mass_drive,
     steady_drive,
 )
-from vd_observer_node.estimation.cascade import run_cascade
+from vd_observer_node.estimation.cascade import CascadeSettings, run_cascade
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import WARN
 from vd_sim_node.vehicle.scenario import VehicleVariant
@@ -87,7 +87,7 @@ def test_a_far_wrong_mass_is_bounded_and_reported_on_the_diagnostics() -> None:
 def test_a_jump_back_in_time_restarts_the_mass_at_the_files_value() -> None:
     sim = _drive(300.0, 45.0)
     # a looped bag: its first 5 s again at the end
-    res = run_cascade(*looped_record(sim, 5.0), VEHICLE, None, ON)
+    res = run_cascade(looped_record(sim, 5.0), CascadeSettings(VEHICLE, estimator=ON))
     n = sim.t.size
     assert res.mass_converged[n - 1] and res.mass_used[n - 1] > M0 + 150.0
     assert res.faults['estimator.time_jump_back'] == 1

@@ -28,7 +28,7 @@ RATE = 500.0  # [Hz] lower than the demo's 1 kHz to keep the cascade short
 @pytest.fixture(scope='module')
 def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Any, Any, Path]:
     from vd_common.vehicle.params import load_vehicle
-    from vd_observer_node.estimation.cascade import run_cascade
+    from vd_observer_node.estimation.cascade import CascadeSeries, CascadeSettings, run_cascade
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
@@ -36,7 +36,8 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Any, Any, Path]:
     scenario = dataclasses.replace(load_scenario(SCENARIO), duration=12.0)
     sim = simulate(load_vehicle(VEHICLE), scenario, rate_hz=RATE)
     est = run_cascade(
-        sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, load_estimator_vehicle(VEHICLE)
+        CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque),
+        CascadeSettings(load_estimator_vehicle(VEHICLE)),
     )
     topics = sim_topics(sim)
     topics.update(cascade_topics(est, sim.wheel_angle))

@@ -125,7 +125,7 @@ def _late_detector(sim: Any, rng: np.random.Generator) -> dict[str, dict[str, np
 
 def _simulated_topics(scenario: str, duration: float | None = None) -> tuple[Any, dict]:
     from vd_common.vehicle.params import load_vehicle
-    from vd_observer_node.estimation.cascade import run_cascade
+    from vd_observer_node.estimation.cascade import CascadeSeries, CascadeSettings, run_cascade
     from vd_observer_node.estimation.vehicle import load_estimator_vehicle
     from vd_sim_node.vehicle.scenario import load_scenario
     from vd_sim_node.vehicle.simulation import simulate
@@ -136,7 +136,8 @@ def _simulated_topics(scenario: str, duration: float | None = None) -> tuple[Any
         loaded = dataclasses.replace(loaded, duration=duration)
     sim = simulate(load_vehicle(vehicle), loaded, rate_hz=RATE)
     est = run_cascade(
-        sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, load_estimator_vehicle(vehicle)
+        CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque),
+        CascadeSettings(load_estimator_vehicle(vehicle)),
     )
     topics = {**sim_topics(sim), **cascade_topics(est, sim.wheel_angle)}
     topics.update(_late_detector(sim, np.random.default_rng(3)))

@@ -19,7 +19,8 @@ from vd_observer_node.testing.standard_bags import (
     abs_wheel_speeds,
     write_standard_bag,
 )
-from vd_observer_node.tools.replay import ESTIMATE_TOPICS, load_replay_config, replay_bag
+from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
+from vd_observer_node.tools.settings_file import load_settings_file
 from vd_sim_node.vehicle.scenario import load_scenario
 from vd_sim_node.vehicle.simulation import simulate
 
@@ -67,16 +68,11 @@ def test_a_standard_types_bag_replays_with_the_shipped_files_near_vds_own(tmp_pa
     stamp_ns = np.round(sim.t * 1e9).astype(np.int64)
     write_topic_arrays_bag(tmp_path / 'vd', stamp_ns, sim_topics(sim, truth=False))
     write_standard_bag(tmp_path / 'car', sim, CarSensors(seed=5))
-    settings = load_replay_config(REPLAY_FILE)
     report_mapping = load_input_mapping(MAPPING_FILE)
+    settings = load_settings_file(REPLAY_FILE).settings(report_mapping)
     replay_bag(tmp_path / 'vd', tmp_path / 'vd_out', progress=False)
     report = replay_bag(
-        tmp_path / 'car',
-        tmp_path / 'car_out',
-        progress=False,
-        mapping=report_mapping,
-        observer_config=settings.observer,
-        estimator_config=settings.estimator,
+        tmp_path / 'car', tmp_path / 'car_out', settings, mapping=report_mapping, progress=False
     )
     assert report.stale <= 2  # the first wheel stamps, before the first odometry
     ours, n_ours = _slope_rms_deg(tmp_path / 'vd_out', sim)

@@ -10,9 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from vd_common.vehicle.params import load_vehicle
-from vd_observer_node.chain import Chain, ChainSettings
+from vd_observer_node.chain import Chain
 from vd_observer_node.errors import ConfigurationError
-from vd_observer_node.estimation.cascade import CascadeResult, run_cascade
+from vd_observer_node.estimation.cascade import (
+    CascadeResult,
+    CascadeSeries,
+    CascadeSettings,
+    run_cascade,
+)
 from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.faults import WARN
@@ -27,6 +32,7 @@ from vd_observer_node.estimation.torque_offset import (
     torque_offset_step,
 )
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
+from vd_observer_node.situation.chain_settings import ChainSettings
 from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_sim_node.vehicle.scenario import SensorSettings, VehicleVariant, load_scenario
 from vd_sim_node.vehicle.simulation import SimResult, simulate
@@ -198,11 +204,15 @@ def _drive(offset: float) -> SimResult:
 
 def _engine_cascade(sim: SimResult, config: EstimatorConfig) -> CascadeResult:
     return run_cascade(
-        sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque, VEHICLE, None, config,
-        torque_source='engine',
-        engine=np.stack([sim.engine_torque, sim.gear.astype(float), sim.engine_speed], axis=1),
-        drivetrain=DRIVETRAIN,
-    )  # fmt: skip
+        CascadeSeries(
+            sim.t,
+            sim.wheel_angle,
+            sim.body_speed,
+            sim.wheel_torque,
+            engine=np.stack([sim.engine_torque, sim.gear.astype(float), sim.engine_speed], axis=1),
+        ),
+        CascadeSettings(VEHICLE, estimator=config, torque_source='engine', drivetrain=DRIVETRAIN),
+    )
 
 
 def _slope_rms(res: CascadeResult, sim: SimResult, after: float) -> float:

@@ -15,6 +15,7 @@ from vd_observer_node.estimation.vehicle import (
     load_estimator_vehicle,
     load_vehicle_params,
 )
+from vd_observer_node.situation.chain_settings import chain_settings
 
 VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 
@@ -118,10 +119,12 @@ def test_an_estimation_only_file_estimates_and_says_what_it_lacks(tmp_path: Path
     with pytest.raises(ConfigurationError, match=r'gearbox is missing'):
         Drivetrain.from_params(params)
     write_synthetic_drive_bag(tmp_path / 'in', duration_s=1.0, rate_hz=100.0, with_truth=False)
-    report = replay_bag(tmp_path / 'in', tmp_path / 'out', progress=False, vehicle_file=path)
+    settings = chain_settings(vehicle_file=path)
+    report = replay_bag(tmp_path / 'in', tmp_path / 'out', settings, progress=False)
     assert report.vehicle == f'{only["name"]} ({path})'
     assert report.notes == (
-        f'vehicle file {path} has no tire section: friction potential and alerts not computed',
+        f'friction potential and alerts off (no tire in vehicle file {path}: the friction '
+        'potential and the alerts need its Magic Formula coefficients)',
     )
     from vd_observer_node.bag import BagReader
 

@@ -16,108 +16,54 @@ from __future__ import annotations
 import math
 import sys
 import time
-from dataclasses import dataclass, field, replace
-from typing import Final, NamedTuple
+from dataclasses import replace
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.estimation.brakes import Brakes, no_brakes
-from vd_observer_node.estimation.cascade import CascadeParts, empty_outputs, no_imu
-from vd_observer_node.estimation.cascade_step import CascadeInputs, cascade_block
-from vd_observer_node.estimation.drivetrain import (
-    TORQUE_ENGINE,
-    TORQUE_NONE,
-    Drivetrain,
-    torque_source_code,
+from vd_observer_node.errors import InputShapeError
+from vd_observer_node.estimation.brakes import no_brakes
+from vd_observer_node.estimation.cascade import (
+    CascadeParts,
+    empty_outputs,
+    no_imu,
 )
-from vd_observer_node.estimation.estimator import Estimates, EstimatorConfig, estimates_from_record
+from vd_observer_node.estimation.cascade_step import CascadeInputs, cascade_block
+from vd_observer_node.estimation.drivetrain import TORQUE_NONE
+from vd_observer_node.estimation.estimator import (
+    Estimates,
+    estimates_from_record,
+)
 from vd_observer_node.estimation.faults import FaultCounter, FaultReport, merge_reports
-from vd_observer_node.estimation.imu_grade import SOURCE_FORCE, ImuGradeConfig
+from vd_observer_node.estimation.imu_grade import SOURCE_FORCE
 from vd_observer_node.estimation.imu_regression import bias_pitch_deg
-from vd_observer_node.estimation.observer import ObserverConfig, SpeedState, WheelState
+from vd_observer_node.estimation.observer import SpeedState, WheelState
 from vd_observer_node.estimation.torque_offset import TorqueOffset, offset_from_record
-from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params, vehicle_tire
+from vd_observer_node.estimation.vehicle import (
+    EstimatorVehicle,
+    load_vehicle_params,
+    vehicle_tire,
+)
 from vd_observer_node.kernel._jit import FixedCall
-from vd_observer_node.situation.alerts import AlertConfig
-from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
+from vd_observer_node.situation.chain_settings import ChainSettings
+from vd_observer_node.situation.friction_potential import TyreCurves
 from vd_observer_node.situation.monitor import (
     Situation,
     SituationBlock,
-    SituationConfig,
     SituationInputs,
     SituationMonitor,
 )
 
 __all__ = [
-    'ESTIMATOR_SPEEDS',
     'Chain',
     'ChainOutput',
-    'ChainSettings',
     'ImuLearnt',
     'chain_faults',
     'engine_row',
     'main',
     'warm_up',
 ]
-
-#: Speed fed to the estimator: the measured body speed, or the observer's filtered one.
-ESTIMATOR_SPEEDS: Final = ('measured', 'observer')
-
-
-@dataclass(frozen=True)
-class ChainSettings:
-    """Everything the chain needs.
-
-    Attributes:
-        vehicle: estimator vehicle parameters.
-        curves: the tyre's curves (friction potential); None (a vehicle file without
-            ``tire``): no situation monitor, the outputs' ``situation`` is None.
-        observer: observer settings (the situation monitor's fast observer shares all but L).
-        estimator: estimator settings.
-        alerts: alert settings.
-        friction: friction-potential settings.
-        situation: fast-observer and gate settings of the monitor.
-        estimator_speed: one of `ESTIMATOR_SPEEDS`.
-        torque_source: 'measured' (the wheel torques), 'engine' (from the engine torque and
-            gear through `drivetrain`) or 'none' (no torque: Fx 0, mu and slope invalid), as
-            `cascade.run_cascade` takes it.
-        drivetrain: the vehicle's driveline; needed by the engine path only.
-        imu: the IMU fusion's settings (`imu_grade`); None: no IMU, the force balance's
-            slope as it is.
-        brakes: the brake input's kind and gains (`estimation.brakes.Brakes`); None: none.
-    """
-
-    vehicle: EstimatorVehicle
-    curves: TyreCurves | None
-    observer: ObserverConfig = field(default_factory=ObserverConfig)
-    estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
-    alerts: AlertConfig = field(default_factory=AlertConfig)
-    friction: FrictionPotentialConfig = field(default_factory=FrictionPotentialConfig)
-    situation: SituationConfig = field(default_factory=SituationConfig)
-    estimator_speed: str = 'measured'
-    torque_source: str = 'measured'
-    drivetrain: Drivetrain | None = None
-    imu: ImuGradeConfig | None = None
-    brakes: Brakes | None = None
-
-    def __post_init__(self) -> None:
-        if self.estimator_speed not in ESTIMATOR_SPEEDS:
-            raise ConfigurationError(
-                f'estimator_speed must be one of {ESTIMATOR_SPEEDS}, got {self.estimator_speed!r}'
-            )
-        if self.source == TORQUE_ENGINE and self.drivetrain is None:
-            raise ConfigurationError('torque_source engine needs a drivetrain')
-
-    @property
-    def source(self) -> int:
-        """The torque source's code (`drivetrain.TORQUE_SOURCES`).
-
-        Raises:
-            ConfigurationError: unknown torque source.
-        """
-        return torque_source_code(self.torque_source)
 
 
 def engine_row(engine: ArrayLike | None) -> NDArray[np.float64]:
@@ -193,15 +139,7 @@ class Chain:
         """Create the parts from `settings` (compiled now, or loaded from numba's cache)."""
         self.settings = settings
         vehicle = settings.vehicle
-        self.parts = CascadeParts(
-            vehicle,
-            settings.observer,
-            settings.estimator,
-            settings.estimator_speed,
-            settings.torque_source,
-            settings.drivetrain,
-            settings.brakes,
-        )
+        self.parts = CascadeParts(settings)
         self.monitor: SituationMonitor | None = None
         if settings.curves is not None:
             self.monitor = SituationMonitor(

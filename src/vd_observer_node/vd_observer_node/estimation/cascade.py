@@ -9,7 +9,7 @@ run in blocks with a carried `CascadeState` (what the streamed replay does).
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -18,6 +18,7 @@ from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.brakes import Brakes, no_brakes
 from vd_observer_node.estimation.cascade_step import (
     CASCADE_SWITCHES,
+    ENGINE_STATE,
     CascadeInputs,
     CascadeOutputs,
     CascadeRecords,
@@ -27,6 +28,7 @@ from vd_observer_node.estimation.cascade_step import (
 )
 from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.drivetrain import (
+    DRIVETRAIN_PARAMS,
     TORQUE_ENGINE,
     TORQUE_MEASURED,
     TORQUE_NONE,
@@ -55,8 +57,11 @@ from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.kernel._jit import new_records, record_array
 
 __all__ = [
+    'ESTIMATOR_SPEEDS',
     'CascadeParts',
     'CascadeResult',
+    'CascadeSeries',
+    'CascadeSettings',
     'CascadeState',
     'OffsetRecord',
     'cascade_result',
@@ -71,6 +76,9 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+
+#: Speed fed to the estimator: the measured body speed, or the observer's filtered one.
+ESTIMATOR_SPEEDS: Final = ('measured', 'observer')
 
 
 @dataclass(frozen=True)
@@ -188,6 +196,91 @@ class CascadeResult:
     imu_gyro: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
 
 
+@dataclass(frozen=True)
+class CascadeSettings:
+    """Everything the cascade (observers, estimator, torque path, IMU fusion) is set with.
+
+    `situation.chain_settings.ChainSettings` extends it with the situation monitor's; both
+    are built from node parameters, a settings file or the CLI by
+    `situation.chain_settings.chain_settings`.
+
+    Attributes:
+        vehicle: estimator vehicle parameters.
+        observer: observer settings.
+        estimator: estimator settings.
+        estimator_speed: one of `ESTIMATOR_SPEEDS`: 'measured' feeds the estimator the
+            measured body speed (its slope low-pass does the smoothing, no observer lag),
+            'observer' the observer's filtered speed.
+        torque_source: 'measured' (the wheel torques), 'engine' (wheel torques from the
+            engine torque and gear through `drivetrain` (`drivetrain.engine_torques`), using
+            the wheel observer's omega_dot for the engine-inertia term; invalid where the
+            clutch is not engaged and for `Drivetrain.clutch_settle_time` after it was, or
+            after a gear change) or 'none' (no torque: Fx 0, mu and slope invalid).
+        drivetrain: the vehicle's driveline; needed by the engine path only.
+        imu: the IMU fusion's settings (`imu_grade`); None: its defaults where a record has
+            an IMU, and without one the force balance's slope as it is.
+        brakes: the brake input's kind and gains (`brakes.Brakes`); None: none.
+    """
+
+    vehicle: EstimatorVehicle
+    observer: ObserverConfig = field(default_factory=ObserverConfig)
+    estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
+    estimator_speed: str = 'measured'
+    torque_source: str = 'measured'
+    drivetrain: Drivetrain | None = None
+    imu: ImuGradeConfig | None = None
+    brakes: Brakes | None = None
+
+    def __post_init__(self) -> None:
+        if self.estimator_speed not in ESTIMATOR_SPEEDS:
+            raise ConfigurationError(
+                f'estimator_speed must be one of {ESTIMATOR_SPEEDS}, got {self.estimator_speed!r}'
+            )
+        if self.source == TORQUE_ENGINE and self.drivetrain is None:
+            raise ConfigurationError('torque_source engine needs a drivetrain')
+
+    @property
+    def source(self) -> int:
+        """The torque source's code (`drivetrain.TORQUE_SOURCES`).
+
+        Raises:
+            ConfigurationError: unknown torque source.
+        """
+        return torque_source_code(self.torque_source)
+
+
+@dataclass(frozen=True)
+class CascadeSeries:
+    """A record of the cascade's inputs at common stamps (N stamps; order FL, FR, RL, RR).
+
+    Attributes:
+        t: shape (N,), [s] stamps (rejected samples keep the previous estimates).
+        wheel_angle: shape (N, 4), [rad] unwrapped wheel angles, or wheel speeds [rad/s]
+            when the observer's ``wheel_input`` is 'speed'.
+        body_speed: shape (N,), [m/s] measured body speed.
+        wheel_torque: shape (N, 4), [N m] drive minus brake torque (ignored unless the torque
+            source is 'measured').
+        engine: shape (N, 3) or (N, 4): engine torque [N m], gear (0 neutral, -1 reverse),
+            engine speed [rad/s] (nan if not measured), turbine speed [rad/s] (an automatic
+            gearbox's; nan or absent if not logged); needed by the engine path only.
+        brake: shape (N, 4): the brake input per wheel (`brakes.brake_torques`: pressures,
+            or the switch in column 0; nan where unknown); None: no brake input.
+        imu: shape (N, 3) or (N, 2): stamp [s] of the newest IMU sample at each stamp (nan:
+            none), its longitudinal specific force in body axes [m/s^2] and the body's pitch
+            rate [rad/s] (REP 103, nose down positive; nan or absent: no angular rate); the
+            slope is then the fusion of `imu_grade` (None: the force balance's slope, as
+            without an IMU).
+    """
+
+    t: ArrayLike
+    wheel_angle: ArrayLike
+    body_speed: ArrayLike
+    wheel_torque: ArrayLike
+    engine: ArrayLike | None = None
+    brake: ArrayLike | None = None
+    imu: ArrayLike | None = None
+
+
 @dataclass
 class CascadeState:
     """What one call of a cascade function hands to the next, so a record can be run in blocks.
@@ -244,26 +337,18 @@ def offset_result_name(attribute: str) -> str:
 
 
 def checked_record(
-    t: ArrayLike,
-    wheel_angle: ArrayLike,
-    body_speed: ArrayLike,
-    wheel_torque: ArrayLike,
-    estimator_speed: str,
+    series: CascadeSeries,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The arguments of `run_cascade` as contiguous float64 arrays, checked.
+    """The stamps, wheel angles, body speeds and wheel torques of a record as contiguous
+    float64 arrays, checked.
 
     Raises:
         InputShapeError: inconsistent shapes.
-        ConfigurationError: unknown estimator_speed.
     """
-    if estimator_speed not in ('measured', 'observer'):
-        raise ConfigurationError(
-            f'estimator_speed must be measured or observer: {estimator_speed}'
-        )
-    stamps = np.ascontiguousarray(t, dtype=np.float64)
-    angles = np.ascontiguousarray(wheel_angle, dtype=np.float64)
-    speeds = np.ascontiguousarray(body_speed, dtype=np.float64)
-    torques = np.ascontiguousarray(wheel_torque, dtype=np.float64)
+    stamps = np.ascontiguousarray(series.t, dtype=np.float64)
+    angles = np.ascontiguousarray(series.wheel_angle, dtype=np.float64)
+    speeds = np.ascontiguousarray(series.body_speed, dtype=np.float64)
+    torques = np.ascontiguousarray(series.wheel_torque, dtype=np.float64)
     n = stamps.shape[0] if stamps.ndim == 1 else -1
     if angles.shape != (n, 4) or speeds.shape != (n,) or torques.shape != (n, 4):
         raise InputShapeError(
@@ -325,8 +410,8 @@ class CascadeParts:
         estimator: the estimator.
         source: the torque source's code (`drivetrain.TORQUE_SOURCES`).
         measured: the estimator gets the measured speed (else the observer's).
-        dprm: `Drivetrain.params_array` on the engine path, else empty.
-        engine_state: shape (2,), the engine path's state (`cascade_step.cascade_step`).
+        drivetrain: `Drivetrain.params` on the engine path, else zeros (unread).
+        engine_state: the engine path's state (`cascade_step.ENGINE_STATE`).
         offset_on: the engine path learns the engine-torque offset.
         offset_params, offset_state, offset_estimate: the offset estimator's records.
         engine_faults: the engine path's own fault counter where it learns the offset.
@@ -334,31 +419,17 @@ class CascadeParts:
         brake_parts: its records (`brakes.BrakeParts`: settings, the learnt gain's state).
     """
 
-    def __init__(
-        self,
-        vehicle: EstimatorVehicle,
-        observer_config: ObserverConfig | None = None,
-        estimator_config: EstimatorConfig | None = None,
-        estimator_speed: str = 'measured',
-        torque_source: str = 'measured',
-        drivetrain: Drivetrain | None = None,
-        brakes: Brakes | None = None,
-    ) -> None:
+    def __init__(self, settings: CascadeSettings) -> None:
         """Create the parts (compiled, or loaded from numba's cache, by their wrappers).
 
         Raises:
-            ConfigurationError: unknown estimator_speed or torque_source, or the engine path
-                without a drivetrain.
+            ConfigurationError: unknown torque source.
         """
-        if estimator_speed not in ('measured', 'observer'):
-            raise ConfigurationError(
-                f'estimator_speed must be measured or observer: {estimator_speed}'
-            )
-        config = observer_config or ObserverConfig()
-        estimator_config = estimator_config or EstimatorConfig()
-        self.source = torque_source_code(torque_source)
-        if self.source == TORQUE_ENGINE and drivetrain is None:
-            raise ConfigurationError('torque_source engine needs a drivetrain')
+        config = settings.observer
+        estimator_config = settings.estimator
+        vehicle = settings.vehicle
+        drivetrain = settings.drivetrain
+        self.source = settings.source
 
         def differentiator(lipschitz: float, n: int, input_derivative: int) -> Any:
             return LevantDifferentiator(
@@ -376,10 +447,15 @@ class CascadeParts:
         self.wheels: LevantDifferentiator = differentiator(config.wheel_lipschitz, 4, wheel_input)
         self.speed: LevantDifferentiator = differentiator(config.speed_lipschitz, 1, 0)
         self.estimator = Estimator(vehicle, estimator_config, self.source)
-        self.measured = estimator_speed == 'measured'
+        self.measured = settings.estimator_speed == 'measured'
         engine_on = self.source == TORQUE_ENGINE and drivetrain is not None
-        self.dprm = drivetrain.params_array() if engine_on and drivetrain else np.zeros(0)
-        self.engine_state = np.array([-np.inf, np.nan])
+        self.engine_on = engine_on
+        self.drivetrain = (
+            drivetrain.params() if engine_on and drivetrain else new_records(DRIVETRAIN_PARAMS, 1)
+        )
+        self.engine_state = new_records(ENGINE_STATE, 1)
+        self.engine_state['changed_at'] = -np.inf
+        self.engine_state['gear'] = np.nan
         self.offset_on = engine_on and estimator_config.torque_offset_adaptation
         self.offset_params = offset_params(estimator_config.torque_offset)
         self.offset_state = new_offset_state()
@@ -391,6 +467,7 @@ class CascadeParts:
                                   vehicle.rolling_c1)  # fmt: skip
         self._vehicle = vehicle
         # without torque there is nothing to take a brake torque from
+        brakes = settings.brakes
         self.brakes = brakes if brakes is not None and self.source != TORQUE_NONE else Brakes()
         #: the brake input's records (`brakes.BRAKE_PARAMS`, `brakes.BRAKE_STATE`)
         self.brake_parts = self.brakes.parts()
@@ -405,11 +482,6 @@ class CascadeParts:
             self.imu_on = True
             self._records = None
         return self.imu_grade
-
-    @property
-    def engine_on(self) -> bool:
-        """The wheel torques come from the engine path."""
-        return bool(self.dprm.shape[0] > 0)
 
     def records(self) -> CascadeRecords:
         """Every part's records as `cascade_step.cascade_block` takes them (views of the live
@@ -427,7 +499,7 @@ class CascadeParts:
             switches, self.wheels.parts(), self.speed.parts(), self.estimator.parts,
             new_records(ESTIMATOR_INPUT, 1),
             EnginePathParts(
-                self.dprm, self.engine_state, a(self.offset_params), a(self.offset_state),
+                self.drivetrain, self.engine_state, a(self.offset_params), a(self.offset_state),
                 a(self.offset_estimate),
             ),
             self.brake_parts,
@@ -465,91 +537,45 @@ def empty_outputs(n: int, offsets: bool) -> CascadeOutputs:
 
 
 def run_cascade(
-    t: ArrayLike,
-    wheel_angle: ArrayLike,
-    body_speed: ArrayLike,
-    wheel_torque: ArrayLike,
-    vehicle: EstimatorVehicle,
-    observer_config: ObserverConfig | None = None,
-    estimator_config: EstimatorConfig | None = None,
-    estimator_speed: str = 'measured',
-    *,
-    torque_source: str = 'measured',
-    engine: ArrayLike | None = None,
-    drivetrain: Drivetrain | None = None,
-    state: CascadeState | None = None,
-    imu: ArrayLike | None = None,
-    imu_config: ImuGradeConfig | None = None,
-    brake: ArrayLike | None = None,
-    brakes: Brakes | None = None,
+    series: CascadeSeries, settings: CascadeSettings, state: CascadeState | None = None
 ) -> CascadeResult:
     """Run observers and estimator over a record sampled at common stamps.
 
     Args:
-        t: shape (N,), [s] stamps (rejected samples keep the previous estimates).
-        wheel_angle: shape (N, 4), [rad] unwrapped wheel angles, or wheel speeds [rad/s]
-            when ``observer_config.wheel_input`` is 'speed'.
-        body_speed: shape (N,), [m/s] measured body speed.
-        wheel_torque: shape (N, 4), [N m] drive minus brake torque.
-        vehicle: estimator parameters.
-        observer_config: observer settings (defaults if None).
-        estimator_config: estimator settings (defaults if None).
-        estimator_speed: 'measured' feeds the estimator the measured body speed (its slope
-            low-pass does the smoothing, no observer lag), 'observer' the observer's
-            filtered speed.
-        torque_source: 'measured' (wheel_torque), 'engine' (wheel torques from `engine`
-            through `drivetrain` (`drivetrain.engine_torques`), using the wheel observer's
-            omega_dot for the engine-inertia term; invalid where the clutch is not engaged
-            and for `Drivetrain.clutch_settle_time` after it was, or after a gear change) or
-            'none' (wheel_torque ignored; Fx 0, mu and slope invalid).
-        engine: shape (N, 3) or (N, 4): engine torque [N m], gear (0 neutral, -1 reverse),
-            engine speed [rad/s] (nan if not measured), turbine speed [rad/s] (an automatic
-            gearbox's; nan or absent if not logged); needed by the engine path only.
-        drivetrain: the vehicle's driveline; needed by the engine path only.
+        series: the inputs at each stamp.
+        settings: the cascade's settings (`situation.chain_settings` builds them from node
+            parameters, a settings file or the CLI; a `ChainSettings` is one).
         state: carried from the previous block of the record (`CascadeState`); None: the
             record is whole. ``faults`` are then the totals since the first block.
-        imu: shape (N, 3) or (N, 2): stamp [s] of the newest IMU sample at each stamp (nan:
-            none), its longitudinal specific force in body axes [m/s^2] and the body's pitch
-            rate [rad/s] (REP 103, nose down positive; nan or absent: no angular rate); the
-            slope is then the fusion of `imu_grade` (None: the force balance's slope, as
-            without an IMU).
-        imu_config: the fusion's settings (defaults if None).
-        brake: shape (N, 4): the brake input per wheel (`brakes.brake_torques`: pressures,
-            or the switch in column 0; nan where unknown); None: no brake input.
-        brakes: what ``brake`` is and its gains (`brakes.Brakes`); None: no brake input.
 
     Raises:
         InputShapeError: inconsistent shapes.
-        ConfigurationError: unknown estimator_speed or torque_source, or the engine path
-            without engine or drivetrain.
+        ConfigurationError: the engine path without its engine record.
     """
-    stamps, angles, speeds, torques = checked_record(
-        t, wheel_angle, body_speed, wheel_torque, estimator_speed
-    )
+    stamps, angles, speeds, torques = checked_record(series)
     n = stamps.shape[0]
-    source, engine_record = checked_engine(n, torque_source, engine, drivetrain)
-    brake_record = checked_brake(n, brake)
+    source, engine_record = checked_engine(
+        n, settings.torque_source, series.engine, settings.drivetrain
+    )
+    brake_record = checked_brake(n, series.brake)
     if source == TORQUE_NONE:
         torques = np.zeros((n, 4))  # no torque topic: zeros everywhere
     if state is not None and state.parts is not None:
         parts = state.parts
     else:
-        parts = CascadeParts(
-            vehicle, observer_config, estimator_config, estimator_speed, torque_source,
-            drivetrain, brakes,
-        )  # fmt: skip
+        parts = CascadeParts(settings)
         if state is not None:
             state.parts = parts
     imu_record = no_imu(n)
-    if imu is not None:
-        given = np.asarray(imu, dtype=np.float64)
+    if series.imu is not None:
+        given = np.asarray(series.imu, dtype=np.float64)
         if given.ndim != 2 or given.shape[0] != n or given.shape[1] not in (2, 3):
             raise InputShapeError(
                 f'imu must have shape ({n}, 3) (sample stamp, specific force, pitch rate) or '
                 f'({n}, 2), got {given.shape}'
             )
         imu_record[:, : given.shape[1]] = given
-        parts.grade(imu_config)
+        parts.grade(settings.imu)
     out = empty_outputs(n, parts.offset_on)
     inputs = CascadeInputs(
         stamps, angles, speeds, torques, engine_record, brake_record, imu_record

@@ -41,8 +41,7 @@ from vd_observer_node.kernel._jit import jit, jit_inlined
 
 __all__ = [
     'CASCADE_SWITCHES',
-    'CLUTCH_SETTLE',
-    'ENGINE_INERTIA',
+    'ENGINE_STATE',
     'CascadeInputs',
     'CascadeOutputs',
     'CascadeRecords',
@@ -55,9 +54,9 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
-#: slots of `Drivetrain.params_array` the torque path reads here
-ENGINE_INERTIA = 4
-CLUTCH_SETTLE = 6
+#: The engine path's memory: the stamp [s] the clutch last slipped or the gear changed (-inf
+#: before), and the last gear (nan before).
+ENGINE_STATE: Final = np.dtype([('changed_at', 'f8'), ('gear', 'f8')], align=True)
 
 #: Which parts run: measured_speed (the estimator gets the measured speed, else the speed
 #: observer's), engine_path (the wheel torques come from the engine torque and gear),
@@ -78,16 +77,16 @@ class EnginePathParts(NamedTuple):
     """The engine path's records (empty and unused off it).
 
     Attributes:
-        drivetrain: `Drivetrain.params_array` (empty off the engine path).
-        engine_state: shape (2,): the stamp the clutch last slipped or the gear changed
-            (-inf before), the last gear (nan before).
+        drivetrain: shape (1,), `drivetrain.DRIVETRAIN_PARAMS` (`Drivetrain.params`; zeros
+            off the engine path).
+        engine_state: shape (1,), `ENGINE_STATE`.
         offset_params: shape (1,), the offset estimator's settings (`torque_offset`).
         offset_state: shape (1,), its state.
         offset_estimate: shape (1,), its estimate of the stamp.
     """
 
-    drivetrain: FloatArray
-    engine_state: FloatArray
+    drivetrain: NDArray[Any]
+    engine_state: NDArray[Any]
     offset_params: NDArray[Any]
     offset_state: NDArray[Any]
     offset_estimate: NDArray[Any]
@@ -227,23 +226,23 @@ def cascade_step(
     if switches.engine_path:
         engine = inputs.engine[k]
         e = parts.engine
-        dprm, escl = e.drivetrain, e.engine_state
+        line, memory = e.drivetrain[0], e.engine_state[0]
         engine_torque = engine[0]
         if switches.offset_learnt:
             oout = e.offset_estimate[0]
             torque_offset_step(
-                e.offset_params[0], dprm[ENGINE_INERTIA], e.offset_state[0], t, engine[0],
+                e.offset_params[0], line.engine_inertia, e.offset_state[0], t, engine[0],
                 engine[1], engine[2], oout,
             )  # fmt: skip
             engine_torque = engine_torque - oout.used
             out.offsets[k] = oout
         engaged = engine_torques(
-            dprm, engine_torque, engine[1], engine[2], engine[3], wheel[1], wheel[2], used
+            line, engine_torque, engine[1], engine[2], engine[3], wheel[1], wheel[2], used
         )
-        if not engaged or engine[1] != escl[1]:
-            escl[0] = t
-        escl[1] = engine[1]
-        torque_ok = engaged and t - escl[0] >= dprm[CLUTCH_SETTLE]
+        if not engaged or engine[1] != memory.gear:
+            memory.changed_at = t
+        memory.gear = engine[1]
+        torque_ok = engaged and t - memory.changed_at >= line.clutch_settle_time
     else:
         used[:] = inputs.wheel_torque[k]
     brake_params = parts.brakes.params[0]

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -42,10 +42,13 @@ from vd_common.vehicle.estimation import EstimationConverter, EstimationVehicleP
 from vd_common.vehicle.params import VehicleParams
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
-from vd_observer_node.kernel._jit import jit
+from vd_observer_node.kernel._jit import jit, new_records
 
 __all__ = [
     'DRIVEN_AXLES',
+    'DRIVETRAIN_PARAMS',
+    'MAX_CONVERTER_POINTS',
+    'MAX_GEARS',
     'NO_GEAR',
     'TORQUE_ENGINE',
     'TORQUE_MEASURED',
@@ -95,6 +98,38 @@ def torque_source_code(name: str) -> int:
             f'torque source must be one of {", ".join(TORQUE_SOURCES)}, got {name!r}'
         )
     return TORQUE_SOURCES.index(name)
+
+
+#: room for a gearbox's forward gears and a converter's table in `DRIVETRAIN_PARAMS`
+MAX_GEARS: Final = 16
+MAX_CONVERTER_POINTS: Final = 64
+#: The settings of `engine_torques` (`Drivetrain.params`): the number of forward gears, the
+#: final drive, the reverse gear's ratio, eta, J_e [kg m^2], the largest clutch slip [rad/s],
+#: the settle time [s], which wheels are driven (1/0, FL, FR, RL, RR), the gear ratios and eta
+#: per forward gear (the first ``gears`` used), each wheel's share of the torque, and the torque
+#: converter (``converter`` 1/0): the first ``converter_points`` of its speed ratios, torque
+#: ratios and capacity factors [rpm/sqrt(N m)].
+DRIVETRAIN_PARAMS: Final = np.dtype(
+    [
+        ('gears', 'i8'),
+        ('final_drive', 'f8'),
+        ('reverse_ratio', 'f8'),
+        ('efficiency', 'f8'),
+        ('engine_inertia', 'f8'),
+        ('max_clutch_slip', 'f8'),
+        ('clutch_settle_time', 'f8'),
+        ('driven', 'f8', (4,)),
+        ('ratios', 'f8', (MAX_GEARS,)),
+        ('gear_efficiency', 'f8', (MAX_GEARS,)),
+        ('shares', 'f8', (4,)),
+        ('converter', 'b1'),
+        ('converter_points', 'i8'),
+        ('speed_ratio', 'f8', (MAX_CONVERTER_POINTS,)),
+        ('torque_ratio', 'f8', (MAX_CONVERTER_POINTS,)),
+        ('capacity_factor', 'f8', (MAX_CONVERTER_POINTS,)),
+    ],
+    align=True,
+)
 
 
 @dataclass(frozen=True)
@@ -167,6 +202,16 @@ class Drivetrain:
         if not (math.isfinite(self.front_share) and 0.0 < self.front_share < 1.0):
             raise ConfigurationError(
                 f'Drivetrain.front_share must be in (0, 1), got {self.front_share}'
+            )
+        if len(self.ratios) > MAX_GEARS:
+            raise ConfigurationError(
+                f'Drivetrain.ratios: at most {MAX_GEARS} forward gears, got {len(self.ratios)}'
+            )
+        points = len(self.converter.speed_ratio) if self.converter is not None else 0
+        if points > MAX_CONVERTER_POINTS:
+            raise ConfigurationError(
+                f'Drivetrain.converter: at most {MAX_CONVERTER_POINTS} points in its table, '
+                f'got {points}'
             )
 
     @classmethod
@@ -255,69 +300,61 @@ class Drivetrain:
         f = self.front_share
         return np.array([0.5 * f, 0.5 * f, 0.5 * (1.0 - f), 0.5 * (1.0 - f)])
 
-    def params_array(self) -> FloatArray:
-        """The parameters of `engine_torques` (an array: the number of gears varies):
-        [n, final, reverse, eta, J_e, max slip, settle time, driven (4), ratios (n),
-        eta per gear (n), torque shares (4), converter (0/1), m, speed ratios (m), torque
-        ratios (m), capacity factors (m) [rpm/sqrt(N m)]]."""
-        etas = self.gear_efficiency or (self.efficiency,) * len(self.ratios)
+    def params(self) -> NDArray[Any]:
+        """The settings of `engine_torques`: a `DRIVETRAIN_PARAMS` record in the 1-element
+        array it lives in."""
+        record: NDArray[Any] = new_records(DRIVETRAIN_PARAMS, 1)
+        p = record[0]
+        n = len(self.ratios)
+        p['gears'] = n
+        for name in ('final_drive', 'reverse_ratio', 'efficiency', 'engine_inertia',
+                     'max_clutch_slip', 'clutch_settle_time'):  # fmt: skip
+            p[name] = getattr(self, name)
+        p['driven'] = self.driven
+        p['ratios'][:n] = self.ratios
+        p['gear_efficiency'][:n] = self.gear_efficiency or (self.efficiency,) * n
+        p['shares'] = self.shares
         c = self.converter
-        table: list[float] = [0.0, 0.0]
         if c is not None:
-            table = [1.0, float(len(c.speed_ratio)), *c.speed_ratio, *c.torque_ratio,
-                     *c.capacity_factor]  # fmt: skip
-        return np.array(
-            [
-                float(len(self.ratios)),
-                self.final_drive,
-                self.reverse_ratio,
-                self.efficiency,
-                self.engine_inertia,
-                self.max_clutch_slip,
-                self.clutch_settle_time,
-                *self.driven.tolist(),
-                *self.ratios,
-                *etas,
-                *self.shares.tolist(),
-                *table,
-            ]
-        )
+            m = len(c.speed_ratio)
+            p['converter'] = True
+            p['converter_points'] = m
+            p['speed_ratio'][:m] = c.speed_ratio
+            p['torque_ratio'][:m] = c.torque_ratio
+            p['capacity_factor'][:m] = c.capacity_factor
+        return record
 
 
 @jit
-def _table(dprm: FloatArray, x0: int, y0: int, m: int, x: float) -> float:
-    """Linear interpolation in the table ``dprm[x0:x0+m]`` -> ``dprm[y0:y0+m]``, held at
-    both ends."""
-    if x <= dprm[x0]:
-        return float(dprm[y0])
+def _table(xs: FloatArray, ys: FloatArray, m: int, x: float) -> float:
+    """Linear interpolation in the table ``xs[:m]`` -> ``ys[:m]``, held at both ends."""
+    if x <= xs[0]:
+        return float(ys[0])
     for k in range(1, m):
-        if x <= dprm[x0 + k]:
-            w = (x - dprm[x0 + k - 1]) / (dprm[x0 + k] - dprm[x0 + k - 1])
-            return float(dprm[y0 + k - 1] + w * (dprm[y0 + k] - dprm[y0 + k - 1]))
-    return float(dprm[y0 + m - 1])
+        if x <= xs[k]:
+            w = (x - xs[k - 1]) / (xs[k] - xs[k - 1])
+            return float(ys[k - 1] + w * (ys[k] - ys[k - 1]))
+    return float(ys[m - 1])
 
 
 @jit
-def converter_speed_ratio(
-    dprm: FloatArray, c0: int, pump_torque: float, turbine_speed: float
-) -> float:
-    """The speed ratio turbine/pump at which the converter of ``dprm`` (its table from slot
-    ``c0``: m, speed ratios, torque ratios, capacity factors) absorbs ``pump_torque`` [N m]
-    with the turbine at ``turbine_speed`` [rad/s]: the root of
+def converter_speed_ratio(p: np.record, pump_torque: float, turbine_speed: float) -> float:
+    """The speed ratio turbine/pump at which the converter of ``p`` (`DRIVETRAIN_PARAMS`)
+    absorbs ``pump_torque`` [N m] with the turbine at ``turbine_speed`` [rad/s]: the root of
     ``turbine_rpm / SR = K(SR) * sqrt(pump_torque)`` by bisection; 1 where even SR -> 1
     needs less torque (coupling, overrun) or the torque is not positive."""
-    m = int(dprm[c0])
+    m = p.converter_points
     if not (pump_torque > 0.0 and turbine_speed > 0.0):
         return 1.0
     rpm = turbine_speed * 30.0 / math.pi
     root = math.sqrt(pump_torque)
-    hi = dprm[c0 + m]  # the table's last speed ratio: from there on, coupling
-    if rpm / hi - _table(dprm, c0 + 1, c0 + 1 + 2 * m, m, hi) * root >= 0.0:
+    hi = p.speed_ratio[m - 1]  # the table's last speed ratio: from there on, coupling
+    if rpm / hi - _table(p.speed_ratio, p.capacity_factor, m, hi) * root >= 0.0:
         return 1.0
     lo = 1e-3
     for _ in range(40):
         mid = 0.5 * (lo + hi)
-        if rpm / mid - _table(dprm, c0 + 1, c0 + 1 + 2 * m, m, mid) * root > 0.0:
+        if rpm / mid - _table(p.speed_ratio, p.capacity_factor, m, mid) * root > 0.0:
             lo = mid
         else:
             hi = mid
@@ -326,7 +363,7 @@ def converter_speed_ratio(
 
 @jit
 def engine_torques(
-    dprm: FloatArray,
+    p: np.record,
     engine_torque: float,
     gear_value: float,
     engine_speed: float,
@@ -338,7 +375,7 @@ def engine_torques(
     """Wheel torques from the engine torque into ``out`` (4,) [N m]; returns whether the
     path holds (the compiled step of `engine_wheel_torques` and `clutch_engaged`).
 
-    With a clutch (no converter in ``dprm``) the path holds where the engine turns at i
+    With a clutch (no converter in ``p``) the path holds where the engine turns at i
     times the driven wheels (the clutch is closed). With a torque converter the pump
     torque ``T_e - J_e * omega_dot_e`` is multiplied by the converter's torque ratio at
     the speed ratio turbine/engine: the turbine speed logged, else i times the driven
@@ -347,7 +384,7 @@ def engine_torques(
     i times the driven wheels (the gear is engaged, not shifting).
 
     Args:
-        dprm: `Drivetrain.params_array`.
+        p: `DRIVETRAIN_PARAMS` record (`Drivetrain.params`).
         engine_torque: net engine torque [N m].
         gear_value: the gear as a float (`gear_number` rules: no gear gives nan torques).
         engine_speed: [rad/s], nan if not measured (then only the gear is checked).
@@ -356,68 +393,66 @@ def engine_torques(
         omega_dot: shape (4,), [rad/s^2] wheel accelerations (the engine-inertia term).
         out: shape (4,), written.
     """
-    n_gears = int(dprm[0])
+    n_gears = p.gears
     ratio = math.nan
-    eta = dprm[3]
+    eta = p.efficiency
     if math.isfinite(gear_value) and gear_value == round(gear_value) and abs(gear_value) < 2.0**31:
         gear = int(gear_value)
         if gear == 0:
             ratio = 0.0
         elif gear == -1:
-            ratio = -dprm[2] * dprm[1]
-            eta = dprm[11 + n_gears]
+            ratio = -p.reverse_ratio * p.final_drive
+            eta = p.gear_efficiency[0]
         elif 1 <= gear <= n_gears:
-            ratio = dprm[11 + gear - 1] * dprm[1]
-            eta = dprm[11 + n_gears + gear - 1]
+            ratio = p.ratios[gear - 1] * p.final_drive
+            eta = p.gear_efficiency[gear - 1]
     if not math.isfinite(ratio):
         out[:] = math.nan
         return False
     if ratio == 0.0:
         out[:] = 0.0  # neutral: nothing reaches the wheels, whatever the engine does
         return True
-    n_driven = dprm[7] + dprm[8] + dprm[9] + dprm[10]
-    shares = 11 + 2 * n_gears
-    c0 = shares + 5  # the converter's table: m, then its three columns
-    has_converter = dprm[shares + 4] > 0.0
+    driven = p.driven
+    n_driven = driven[0] + driven[1] + driven[2] + driven[3]
     carrier_accel = 0.0
     carrier_speed = 0.0
     for i in range(4):
-        carrier_accel += dprm[7 + i] * omega_dot[i]
-        carrier_speed += dprm[7 + i] * omega[i]
+        carrier_accel += driven[i] * omega_dot[i]
+        carrier_speed += driven[i] * omega[i]
     carrier_accel /= n_driven
     carrier_speed /= n_driven
     gearbox_in = ratio * carrier_speed  # the turbine's (clutch's) speed the wheels give
     torque_ratio = 1.0
     speed_ratio = 1.0
-    if has_converter:
+    if p.converter:
         turbine = turbine_speed if math.isfinite(turbine_speed) else gearbox_in
         if math.isfinite(engine_speed) and engine_speed > 0.0:
             speed_ratio = turbine / engine_speed
         elif math.isfinite(engine_torque):
-            speed_ratio = converter_speed_ratio(dprm, c0, engine_torque, abs(turbine))
-        m = int(dprm[c0])
-        if speed_ratio < dprm[c0 + m]:  # overrun and coupling: 1
-            torque_ratio = _table(dprm, c0 + 1, c0 + 1 + m, m, speed_ratio)
+            speed_ratio = converter_speed_ratio(p, engine_torque, abs(turbine))
+        m = p.converter_points
+        if speed_ratio < p.speed_ratio[m - 1]:  # overrun and coupling: 1
+            torque_ratio = _table(p.speed_ratio, p.torque_ratio, m, speed_ratio)
     if math.isfinite(engine_torque):
         # the engine's own acceleration: i * the driven wheels' over the speed ratio (a
         # steady converter slip; exact with the clutch or a locked converter)
         spin = ratio * carrier_accel / max(speed_ratio, 0.5)
-        pump = engine_torque - dprm[4] * spin
+        pump = engine_torque - p.engine_inertia * spin
         total = ratio * torque_ratio * pump
         # The engine turns forward in every gear: a positive pump torque sends power to
         # the wheels (losses take eta of it), a negative one (engine braking) draws it.
         total = total * eta if pump >= 0.0 else total / eta
         for i in range(4):
-            out[i] = total * dprm[shares + i]
+            out[i] = total * p.shares[i]
     else:
         out[:] = math.nan
-    if has_converter:
+    if p.converter:
         if not math.isfinite(turbine_speed):
             return True
-        return bool(abs(turbine_speed - gearbox_in) <= dprm[5])
+        return bool(abs(turbine_speed - gearbox_in) <= p.max_clutch_slip)
     if not math.isfinite(engine_speed):
         return True
-    return bool(abs(engine_speed - gearbox_in) <= dprm[5])
+    return bool(abs(engine_speed - gearbox_in) <= p.max_clutch_slip)
 
 
 def engine_wheel_torques(
@@ -452,7 +487,7 @@ def engine_wheel_torques(
             raise InputShapeError(f'wheel_omega_dot must have shape (4,), got {accel.shape}')
     out = np.empty(4)
     engine_torques(
-        drivetrain.params_array(), float(engine_torque), float(gear), math.nan, math.nan,
+        drivetrain.params()[0], float(engine_torque), float(gear), math.nan, math.nan,
         np.zeros(4), accel, out,
     )  # fmt: skip
     return out
@@ -482,7 +517,7 @@ def clutch_engaged(
     if omega.shape != (4,):
         raise InputShapeError(f'wheel_omega must have shape (4,), got {omega.shape}')
     engaged = engine_torques(
-        drivetrain.params_array(), 0.0, float(gear), float(engine_speed), math.nan, omega,
+        drivetrain.params()[0], 0.0, float(gear), float(engine_speed), math.nan, omega,
         np.zeros(4), np.empty(4),
     )  # fmt: skip
     return bool(engaged)

@@ -389,6 +389,16 @@ class InputMapping:
         return 'speed' if self.wheels.name == 'wheel_speeds' else 'angle'
 
     @property
+    def brake_signal(self) -> str:
+        """The brake input's signal ('switch' or 'pressure'), '' without one."""
+        return self.brake.signal if self.brake is not None else ''
+
+    @property
+    def imu_fusion(self) -> tuple[tuple[str, float], ...] | None:
+        """The IMU fusion's settings of this sensor (``imu.fusion``), None without an IMU."""
+        return self.imu.fusion if self.imu is not None else None
+
+    @property
     def topics(self) -> tuple[str, ...]:
         """The distinct input topics, in input order (two inputs may share a JointState)."""
         return tuple(dict.fromkeys(s.topic for s in self.specs))

@@ -48,12 +48,6 @@ from vd_msgs.msg import (
     WheelStates,
 )
 from vd_observer_node.estimation.faults import OK, WARN
-from vd_observer_node.estimation.observer import ObserverConfig
-from vd_observer_node.estimation.vehicle import (
-    EstimatorVehicle,
-    load_vehicle_params,
-    no_tire_note,
-)
 from vd_observer_node.inputs.decode import has_header
 from vd_observer_node.inputs.mapping import InputMapping
 from vd_observer_node.nodes.node_params import (
@@ -72,9 +66,8 @@ from vd_observer_node.nodes.raw_io import (
     merge_status,
     queued_by_topic,
 )
-from vd_observer_node.situation.alerts import AlertConfig
-from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
-from vd_observer_node.situation.monitor import SituationConfig, SituationMonitor
+from vd_observer_node.situation.chain_settings import chain_settings, parameter_sections
+from vd_observer_node.situation.monitor import SituationMonitor
 
 __all__ = ['PARAMS', 'AlertsNode', 'main']
 
@@ -120,12 +113,12 @@ class AlertsNode(Node):
         classes = {key: input_message_class(spec) for key, spec in sensors.items()}
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')
-        # One read of the file gives the estimator vehicle and the tyre alike.
-        params = load_vehicle_params(vehicle_file)
-        vehicle = EstimatorVehicle.from_params(params)
+        # the monitor's settings as the pipeline's: one read of the file, the mapping's sensors
+        settings = chain_settings(mapping, vehicle_file, parameter_sections(values))
+        vehicle = settings.vehicle
         self.pub_diag = self.refusals.publisher(DiagnosticArray, '/diagnostics', DIAGNOSTICS_QOS)
-        self._off = no_tire_note(params)
-        if params.tire is None:
+        self._off = settings.situation_off
+        if settings.curves is None:
             # Every alert is off: low friction compares mu with the Magic Formula's peak, and
             # the 12 channels of vd_msgs/Alerts have no 'not computed' level, so a traction or
             # lock alert alone would publish the low-friction channels as OK. The node stays
@@ -136,23 +129,15 @@ class AlertsNode(Node):
             )
             self.create_timer(1.0, self.publish_off)
             return
-        situation_keys = set(SituationConfig.__dataclass_fields__)
-        friction_keys = set(FrictionPotentialConfig.__dataclass_fields__)
         self.monitor = SituationMonitor(
-            TyreCurves.from_tire(params.tire),
+            settings.curves,
             vehicle.static_wheel_loads[[0, 2]],
             vehicle.effective_radius,
             # its fast wheel observer reads the wheel sensor: angles or ABS speeds
-            observer=ObserverConfig(wheel_input=mapping.wheel_input),
-            situation=SituationConfig.from_mapping(
-                {k: v for k, v in values.items() if k in situation_keys}
-            ),
-            alerts=AlertConfig.from_mapping(
-                {k: v for k, v in values.items() if k not in situation_keys | friction_keys}
-            ),
-            friction=FrictionPotentialConfig.from_mapping(
-                {k: v for k, v in values.items() if k in friction_keys}
-            ),
+            observer=settings.observer,
+            situation=settings.situation,
+            alerts=settings.alerts,
+            friction=settings.friction,
         )
         max_gap_ns = round(self.monitor.observer_config.max_gap * 1e9)
         # TOPICS: the wheel sensor's stamps first; they drive, as in the replay

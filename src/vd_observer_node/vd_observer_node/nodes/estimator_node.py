@@ -50,11 +50,10 @@ from vd_msgs.msg import (
     TireForces,
     WheelStates,
 )
-from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
+from vd_observer_node.estimation.estimator import Estimator
 from vd_observer_node.estimation.faults import merge_reports, summarise
 from vd_observer_node.estimation.imu_grade import SOURCE_FORCE
 from vd_observer_node.estimation.rate_settings import RateMeter
-from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.inputs.decode import has_header
 from vd_observer_node.inputs.mapping import InputMapping
 from vd_observer_node.nodes.node_params import (
@@ -76,6 +75,7 @@ from vd_observer_node.nodes.raw_io import (
     queued_by_topic,
     radius_values,
 )
+from vd_observer_node.situation.chain_settings import chain_settings, parameter_sections
 
 __all__ = ['EstimatorNode', 'main']
 
@@ -120,14 +120,15 @@ class EstimatorNode(Node):
             )
         vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
         capacity = values.pop('align_capacity')
-        measured = values.pop('speed_source') == 'measured'
+        measured = values['speed_source'] == 'measured'
         # the measured speed and the torques are the mapping's topics and types
         sensors = {'torques': mapping.wheel_torques}
         if measured:
             sensors['speed'] = mapping.body_speed
         classes = {key: input_message_class(spec) for key, spec in sensors.items()}
-        self.vehicle = load_estimator_vehicle(vehicle_file)
-        config = EstimatorConfig.from_mapping(values)
+        settings = chain_settings(mapping, vehicle_file, parameter_sections(values))
+        self.vehicle = settings.vehicle
+        config = settings.estimator
         self.estimator = Estimator(self.vehicle, config)
         # compile (or load from numba's cache) now, on a scratch estimator, not at the first
         # sample

@@ -28,7 +28,7 @@ from vd_common.topics import (
     SENSORS_NAMESPACE,
 )
 
-from vd_observer_node.chain import ESTIMATOR_SPEEDS
+from vd_observer_node.estimation.cascade import ESTIMATOR_SPEEDS
 from vd_observer_node.estimation.differentiator import (
     DEFAULT_GAINS,
     DISCRETIZATIONS,

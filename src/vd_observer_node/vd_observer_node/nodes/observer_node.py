@@ -39,8 +39,7 @@ from vd_common.topics import (
 from vd_msgs.msg import WheelStates
 from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.estimation.faults import ERROR, merge_reports
-from vd_observer_node.estimation.observer import ObserverConfig, SpeedObserver, WheelObserver
-from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
+from vd_observer_node.estimation.observer import SpeedObserver, WheelObserver
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.nodes.node_params import (
@@ -52,6 +51,7 @@ from vd_observer_node.nodes.node_params import (
     undeclared_inputs,
 )
 from vd_observer_node.nodes.raw_io import Encoders, InputWatch, merge_status
+from vd_observer_node.situation.chain_settings import chain_settings, parameter_sections
 
 __all__ = ['ObserverNode', 'main']
 
@@ -73,14 +73,11 @@ class ObserverNode(Node):
         angles_spec, speed_spec = mapping.wheels, mapping.body_speed
         classes = [input_message_class(spec) for spec in (angles_spec, speed_spec)]
         vehicle_file = values.pop('vehicle_file') or None
+        settings = chain_settings(mapping, vehicle_file, parameter_sections(values))
         # the vehicle file matters here only for wheel speeds given in m/s or km/h
-        radius = (
-            EstimatorVehicle.from_params(load_vehicle_params(vehicle_file)).effective_radius
-            if angles_spec.per_radius
-            else None
-        )
+        radius = settings.vehicle.effective_radius if angles_spec.per_radius else None
         # angles or ABS wheel speeds: the mapping says which
-        self.config = ObserverConfig.from_mapping({**values, 'wheel_input': mapping.wheel_input})
+        self.config = settings.observer
         # the differentiator's step is compiled (or loaded from numba's disk cache) here,
         # before the first sample
         self.wheels = WheelObserver(self.config)

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -76,21 +75,9 @@ from vd_msgs.msg import (
 )
 from vd_observer_node.bag.cdr_message import MessageCodec
 from vd_observer_node.bag.errors import BagFormatError
-from vd_observer_node.chain import Chain, ChainOutput, ChainSettings
-from vd_observer_node.estimation.body_pitch import vehicle_body_pitch
-from vd_observer_node.estimation.brakes import Brakes
-from vd_observer_node.estimation.differentiator import LevantGains
-from vd_observer_node.estimation.drivetrain import Drivetrain
-from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.chain import Chain, ChainOutput
 from vd_observer_node.estimation.faults import ERROR
-from vd_observer_node.estimation.imu_grade import imu_grade_config
-from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.rate_settings import RateMeter, follow_rate_hz
-from vd_observer_node.estimation.vehicle import (
-    EstimatorVehicle,
-    load_vehicle_params,
-    no_tire_note,
-)
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.imu_hold import ImuHold
@@ -114,9 +101,7 @@ from vd_observer_node.nodes.raw_io import (
     queued_by_topic,
     radius_values,
 )
-from vd_observer_node.situation.alerts import AlertConfig
-from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
-from vd_observer_node.situation.monitor import SituationConfig
+from vd_observer_node.situation.chain_settings import chain_settings, parameter_sections
 
 __all__ = ['PARAMS', 'PipelineNode', 'main']
 
@@ -152,51 +137,6 @@ _SEPARATE = ('states', 'accel', 'velocity', 'forces', 'friction', 'resistances',
 #: without it (`ImuHold`): a busy executor taking the IMU's queue late is not a dropout (the
 #: fusion judges the sample's age by its stamp); as the lockstep demo's window
 _IMU_WAIT = 0.5
-_OBSERVER_KEYS = {f for f in ObserverConfig.__dataclass_fields__ if f != 'gains'}
-_GAIN_KEYS = set(LevantGains.__dataclass_fields__)
-
-
-def _settings(
-    values: dict[str, Any], torque_source: str = 'measured', brake_signal: str = ''
-) -> tuple[ChainSettings, str, str | None]:
-    """Chain settings from the declared parameters and the mapping's torque source (the
-    engine path takes the vehicle file's drivetrain); also the vehicle file used, and why the
-    situation monitor is off (`no_tire_note`: a file without tyre), or None."""
-    vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
-    speed_source = values.pop('speed_source')
-    estimator_keys = set(EstimatorConfig.setting_keys())
-    situation_keys = set(SituationConfig.__dataclass_fields__)
-    friction_keys = set(FrictionPotentialConfig.__dataclass_fields__)
-    observer = ObserverConfig.from_mapping(
-        {k: v for k, v in values.items() if k in _OBSERVER_KEYS | _GAIN_KEYS}
-    )
-    # One read of the file gives the estimator vehicle and the tyre alike.
-    params = load_vehicle_params(vehicle_file)
-    taken = _OBSERVER_KEYS | _GAIN_KEYS | estimator_keys | situation_keys | friction_keys
-    settings = ChainSettings(
-        vehicle=EstimatorVehicle.from_params(params),
-        curves=None if params.tire is None else TyreCurves.from_tire(params.tire),
-        observer=observer,
-        estimator=EstimatorConfig.from_mapping(
-            {k: v for k, v in values.items() if k in estimator_keys}
-        ),
-        alerts=AlertConfig.from_mapping({k: v for k, v in values.items() if k not in taken}),
-        friction=FrictionPotentialConfig.from_mapping(
-            {k: v for k, v in values.items() if k in friction_keys}
-        ),
-        situation=SituationConfig.from_mapping(
-            {k: v for k, v in values.items() if k in situation_keys}
-        ),
-        estimator_speed=speed_source,
-        torque_source=torque_source,
-        drivetrain=Drivetrain.from_params(params) if torque_source == 'engine' else None,
-        brakes=(
-            Brakes.from_params(brake_signal, params)
-            if brake_signal and torque_source != 'none'
-            else None
-        ),
-    )
-    return settings, vehicle_file, no_tire_note(params)
 
 
 def _stamp_ns(t: float) -> int:
@@ -218,19 +158,10 @@ class PipelineNode(Node):
         classes = [input_message_class(spec) for spec in specs]
         capacity = values.pop('align_capacity')
         layout = values.pop('estimate_topics')
-        settings, vehicle_file, self._situation_off = _settings(
-            values, mapping.torque_source, mapping.brake.signal if mapping.brake else ''
-        )
-        # what the wheel sensors are (angles or ABS speeds) follows from the mapping
-        settings = replace(
-            settings, observer=replace(settings.observer, wheel_input=mapping.wheel_input)
-        )
-        if mapping.imu is not None:
-            # the IMU fusion, with the body's pitch under the ground force from a full file
-            settings = replace(
-                settings,
-                imu=imu_grade_config(vehicle_body_pitch(vehicle_file), mapping.imu.fusion),
-            )
+        vehicle_file = values.pop('vehicle_file') or str(default_vehicle_file())
+        # the sensors (wheel angles or speeds, torque path, brakes, IMU) are the mapping's
+        settings = chain_settings(mapping, vehicle_file, parameter_sections(values))
+        self._situation_off = settings.situation_off
         # Builds (or loads from numba's disk cache) the compiled chain now, before any sample.
         self.chain = Chain(settings)
         max_gap_ns = round(settings.estimator.max_gap * 1e9)

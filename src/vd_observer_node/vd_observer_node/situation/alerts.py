@@ -39,7 +39,7 @@ from typing import Any, Final
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node.errors import InputShapeError, ObserverError
+from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.kernel._jit import jit, new_record
 
 __all__ = [
@@ -76,7 +76,7 @@ LEVEL_WARNING: Final = 1
 LEVEL_CRITICAL: Final = 2
 
 
-class AlertConfigError(ObserverError):
+class AlertConfigError(ConfigurationError):
     """An alert threshold or hold time is invalid (names the setting and the rule)."""
 
 

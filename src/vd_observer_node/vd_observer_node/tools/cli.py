@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 from vd_common.errors import VdError
@@ -83,23 +84,25 @@ def _repair(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     from vd_common.settings_log import settings_line
 
-    from vd_observer_node.inputs.mapping import load_input_mapping
-    from vd_observer_node.tools.replay import ReplayConfig, load_replay_config, replay_bag
+    from vd_observer_node.inputs.mapping import default_mapping, load_input_mapping
+    from vd_observer_node.tools.replay import replay_bag
+    from vd_observer_node.tools.settings_file import SettingsFile, load_settings_file
 
-    config = load_replay_config(args.config) if args.config else ReplayConfig()
-    mapping = load_input_mapping(args.mapping) if args.mapping else None
-    if mapping is not None and args.vehicle is None:
+    config = load_settings_file(args.config) if args.config else SettingsFile()
+    mapping = load_input_mapping(args.mapping) if args.mapping else default_mapping()
+    if args.mapping and args.vehicle is None:
         from vd_observer_node.estimation.vehicle import mapped_without_vehicle_warning
 
         print(mapped_without_vehicle_warning(), file=sys.stderr)
+    if args.torque_source is not None:
+        mapping = replace(mapping, torque_source=args.torque_source)
     report = replay_bag(
         args.in_bag,
         args.out_bag,
-        vehicle_file=args.vehicle,  # the estimator vehicle and the tyre, from one read
-        **config.replay_kwargs(),
-        progress=not args.no_progress,
+        # the estimator vehicle, the tyre and the drivetrain, from one read of the file
+        config.settings(mapping, args.vehicle),
         mapping=mapping,
-        torque_source=args.torque_source,
+        progress=not args.no_progress,
     )
     # the torque is known where the clutch (or the converter's turbine) is engaged and
     # settled, and not while a brake switch is on
@@ -159,7 +162,8 @@ def _parser() -> argparse.ArgumentParser:
     replay.add_argument(
         '--config',
         type=Path,
-        help='YAML with observer / estimator / cascade settings (default: the defaults)',
+        help='settings YAML: observer / estimator / cascade / alerts / friction_potential / '
+        'situation sections (default: the defaults; docs/replay.md)',
     )
     replay.add_argument(
         '--mapping',

@@ -22,7 +22,7 @@ stays bounded (`BLOCK_MESSAGES`; the state of every step carries over to the nex
 Inputs' own ``/vd/estimates/*`` and ``/vd/observer/*`` topics (a live recording) are not
 copied: the output holds the replayed ones only.
 
-Beside it: the settings file (`replay_config`), the output messages from a cascade result
+Beside it: the settings file (`settings_file`), the output messages from a cascade result
 (`replay_topics`) and the writer that merges them in log-time order (`merged_writer`).
 """
 
@@ -43,7 +43,6 @@ from vd_common.topics import (
     SENSORS,
     TRUTH_NAMESPACE,
 )
-from vd_common.vehicle.estimation import EstimationVehicleParams
 
 from vd_observer_node.bag.cdr_batch import upgrade_batch
 from vd_observer_node.bag.errors import BagExistsError, ReplayInputError
@@ -51,35 +50,24 @@ from vd_observer_node.bag.read_ahead import read_ahead
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.errors import ConfigurationError
-from vd_observer_node.estimation.body_pitch import vehicle_body_pitch
-from vd_observer_node.estimation.brakes import Brakes
 from vd_observer_node.estimation.cascade import (
     CascadeResult,
     run_cascade,
 )
-from vd_observer_node.estimation.drivetrain import (
-    Drivetrain,
-    torque_source_code,
-)
-from vd_observer_node.estimation.estimator import (
-    EstimatorConfig,
-)
-from vd_observer_node.estimation.imu_grade import imu_grade_config
-from vd_observer_node.estimation.observer import ObserverConfig
-from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_vehicle_params
 from vd_observer_node.inputs.mapping import (
     InputMapping,
     InputSpec,
     default_mapping,
 )
-from vd_observer_node.situation.alerts import AlertConfig
-from vd_observer_node.situation.friction_potential import FrictionPotentialConfig, TyreCurves
+from vd_observer_node.situation.chain_settings import (
+    ChainSettings,
+    chain_settings,
+    check_settings_fit,
+)
 from vd_observer_node.situation.monitor import (
-    SituationConfig,
     SituationMonitor,
 )
 from vd_observer_node.tools.merged_writer import MergedWriter, OutOfOrderError
-from vd_observer_node.tools.replay_config import ReplayConfig, load_replay_config
 from vd_observer_node.tools.replay_run import (
     ALERT_TOPICS,
     ESTIMATE_TOPICS,
@@ -99,10 +87,8 @@ __all__ = [
     'MAX_WAIT_S',
     'SENSOR_TOPICS',
     'TRUTH_PREFIX',
-    'ReplayConfig',
     'ReplayReport',
     'estimate_topics',
-    'load_replay_config',
     'replay_bag',
     'situation_topics',
 ]
@@ -151,21 +137,12 @@ def check_input_topic(
 def replay_bag(
     in_bag: str | os.PathLike[str],
     out_bag: str | os.PathLike[str],
+    settings: ChainSettings | None = None,
     *,
-    vehicle: EstimatorVehicle | None = None,
-    observer_config: ObserverConfig | None = None,
-    estimator_config: EstimatorConfig | None = None,
+    mapping: InputMapping | None = None,
+    situation: bool = True,
     progress: bool = True,
     cascade: Callable[..., CascadeResult] | None = None,
-    cascade_kwargs: Mapping[str, Any] | None = None,
-    vehicle_file: str | os.PathLike[str] | None = None,
-    situation: bool = True,
-    alert_config: AlertConfig | None = None,
-    friction_config: FrictionPotentialConfig | None = None,
-    situation_config: SituationConfig | None = None,
-    mapping: InputMapping | None = None,
-    torque_source: str | None = None,
-    drivetrain: Drivetrain | None = None,
     block_messages: int | None = BLOCK_MESSAGES,
 ) -> ReplayReport:
     """Replay a bag's sensor topics through the cascade and write inputs, truth and estimates.
@@ -179,41 +156,29 @@ def replay_bag(
     Args:
         in_bag: input bag folder or .mcap file.
         out_bag: output bag folder (must not exist).
-        vehicle: estimator vehicle; default the one of ``vehicle_file``.
-        observer_config: observer settings; default ObserverConfig().
-        estimator_config: estimator settings; default EstimatorConfig().
+        settings: the chain's settings for ``mapping`` (`situation.chain_settings`, or
+            `SettingsFile.settings` of a settings file: the vehicle file's estimator
+            vehicle, tyre, drivetrain and brakes, the observers', estimator's, alerts' and
+            IMU fusion's settings); None: the defaults for ``mapping`` and the Clio file.
+        mapping: which topics, types, joints, units and signs are the wheel angles (or
+            speeds), body speed and wheel torques (or the engine torque and gear, by the
+            mapping's ``torque_source``), and how their samples are aligned
+            (:mod:`vd_observer_node.inputs.mapping`); default vd's own ``/vd/sensors/*``
+            topics.
+        situation: also compute and write the friction potential and the alerts
+            (:data:`ALERT_TOPICS`) with :class:`SituationMonitor`, as the alerts node does
+            (not with a vehicle file without tyre: a note says so).
         progress: show a tqdm progress bar on stderr.
         cascade: the array cascade (injectable for tests); signature of ``run_cascade``,
-            called once per block with ``state=`` (a `CascadeState` to carry); default
-            `run_cascade`.
-        cascade_kwargs: further keyword arguments of the cascade (settings added to
-            ``run_cascade`` later, so the replay can match the live nodes' parameters).
-        vehicle_file: vehicle YAML of the estimator vehicle (unless ``vehicle`` is given) and
-            of the tyre curves of the friction potential; default the Clio file
-            (:func:`vd_common.vehicle.params.default_vehicle_file`). Pass the file
-            ``vehicle`` was read from, or the tyre of the default file is used with it.
-        situation: also compute and write the friction potential and the alerts
-            (:data:`ALERT_TOPICS`) with :class:`SituationMonitor`, as the alerts node does.
-        alert_config: alert settings; default AlertConfig().
-        friction_config: friction-potential settings; default FrictionPotentialConfig().
-        situation_config: fast-observer settings; default SituationConfig().
-        mapping: which topics, types, joints, units and signs are the wheel angles (or
-            speeds), body speed and wheel torques, and how their samples are aligned
-            (:mod:`vd_observer_node.inputs.mapping`); default vd's own ``/vd/sensors/*``
-            topics. With wheel speeds the observers run with ``wheel_input='speed'``
-            whatever ``observer_config`` says.
-        torque_source: 'measured' (the wheel torques), 'engine' (wheel torques from the
-            engine torque and gear of the mapping's ``engine_torque`` input, by default
-            vd's WheelTorques topic, through `drivetrain`) or 'none' (no torque topic is
-            read; Fx, mu and slope invalid); None: the mapping's ``torque_source``.
-        drivetrain: the engine path's driveline; default that of ``vehicle_file``
-            (`Drivetrain.from_params`).
+            called once per block with a `CascadeState` to carry; default `run_cascade`.
         block_messages: input and truth messages read per block (>= 1; about 20 s of a
             1 kHz drive by default); None: the whole bag in one block.
 
     Raises:
         ReplayInputError: a sensor topic is missing or has the wrong type.
         MappingError: the messages do not fit the mapping (a joint or element absent).
+        ConfigurationError: settings made for another mapping
+            (`situation.chain_settings.check_settings_fit`).
         BagError: reading or writing failed (see .errors).
         VehicleParameterError: the vehicle file is unreadable or invalid.
     """
@@ -226,13 +191,11 @@ def replay_bag(
     if target.exists() and (not target.is_dir() or any(target.iterdir())):
         # Fail before minutes of work, not when the output is finally written.
         raise BagExistsError(f'{target}: already exists (choose a new bag name)')
+    mapping = mapping or default_mapping()
+    settings = settings or chain_settings(mapping)
+    check_settings_fit(settings, mapping)
     reader = BagReader(in_bag)
     topics = reader.topics
-    mapping = mapping or default_mapping()
-    if torque_source is not None:
-        torque_source_code(torque_source)  # refuses an unknown name
-        mapping = replace(mapping, torque_source=torque_source)
-    source = mapping.torque_source
     # the IMU too: a mapping that names one asks for the fusion, so a typo in its topic or
     # a silent sensor must not quietly give the force balance's slope instead
     imu_specs = [mapping.imu] if mapping.imu is not None else []
@@ -240,23 +203,13 @@ def replay_bag(
         check_input_topic(in_bag, topics, spec, mapping.source)
     imu_topics = [mapping.imu.topic] if mapping.imu is not None else []
     inputs = list(dict.fromkeys([*(spec.topic for spec in mapping.used_specs), *imu_topics]))
-    observer_config = replace(observer_config or ObserverConfig(), wheel_input=mapping.wheel_input)
     truth = [t for t in topics if t.startswith(TRUTH_PREFIX)]
-    # One read of the file gives the estimator vehicle and the tyre alike (a millisecond).
-    params = load_vehicle_params(vehicle_file)
-    estimator_vehicle = vehicle or EstimatorVehicle.from_params(params)
-    if source == 'engine' and drivetrain is None:
-        drivetrain = Drivetrain.from_params(params)
-    brakes = replay_brakes(mapping, params)
     notes: list[str] = []
-    if situation and params.tire is None:
+    curves = settings.curves
+    if situation and curves is None:
         # an estimation-only vehicle file: everything but the friction potential and alerts
         situation = False
-        notes.append(
-            f'vehicle file {params.source} has no tire section: friction potential and '
-            'alerts not computed'
-        )
-    curves = TyreCurves.from_tire(params.tire) if params.tire is not None else None
+        notes.append(f'friction potential and alerts {settings.situation_off or "off"}')
     make_monitor: Any = SituationMonitor
 
     def new_monitor() -> Any:
@@ -264,44 +217,17 @@ def replay_bag(
             return None
         return make_monitor(
             curves,
-            estimator_vehicle.static_wheel_loads[[0, 2]],
-            estimator_vehicle.effective_radius,
-            observer=observer_config,
-            alerts=alert_config,
-            friction=friction_config,
-            situation=situation_config,
+            settings.vehicle.static_wheel_loads[[0, 2]],
+            settings.vehicle.effective_radius,
+            observer=settings.observer,
+            alerts=settings.alerts,
+            friction=settings.friction,
+            situation=settings.situation,
         )
-
-    extra = dict(cascade_kwargs or {})
-    clash = sorted(
-        {'torque_source', 'engine', 'drivetrain', 'state', 'brake', 'brakes'} & set(extra)
-    )
-    if clash:
-        raise ConfigurationError(
-            f'cascade settings: {clash[0]} is set by the torque source, not the config'
-        )
-    if mapping.imu is not None and 'imu_config' not in extra:
-        # the body's pitch under the ground force, from a full vehicle file's springs
-        # and the sensor's own settings from the mapping
-        extra['imu_config'] = imu_grade_config(
-            vehicle_body_pitch(vehicle_file), mapping.imu.fusion
-        )
-    torque_kwargs: dict[str, Any] = {}
-    if source != 'measured':  # the default call stays as it was (injected cascades)
-        torque_kwargs = {'torque_source': source, 'drivetrain': drivetrain}
-    if brakes is not None:
-        torque_kwargs['brakes'] = brakes
 
     def new_run() -> ReplayRun:
         return ReplayRun(
-            mapping=mapping,
-            cascade=cascade,
-            vehicle=estimator_vehicle,
-            observer_config=observer_config,
-            estimator_config=estimator_config,
-            cascade_kwargs={**torque_kwargs, **extra},
-            drivetrain=drivetrain if source == 'engine' else None,
-            monitor=new_monitor(),
+            mapping=mapping, cascade=cascade, settings=settings, monitor=new_monitor()
         )
 
     raw_topics = [*inputs, *truth]
@@ -353,6 +279,7 @@ def replay_bag(
         raise
     wall = time.perf_counter() - started
     parts = run.state.parts
+    brakes = settings.brakes
     if brakes is not None and brakes.learn and parts is not None:
         learnt = parts.brake_parts.state[0]
         gain, braking, converged = learnt.gain, learnt.excited_time, learnt.converged
@@ -362,21 +289,9 @@ def replay_bag(
         )
     return replace(
         run.report(written, wall),
-        vehicle=f'{params.name} ({params.source})',
+        vehicle=settings.vehicle_label,
         notes=tuple(notes),
     )
-
-
-def replay_brakes(mapping: InputMapping, params: EstimationVehicleParams) -> Brakes | None:
-    """The brake input of a mapping with the vehicle file's gains (None: no brake input, or
-    no torque to take it from).
-
-    Raises:
-        ConfigurationError: a pressure without the file's gains (`Brakes.from_params`).
-    """
-    if mapping.brake is None or mapping.torque_source == 'none':
-        return None
-    return Brakes.from_params(mapping.brake.signal, params, mapping.source)
 
 
 def _stream(

@@ -11,7 +11,7 @@ import math
 import threading
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -30,29 +30,24 @@ from vd_observer_node.bag.reader import TopicArrays
 from vd_observer_node.estimation.alignment import BlockAligner
 from vd_observer_node.estimation.cascade import (
     CascadeResult,
+    CascadeSeries,
+    CascadeSettings,
     CascadeState,
     offset_result_name,
 )
 from vd_observer_node.estimation.drivetrain import (
     TORQUE_SOURCES,
-    Drivetrain,
-)
-from vd_observer_node.estimation.estimator import (
-    EstimatorConfig,
 )
 from vd_observer_node.estimation.imu_grade import (
     RATE_FOLLOWING,
-    ImuGradeConfig,
 )
 from vd_observer_node.estimation.imu_regression import bias_pitch_deg
-from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.rate_settings import (
     SPEED_STAMPS_KEPT,
     RateMeter,
     follow_rate_hz,
 )
 from vd_observer_node.estimation.torque_offset import OFFSET_MESSAGE_FIELDS, publish_mask
-from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.inputs.decode import (
     InputSeries,
     InputStats,
@@ -247,31 +242,30 @@ class ReplayRun:
         *,
         mapping: InputMapping,
         cascade: Callable[..., CascadeResult],
-        vehicle: EstimatorVehicle,
-        observer_config: ObserverConfig,
-        estimator_config: EstimatorConfig | None,
-        cascade_kwargs: dict[str, Any],
-        drivetrain: Drivetrain | None,
+        settings: CascadeSettings,
         monitor: Any,
     ) -> None:
+        """Args:
+        mapping: the input mapping.
+        cascade: `cascade.run_cascade` (or a function of its signature, for tests).
+        settings: the cascade's settings (they fit the mapping); those left to the input
+            rate are fixed after the first stamps (`rate_settings.follow_rate_hz`).
+        monitor: the situation monitor, or None.
+        """
         self.mapping = mapping
         self.used = mapping.used_specs  # wheels, body speed, and the torque input of the path
         self.cascade = cascade
-        self.vehicle = vehicle
-        self.observer_config = observer_config
-        self.estimator_config = estimator_config
-        self.cascade_kwargs = cascade_kwargs
-        self.drivetrain = drivetrain
+        self.settings = settings
+        self.vehicle = settings.vehicle
         self.monitor = monitor
         self.state = CascadeState()
         self.aligner = BlockAligner(
             len(self.used), mapping.alignment, mapping.max_age, max_wait=MAX_WAIT_S
         )
-        self.gaps = [GapStats(s, observer_config.max_gap) for s in self.used]
+        max_gap = settings.observer.max_gap
+        self.gaps = [GapStats(s, max_gap) for s in self.used]
         # the IMU is counted like the other inputs (it is not aligned: held at each stamp)
-        self.imu_gaps = (
-            GapStats(mapping.imu, observer_config.max_gap) if mapping.imu is not None else None
-        )
+        self.imu_gaps = GapStats(mapping.imu, max_gap) if mapping.imu is not None else None
         self.frame_id: str | None = None
         self.samples = 0
         self.sensor_messages = 0
@@ -287,11 +281,11 @@ class ReplayRun:
         self.rate_settings: dict[str, float] = {}
         # what the settings left to the rate follow (rate_settings.follow_rate_hz): the
         # estimator's slope filter and the IMU fusion's low-passes
-        imu_config = cascade_kwargs.get('imu_config')
-        imu_unset = isinstance(imu_config, ImuGradeConfig) and any(
+        imu_config = settings.imu
+        imu_unset = imu_config is not None and any(
             getattr(imu_config, name) is None for name in RATE_FOLLOWING
         )
-        unset = (estimator_config or EstimatorConfig()).slope_filter_tau is None or imu_unset
+        unset = settings.estimator.slope_filter_tau is None or imu_unset
         self.wheel_meter: RateMeter | None = RateMeter() if unset else None
         speed = self.used[1]
         self.speed_meter = RateMeter(SPEED_STAMPS_KEPT) if unset and has_header(speed) else None
@@ -334,16 +328,17 @@ class ReplayRun:
         speed = self.speed_meter.stamps if self.speed_meter is not None else None
         self.input_rate_hz = follow_rate_hz(wheel_stamps, speed)
         self.wheel_meter = None
-        config = self.estimator_config or EstimatorConfig()
-        self.estimator_config, self.rate_settings = config.at_rate(self.input_rate_hz)
+        estimator, self.rate_settings = self.settings.estimator.at_rate(self.input_rate_hz)
+        self.settings = replace(self.settings, estimator=estimator)
         parts = self.state.parts
         if parts is not None:  # None for an injected cascade that keeps no parts
             parts.estimator.follow_rate(self.input_rate_hz)
-        imu_config = self.cascade_kwargs.get('imu_config')
-        if self.mapping.imu is not None and isinstance(imu_config, ImuGradeConfig):
+        imu_config = self.settings.imu
+        if self.mapping.imu is not None and imu_config is not None:
             # the fusion's grade takes the speed's derivative as the slope filter does
             # (`imu_grade.tau_for_rate`); a fusion made later starts with the fixed values
-            self.cascade_kwargs['imu_config'], fixed = imu_config.at_rate(self.input_rate_hz)
+            imu_config, fixed = imu_config.at_rate(self.input_rate_hz)
+            self.settings = replace(self.settings, imu=imu_config)
             self.rate_settings.update({f'{IMU_FUSION_PREFIX}{k}': v for k, v in fixed.items()})
             if parts is not None and parts.imu_on:
                 parts.imu_grade.follow_rate(self.input_rate_hz)
@@ -430,31 +425,21 @@ class ReplayRun:
         source = self.mapping.torque_source
         wheel_torque = picked[2]['v'] if source == 'measured' else np.zeros((n, 4))
         engine = picked[2]['v'] if source == 'engine' else None
-        kwargs = dict(self.cascade_kwargs)
-        if engine is not None:
-            kwargs['engine'] = engine
         brake = picked[3]['v'] if self.mapping.brake is not None and len(picked) > 3 else None
-        if brake is not None:
-            kwargs['brake'] = brake
-        if self.mapping.imu is not None:
-            kwargs['imu'] = self.held_imu(arrays, common)
-        # the inputs given per stamp, sliced with the stamps where the block is split
-        per_stamp = [key for key in ('engine', 'brake', 'imu') if key in kwargs]
+        imu = self.held_imu(arrays, common) if self.mapping.imu is not None else None
 
         def run(rows: slice) -> CascadeResult:
-            part: dict[str, Any] = dict(kwargs)
-            part.update({key: kwargs[key][rows] for key in per_stamp})
-            return self.cascade(
+            # the block's rows where it is split (the settings follow the rate from there)
+            series = CascadeSeries(
                 t[rows],
                 wheel_angle[rows],
                 body_speed[rows],
                 wheel_torque[rows],
-                self.vehicle,
-                self.observer_config,
-                self.estimator_config,
-                state=self.state,
-                **part,
+                engine=engine[rows] if engine is not None else None,
+                brake=brake[rows] if brake is not None else None,
+                imu=imu[rows] if imu is not None else None,
             )
+            return self.cascade(series, self.settings, self.state)
 
         def cascade() -> None:
             meter = self.wheel_meter
@@ -511,7 +496,9 @@ class ReplayRun:
         observed = result.angle if self.mapping.wheel_input == 'speed' else wheel_angle
 
         def encode() -> None:
-            for topic, values in estimate_topics(result, observed, self.estimator_config).items():
+            for topic, values in estimate_topics(
+                result, observed, self.settings.estimator
+            ).items():
                 datas = encode_packed(ESTIMATE_TOPICS[topic], common, frame_id, values)
                 merged.add(topic, ESTIMATE_TOPICS[topic], log_ns, datas)
             changed, values = self.offset_messages(result, common)

@@ -318,19 +318,16 @@ def bag_figures_whole(
 
 
 def _replay(bag: str, target: Path, settings: FleetSettings) -> Any:
-    from vd_observer_node.inputs.mapping import load_input_mapping
-    from vd_observer_node.tools.replay import ReplayConfig, load_replay_config, replay_bag
+    from vd_observer_node.inputs.mapping import default_mapping, load_input_mapping
+    from vd_observer_node.tools.replay import replay_bag
+    from vd_observer_node.tools.settings_file import SettingsFile, load_settings_file
 
-    config = load_replay_config(settings.config_file) if settings.config_file else ReplayConfig()
-    mapping = load_input_mapping(settings.mapping_file) if settings.mapping_file else None
-    return replay_bag(
-        bag,
-        target,
-        vehicle_file=settings.vehicle_file,
-        **config.replay_kwargs(),
-        progress=False,
-        mapping=mapping,
+    config = load_settings_file(settings.config_file) if settings.config_file else SettingsFile()
+    mapping = (
+        load_input_mapping(settings.mapping_file) if settings.mapping_file else default_mapping()
     )
+    chain = config.settings(mapping, settings.vehicle_file)
+    return replay_bag(bag, target, chain, mapping=mapping, progress=False)
 
 
 def _one_line(exc: BaseException) -> str:

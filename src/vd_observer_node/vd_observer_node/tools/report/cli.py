@@ -210,33 +210,20 @@ def _load_mapped(
     estimates (the replay copies the mapped inputs and the truth to its output), with the
     vehicle file and replay settings given (else the defaults)."""
     from vd_common.settings_log import settings_line
-    from vd_common.vehicle.params import default_vehicle_file
 
     from vd_observer_node.bag.reader import BagReader
-    from vd_observer_node.estimation.observer import ObserverConfig
-    from vd_observer_node.estimation.vehicle import load_estimator_vehicle
     from vd_observer_node.inputs.mapping import load_input_mapping
-    from vd_observer_node.tools.replay import (
-        ESTIMATE_TOPICS,
-        ReplayConfig,
-        load_replay_config,
-        replay_bag,
-    )
+    from vd_observer_node.tools.replay import ESTIMATE_TOPICS, replay_bag
     from vd_observer_node.tools.report.load import load_bag_series
+    from vd_observer_node.tools.settings_file import SettingsFile, load_settings_file
 
     mapping = load_input_mapping(mapping_file)
-    config = load_replay_config(config_file) if config_file else ReplayConfig()
+    config = load_settings_file(config_file) if config_file else SettingsFile()
+    settings = config.settings(mapping, vehicle_file)
     source = bag
     if not any(topic in ESTIMATE_TOPICS for topic in BagReader(bag).topics):
         source = scratch / 'replayed'
-        replayed = replay_bag(
-            bag,
-            source,
-            mapping=mapping,
-            progress=progress,
-            vehicle_file=vehicle_file,
-            **config.replay_kwargs(),
-        )
+        replayed = replay_bag(bag, source, settings, mapping=mapping, progress=progress)
         # the IMU fusion's are named as the mapping names them (imu.fusion.*)
         derived = {
             k if k.startswith('imu.') else f'estimator.{k}': v
@@ -249,10 +236,12 @@ def _load_mapped(
         print(f'  settings: {line}')
         for note in replayed.notes:
             print(f'  note: {note}')
-    radius = load_estimator_vehicle(vehicle_file or default_vehicle_file()).effective_radius
-    max_gap = (config.observer or ObserverConfig()).max_gap
     return load_bag_series(
-        source, progress=progress, mapping=mapping, max_gap_s=max_gap, radius=radius
+        source,
+        progress=progress,
+        mapping=mapping,
+        max_gap_s=settings.observer.max_gap,
+        radius=settings.vehicle.effective_radius,
     )
 
 
