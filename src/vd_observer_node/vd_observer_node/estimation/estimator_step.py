@@ -35,6 +35,7 @@ from vd_observer_node.estimation.filters import (
 )
 from vd_observer_node.estimation.formulas import rolling_coefficient_at
 from vd_observer_node.estimation.mass_grade_step import (
+    MASS_GRADE_FAULTS,
     MASS_PARAMS,
     MASS_STATE,
     mass_held,
@@ -45,6 +46,7 @@ from vd_observer_node.estimation.mass_grade_step import (
 from vd_observer_node.estimation.rolling_radius import (
     RADIUS_PARAMS,
     RADIUS_STATE,
+    ROLLING_RADIUS_FAULTS,
     radius_held,
     radius_reset,
     radius_update,
@@ -57,6 +59,7 @@ __all__ = [
     'ESTIMATOR_PARAMS',
     'ESTIMATOR_STATE',
     'GAP_FORCE_CHANGE',
+    'HELD_INPUTS',
     'REJECTED_SLOT',
     'EstimatorParts',
     'estimator_reset',
@@ -136,20 +139,56 @@ ESTIMATOR_PARAMS: Final = np.dtype(
     ],
     align=True,
 )
-#: Fault slots: `ESTIMATOR_FAULTS` in order, then the rejected stamps.
+#: The fault counts (`ESTIMATOR_STATE.counts`): one per kind of `ESTIMATOR_FAULTS`, at its
+#: place in that list, then the rejected stamps.
 REJECTED_SLOT: Final = len(ESTIMATOR_FAULTS)
-(_NON_FINITE_STAMP, _NON_FINITE_VALUE, _DUPLICATE, _OUT_OF_ORDER, _GAP, _JUMP_BACK,
- _NON_FINITE_OUTPUT, _WHEEL_LIFT, _MU_RANGE, _SLOPE_RANGE, _ARCSIN, _MASS_CLAMPED,
- _RADIUS_CLAMPED) = range(13)  # fmt: skip
-assert ESTIMATOR_FAULTS[_RADIUS_CLAMPED] == 'radius_clamped'
-assert ESTIMATOR_FAULTS[_NON_FINITE_OUTPUT] == 'non_finite_output'
-_M_CLAMPED: Final = 6  # 'mass_clamped' in MASS_GRADE_FAULTS, 'radius_clamped' likewise
+_NON_FINITE_STAMP: Final = ESTIMATOR_FAULTS.index('non_finite_stamp')
+_NON_FINITE_VALUE: Final = ESTIMATOR_FAULTS.index('non_finite_value')
+_DUPLICATE: Final = ESTIMATOR_FAULTS.index('duplicate_stamp')
+_OUT_OF_ORDER: Final = ESTIMATOR_FAULTS.index('out_of_order')
+_GAP: Final = ESTIMATOR_FAULTS.index('gap')
+_JUMP_BACK: Final = ESTIMATOR_FAULTS.index('time_jump_back')
+_NON_FINITE_OUTPUT: Final = ESTIMATOR_FAULTS.index('non_finite_output')
+_WHEEL_LIFT: Final = ESTIMATOR_FAULTS.index('wheel_lift')
+_MU_RANGE: Final = ESTIMATOR_FAULTS.index('mu_out_of_range')
+_SLOPE_RANGE: Final = ESTIMATOR_FAULTS.index('slope_out_of_range')
+_ARCSIN: Final = ESTIMATOR_FAULTS.index('arcsin_domain')
+_MASS_CLAMPED: Final = ESTIMATOR_FAULTS.index('mass_clamped')
+_RADIUS_CLAMPED: Final = ESTIMATOR_FAULTS.index('radius_clamped')
+#: the clamp count of the online mass's and radius's own fault lists (the same place in both)
+_M_CLAMPED: Final = MASS_GRADE_FAULTS.index('mass_clamped')
+assert ROLLING_RADIUS_FAULTS.index('radius_clamped') == _M_CLAMPED
 #: A gap the slope low-pass bridges (`filters.lowpass_gap`) after which the balance's input
 #: (the forces, or forces - m*dv/dt) is further than this share of the weight [-] from the
 #: trend before the gap hid a transient the bridge could only interpolate: the slope is then
 #: invalid (held) until the filter has forgotten the bridge, (order + 1) * slope_filter_tau
 #: after the gap.
 GAP_FORCE_CHANGE: Final = 0.05
+
+#: One stamp's inputs of the estimator: omega [rad/s] and omega_dot [rad/s^2] per wheel (the
+#: wheel observer's), torque [N m] per wheel (drive minus brake), speed [m/s] and accel
+#: [m/s^2] of the body, and torque_ok: False where the torque source cannot be trusted at
+#: the stamp (the engine path while the clutch slips: mu and slope are then invalid).
+ESTIMATOR_INPUT: Final = np.dtype(
+    [
+        ('omega', 'f8', (4,)),
+        ('omega_dot', 'f8', (4,)),
+        ('torque', 'f8', (4,)),
+        ('speed', 'f8'),
+        ('accel', 'f8'),
+        ('torque_ok', 'b1'),
+    ],
+    align=True,
+)
+
+
+#: The last finite inputs, held where a stamp's are not: `ESTIMATOR_INPUT` but its
+#: ``torque_ok``.
+HELD_INPUTS: Final = np.dtype(
+    [(name, ESTIMATOR_INPUT.fields[name][0]) for name in ESTIMATOR_INPUT.names[:-1]],
+    align=True,
+)
+assert ESTIMATOR_INPUT.names[-1] == 'torque_ok'
 
 #: The estimator's memory: last stamp (nan: none), slope [rad], whether ``last`` holds an
 #: estimate, the radius of the last stamp's Fx (nan: none), the stamp until which the slope
@@ -165,7 +204,7 @@ ESTIMATOR_STATE: Final = np.dtype(
         ('has_last', 'b1'),
         ('radius_prev', 'f8'),
         ('settle_until', 'f8'),
-        ('held', 'f8', (14,)),
+        ('held', HELD_INPUTS),
         ('force_prev', 'f8', (2, 5)),
         ('slope_prev', 'f8', (2, 1)),
         ('speed_prev', 'f8', (2, 1)),
@@ -177,23 +216,6 @@ ESTIMATOR_STATE: Final = np.dtype(
         ('last', ESTIMATES),
         ('counts', 'i8', (len(ESTIMATOR_FAULTS) + 1,)),
         ('mass_known', 'f8'),
-    ],
-    align=True,
-)
-
-
-#: One stamp's inputs of the estimator: omega [rad/s] and omega_dot [rad/s^2] per wheel (the
-#: wheel observer's), torque [N m] per wheel (drive minus brake), speed [m/s] and accel
-#: [m/s^2] of the body, and torque_ok: False where the torque source cannot be trusted at
-#: the stamp (the engine path while the clutch slips: mu and slope are then invalid).
-ESTIMATOR_INPUT: Final = np.dtype(
-    [
-        ('omega', 'f8', (4,)),
-        ('omega_dot', 'f8', (4,)),
-        ('torque', 'f8', (4,)),
-        ('speed', 'f8'),
-        ('accel', 'f8'),
-        ('torque_ok', 'b1'),
     ],
     align=True,
 )
@@ -221,14 +243,25 @@ class EstimatorParts(NamedTuple):
 
 @jit
 def estimator_reset(p: np.record, s: np.record) -> None:
-    """Forget the history: slope 0, filters empty, no last estimate, the online mass and
-    radius from the start (fault counts stay)."""
+    """Forget the history: slope 0, filters empty, no last estimate, no inputs to hold, the
+    online mass and radius from the start (fault counts stay)."""
+    _forget(p, s)
+    h = s.held
+    h.omega[:] = 0.0
+    h.omega_dot[:] = 0.0
+    h.torque[:] = 0.0
+    h.speed = 0.0
+    h.accel = 0.0
+
+
+@jit
+def _forget(p: np.record, s: np.record) -> None:
+    """`estimator_reset` but for the inputs held (a restart after a gap still holds them)."""
     s.t = math.nan
     s.slope = 0.0
     s.has_last = False
     s.radius_prev = math.nan
     s.settle_until = -math.inf
-    s.held[:] = 0.0
     lowpass_reset(s.force_lp)
     lowpass_reset(s.slope_lp)
     lowpass_reset(s.speed_lp)
@@ -307,13 +340,13 @@ def _copy(src: np.record, dst: np.record) -> None:
 
 @jit
 def _online_radius(
-    p: np.record, s: np.record, t: float, x: FloatArray, ok: bool, est: np.record
+    p: np.record, s: np.record, t: float, x: np.record, ok: bool, est: np.record
 ) -> None:
     """Advance the online radius (held where not every input was finite and trusted)."""
     if p.radius_on and ok:
         r = s.radius_s
         clamped = r.counts[_M_CLAMPED]
-        radius_update(p.radius_p, r, t, x[0:4], x[8:12], x[12])
+        radius_update(p.radius_p, r, t, x.omega, x.torque, x.speed)
         if r.counts[_M_CLAMPED] != clamped:
             s.counts[_RADIUS_CLAMPED] += 1
         _radius_fields(p, s, est)
@@ -379,18 +412,27 @@ def _bridge_speed(
 
 
 @jit
+def _take(value: float, held: FloatArray, i: int) -> bool:
+    """Whether ``value`` is finite; if so it is ``held[i]`` from now on."""
+    if math.isfinite(value):
+        held[i] = value
+        return True
+    return False
+
+
+@jit
 def _estimate(
-    parts: EstimatorParts, t: float, dt: float, x: FloatArray, wheel_ok: BoolArray,
+    parts: EstimatorParts, t: float, dt: float, x: np.record, wheel_ok: BoolArray,
     body_ok: bool, torque_known: bool, est: np.record,
 ) -> None:  # fmt: skip
-    """Every estimate of an accepted stamp from the packed inputs ``x`` (14,); without
+    """Every estimate of an accepted stamp from the inputs ``x`` (`HELD_INPUTS`); without
     ``torque_known`` (a torque not finite at this stamp) no Fx is computed from an old one:
     Fx 0 and the load transfer from the acceleration, as without torque."""
     p, s = parts.params[0], parts.state[0]
     f_stages, s_stages, v_stages = parts.force_stages, parts.slope_stages, parts.speed_stages
     gravity = p.gravity
-    v = x[12]
-    accel = x[13]
+    v = x.speed
+    accel = x.accel
     no_torque = p.torque_source == TORQUE_NONE or not torque_known
     all_ok = body_ok and wheel_ok[0] and wheel_ok[1] and wheel_ok[2] and wheel_ok[3]
     # the online radius first: Fx and the slip use radius_used
@@ -408,7 +450,7 @@ def _estimate(
     if not no_torque:
         for i in range(4):
             inertia = p.inertia_front if i < 2 else p.inertia_rear
-            fx_raw[i] = (x[8 + i] - inertia * x[4 + i]) / radius
+            fx_raw[i] = (x.torque[i] - inertia * x.omega_dot[i]) / radius
     fx_sum = fx_raw[0] + fx_raw[1] + fx_raw[2] + fx_raw[3]
     # then the online mass: the rest uses mass_used
     _online_mass(p, s, t, fx_sum, v, all_ok, waiting, est)
@@ -461,7 +503,7 @@ def _estimate(
         est.mu[i] = mu if valid else 0.0
         est.mu_valid[i] = 1 if valid else 0
         # vd_common.vehicle.tire.slip_ratio of the slip velocity
-        sv = x[i] * radius - v
+        sv = x.omega[i] * radius - v
         den = max(max(abs(sv + v), abs(v)), p.slip_eps)
         est.slip[i] = sv / den
     if lift:
@@ -536,12 +578,6 @@ def estimator_update(parts: EstimatorParts, t: float, inp: np.record, est: np.re
     """
     p, s = parts.params[0], parts.state[0]
     torque_ok = inp.torque_ok
-    packed = np.empty(14)
-    packed[0:4] = inp.omega
-    packed[4:8] = inp.omega_dot
-    packed[8:12] = inp.torque
-    packed[12] = inp.speed
-    packed[13] = inp.accel
     if not math.isfinite(t):
         _reject(p, s, _NON_FINITE_STAMP, t, est)
         return
@@ -557,32 +593,33 @@ def estimator_update(parts: EstimatorParts, t: float, inp: np.record, est: np.re
             s.counts[_GAP] += 1
             restart = True
         if restart:  # reset, keeping the last finite inputs to hold
-            kept = s.held.copy()
-            estimator_reset(p, s)
-            s.held[:] = kept
+            _forget(p, s)
     dt = 0.0 if math.isnan(s.t) else t - s.t
     s.t = t
-    ok = np.empty(14, dtype=np.bool_)
-    all_ok = True
-    for j in range(14):
-        ok[j] = math.isfinite(packed[j])
-        all_ok = all_ok and ok[j]
-    torque_known = ok[8] and ok[9] and ok[10] and ok[11]
+    # each input finite is taken, each other one is the last finite one (held)
+    x = s.held
+    speed_ok = math.isfinite(inp.speed)
+    if speed_ok:
+        x.speed = inp.speed
+    body_ok = math.isfinite(inp.accel)
+    if body_ok:
+        x.accel = inp.accel
+    body_ok = body_ok and speed_ok
     wheel_ok = np.ones(4, dtype=np.bool_)
-    body_ok = True
-    if not all_ok:
+    torque_known = True
+    for i in range(4):
+        omega_ok = _take(inp.omega[i], x.omega, i)
+        omega_dot_ok = _take(inp.omega_dot[i], x.omega_dot, i)
+        torque_ok_i = _take(inp.torque[i], x.torque, i)
+        torque_known = torque_known and torque_ok_i
+        wheel_ok[i] = omega_ok and omega_dot_ok and torque_ok_i and speed_ok
+        body_ok = body_ok and wheel_ok[i]
+    if not body_ok:
         s.counts[_NON_FINITE_VALUE] += 1
-        for j in range(14):
-            if not ok[j]:
-                packed[j] = s.held[j]
-        for i in range(4):
-            wheel_ok[i] = ok[i] and ok[4 + i] and ok[8 + i] and ok[12]
-        body_ok = False
-    s.held[:] = packed
     if not torque_ok:
         wheel_ok[:] = False
         body_ok = False
-    _estimate(parts, t, dt, packed, wheel_ok, body_ok, torque_known, est)
+    _estimate(parts, t, dt, x, wheel_ok, body_ok, torque_known, est)
     # one sum is the cheapest check: NaN/Inf anywhere makes it non-finite
     total = est.aero + est.slope
     for i in range(4):
