@@ -316,15 +316,17 @@ def build_file(
         fmt.Op.CHUNK_INDEX,
         ext(
             fmt.encode_chunk_index(
-                start_ns,
-                end_ns,
-                chunk_at,
-                chunk_length,
-                index_offsets,
-                index_length,
-                compression,
-                len(payload),
-                len(records),
+                fmt.ChunkIndexRecord(
+                    start_ns,
+                    end_ns,
+                    chunk_at,
+                    chunk_length,
+                    index_offsets,
+                    index_length,
+                    compression,
+                    len(payload),
+                    len(records),
+                )
             )
         ),
     )

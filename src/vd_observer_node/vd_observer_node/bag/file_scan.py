@@ -269,9 +269,7 @@ class FileScan:
         tiled = _tile(raw, hint)
         if tiled is not None:
             at, sizes = tiled
-            return self._messages_at(
-                data, raw, at, sizes, chunk, payload_at, wanted, start_ns, stop_ns
-            )
+            return self._messages_at(data, at, sizes, chunk, payload_at, wanted, start_ns, stop_ns)
         # Walk the record lengths (inherently sequential), then decode headers with numpy.
         unpack_prefix = _PREFIX.unpack_from
         positions: list[int] = []
@@ -301,14 +299,11 @@ class FileScan:
                     self._channel(self._parse(offset, payload_at, fmt.parse_channel, body), offset)
             at = at[is_message]
         sizes = np.asarray(lengths, dtype=np.int64)[is_message]
-        return self._messages_at(
-            data, raw, at, sizes, chunk, payload_at, wanted, start_ns, stop_ns
-        )
+        return self._messages_at(data, at, sizes, chunk, payload_at, wanted, start_ns, stop_ns)
 
     def _messages_at(
         self,
         data: bytes,
-        raw: np.ndarray,
         at: np.ndarray,
         sizes: np.ndarray,
         chunk: fmt.ChunkRecord,
@@ -318,6 +313,7 @@ class FileScan:
         stop_ns: int | None,
     ) -> Batch | None:
         """Decode the message records at offsets ``at`` (record lengths ``sizes``) at once."""
+        raw = np.frombuffer(data, dtype=np.uint8)
         if sizes.size and int(sizes.min()) < 22:
             self._damage(payload_at, 'message record too short')
             return None

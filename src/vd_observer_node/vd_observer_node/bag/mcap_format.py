@@ -23,6 +23,7 @@ __all__ = [
     'MAGIC',
     'RECORD_PREFIX',
     'ChannelRecord',
+    'ChunkIndexRecord',
     'ChunkRecord',
     'Cursor',
     'FooterRecord',
@@ -165,26 +166,40 @@ def encode_message_index(channel_id: int, entries: list[tuple[int, int]] | bytes
     return record(Op.MESSAGE_INDEX, _U16.pack(channel_id) + _U32.pack(len(packed)) + packed)
 
 
-def encode_chunk_index(
-    start_ns: int,
-    end_ns: int,
-    chunk_offset: int,
-    chunk_length: int,
-    message_index_offsets: dict[int, int],
-    message_index_length: int,
-    compression: str,
-    compressed_size: int,
-    uncompressed_size: int,
-) -> bytes:
+@dataclass(frozen=True)
+class ChunkIndexRecord:
+    """A chunk index record of the summary section: where a chunk is and what it holds.
+
+    Attributes:
+        start_ns, end_ns: [ns] the chunk's first and last log time.
+        chunk_offset, chunk_length: [bytes] the chunk record's place in the file.
+        message_index_offsets: each channel's message index record's offset [bytes].
+        message_index_length: [bytes] the message index records after the chunk.
+        compression: '' | 'zstd' | 'lz4'.
+        compressed_size, uncompressed_size: [bytes] the chunk's records.
+    """
+
+    start_ns: int
+    end_ns: int
+    chunk_offset: int
+    chunk_length: int
+    message_index_offsets: dict[int, int]
+    message_index_length: int
+    compression: str
+    compressed_size: int
+    uncompressed_size: int
+
+
+def encode_chunk_index(index: ChunkIndexRecord) -> bytes:
     """Chunk index record of the summary section."""
-    offsets = b''.join(_U16.pack(c) + _U64.pack(o) for c, o in message_index_offsets.items())
+    offsets = b''.join(_U16.pack(c) + _U64.pack(o) for c, o in index.message_index_offsets.items())
     body = (
-        struct.pack('<QQQQ', start_ns, end_ns, chunk_offset, chunk_length)
+        struct.pack('<QQQQ', index.start_ns, index.end_ns, index.chunk_offset, index.chunk_length)
         + _U32.pack(len(offsets))
         + offsets
-        + _U64.pack(message_index_length)
-        + _string(compression)
-        + struct.pack('<QQ', compressed_size, uncompressed_size)
+        + _U64.pack(index.message_index_length)
+        + _string(index.compression)
+        + struct.pack('<QQ', index.compressed_size, index.uncompressed_size)
     )
     return record(Op.CHUNK_INDEX, body)
 

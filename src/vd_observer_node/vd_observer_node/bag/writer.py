@@ -438,15 +438,17 @@ class BagWriter:
         self._sync()
         self._chunk_indexes.append(
             fmt.encode_chunk_index(
-                start_ns,
-                end_ns,
-                chunk_offset,
-                len(chunk_record),
-                index_offsets,
-                len(indexes),
-                self._compression,
-                len(compressed),
-                len(raw),
+                fmt.ChunkIndexRecord(
+                    start_ns,
+                    end_ns,
+                    chunk_offset,
+                    len(chunk_record),
+                    index_offsets,
+                    len(indexes),
+                    self._compression,
+                    len(compressed),
+                    len(raw),
+                )
             )
         )
         self._start_ns = min(self._start_ns, start_ns)

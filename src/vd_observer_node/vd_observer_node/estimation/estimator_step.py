@@ -169,26 +169,17 @@ GAP_FORCE_CHANGE: Final = 0.05
 #: wheel observer's), torque [N m] per wheel (drive minus brake), speed [m/s] and accel
 #: [m/s^2] of the body, and torque_ok: False where the torque source cannot be trusted at
 #: the stamp (the engine path while the clutch slips: mu and slope are then invalid).
-ESTIMATOR_INPUT: Final = np.dtype(
-    [
-        ('omega', 'f8', (4,)),
-        ('omega_dot', 'f8', (4,)),
-        ('torque', 'f8', (4,)),
-        ('speed', 'f8'),
-        ('accel', 'f8'),
-        ('torque_ok', 'b1'),
-    ],
-    align=True,
-)
-
-
+_INPUT_FIELDS: Final = [
+    ('omega', 'f8', (4,)),
+    ('omega_dot', 'f8', (4,)),
+    ('torque', 'f8', (4,)),
+    ('speed', 'f8'),
+    ('accel', 'f8'),
+]
+ESTIMATOR_INPUT: Final = np.dtype([*_INPUT_FIELDS, ('torque_ok', 'b1')], align=True)
 #: The last finite inputs, held where a stamp's are not: `ESTIMATOR_INPUT` but its
 #: ``torque_ok``.
-HELD_INPUTS: Final = np.dtype(
-    [(name, ESTIMATOR_INPUT.fields[name][0]) for name in ESTIMATOR_INPUT.names[:-1]],
-    align=True,
-)
-assert ESTIMATOR_INPUT.names[-1] == 'torque_ok'
+HELD_INPUTS: Final = np.dtype(_INPUT_FIELDS, align=True)
 
 #: The estimator's memory: last stamp (nan: none), slope [rad], whether ``last`` holds an
 #: estimate, the radius of the last stamp's Fx (nan: none), the stamp until which the slope

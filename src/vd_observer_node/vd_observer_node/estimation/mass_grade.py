@@ -134,19 +134,18 @@ def rls_step(
     Returns:
         (theta, P) after the step, new arrays of the same shapes.
     """
-    th = np.array(theta, dtype=np.float64, ndmin=1)
-    n = th.shape[0]
-    theta_out, cov_out = np.empty(n), np.empty((n, n))
+    # copies: the step works in place
+    theta_out = np.array(theta, dtype=np.float64, ndmin=1)
+    n = theta_out.shape[0]
+    cov_out = np.array(cov, dtype=np.float64).reshape(n, n)
     rls_update(
-        th,
-        np.ascontiguousarray(cov, dtype=np.float64).reshape(n, n),
+        theta_out,
+        cov_out,
         np.ascontiguousarray(phi, dtype=np.float64).reshape(n),
         float(y),
         np.ascontiguousarray(forgetting, dtype=np.float64).reshape(n),
         float(noise_var),
         np.ascontiguousarray(update, dtype=np.bool_).reshape(n),
-        theta_out,
-        cov_out,
     )
     return theta_out, cov_out
 

@@ -148,11 +148,10 @@ def rls_update(
     forgetting: FloatArray,
     noise_var: float,
     update: BoolArray,
-    theta_out: FloatArray,
-    cov_out: FloatArray,
 ) -> None:
-    """One recursive-least-squares step (`mass_grade.rls_step`) into ``theta_out`` (n,) and
-    ``cov_out`` (n, n) (which may be ``theta`` and ``cov`` themselves).
+    """One recursive-least-squares step (`mass_grade.rls_step`) on ``theta`` (n,) and ``cov``
+    (n, n), in place (both are read whole before either is written: pass copies to keep the
+    step's inputs).
 
     Time update ``P <- D P D``, ``D = diag(forgetting)^(-1/2)``; the measurement ``y = phi .
     theta + e``, ``var(e) = noise_var``, corrects only the parameters selected by ``update``
@@ -169,8 +168,8 @@ def rls_update(
             p[i, j] = cov[i, j] * (d[i] * d[j])
     th = theta.copy()
     if not update.any():
-        theta_out[:] = th
-        cov_out[:, :] = p
+        theta[:] = th
+        cov[:, :] = p
         return
     p_phi = np.zeros(n)
     for i in range(n):
@@ -205,8 +204,8 @@ def rls_update(
             p_new[i, j] += noise_var * (k[i] * k[j])
     for i in range(n):
         for j in range(n):
-            cov_out[i, j] = 0.5 * (p_new[i, j] + p_new[j, i])
-        theta_out[i] = th[i] + k[i] * innovation
+            cov[i, j] = 0.5 * (p_new[i, j] + p_new[j, i])
+        theta[i] = th[i] + k[i] * innovation
 
 
 @jit
@@ -217,9 +216,9 @@ def _rls1_bounded(
     [lo, hi]; a non-finite result is dropped. Returns whether the clamp acted."""
     phis = np.full(1, phi)
     lams = np.full(1, lam)
-    theta = np.empty(1)
-    cov = np.empty((1, 1))
-    rls_update(s.theta, s.cov, phis, y, lams, noise_var, np.ones(1, np.bool_), theta, cov)
+    theta = s.theta.copy()
+    cov = s.cov.copy()
+    rls_update(theta, cov, phis, y, lams, noise_var, np.ones(1, np.bool_))
     clamped = False
     if math.isfinite(theta[0]) and math.isfinite(cov[0, 0]):
         if not lo <= theta[0] <= hi:

@@ -208,11 +208,11 @@ def radius_update(
         _radius_out(p, s, 0)
         s.has_last = True
         return True
-    theta = np.empty(1)
-    cov = np.empty((1, 1))
+    theta = s.theta.copy()
+    cov = s.cov.copy()
     rls_update(
-        s.theta, s.cov, np.full(1, mean_omega), speed, np.full(1, forgetting_factor(dt, p.tau)),
-        p.noise_density * p.noise_density / dt, np.ones(1, np.bool_), theta, cov,
+        theta, cov, np.full(1, mean_omega), speed, np.full(1, forgetting_factor(dt, p.tau)),
+        p.noise_density * p.noise_density / dt, np.ones(1, np.bool_),
     )  # fmt: skip
     if math.isfinite(theta[0]) and math.isfinite(cov[0, 0]):
         if not p.lo <= theta[0] <= p.hi:

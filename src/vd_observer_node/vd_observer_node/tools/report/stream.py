@@ -394,7 +394,6 @@ def evaluate_bag(
     try:
         report = _the_pass(
             reader,
-            path,
             tally,
             present,
             skipped,
@@ -464,7 +463,6 @@ def _delayed_rows(queue: list[Paired], horizon: int) -> list[Paired]:
 
 def _the_pass(
     reader: BagReader,
-    path: str | os.PathLike[str],
     tally: Scout,
     present: list[str],
     skipped: dict[str, str],
@@ -489,7 +487,7 @@ def _the_pass(
         for block in iter_topic_blocks(reader, present, block_messages):
             tally.feed(block)
         raise ReportInputError(
-            f'{Path(path)}: no truth topics (need at least one of {TRUTH_NAMESPACE}*: '
+            f'{reader.path}: no truth topics (need at least one of {TRUTH_NAMESPACE}*: '
             + ', '.join(name.rsplit('/', 1)[1] for name in TRUTH_TOPICS)
             + ')'
         )
@@ -622,7 +620,7 @@ def _the_pass(
         dropped = tally.counts[TRUE_POTENTIAL_TOPIC] - alerts.rows
         section = alerts.result(tuple(alert_data_notes(have, dropped)))
     return AccuracyReport(
-        bag=str(Path(path)),
+        bag=str(reader.path),
         first_stamp_s=t0 * 1e-9,
         duration_s=(max(tally.last.values()) - t0) * 1e-9,
         settings=cfg,
