@@ -80,6 +80,7 @@ from vd_observer_node.estimation.mass_grade_step import (
     mass_update,
     rls_update,
 )
+from vd_observer_node.estimation.track import Track, record_track
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.kernel._jit import new_record
 
@@ -88,7 +89,6 @@ __all__ = [
     'MassGradeConfig',
     'MassGradeEstimate',
     'MassGradeEstimator',
-    'MassGradeTrack',
     'forgetting_factor',
     'mass_estimate',
     'mass_params',
@@ -453,40 +453,13 @@ class MassGradeEstimator:
         return self.current()
 
 
-@dataclass(frozen=True)
-class MassGradeTrack:
-    """:class:`MassGradeEstimator` over a whole record (N stamps).
-
-    Attributes:
-        t: shape (N,), [s].
-        mass: shape (N,), [kg].
-        mass_std: shape (N,), [kg].
-        converged: shape (N,), bool.
-        mass_used: shape (N,), [kg].
-        excited: shape (N,), bool.
-        slope: shape (N,), [rad].
-        slope_valid: shape (N,), bool.
-        faults: counts per kind at the end.
-    """
-
-    t: FloatArray
-    mass: FloatArray
-    mass_std: FloatArray
-    converged: BoolArray
-    mass_used: FloatArray
-    excited: BoolArray
-    slope: FloatArray
-    slope_valid: BoolArray
-    faults: dict[str, int]
-
-
 def run_mass_grade(
     t: ArrayLike,
     sum_fx: ArrayLike,
     speed: ArrayLike,
     vehicle: EstimatorVehicle,
     config: MassGradeConfig | None = None,
-) -> MassGradeTrack:
+) -> Track:
     """Run :class:`MassGradeEstimator` over arrays (offline; evaluation, tests).
 
     Args:
@@ -497,7 +470,7 @@ def run_mass_grade(
         config: settings.
 
     Returns:
-        The estimates at every stamp.
+        The estimates at every stamp (`MassGradeEstimate`'s fields, e.g. ``track['mass']``).
 
     Raises:
         InputShapeError: the arrays are not all of shape (N,).
@@ -510,21 +483,5 @@ def run_mass_grade(
         )
     tt, fx, v = arrays
     est = MassGradeEstimator(vehicle, config)
-    n = tt.size
-    mass, mass_std, mass_used, slope = (np.empty(n) for _ in range(4))
-    converged, excited, slope_valid = (np.zeros(n, dtype=np.bool_) for _ in range(3))
-    for k in range(n):
-        e = est.update(float(tt[k]), float(fx[k]), float(v[k]))
-        mass[k], mass_std[k], mass_used[k], slope[k] = e.mass, e.mass_std, e.mass_used, e.slope
-        converged[k], excited[k], slope_valid[k] = e.converged, e.excited, e.slope_valid
-    return MassGradeTrack(
-        t=tt,
-        mass=mass,
-        mass_std=mass_std,
-        converged=converged,
-        mass_used=mass_used,
-        excited=excited,
-        slope=slope,
-        slope_valid=slope_valid,
-        faults=dict(est.faults),
-    )
+    rows = [est.update(float(tt[k]), float(fx[k]), float(v[k])) for k in range(tt.size)]
+    return record_track(tt, MassGradeEstimate, rows, est.faults)

@@ -40,6 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.faults import STAMP_FAULTS, stamp_step
 from vd_observer_node.estimation.mass_grade_step import forgetting_factor, rls_update
+from vd_observer_node.estimation.track import Track, record_track
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 from vd_observer_node.kernel._jit import jit, new_record
 
@@ -51,7 +52,6 @@ __all__ = [
     'RollingRadiusConfig',
     'RollingRadiusEstimate',
     'RollingRadiusEstimator',
-    'RollingRadiusTrack',
     'radius_estimate',
     'radius_held',
     'radius_params',
@@ -425,29 +425,6 @@ class RollingRadiusEstimator:
         return self.current()
 
 
-@dataclass(frozen=True)
-class RollingRadiusTrack:
-    """:class:`RollingRadiusEstimator` over a whole record (N stamps).
-
-    Attributes:
-        t: shape (N,), [s].
-        radius: shape (N,), [m].
-        radius_std: shape (N,), [m].
-        converged: shape (N,), bool.
-        radius_used: shape (N,), [m].
-        free_wheels: shape (N,), int.
-        faults: counts per kind at the end.
-    """
-
-    t: FloatArray
-    radius: FloatArray
-    radius_std: FloatArray
-    converged: BoolArray
-    radius_used: FloatArray
-    free_wheels: NDArray[np.int64]
-    faults: dict[str, int]
-
-
 def run_rolling_radius(
     t: ArrayLike,
     omega: ArrayLike,
@@ -455,7 +432,7 @@ def run_rolling_radius(
     speed: ArrayLike,
     vehicle: EstimatorVehicle,
     config: RollingRadiusConfig | None = None,
-) -> RollingRadiusTrack:
+) -> Track:
     """Run :class:`RollingRadiusEstimator` over arrays (offline; evaluation, tests).
 
     Args:
@@ -467,7 +444,8 @@ def run_rolling_radius(
         config: settings.
 
     Returns:
-        The estimates at every stamp.
+        The estimates at every stamp (`RollingRadiusEstimate`'s fields, e.g.
+        ``track['radius']``).
 
     Raises:
         InputShapeError: inconsistent shapes.
@@ -483,19 +461,5 @@ def run_rolling_radius(
             f'shape (N, 4), got {tt.shape}, {v.shape}, {w.shape}, {tq.shape}'
         )
     est = RollingRadiusEstimator(vehicle, config)
-    radius, radius_std, used = (np.empty(n) for _ in range(3))
-    converged = np.zeros(n, dtype=np.bool_)
-    free = np.zeros(n, dtype=np.int64)
-    for k in range(n):
-        e = est.update(float(tt[k]), w[k], tq[k], float(v[k]))
-        radius[k], radius_std[k], used[k] = e.radius, e.radius_std, e.radius_used
-        converged[k], free[k] = e.converged, e.free_wheels
-    return RollingRadiusTrack(
-        t=tt,
-        radius=radius,
-        radius_std=radius_std,
-        converged=converged,
-        radius_used=used,
-        free_wheels=free,
-        faults=dict(est.faults),
-    )
+    rows = [est.update(float(tt[k]), w[k], tq[k], float(v[k])) for k in range(n)]
+    return record_track(tt, RollingRadiusEstimate, rows, est.faults)
