@@ -23,11 +23,17 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
-from vd_observer_node.estimation.differentiator import DISCRETIZATIONS, LevantDifferentiator  # noqa: E402
+from vd_observer_node.estimation.differentiator import (  # noqa: E402
+    DISCRETIZATIONS,
+    DifferentiatorSettings,
+    LevantDifferentiator,
+)
 
 
 def _time_per_update(disc: str, samples: int) -> float:
-    diff = LevantDifferentiator(300.0, n_channels=4, discretization=disc)
+    diff = LevantDifferentiator(
+        300.0, n_channels=4, settings=DifferentiatorSettings(discretization=disc)
+    )
     t = np.arange(samples) * 1e-3
     f = np.stack([np.sin(t), np.cos(t), t, t**2], axis=1)
     start = time.perf_counter()
@@ -40,7 +46,9 @@ def _errors(disc: str, tau: float, jitter: float) -> np.ndarray:
     rng = np.random.default_rng(0)
     steps = tau * (1.0 + jitter * rng.uniform(-1.0, 1.0, int(8.0 / tau)))
     t = np.concatenate(([0.0], np.cumsum(steps)))
-    diff = LevantDifferentiator(1.5, n_channels=1, discretization=disc)
+    diff = LevantDifferentiator(
+        1.5, n_channels=1, settings=DifferentiatorSettings(discretization=disc)
+    )
     out = np.array([diff.update(tk, np.sin(tk))[:3] for tk in t])[:, :, 0]
     truth = np.stack((np.sin(t), np.cos(t), -np.sin(t)), axis=1)
     keep = t > 3.0
@@ -50,7 +58,9 @@ def _errors(disc: str, tau: float, jitter: float) -> np.ndarray:
 
 def _chattering(disc: str) -> float:
     t = np.arange(0.0, 5.0, 1e-3)
-    diff = LevantDifferentiator(20.0, n_channels=1, discretization=disc)
+    diff = LevantDifferentiator(
+        20.0, n_channels=1, settings=DifferentiatorSettings(discretization=disc)
+    )
     out = np.array([diff.update(tk, -1.5 * tk**2).second[0] for tk in t])
     return float(np.abs(out[t > 3.0] + 3.0).max())
 

@@ -47,7 +47,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_sim_nod
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'src' / 'vd_common'))
 
 from vd_observer_node.testing.fleet_bags import write_recording_like_bag
-from vd_observer_node.tools.fleet import FleetSettings, process_bag, run_fleet
+from vd_observer_node.tools.fleet import FleetEngine, FleetSettings, process_bag, run_fleet
 
 _HWM = """
 def hwm():  # [KiB] this process's peak RSS: VmHWM starts at exec, ru_maxrss would
@@ -107,7 +107,9 @@ def _children_cpu() -> float:
 def _throughput(bags: list[str], root: Path, engine: str, workers: int) -> dict[str, float]:
     out = root / f'out-{engine}-{workers}'
     cpu = _children_cpu()
-    run = run_fleet(bags, out, FleetSettings(), engine=engine, workers=workers, progress=False)
+    run = run_fleet(
+        bags, out, FleetSettings(), engine=FleetEngine(engine, workers=workers), progress=False
+    )
     # the pool's workers have exited: their CPU time is in RUSAGE_CHILDREN (Dask's workers
     # are the nanny's children, not ours: no figure)
     cpu = _children_cpu() - cpu

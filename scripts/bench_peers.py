@@ -44,6 +44,7 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 from vd_common.vehicle.params import default_vehicle_file, load_vehicle  # noqa: E402
 from vd_observer_node.estimation.differentiator import (  # noqa: E402
     DEFAULT_GAINS,
+    DifferentiatorSettings,
     LevantDifferentiator,
     levant_params,
 )
@@ -80,7 +81,9 @@ def ours(disc: str, tau: float) -> tuple[np.ndarray, float]:
     """Max errors (f, f', f'') and s per sample of our stateful differentiator, 1 channel."""
     t = np.arange(int(DURATION / tau) + 1) * tau
     f = np.sin(t)
-    diff = LevantDifferentiator(LIPSCHITZ, n_channels=1, discretization=disc, init='zero')
+    diff = LevantDifferentiator(
+        LIPSCHITZ, n_channels=1, settings=DifferentiatorSettings(discretization=disc, init='zero')
+    )
     z = np.empty((len(t), 3))
     start = time.perf_counter()
     for k in range(len(t)):

@@ -172,8 +172,7 @@ def report_mu_max(sim: Any, det: dict[str, np.ndarray]) -> None:
         det['mu_max'],
         segments_from_road(sim.road_mu),
         confidence=det['conf'],
-        road_class=det['road'],
-        true_road_class=road_class(true_mu_max),
+        road_classes=(det['road'], road_class(true_mu_max)),
         settings=SETTINGS,
     )
     for m in segments:

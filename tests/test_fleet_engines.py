@@ -27,6 +27,7 @@ from vd_observer_node.testing.fleet_bags import (
 )
 from vd_observer_node.tools.fleet import (
     ENGINES,
+    FleetEngine,
     FleetSettings,
     find_bags,
     load_records,
@@ -48,7 +49,11 @@ def local_run(fleet: TestFleet, tmp_path_factory: pytest.TempPathFactory) -> Pat
     """One uninterrupted run with the local pool of 2 processes: the reference."""
     out = tmp_path_factory.mktemp('local')
     run = run_fleet(
-        [str(b) for b in find_bags([fleet.folder])], out, SETTINGS, workers=2, progress=False
+        [str(b) for b in find_bags([fleet.folder])],
+        out,
+        SETTINGS,
+        engine=FleetEngine(workers=2),
+        progress=False,
     )
     assert (run.processed, run.skipped, run.failed, run.lost) == (GOOD + 2, 0, 2, [])
     write_fleet_report(run.records, out, figures=False)
@@ -81,8 +86,7 @@ def test_dask_cluster_gives_identical_results(
         [str(b) for b in find_bags([fleet.folder])],
         tmp_path,
         SETTINGS,
-        engine='dask',
-        workers=2,
+        engine=FleetEngine('dask', workers=2),
         progress=False,
     )
     assert (run.processed, run.failed, run.engine) == (GOOD + 2, 2, 'dask')
@@ -108,7 +112,14 @@ def test_interrupted_run_resumes_without_processing_a_bag_twice(
             raise _InterruptError  # as a Ctrl-C in the coordinating process would
 
     with pytest.raises(_InterruptError):
-        run_fleet(bags, tmp_path, SETTINGS, workers=2, progress=False, on_record=stop_after_three)
+        run_fleet(
+            bags,
+            tmp_path,
+            SETTINGS,
+            engine=FleetEngine(workers=2),
+            progress=False,
+            on_record=stop_after_three,
+        )
     assert len(load_records(tmp_path)) == 3
     # leftovers of a crash: a temporary file and a damaged result, both ignored
     (tmp_path / 'bags' / '.x.json.123.tmp').write_text('{"id": "half')
@@ -120,7 +131,7 @@ def test_interrupted_run_resumes_without_processing_a_bag_twice(
         bags,
         tmp_path,
         SETTINGS,
-        workers=2,
+        engine=FleetEngine(workers=2),
         progress=False,
         on_record=lambda r: second.append(r['bag']),
     )
@@ -131,19 +142,24 @@ def test_interrupted_run_resumes_without_processing_a_bag_twice(
     assert (tmp_path / 'fleet.csv').read_bytes() == (local_run / 'fleet.csv').read_bytes()
     assert (tmp_path / 'fleet.md').read_bytes() == (local_run / 'fleet.md').read_bytes()
     # a third run has nothing left to do
-    third = run_fleet(bags, tmp_path, SETTINGS, workers=2, progress=False)
+    third = run_fleet(bags, tmp_path, SETTINGS, engine=FleetEngine(workers=2), progress=False)
     assert (third.processed, third.skipped) == (0, len(bags))
 
 
 def test_changed_bag_or_settings_are_processed_again(fleet: TestFleet, tmp_path: Path) -> None:
     bags = [str(fleet.good[0]), str(fleet.corrupt)]
-    run_fleet(bags, tmp_path, SETTINGS, workers=1, progress=False)
-    again = run_fleet(bags, tmp_path, SETTINGS, workers=1, progress=False)
+    run_fleet(bags, tmp_path, SETTINGS, engine=FleetEngine(workers=1), progress=False)
+    again = run_fleet(bags, tmp_path, SETTINGS, engine=FleetEngine(workers=1), progress=False)
     assert (again.processed, again.skipped) == (0, 2)
-    retried = run_fleet(bags, tmp_path, SETTINGS, workers=1, progress=False, retry_failed=True)
+    retried = run_fleet(
+        bags, tmp_path, SETTINGS, engine=FleetEngine(workers=1), progress=False, retry_failed=True
+    )
     assert (retried.processed, retried.skipped) == (1, 1)
     other = FleetSettings(replay=False)  # another fingerprint
-    assert run_fleet(bags, tmp_path, other, workers=1, progress=False).processed == 2
+    assert (
+        run_fleet(bags, tmp_path, other, engine=FleetEngine(workers=1), progress=False).processed
+        == 2
+    )
 
 
 @pytest.mark.parametrize('engine', ENGINES)
@@ -160,8 +176,7 @@ def test_a_bag_that_kills_its_worker_is_a_failed_row(
         bags,
         tmp_path / 'out',
         SETTINGS,
-        engine=engine,
-        workers=2,
+        engine=FleetEngine(engine, workers=2),
         progress=False,
         function=process_or_die,
     )

@@ -12,6 +12,7 @@ from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.differentiator import (
     DEFAULT_GAINS,
     DISCRETIZATIONS,
+    DifferentiatorSettings,
     LevantDifferentiator,
     LevantGains,
     levant_params,
@@ -27,7 +28,9 @@ def _params(disc: str = 'implicit', gains: LevantGains = DEFAULT_GAINS) -> np.re
 
 
 def _run(disc: str, t: np.ndarray, f: np.ndarray, lip: float, init: str = 'finite_difference'):
-    diff = LevantDifferentiator(lip, n_channels=1, discretization=disc, init=init)
+    diff = LevantDifferentiator(
+        lip, n_channels=1, settings=DifferentiatorSettings(discretization=disc, init=init)
+    )
     out = np.array([diff.update(tk, fk)[:3] for tk, fk in zip(t, f, strict=True)])
     return out[:, :, 0]
 
@@ -157,7 +160,11 @@ def test_wrapper_matches_pure_steps(disc: str) -> None:
     t = np.concatenate(([0.0], np.cumsum(rng.uniform(5e-4, 2e-3, 400))))
     f = np.stack((np.sin(3 * t), np.cos(2 * t), t**2, np.exp(-t)), axis=1)
     lip = np.array([30.0, 10.0, 1.0, 2.0])
-    diff = LevantDifferentiator(lip, n_channels=4, discretization=disc, init='first_sample')
+    diff = LevantDifferentiator(
+        lip,
+        n_channels=4,
+        settings=DifferentiatorSettings(discretization=disc, init='first_sample'),
+    )
     p = _params(disc)
     z = np.zeros((4, 3))  # a row per channel: (f, f', f'')
     z[:, 0] = f[0]
@@ -223,7 +230,9 @@ def test_euler_step_is_the_recursive_form() -> None:
 
 @pytest.mark.parametrize('disc', DISCRETIZATIONS)
 def test_invalid_samples_do_not_poison_the_state(disc: str) -> None:
-    diff = LevantDifferentiator(1.0, n_channels=2, discretization=disc)
+    diff = LevantDifferentiator(
+        1.0, n_channels=2, settings=DifferentiatorSettings(discretization=disc)
+    )
     t = np.arange(0.0, 3.0, 1e-3)
     for tk in t[:1500]:
         diff.update(tk, [np.sin(tk), 2.0 * tk])
@@ -243,7 +252,9 @@ def test_invalid_samples_do_not_poison_the_state(disc: str) -> None:
 
 
 def test_finite_difference_initialisation_starts_close() -> None:
-    diff = LevantDifferentiator(10.0, n_channels=1, discretization='implicit')
+    diff = LevantDifferentiator(
+        10.0, n_channels=1, settings=DifferentiatorSettings(discretization='implicit')
+    )
     first = diff.update(0.0, 100.0)
     assert not first.valid[0]
     second = diff.update(0.001, 100.08)
@@ -252,7 +263,7 @@ def test_finite_difference_initialisation_starts_close() -> None:
 
 
 def test_long_gap_reinitialises() -> None:
-    diff = LevantDifferentiator(10.0, n_channels=1, max_gap=0.1)
+    diff = LevantDifferentiator(10.0, n_channels=1, settings=DifferentiatorSettings(max_gap=0.1))
     for k in range(100):
         diff.update(k * 1e-3, 1.0 * k * 1e-3)
     est = diff.update(5.0, 123.0)
@@ -262,11 +273,13 @@ def test_long_gap_reinitialises() -> None:
 
 def test_configuration_errors() -> None:
     with pytest.raises(ConfigurationError):
-        LevantDifferentiator(1.0, n_channels=1, discretization='rk4')
+        LevantDifferentiator(
+            1.0, n_channels=1, settings=DifferentiatorSettings(discretization='rk4')
+        )
     with pytest.raises(ConfigurationError):
         LevantDifferentiator(0.0, n_channels=1)
     with pytest.raises(ConfigurationError):
-        LevantDifferentiator(1.0, n_channels=1, init='guess')
+        LevantDifferentiator(1.0, n_channels=1, settings=DifferentiatorSettings(init='guess'))
     with pytest.raises(ConfigurationError):
         LevantGains(l2=0.9)
     with pytest.raises(InputShapeError):

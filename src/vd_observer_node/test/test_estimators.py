@@ -13,7 +13,7 @@ from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation import formulas as phys
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
-from vd_observer_node.testing.synthetic import synthetic_trajectory
+from vd_observer_node.testing.synthetic import TrajectoryShape, synthetic_trajectory
 
 VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
 VEHICLE = load_estimator_vehicle(VEHICLE_FILE)
@@ -101,7 +101,9 @@ def test_online_estimator_recovers_exact_synthetic_truth(source: str) -> None:
 
 def test_slope_filter_delays_but_keeps_a_constant_slope() -> None:
     t = np.arange(0.0, 3.0, 1e-3)
-    traj = synthetic_trajectory(t, VEHICLE, slope_amplitude=0.0, accel_amplitude=0.0)
+    traj = synthetic_trajectory(
+        t, VEHICLE, TrajectoryShape(slope_amplitude=0.0, accel_amplitude=0.0)
+    )
     estimator = Estimator(VEHICLE, EstimatorConfig(slope_filter_tau=0.05))
     for k in range(t.size):
         est = estimator.update(

@@ -11,6 +11,7 @@ from vd_observer_node.estimation.differentiator import (
     DEFAULT_GAINS,
     DISCRETIZATIONS,
     INIT_POLICIES,
+    DifferentiatorSettings,
     LevantDifferentiator,
     levant_params,
 )
@@ -30,7 +31,10 @@ from vd_observer_node.kernel._jit import new_record
 
 def _run(disc: str, t: np.ndarray, g: np.ndarray, lip: float, init: str = 'first_sample'):
     diff = LevantDifferentiator(
-        lip, n_channels=1, discretization=disc, init=init, input_derivative=1
+        lip,
+        n_channels=1,
+        input_derivative=1,
+        settings=DifferentiatorSettings(discretization=disc, init=init),
     )
     out = np.array([diff.update(tk, gk)[:3] for tk, gk in zip(t, g, strict=True)])
     return out[:, :, 0]
@@ -136,10 +140,10 @@ def test_the_update_on_records_is_the_wrapper_and_counts_every_fault(disc: str, 
     # levant_update driven on its own records (as the fused kernels do) against the wrapper,
     # on speeds with one fault of each kind injected
     t, g = _faulty_speeds(np.random.default_rng(7))
-    wrapper = LevantDifferentiator(
-        300.0, n_channels=4, discretization=disc, init=init, max_gap=0.5, init_baseline=0.01,
-        input_derivative=1,
-    )  # fmt: skip
+    settings = DifferentiatorSettings(
+        discretization=disc, init=init, max_gap=0.5, init_baseline=0.01
+    )
+    wrapper = LevantDifferentiator(300.0, n_channels=4, input_derivative=1, settings=settings)
     p = levant_params(DEFAULT_GAINS, disc, init, 0.5, 0.01, 0.5, 1)
     lip, s, channels = np.full(4, 300.0), new_record(STATE_DTYPE), new_channels(4)
     levant_reset(p, s, channels)

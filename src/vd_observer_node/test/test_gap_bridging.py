@@ -19,7 +19,7 @@ from vd_observer_node.bag import BagReader
 from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.chain import Chain
 from vd_observer_node.estimation.cascade import CascadeSeries, CascadeSettings, run_cascade
-from vd_observer_node.estimation.differentiator import LevantDifferentiator
+from vd_observer_node.estimation.differentiator import DifferentiatorSettings, LevantDifferentiator
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.estimator_step import GAP_FORCE_CHANGE
 from vd_observer_node.estimation.filters import (
@@ -60,7 +60,7 @@ def test_the_differentiator_steps_over_a_gap_below_max_gap_with_its_real_interva
     # A quadratic is the implicit scheme's exact case: carried across 0.3 s of nothing and
     # stepped with the real 0.3 s, the state is exact at the first sample after the gap
     # (stepped with 1 ms, or restarted, it would not be).
-    diff = LevantDifferentiator(50.0, n_channels=1, max_gap=0.5)
+    diff = LevantDifferentiator(50.0, n_channels=1, settings=DifferentiatorSettings(max_gap=0.5))
     t = _stamps_with_hole(2.0, 1.0, 0.3)
     f, df, ddf = _quadratic(t)
     after = int(np.searchsorted(t, 1.0))
@@ -76,7 +76,9 @@ def test_the_differentiator_steps_over_a_gap_below_max_gap_with_its_real_interva
 
 
 def test_the_differentiator_restarts_beyond_max_gap() -> None:
-    diff = LevantDifferentiator(50.0, n_channels=1, max_gap=0.5, init_baseline=0.05)
+    diff = LevantDifferentiator(
+        50.0, n_channels=1, settings=DifferentiatorSettings(max_gap=0.5, init_baseline=0.05)
+    )
     t = _stamps_with_hole(2.0, 1.0, 0.6)
     f, df, _ = _quadratic(t)
     after = int(np.searchsorted(t, 1.0))

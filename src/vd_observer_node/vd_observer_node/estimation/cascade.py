@@ -433,15 +433,9 @@ class CascadeParts:
 
         def differentiator(lipschitz: float, n: int, input_derivative: int) -> Any:
             return LevantDifferentiator(
-                lipschitz,
-                n_channels=n,
-                gains=config.gains,
-                discretization=config.discretization,
-                init=config.init,
-                max_gap=config.max_gap,
-                init_baseline=config.init_baseline,
+                lipschitz, n_channels=n, settings=config.differentiator(),
                 input_derivative=input_derivative,
-            )
+            )  # fmt: skip
 
         wheel_input = WHEEL_INPUTS.index(config.wheel_input)
         self.wheels: LevantDifferentiator = differentiator(config.wheel_lipschitz, 4, wheel_input)

@@ -45,6 +45,7 @@ __all__ = [
     'INIT_POLICIES',
     'INPUT_DERIVATIVES',
     'DerivativeEstimate',
+    'DifferentiatorSettings',
     'LevantDifferentiator',
     'LevantGains',
     'checked_settings',
@@ -84,6 +85,30 @@ class LevantGains:
 
 #: Levant's published gains for the second-order differentiator.
 DEFAULT_GAINS: Final = LevantGains()
+
+
+@dataclass(frozen=True)
+class DifferentiatorSettings:
+    """A `LevantDifferentiator`'s settings but its L and channels (which the observers set
+    per signal); `ObserverConfig.differentiator` gives the observers'.
+
+    Attributes:
+        gains: recursive-form gains.
+        discretization: one of `DISCRETIZATIONS`.
+        init: one of `INIT_POLICIES`.
+        max_gap: time gap [s] beyond which the state is re-initialised.
+        init_baseline: minimum time [s] between the two samples of the
+            'finite_difference' initialisation.
+        max_jump_back: a stamp older than the last accepted one by more than this [s]
+            resets the state instead of being rejected; None = `max_gap`.
+    """
+
+    gains: LevantGains = DEFAULT_GAINS
+    discretization: str = 'implicit'
+    init: str = 'finite_difference'
+    max_gap: float = math.inf
+    init_baseline: float = 0.0
+    max_jump_back: float | None = None
 
 
 class DerivativeEstimate(NamedTuple):
@@ -203,12 +228,7 @@ class LevantDifferentiator:
         lipschitz: ArrayLike,
         *,
         n_channels: int,
-        gains: LevantGains = DEFAULT_GAINS,
-        discretization: str = 'implicit',
-        init: str = 'finite_difference',
-        max_gap: float = math.inf,
-        init_baseline: float = 0.0,
-        max_jump_back: float | None = None,
+        settings: DifferentiatorSettings = DifferentiatorSettings(),
         input_derivative: int = 0,
     ) -> None:
         """Create the differentiator.
@@ -216,37 +236,32 @@ class LevantDifferentiator:
         Args:
             lipschitz: shape (n,) or scalar, L, bound on |f'''| [unit/s^3], > 0.
             n_channels: number n of independent signals differentiated together.
-            gains: recursive-form gains.
-            discretization: one of `DISCRETIZATIONS`.
-            init: one of `INIT_POLICIES`.
-            max_gap: time gap [s] beyond which the state is re-initialised.
-            init_baseline: minimum time [s] between the two samples of the
-                'finite_difference' initialisation.
-            max_jump_back: a stamp older than the last accepted one by more than this [s]
-                resets the state instead of being rejected; None = `max_gap`.
+            settings: gains, discretization, initialisation, gap and jump-back settings.
             input_derivative: one of `INPUT_DERIVATIVES`: 0 when the samples are f, 1 when
                 they are f' (L then bounds the second derivative of the samples).
 
         Raises:
             ConfigurationError: invalid L, name or gap.
         """
+        s = settings
         lip, jump = checked_settings(
             lipschitz,
             n_channels,
-            discretization,
-            init,
-            max_gap,
-            init_baseline,
-            max_jump_back,
+            s.discretization,
+            s.init,
+            s.max_gap,
+            s.init_baseline,
+            s.max_jump_back,
             input_derivative,
         )
         self._n = n_channels
-        self._discretization = discretization
+        self._discretization = s.discretization
         self._row = int(input_derivative)
         #: `levant_step.PARAMS_DTYPE` record
         self.params = levant_params(
-            gains, discretization, init, float(max_gap), init_baseline, jump, input_derivative
-        )
+            s.gains, s.discretization, s.init, float(s.max_gap), s.init_baseline, jump,
+            input_derivative,
+        )  # fmt: skip
         #: shape (n,), L per channel [unit/s^3]
         self.lipschitz = lip
         #: `levant_step.STATE_DTYPE` record: last stamp, fault counters

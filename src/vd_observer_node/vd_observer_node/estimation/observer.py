@@ -23,6 +23,7 @@ from vd_observer_node.estimation.differentiator import (
     DEFAULT_GAINS,
     DISCRETIZATIONS,
     INIT_POLICIES,
+    DifferentiatorSettings,
     LevantDifferentiator,
     LevantGains,
 )
@@ -93,6 +94,16 @@ class ObserverConfig:
             if not (math.isfinite(value) and value > 0.0):
                 raise ConfigurationError(f'{name} must be finite and > 0, got {value}')
 
+    def differentiator(self) -> DifferentiatorSettings:
+        """The settings every observer's differentiator shares (all but L and channels)."""
+        return DifferentiatorSettings(
+            gains=self.gains,
+            discretization=self.discretization,
+            init=self.init,
+            max_gap=self.max_gap,
+            init_baseline=self.init_baseline,
+        )
+
     @classmethod
     def from_mapping(cls, data: dict[str, Any]) -> ObserverConfig:
         """Build from a flat mapping (e.g. ROS parameters); gains as l0, l1, l2 keys.
@@ -162,11 +173,7 @@ class _DifferentiatorObserver:
         self.differentiator = LevantDifferentiator(
             self._lipschitz(config),
             n_channels=self._channels,
-            gains=config.gains,
-            discretization=config.discretization,
-            init=config.init,
-            max_gap=config.max_gap,
-            init_baseline=config.init_baseline,
+            settings=config.differentiator(),
             input_derivative=self._input_derivative(config),
         )
 

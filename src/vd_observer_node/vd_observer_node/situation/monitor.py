@@ -186,11 +186,7 @@ class SituationMonitor:
         self.fast = LevantDifferentiator(
             fc.wheel_lipschitz,
             n_channels=4,
-            gains=fc.gains,
-            discretization=fc.discretization,
-            init=fc.init,
-            max_gap=fc.max_gap,
-            init_baseline=fc.init_baseline,
+            settings=fc.differentiator(),
             input_derivative=WHEEL_INPUTS.index(fc.wheel_input),
         )
         self.friction = FrictionPotentialEstimator(curves, static_load, friction)

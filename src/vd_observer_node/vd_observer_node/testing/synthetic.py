@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from vd_observer_node.estimation import formulas as phys
 from vd_observer_node.estimation.vehicle import EstimatorVehicle
 
-__all__ = ['SyntheticTrajectory', 'synthetic_trajectory']
+__all__ = ['SyntheticTrajectory', 'TrajectoryShape', 'synthetic_trajectory']
 
 FloatArray = NDArray[np.float64]
 
@@ -57,25 +57,11 @@ class SyntheticTrajectory:
     aero: FloatArray
 
 
-def synthetic_trajectory(
-    t: ArrayLike,
-    vehicle: EstimatorVehicle,
-    *,
-    v0: float = 15.0,
-    accel_amplitude: float = 1.5,
-    accel_frequency: float = 0.3,
-    slope_mean: float = 0.03,
-    slope_amplitude: float = 0.02,
-    slope_frequency: float = 0.1,
-    slip_amplitude: float = 0.01,
-    slip_frequency: float = 1.0,
-    front_share: float = 0.9,
-) -> SyntheticTrajectory:
-    """Sample the analytic trajectory at stamps t (may be irregular).
+@dataclass(frozen=True)
+class TrajectoryShape:
+    """The shape of the analytic trajectory (`synthetic_trajectory`).
 
-    Args:
-        t: shape (N,), [s].
-        vehicle: parameters.
+    Attributes:
         v0: mean speed [m/s].
         accel_amplitude: amplitude of v' [m/s^2] (sinusoidal speed oscillation).
         accel_frequency: frequency of the speed oscillation [Hz].
@@ -86,6 +72,32 @@ def synthetic_trajectory(
         slip_frequency: [Hz].
         front_share: fraction of sum(Fx) carried by the front axle [-].
     """
+
+    v0: float = 15.0
+    accel_amplitude: float = 1.5
+    accel_frequency: float = 0.3
+    slope_mean: float = 0.03
+    slope_amplitude: float = 0.02
+    slope_frequency: float = 0.1
+    slip_amplitude: float = 0.01
+    slip_frequency: float = 1.0
+    front_share: float = 0.9
+
+
+def synthetic_trajectory(
+    t: ArrayLike, vehicle: EstimatorVehicle, shape: TrajectoryShape = TrajectoryShape()
+) -> SyntheticTrajectory:
+    """Sample the analytic trajectory at stamps t (may be irregular).
+
+    Args:
+        t: shape (N,), [s].
+        vehicle: parameters.
+        shape: speed, slope and slip oscillations, the front axle's share of the force.
+    """
+    v0, accel_amplitude, accel_frequency = shape.v0, shape.accel_amplitude, shape.accel_frequency
+    slope_mean, slope_amplitude = shape.slope_mean, shape.slope_amplitude
+    slope_frequency, front_share = shape.slope_frequency, shape.front_share
+    slip_amplitude, slip_frequency = shape.slip_amplitude, shape.slip_frequency
     ts = np.asarray(t, dtype=np.float64)
     w = 2.0 * np.pi * accel_frequency
     speed_amp = accel_amplitude / w

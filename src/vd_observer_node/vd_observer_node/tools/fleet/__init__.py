@@ -26,11 +26,18 @@ if TYPE_CHECKING:  # the names as mypy and editors see them; imported on first u
         read_fleet_csv,
         write_fleet_report,
     )
-    from vd_observer_node.tools.fleet.run import ENGINES, FleetRun, load_records, run_fleet
+    from vd_observer_node.tools.fleet.run import (
+        ENGINES,
+        FleetEngine,
+        FleetRun,
+        load_records,
+        run_fleet,
+    )
 
 __all__ = [
     'ENGINES',
     'ROW_COLUMNS',
+    'FleetEngine',
     'FleetEngineError',
     'FleetError',
     'FleetInputError',
@@ -53,6 +60,7 @@ __getattr__ = lazy_exports(
     __name__,
     {
         'ENGINES': 'run',
+        'FleetEngine': 'run',
         'FleetEngineError': 'errors',
         'FleetError': 'errors',
         'FleetInputError': 'errors',

@@ -97,7 +97,7 @@ def run_fleet_command(args: argparse.Namespace) -> int:
     from vd_observer_node.tools.fleet.errors import FleetInputError
     from vd_observer_node.tools.fleet.process import FleetSettings
     from vd_observer_node.tools.fleet.report import read_fleet_csv, write_fleet_report
-    from vd_observer_node.tools.fleet.run import run_fleet
+    from vd_observer_node.tools.fleet.run import FleetEngine, run_fleet
 
     if args.baseline is not None:
         read_fleet_csv(args.baseline)  # a bad baseline stops the run before hours of work
@@ -125,9 +125,7 @@ def run_fleet_command(args: argparse.Namespace) -> int:
         [str(b) for b in bags],
         out,
         settings,
-        engine=engine,
-        workers=args.workers,
-        scheduler=args.scheduler,
+        engine=FleetEngine(engine, args.workers, args.scheduler),
         retry_failed=args.retry_failed,
         progress=not args.no_progress,
     )

@@ -46,7 +46,15 @@ from vd_observer_node.tools.fleet.process import (
     process_bag,
 )
 
-__all__ = ['ENGINES', 'WORKER_DIED', 'FleetRun', 'load_records', 'run_fleet', 'write_atomic']
+__all__ = [
+    'ENGINES',
+    'WORKER_DIED',
+    'FleetEngine',
+    'FleetRun',
+    'load_records',
+    'run_fleet',
+    'write_atomic',
+]
 
 ENGINES = ('local', 'dask')
 RESULTS_DIR = 'bags'
@@ -266,14 +274,27 @@ def _dask_results(
             cluster.close()
 
 
+@dataclass(frozen=True)
+class FleetEngine:
+    """Where the bags are processed.
+
+    Attributes:
+        kind: 'local' (process pool) or 'dask' (`ENGINES`).
+        workers: worker processes (default: ``os.cpu_count()``); with ``scheduler``, unused.
+        scheduler: address of a running Dask scheduler (kind 'dask').
+    """
+
+    kind: str = 'local'
+    workers: int | None = None
+    scheduler: str | None = None
+
+
 def run_fleet(
     bags: Sequence[str | os.PathLike[str]],
     out_dir: str | os.PathLike[str],
     settings: FleetSettings | None = None,
     *,
-    engine: str = 'local',
-    workers: int | None = None,
-    scheduler: str | None = None,
+    engine: FleetEngine = FleetEngine(),
     retry_failed: bool = False,
     progress: bool = True,
     on_record: Callable[[dict[str, Any]], None] | None = None,
@@ -285,9 +306,7 @@ def run_fleet(
         bags: bag paths (:func:`~.bags.find_bags`).
         out_dir: output folder; ``bags/<bag id>.json`` per bag.
         settings: how the bags are processed; default :class:`FleetSettings`.
-        engine: 'local' (process pool) or 'dask'.
-        workers: worker processes (default: ``os.cpu_count()``); with ``scheduler``, unused.
-        scheduler: address of a running Dask scheduler (engine 'dask').
+        engine: the process pool or the Dask cluster, and its workers.
         retry_failed: process again the bags whose stored result is a failure.
         progress: tqdm bars on stderr: bags (failures so far in its postfix), and samples
             done with their rate.
@@ -304,8 +323,9 @@ def run_fleet(
     """
     started = time.perf_counter()
     cfg = settings or FleetSettings()
-    if engine not in ENGINES:
-        raise FleetInputError(f'engine must be one of {", ".join(ENGINES)}, got {engine!r}')
+    kind, workers, scheduler = engine.kind, engine.workers, engine.scheduler
+    if kind not in ENGINES:
+        raise FleetInputError(f'engine must be one of {", ".join(ENGINES)}, got {kind!r}')
     count = workers if workers is not None else (os.cpu_count() or 1)
     if count < 1:
         raise FleetInputError(f'workers must be at least 1, got {count}')
@@ -324,7 +344,7 @@ def run_fleet(
             by_bag[bag] = {**record, 'reused': True}
         else:
             todo.append(bag)
-    run = FleetRun(engine=engine, workers=count, skipped=len(names) - len(todo))
+    run = FleetRun(engine=kind, workers=count, skipped=len(names) - len(todo))
     bar = tqdm(
         total=len(names),
         initial=run.skipped,
@@ -346,7 +366,7 @@ def run_fleet(
         if todo:
             stream = (
                 _local_results(todo, cfg, count, function)
-                if engine == 'local'
+                if kind == 'local'
                 else _dask_results(todo, cfg, count, scheduler, function)
             )
             for bag, record in stream:

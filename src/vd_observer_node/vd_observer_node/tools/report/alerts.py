@@ -547,8 +547,7 @@ def mu_max_errors(
     segment_starts: ArrayLike,
     *,
     confidence: ArrayLike | None = None,
-    road_class: ArrayLike | None = None,
-    true_road_class: ArrayLike | None = None,
+    road_classes: tuple[ArrayLike | None, ArrayLike | None] = (None, None),
     settings: AlertSettings | None = None,
 ) -> list[MuMaxSegment]:
     """μ_max error per axle and constant-road segment after the axle's first excitation.
@@ -560,8 +559,8 @@ def mu_max_errors(
         estimate: shape (N, 2), [-] estimated μ_max.
         segment_starts: start indices of the segments (first 0), increasing.
         confidence: shape (N, 2), estimated confidence, or None.
-        road_class: shape (N, 2), estimated road class codes, or None.
-        true_road_class: shape (N, 2), true road class codes, or None.
+        road_classes: the estimated and the true road class codes, each shape (N, 2) or
+            None.
         settings: definitions.
 
     Returns:
@@ -574,8 +573,7 @@ def mu_max_errors(
     est = np.asarray(estimate, dtype=np.float64)
     starts = np.asarray(segment_starts, dtype=np.int64)
     conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
-    klass = None if road_class is None else np.asarray(road_class, dtype=np.int64)
-    tclass = None if true_road_class is None else np.asarray(true_road_class, dtype=np.int64)
+    klass, tclass = (None if c is None else np.asarray(c, dtype=np.int64) for c in road_classes)
     segments = np.split(np.arange(tt.size), starts[1:])
     out: list[MuMaxSegment] = []
     for axle in range(2):
@@ -660,8 +658,7 @@ def evaluate_alerts_section(
             data.mu_max,
             segments_from_peaks(data.true_mu_max, cfg.road_jump),
             confidence=data.confidence,
-            road_class=data.road_class,
-            true_road_class=data.true_road_class,
+            road_classes=(data.road_class, data.true_road_class),
             settings=cfg,
         )
     return alerts_section(

@@ -398,7 +398,6 @@ def evaluate_bag(
             present,
             skipped,
             t0,
-            cfg,
             static_loads,
             alert_settings,
             block_messages,
@@ -467,12 +466,12 @@ def _the_pass(
     present: list[str],
     skipped: dict[str, str],
     t0: int,
-    cfg: EvaluationSettings,
     static_loads: FloatArray | None,
     alert_settings: AlertSettings | None,
     block_messages: int,
 ) -> AccuracyReport:
-    """The pass over every topic: the tally (``tally``) and, with truth, the report.
+    """The pass over every topic: the tally (``tally``, which holds the settings) and, with
+    truth, the report.
 
     Paired rows wait (:func:`_delayed_rows`) until the events that may exclude them are known:
     the slope truth and the gear have passed their stamp + ``exclusion_half_width_s`` (+1 ms
@@ -482,6 +481,7 @@ def _the_pass(
         ReportInputError: no truth topic (after the pass: the tally is complete).
         StampOrderError: a topic's stamps go backwards.
     """
+    cfg = tally.cfg
     have = set(present)
     if not any(t in have for t in TRUTH_TOPICS):
         for block in iter_topic_blocks(reader, present, block_messages):
