@@ -88,8 +88,8 @@ OWN_SENSORS: Final = _OwnSensors()
 class ChainSettings(CascadeSettings):
     """Everything the chain needs: the cascade's settings (`CascadeSettings`: vehicle,
     observer, estimator, estimator speed, torque source, drivetrain, IMU, brakes) and the
-    situation monitor's. `settings.chain_settings` builds them from node parameters, a
-    settings file or the CLI, and the vehicle file.
+    situation monitor's. `chain_settings` builds them from node parameters, a settings file
+    or the CLI, and the vehicle file.
 
     Attributes:
         curves: the tyre's curves (friction potential); None (a vehicle file without
@@ -206,8 +206,8 @@ def chain_settings(
             else None
         ),
         brakes=(
-            Brakes.from_params(mapping.brake_signal, params, mapping.source)
-            if mapping.brake_signal and source != 'none'
+            Brakes.from_params(_brake_in_use(mapping), params, mapping.source)
+            if _brake_in_use(mapping)
             else None
         ),
         curves=None if params.tire is None else TyreCurves.from_tire(params.tire),
@@ -217,6 +217,12 @@ def chain_settings(
         vehicle_label=f'{params.name} ({params.source})',
         situation_off=no_tire_note(params),
     )
+
+
+def _brake_in_use(mapping: Sensors) -> str:
+    """The brake input's signal the cascade uses, '' for none: without a torque there is
+    nothing to take a brake torque from."""
+    return mapping.brake_signal if mapping.torque_source != 'none' else ''
 
 
 def check_settings_fit(settings: CascadeSettings, mapping: Sensors) -> None:
@@ -233,9 +239,7 @@ def check_settings_fit(settings: CascadeSettings, mapping: Sensors) -> None:
         'imu (fused)': (settings.imu is not None or mapping.imu_fusion is None, True),
         'brakes': (
             settings.brakes.kind if settings.brakes is not None else 'none',
-            mapping.brake_signal
-            if mapping.brake_signal and mapping.torque_source != 'none'
-            else 'none',
+            _brake_in_use(mapping) or 'none',
         ),
     }
     for name, (have, need) in wants.items():
