@@ -43,7 +43,6 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
 from vd_common.vehicle.params import default_vehicle_file, load_vehicle  # noqa: E402
 from vd_observer_node.estimation.differentiator import (  # noqa: E402
-    DEFAULT_GAINS,
     DifferentiatorSettings,
     LevantDifferentiator,
     levant_params,
@@ -98,7 +97,7 @@ def ours_pure_euler(tau: float) -> tuple[np.ndarray, float]:
     t = np.arange(int(DURATION / tau) + 1) * tau
     f = np.sin(t)
     z = np.zeros((len(t), 3))
-    params = levant_params(DEFAULT_GAINS, 'euler', 'zero', np.inf, 0.0, np.inf)
+    params = levant_params(DifferentiatorSettings(discretization='euler', init='zero'), np.inf)
     start = time.perf_counter()
     for k in range(1, len(t)):
         z[k] = euler_step(params, z[k - 1], f[k - 1], tau, LIPSCHITZ, False)

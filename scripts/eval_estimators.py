@@ -16,7 +16,11 @@ Usage:
     python scripts/eval_estimators.py [--scenario PATH] [--cases ideal,noisy]
         [--discretization implicit] [--wheel-lipschitz 300] [--speed-lipschitz 20]
         [--slope-tau 0.05] [--force-tau 0.0] [--load-transfer tire_forces]
-        [--torque-paths measured,engine,none]
+        [--torque-paths measured,engine,none] [--no-defaults]
+
+Last, omega's relative RMS with every setting at its default (the wheel L follows the angles'
+resolution, issue 38) on ideal angles and a 96 counts/rev encoder at 1 kHz and 100 Hz, beside
+the same runs with L fixed at its floor.
 """
 
 from __future__ import annotations
@@ -175,6 +179,10 @@ def main() -> None:
     parser.add_argument('--load-transfer', default=None)
     parser.add_argument('--torque-paths', default='measured,engine,none')
     parser.add_argument(
+        '--no-defaults', action='store_true',
+        help="skip omega's figures with every setting at its default (4 more simulations)",
+    )  # fmt: skip
+    parser.add_argument(
         '--imu', action='store_true',
         help='the car carries an IMU (0.05 m/s^2 noise, 0.08 m/s^2 bias; gyro 0.004 rad/s '
         'noise, 0.003 rad/s bias) and the cascade fuses it (estimation.imu_grade)',
@@ -279,6 +287,47 @@ def main() -> None:
         for key in keys:
             row = ''.join(f'{per_path[p].get(key, float("nan")):12.5g}' for p in paths)
             print(f'   {key:26s}{row}')
+    if not args.no_defaults:
+        default_omega_figures(sim_vehicle, vehicle, scenario)
+
+
+def default_omega_figures(sim_vehicle: Any, vehicle: EstimatorVehicle, scenario: Any) -> None:
+    """omega's relative RMS with every setting at its default (issue 38: the wheel L
+    follows the angles' resolution), ideal angles and a 96 counts/rev encoder, at 1 kHz
+    and 100 Hz, each beside the same run with L fixed at its floor."""
+    from vd_sim_node.vehicle.simulation import simulate
+
+    target = TARGETS['ideal']['omega_rel_pct']
+    print(f'== {scenario.name}: every setting at its default (the wheel L follows the resolution)')
+    print(
+        f'   {"sensors (body speed exact)":34s}{"omega_rel_pct":>14s}{"L fixed":>10s}'
+        f'{"slope_deg":>11s}{"L fixed":>10s}'
+    )
+    for rate in (1000.0, 100.0):
+        for counts in (0, 96):
+            sensors = dataclasses.replace(
+                scenario.sensors, encoder_counts_per_rev=counts, speed_noise_std=0.0,
+                rate_hz=rate,
+            )  # fmt: skip
+            sim = simulate(sim_vehicle, dataclasses.replace(scenario, sensors=sensors))
+            mask = evaluation_mask(sim.t, sim.events)
+            row = {}
+            for follow in (True, False):
+                est = run_cascade(
+                    CascadeSeries(sim.t, sim.wheel_angle, sim.body_speed, sim.wheel_torque),
+                    CascadeSettings(vehicle, ObserverConfig(follow_resolution=follow)),
+                )
+                row[follow] = figures(sim, est, vehicle, mask)
+            label = f'{rate:g} Hz, ' + (f'{counts} counts/rev' if counts else 'ideal angles')
+            verdict = ''
+            if rate == 1000.0 and not counts:
+                met = row[True]['omega_rel_pct'] <= target
+                verdict = f'  target <= {target}: ' + ('MET' if met else 'MISSED')
+            print(
+                f'   {label:34s}{row[True]["omega_rel_pct"]:14.5f}'
+                f'{row[False]["omega_rel_pct"]:10.5f}{row[True]["slope_rms_deg"]:11.4f}'
+                f'{row[False]["slope_rms_deg"]:10.4f}{verdict}'
+            )
 
 
 #: Settings chosen with this script (see docs/estimation.md, "Tuning").

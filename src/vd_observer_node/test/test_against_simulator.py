@@ -125,3 +125,33 @@ def test_whole_cascade_on_simulated_sensors(sim: Any) -> None:
     assert np.sqrt(np.mean(fx_err**2)) < 0.02 * np.abs(sim.fx[window]).max()
     omega_rel = np.abs(est.omega - sim.omega)[window] / np.abs(sim.omega)[window]
     assert np.sqrt(np.mean(omega_rel**2)) < 1e-3
+
+
+def test_default_wheel_l_follows_the_angles_resolution(sim: Any) -> None:
+    # the observer's defaults (#38): exact angles raise the wheel L to its cap, which follows
+    # the launch that L = 300 does not; a 96 counts/rev encoder keeps L = 300 bit for bit
+    from vd_sim_node.vehicle.sensors import quantise_angle
+
+    window = _calm(sim)
+
+    def omega_rel_pct(angles: np.ndarray, follow: bool) -> tuple[float, Any]:
+        est = run_cascade(
+            CascadeSeries(sim.t, angles, sim.body_speed, sim.wheel_torque),
+            CascadeSettings(VEHICLE, observer=ObserverConfig(follow_resolution=follow)),
+        )
+        error = (est.omega - sim.omega)[window]
+        return 100.0 * _rms(error) / _rms(sim.omega[window]), est
+
+    exact, _ = omega_rel_pct(sim.wheel_angle, True)
+    floor, _ = omega_rel_pct(sim.wheel_angle, False)
+    assert exact < 5e-5  # measured 1.2e-5 %: the cap tracks the exact angles
+    assert floor > 1.0  # measured 3.4 %: L = 300 has not caught up with the launch
+    encoder = quantise_angle(sim.wheel_angle, 96)
+    _, followed = omega_rel_pct(encoder, True)
+    _, fixed = omega_rel_pct(encoder, False)
+    np.testing.assert_array_equal(followed.omega, fixed.omega)
+    np.testing.assert_array_equal(followed.slope, fixed.slope)
+
+
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(x))))

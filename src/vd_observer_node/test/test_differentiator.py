@@ -24,7 +24,9 @@ ACCURATE = ('euler_taylor', 'implicit')
 
 def _params(disc: str = 'implicit', gains: LevantGains = DEFAULT_GAINS) -> np.record:
     """The parameter record the step functions read (only the gains and names matter)."""
-    return levant_params(gains, disc, 'first_sample', math.inf, 0.0, math.inf)
+    return levant_params(
+        DifferentiatorSettings(gains, discretization=disc, init='first_sample'), math.inf
+    )
 
 
 def _run(disc: str, t: np.ndarray, f: np.ndarray, lip: float, init: str = 'finite_difference'):

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.differentiator import (
-    DEFAULT_GAINS,
     DISCRETIZATIONS,
     INIT_POLICIES,
     DifferentiatorSettings,
@@ -92,7 +91,9 @@ def test_row_zero_integrates_the_speed() -> None:
 
 
 def _params(disc: str) -> np.record:
-    return levant_params(DEFAULT_GAINS, disc, 'first_sample', math.inf, 0.0, math.inf, 1)
+    return levant_params(
+        DifferentiatorSettings(discretization=disc, init='first_sample'), math.inf, 1
+    )
 
 
 def test_step_dispatches_the_first_order_steps() -> None:
@@ -144,7 +145,7 @@ def test_the_update_on_records_is_the_wrapper_and_counts_every_fault(disc: str, 
         discretization=disc, init=init, max_gap=0.5, init_baseline=0.01
     )
     wrapper = LevantDifferentiator(300.0, n_channels=4, input_derivative=1, settings=settings)
-    p = levant_params(DEFAULT_GAINS, disc, init, 0.5, 0.01, 0.5, 1)
+    p = levant_params(settings, 0.5, 1)
     lip, s, channels = np.full(4, 300.0), new_record(STATE_DTYPE), new_channels(4)
     levant_reset(p, s, channels)
     out, valid = np.zeros((3, 4)), np.zeros(4, dtype=np.bool_)

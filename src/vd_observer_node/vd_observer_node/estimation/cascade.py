@@ -431,15 +431,14 @@ class CascadeParts:
         drivetrain = settings.drivetrain
         self.source = settings.source
 
-        def differentiator(lipschitz: float, n: int, input_derivative: int) -> Any:
-            return LevantDifferentiator(
-                lipschitz, n_channels=n, settings=config.differentiator(),
-                input_derivative=input_derivative,
-            )  # fmt: skip
-
         wheel_input = WHEEL_INPUTS.index(config.wheel_input)
-        self.wheels: LevantDifferentiator = differentiator(config.wheel_lipschitz, 4, wheel_input)
-        self.speed: LevantDifferentiator = differentiator(config.speed_lipschitz, 1, 0)
+        self.wheels = LevantDifferentiator(
+            config.wheel_lipschitz, n_channels=4, settings=config.differentiator(wheels=True),
+            input_derivative=wheel_input,
+        )  # fmt: skip
+        self.speed = LevantDifferentiator(
+            config.speed_lipschitz, n_channels=1, settings=config.differentiator()
+        )
         self.estimator = Estimator(vehicle, estimator_config, self.source)
         self.measured = settings.estimator_speed == 'measured'
         engine_on = self.source == TORQUE_ENGINE and drivetrain is not None

@@ -101,6 +101,8 @@ class DifferentiatorSettings:
             'finite_difference' initialisation.
         max_jump_back: a stamp older than the last accepted one by more than this [s]
             resets the state instead of being rejected; None = `max_gap`.
+        follow_resolution: each channel's L rises above the given one (its floor) as the
+            samples show a finer resolution (`levant_step.followed_lipschitz`).
     """
 
     gains: LevantGains = DEFAULT_GAINS
@@ -109,6 +111,7 @@ class DifferentiatorSettings:
     max_gap: float = math.inf
     init_baseline: float = 0.0
     max_jump_back: float | None = None
+    follow_resolution: bool = False
 
 
 class DerivativeEstimate(NamedTuple):
@@ -172,24 +175,21 @@ def checked_settings(
 
 
 def levant_params(
-    gains: LevantGains,
-    discretization: str,
-    init: str,
-    max_gap: float,
-    init_baseline: float,
-    max_jump_back: float,
-    input_derivative: int = 0,
+    settings: DifferentiatorSettings, max_jump_back: float, input_derivative: int = 0
 ) -> np.record:
-    """The `levant_step.PARAMS_DTYPE` record of these (checked) settings."""
+    """The `levant_step.PARAMS_DTYPE` record of these (checked) settings (`max_jump_back` [s]
+    resolved from the settings' None)."""
     p = new_record(PARAMS_DTYPE)
+    gains = settings.gains
     p.l0, p.l1, p.l2 = gains.l0, gains.l1, gains.l2
     p.k0, p.k1, p.k2 = gains.nonrecursive()
-    p.discretization = DISCRETIZATIONS.index(discretization)
-    p.init = INIT_POLICIES.index(init)
-    p.max_gap = max_gap
-    p.init_baseline = init_baseline
+    p.discretization = DISCRETIZATIONS.index(settings.discretization)
+    p.init = INIT_POLICIES.index(settings.init)
+    p.max_gap = float(settings.max_gap)
+    p.init_baseline = settings.init_baseline
     p.max_jump_back = max_jump_back
     p.input_derivative = input_derivative
+    p.follow_resolution = settings.follow_resolution
     return p
 
 
@@ -258,11 +258,8 @@ class LevantDifferentiator:
         self._discretization = s.discretization
         self._row = int(input_derivative)
         #: `levant_step.PARAMS_DTYPE` record
-        self.params = levant_params(
-            s.gains, s.discretization, s.init, float(s.max_gap), s.init_baseline, jump,
-            input_derivative,
-        )  # fmt: skip
-        #: shape (n,), L per channel [unit/s^3]
+        self.params = levant_params(s, jump, input_derivative)
+        #: shape (n,), L per channel [unit/s^3] (the floor where it follows the resolution)
         self.lipschitz = lip
         #: `levant_step.STATE_DTYPE` record: last stamp, fault counters
         self.record = new_record(STATE_DTYPE)
@@ -292,6 +289,21 @@ class LevantDifferentiator:
             record_array(self.params), self.lipschitz, record_array(self.record),
             self.channels.view(np.ndarray),
         )  # fmt: skip
+
+    @property
+    def lipschitz_in_use(self) -> FloatArray:
+        """Shape (n,), the L each channel steps with now [unit/s^3]: `lipschitz`, or where it
+        follows the resolution, what the resolution seen so far gives."""
+        raised = self.channels.lipschitz
+        if not self.params.follow_resolution:
+            return self.lipschitz.copy()
+        return np.where(raised > 0.0, raised, self.lipschitz)
+
+    @property
+    def resolution(self) -> FloatArray:
+        """Shape (n,), the smallest non-zero change between consecutive samples seen so far
+        [unit] (0: none yet; noted only where L follows the resolution)."""
+        return np.asarray(self.channels.resolution, dtype=np.float64).copy()
 
     @property
     def discretization(self) -> str:

@@ -49,7 +49,13 @@ plain Python with ``VD_JIT=0``. They work on numpy records with named fields:
   the bounds L per channel as a float array (n,);
 * state: one record of `STATE_DTYPE` (stamp, fault counters) and a record array (n,) of
   `CHANNEL_DTYPE` (per channel: the estimates z = (f, f', f''), the last sample, the
-  initialisation's bookkeeping).
+  initialisation's bookkeeping, the resolution learnt).
+
+**L following the resolution** (``PARAMS_DTYPE.follow_resolution``, the wheel angles' default):
+each channel notes the smallest non-zero change between consecutive samples (an encoder's
+step; for exact angles, a tiny one at the first slow roll) and steps with
+`followed_lipschitz` of it instead of its given L, which is then the floor. The same samples
+in the same order give the same L live and offline, at the same stamp.
 
 `levant_update` is one stamp of `differentiator.LevantDifferentiator` (every fault rule and
 counter); the per-channel steps `euler_step`, `implicit_step`, `first_order_euler_step`,
@@ -71,14 +77,17 @@ from vd_observer_node.kernel._jit import jit
 __all__ = [
     'CHANNEL_DTYPE',
     'DISCRETIZATIONS',
+    'FOLLOW_MAX_RATIO',
     'INIT_POLICIES',
     'INPUT_DERIVATIVES',
     'PARAMS_DTYPE',
+    'RESOLUTION_REFERENCE',
     'STATE_DTYPE',
     'LevantParts',
     'euler_step',
     'first_order_euler_step',
     'first_order_implicit_step',
+    'followed_lipschitz',
     'implicit_step',
     'levant_reset',
     'levant_step',
@@ -113,7 +122,7 @@ PARAMS_DTYPE: Final = np.dtype(
     [
         ('l0', 'f8'), ('l1', 'f8'), ('l2', 'f8'), ('k0', 'f8'), ('k1', 'f8'), ('k2', 'f8'),
         ('discretization', 'i8'), ('init', 'i8'), ('max_gap', 'f8'), ('init_baseline', 'f8'),
-        ('max_jump_back', 'f8'), ('input_derivative', 'i8'),
+        ('max_jump_back', 'f8'), ('input_derivative', 'i8'), ('follow_resolution', 'b1'),
     ],
     align=True,
 )  # fmt: skip
@@ -127,12 +136,25 @@ STATE_DTYPE: Final = np.dtype(
     align=True,
 )
 #: One channel's memory: the estimates z = (f, f', f''), the sample at the current stamp
-#: (nan where missing; the explicit steps correct with it), initialised or not, and the first
-#: sample (stamp [s], value) of a 'finite_difference' initialisation (nan: none yet).
+#: (nan where missing; the explicit steps correct with it), initialised or not, the first
+#: sample (stamp [s], value) of a 'finite_difference' initialisation (nan: none yet), and,
+#: where L follows the resolution, the smallest non-zero change between consecutive samples
+#: seen so far [unit] (0: none yet) and the L it gives [unit / s^3] (0: the floor).
 CHANNEL_DTYPE: Final = np.dtype(
-    [('z', 'f8', (3,)), ('f_last', 'f8'), ('active', 'b1'), ('pend_t', 'f8'), ('pend_f', 'f8')],
+    [
+        ('z', 'f8', (3,)), ('f_last', 'f8'), ('active', 'b1'), ('pend_t', 'f8'), ('pend_f', 'f8'),
+        ('resolution', 'f8'), ('lipschitz', 'f8'),
+    ],
     align=True,
-)
+)  # fmt: skip
+#: [rad] the resolution the wheel angles' L floor (`ObserverConfig.wheel_lipschitz`, 300) was
+#: chosen for: a 96 counts/rev encoder; finer samples raise L (`followed_lipschitz`)
+RESOLUTION_REFERENCE: Final = 2.0 * math.pi / 96.0
+#: the most a fine resolution raises L above its floor
+FOLLOW_MAX_RATIO: Final = 10.0
+# a resolution within this of the reference keeps the floor bit for bit (a 96-count encoder's
+# steps differ from 2 pi / 96 in the last bits)
+_FOLLOW_SLACK: Final = 1e-6
 
 
 def new_channels(n: int) -> np.recarray[tuple[int], np.dtype[np.record]]:
@@ -364,8 +386,51 @@ def levant_step(
 
 
 @jit
+def followed_lipschitz(floor: float, resolution: float) -> float:
+    """L for samples of this resolution: the floor times sqrt(reference / resolution), at
+    most `FOLLOW_MAX_RATIO` times the floor, never below it.
+
+    With measurement noise of amplitude eps, the differentiator's error in f' grows as
+    L^(1/3) eps^(2/3) (Levant 2003), while too small an L leaves it behind wherever |f'''|
+    exceeds L (a torque step, a gear shift); the sum is smallest for L ~ eps^(-1/2). The
+    quantisation step of an encoder is that eps; `RESOLUTION_REFERENCE` and the floor are the
+    96-count encoder and the L tuned for it. Measured on paper_table1 at 1 kHz (docs/
+    estimation.md, "The wheel L follows the resolution"): the omega-optimal L is 300, about
+    1000 and about 3000 for 96, 1024 and 8192 counts/rev, as this law gives; ideal angles
+    take the cap.
+
+    Args:
+        floor: L without a finer resolution [unit / s^3], > 0.
+        resolution: smallest non-zero change between consecutive samples [unit]; <= 0 or
+            nan: unknown (the floor).
+
+    Returns:
+        [unit / s^3].
+    """
+    if not resolution > 0.0:
+        return floor
+    ratio = math.sqrt(RESOLUTION_REFERENCE / resolution)
+    if ratio <= 1.0 + _FOLLOW_SLACK:
+        return floor
+    return floor * min(ratio, FOLLOW_MAX_RATIO)
+
+
+@jit
+def _follow_resolution(lip: FloatArray, channels: np.recarray, sample: FloatArray) -> None:
+    """Note each channel's change since its last sample; a smaller non-zero one than seen
+    so far sets the channel's resolution and the L it follows (`followed_lipschitz`)."""
+    for i in range(channels.shape[0]):
+        c = channels[i]
+        step = abs(sample[i] - c.f_last)  # nan where either sample is missing
+        if step > 0.0 and (c.resolution == 0.0 or step < c.resolution):
+            c.resolution = step
+            c.lipschitz = followed_lipschitz(lip[i], step)
+
+
+@jit
 def levant_reset(p: np.record, s: np.record, channels: np.recarray) -> None:
-    """Forget all history (the fault counters stay).
+    """Forget all history (the fault counters stay, and so does the resolution each channel
+    learnt: a property of the sensor, not of the drive).
 
     Args:
         p: `PARAMS_DTYPE` record.
@@ -503,6 +568,9 @@ def levant_update(
     else:
         tau = t - s.t
         implicit = p.discretization == _IMPLICIT
+        follow = p.follow_resolution
+        if follow:
+            _follow_resolution(lip, channels, sample)
         for i in range(n):
             c = channels[i]
             if not c.active:
@@ -511,7 +579,8 @@ def levant_update(
             # the explicit schemes correct with the sample at the start of the step
             f = sample[i] if implicit else c.f_last
             if math.isfinite(f):
-                z0, z1, z2 = levant_step(p, z, f, tau, lip[i])
+                lip_i = c.lipschitz if follow and c.lipschitz > 0.0 else lip[i]
+                z0, z1, z2 = levant_step(p, z, f, tau, lip_i)
             else:  # no sample: the open-loop Taylor prediction
                 z0 = z[0] + tau * z[1] + 0.5 * (tau * tau) * z[2]
                 z1 = z[1] + tau * z[2]

@@ -54,6 +54,7 @@ class ObserverConfig:
         gains: Levant gains (paper order l0, l1, l2), shared by both observers.
         wheel_lipschitz: L for the wheel angles, bound on |d^3 theta/dt^3| = |omega_ddot|
             [rad/s^3]. Larger tracks torque steps faster, smaller rejects encoder noise.
+            With `follow_resolution` it is the floor, chosen for a 96 counts/rev encoder.
         speed_lipschitz: L for the body speed, bound on |d^3 v/dt^3| [m/s^4].
         discretization: one of `differentiator.DISCRETIZATIONS`.
         init: one of `differentiator.INIT_POLICIES`.
@@ -65,6 +66,12 @@ class ObserverConfig:
         wheel_input: one of `WHEEL_INPUTS`: 'angle' runs the second-order differentiator on
             the wheel angles, 'speed' the first-order one on the wheel speeds (same
             wheel_lipschitz: it bounds |d^2 omega/dt^2| either way).
+        follow_resolution: with wheel angles, each wheel's L rises above
+            ``wheel_lipschitz`` as its angles show a finer resolution than a 96 counts/rev
+            encoder: times sqrt(2 pi / 96 / resolution), at most times 10, the resolution
+            being the smallest non-zero change between consecutive angles seen so far
+            (`levant_step.followed_lipschitz`; exact angles take the cap). False: L is
+            ``wheel_lipschitz`` throughout. Wheel speeds keep ``wheel_lipschitz``.
     """
 
     gains: LevantGains = field(default_factory=lambda: DEFAULT_GAINS)
@@ -75,6 +82,7 @@ class ObserverConfig:
     max_gap: float = 0.5
     init_baseline: float = 0.05
     wheel_input: str = 'angle'
+    follow_resolution: bool = True
 
     def __post_init__(self) -> None:
         if self.wheel_input not in WHEEL_INPUTS:
@@ -94,14 +102,16 @@ class ObserverConfig:
             if not (math.isfinite(value) and value > 0.0):
                 raise ConfigurationError(f'{name} must be finite and > 0, got {value}')
 
-    def differentiator(self) -> DifferentiatorSettings:
-        """The settings every observer's differentiator shares (all but L and channels)."""
+    def differentiator(self, *, wheels: bool = False) -> DifferentiatorSettings:
+        """The settings of an observer's differentiator (all but L and channels): the wheels'
+        (`wheels`) follow their angles' resolution where `follow_resolution` says so."""
         return DifferentiatorSettings(
             gains=self.gains,
             discretization=self.discretization,
             init=self.init,
             max_gap=self.max_gap,
             init_baseline=self.init_baseline,
+            follow_resolution=wheels and self.follow_resolution and self.wheel_input == 'angle',
         )
 
     @classmethod
@@ -156,6 +166,8 @@ class _DifferentiatorObserver:
 
     #: signals differentiated together (4 wheels, or the 1 body speed)
     _channels: ClassVar[int]
+    #: the wheel observer (its L may follow the resolution, `ObserverConfig.differentiator`)
+    _wheels: ClassVar[bool] = False
 
     @staticmethod
     def _lipschitz(config: ObserverConfig) -> float:
@@ -173,7 +185,7 @@ class _DifferentiatorObserver:
         self.differentiator = LevantDifferentiator(
             self._lipschitz(config),
             n_channels=self._channels,
-            settings=config.differentiator(),
+            settings=config.differentiator(wheels=self._wheels),
             input_derivative=self._input_derivative(config),
         )
 
@@ -192,6 +204,7 @@ class WheelObserver(_DifferentiatorObserver):
     """Four-wheel Levant differentiator on the wheel angles (or speeds, `wheel_input`)."""
 
     _channels = 4
+    _wheels = True
     last: WheelState | None = None
 
     @staticmethod

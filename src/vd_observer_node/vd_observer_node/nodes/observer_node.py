@@ -50,7 +50,12 @@ from vd_observer_node.nodes.node_params import (
     take_input_mapping,
     undeclared_inputs,
 )
-from vd_observer_node.nodes.raw_io import Encoders, InputWatch, merge_status
+from vd_observer_node.nodes.raw_io import (
+    Encoders,
+    InputWatch,
+    merge_status,
+    wheel_lipschitz_value,
+)
 from vd_observer_node.situation.chain_settings import chain_settings, parameter_sections
 
 __all__ = ['ObserverNode', 'main']
@@ -110,10 +115,12 @@ class ObserverNode(Node):
             'unfit': 0,
         }
         self.create_timer(1.0, self.publish_diagnostics)
+        follows = self.wheels.differentiator.params.follow_resolution
         self.get_logger().info(
             f'observer ready: {self.config.discretization} '
-            f'discretization, L_wheel={self.config.wheel_lipschitz:g}, '
-            f'L_speed={self.config.speed_lipschitz:g}'
+            f'discretization, L_wheel={self.config.wheel_lipschitz:g}'
+            + (" (rises with the angles' resolution)" if follows else '')
+            + f', L_speed={self.config.speed_lipschitz:g}'
             + (f', inputs from {mapping.source}' if mapping.source else '')
         )
 
@@ -188,6 +195,7 @@ class ObserverNode(Node):
             **self.counts,
             'rejected_wheel_stamps': self.wheels.rejected_count,
             'rejected_speed_stamps': self.speed.rejected_count,
+            'wheel_lipschitz_in_use': wheel_lipschitz_value(self.wheels.differentiator),
             **report.counts,
             **watch_values,
         }

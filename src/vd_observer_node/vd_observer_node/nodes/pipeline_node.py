@@ -100,6 +100,7 @@ from vd_observer_node.nodes.raw_io import (
     offset_values,
     queued_by_topic,
     radius_values,
+    wheel_lipschitz_value,
 )
 from vd_observer_node.situation.chain_settings import chain_settings, parameter_sections
 
@@ -499,6 +500,7 @@ class PipelineNode(Node):
             }
         values = {
             'torque_source': self.torque_source,
+            'wheel_lipschitz_in_use': wheel_lipschitz_value(self.chain.parts.wheels),
             **({'situation': self._situation_off} if self._situation_off is not None else {}),
             **self.counts,
             **self.aligner.counts(),

@@ -24,6 +24,7 @@ from vd_common.settings_log import settings_line
 from vd_observer_node.bag.cdr_message import AlertsCodec, MessageCodec
 from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.estimation.alignment import LatestAligner, StampAligner
+from vd_observer_node.estimation.differentiator import LevantDifferentiator
 from vd_observer_node.estimation.estimator import (
     MASS_MESSAGE_FIELDS,
     RADIUS_MESSAGE_FIELDS,
@@ -59,7 +60,14 @@ __all__ = [
     'offset_values',
     'queued_by_topic',
     'radius_values',
+    'wheel_lipschitz_value',
 ]
+
+
+def wheel_lipschitz_value(wheels: LevantDifferentiator) -> str:
+    """The diagnostics value of the L each wheel steps with now [rad/s^3], FL FR RL RR (it
+    rises above ``wheel_lipschitz`` with the angles' resolution, `ObserverConfig`)."""
+    return ' '.join(f'{value:.4g}' for value in wheels.lipschitz_in_use)
 
 
 def mass_values(est: Estimates) -> list[float | bool]:
