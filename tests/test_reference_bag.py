@@ -26,6 +26,7 @@ from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.bag.typestore import message_definition
 from vd_observer_node.estimation.drivetrain import TORQUE_MEASURED
 from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.situation.chain_settings import chain_settings
 from vd_observer_node.tools.replay import replay_bag
 
@@ -49,8 +50,14 @@ def test_reference_bag_is_present_and_small() -> None:
 def test_offline_replay_reproduces_the_live_estimates(tmp_path: Path) -> None:
     out = tmp_path / 'replayed'
     # the live nodes that recorded it ran with slope_filter_tau 0.1 s, then the default at
-    # every rate; left unset, the replay would follow the bag's 100 Hz (rate_settings)
-    settings = replace(chain_settings(), estimator=EstimatorConfig(slope_filter_tau=0.1))
+    # every rate; left unset, the replay would follow the bag's 100 Hz (rate_settings). They
+    # ran with the wheel L fixed at 300, before it followed the angles' resolution (exact
+    # angles here: the replay's default would raise it to 3000)
+    settings = replace(
+        chain_settings(),
+        observer=ObserverConfig(follow_resolution=False),
+        estimator=EstimatorConfig(slope_filter_tau=0.1),
+    )
     replay_bag(BAG, out, settings, progress=False)
     live, offline = slopes_by_stamp(BAG), slopes_by_stamp(out)
     sensors = sum(1 for _ in BagReader(BAG).raw_messages([SENSORS_WHEEL_ANGLES]))
