@@ -48,7 +48,7 @@ from vd_observer_node.estimation.cascade import (  # noqa: E402
 )
 from vd_observer_node.estimation.drivetrain import Drivetrain  # noqa: E402
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
-from vd_observer_node.estimation.imu_grade import imu_grade_config  # noqa: E402
+from vd_observer_node.estimation.imu_settings import imu_grade_config  # noqa: E402
 from vd_observer_node.estimation.observer import ObserverConfig  # noqa: E402
 from vd_observer_node.estimation.vehicle import EstimatorVehicle, load_estimator_vehicle  # noqa: E402
 

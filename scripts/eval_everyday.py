@@ -57,7 +57,7 @@ from vd_observer_node.estimation.cascade import (  # noqa: E402
     run_cascade,
 )
 from vd_observer_node.estimation.estimator import EstimatorConfig  # noqa: E402
-from vd_observer_node.estimation.imu_grade import ImuGradeConfig, imu_grade_config  # noqa: E402
+from vd_observer_node.estimation.imu_settings import ImuGradeConfig, imu_grade_config  # noqa: E402
 from vd_observer_node.estimation.vehicle import EstimatorVehicle  # noqa: E402
 from vd_sim_node.vehicle.everyday import EverydaySettings, everyday_scenario  # noqa: E402
 from vd_sim_node.vehicle.simulation import SimResult, simulate  # noqa: E402

@@ -21,7 +21,7 @@ from vd_observer_node.estimation.cascade import (
     CascadeSettings,
     run_cascade,
 )
-from vd_observer_node.estimation.imu_grade import ImuGradeConfig, imu_grade_config
+from vd_observer_node.estimation.imu_settings import ImuGradeConfig, imu_grade_config
 from vd_sim_node.vehicle.everyday import EverydaySettings, everyday_scenario
 from vd_sim_node.vehicle.simulation import SimResult, simulate
 

@@ -25,10 +25,9 @@ from vd_observer_node.estimation.cascade import (
     run_cascade,
 )
 from vd_observer_node.estimation.estimator import EstimatorConfig
-from vd_observer_node.estimation.imu_grade import (
+from vd_observer_node.estimation.imu_grade import SOURCE_FORCE, SOURCE_IMU
+from vd_observer_node.estimation.imu_settings import (
     REFERENCE_RATE_FOLLOWING,
-    SOURCE_FORCE,
-    SOURCE_IMU,
     ImuGradeConfig,
     imu_grade_config,
 )

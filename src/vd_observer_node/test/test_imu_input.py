@@ -11,7 +11,8 @@ import pytest
 from vd_common.topics import ESTIMATES_SLOPE
 from vd_observer_node.bag.errors import ReplayInputError
 from vd_observer_node.bag.writer import BagWriter
-from vd_observer_node.estimation.imu_grade import ImuGrade, ImuGradeConfig, tau_for_rate
+from vd_observer_node.estimation.imu_grade import ImuGrade
+from vd_observer_node.estimation.imu_settings import ImuGradeConfig, tau_for_rate
 from vd_observer_node.estimation.rate_settings import slope_filter_tau_for_rate
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import mapping_from_dict

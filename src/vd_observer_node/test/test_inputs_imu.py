@@ -14,7 +14,7 @@ from vd_observer_node.bag.reader import TopicArrays
 from vd_observer_node.bag.typestore import message_class, serialize
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.body_pitch import BodyPitch
-from vd_observer_node.estimation.imu_grade import ImuGradeConfig, imu_grade_config
+from vd_observer_node.estimation.imu_settings import ImuGradeConfig, imu_grade_config
 from vd_observer_node.inputs.decode import InputDecoder, decode_input
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import default_mapping, mapping_from_dict

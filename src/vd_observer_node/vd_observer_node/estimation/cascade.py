@@ -38,13 +38,8 @@ from vd_observer_node.estimation.drivetrain import (
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.estimator_step import ESTIMATES, ESTIMATOR_INPUT
 from vd_observer_node.estimation.faults import ENGINE_FAULTS, FaultCounter
-from vd_observer_node.estimation.imu_grade import (
-    GRADE_INPUT,
-    GRADE_OUT,
-    SOURCE_FORCE,
-    ImuGrade,
-    ImuGradeConfig,
-)
+from vd_observer_node.estimation.imu_grade import GRADE_INPUT, GRADE_OUT, SOURCE_FORCE, ImuGrade
+from vd_observer_node.estimation.imu_settings import ImuGradeConfig
 from vd_observer_node.estimation.observer import WHEEL_INPUTS, ObserverConfig
 from vd_observer_node.estimation.torque_offset import (
     OFFSET_ESTIMATE_DTYPE,

@@ -137,7 +137,7 @@ from vd_common.topics import (
 
 from vd_observer_node.estimation.alignment import ALIGNMENTS
 from vd_observer_node.estimation.drivetrain import TORQUE_SOURCES
-from vd_observer_node.estimation.imu_grade import VEHICLE_FIELDS, ImuGradeConfig
+from vd_observer_node.estimation.imu_settings import VEHICLE_FIELDS, ImuGradeConfig
 from vd_observer_node.inputs.errors import MappingError
 
 __all__ = [
@@ -281,7 +281,7 @@ class InputSpec:
         gear_offset: ``engine_torque`` only: added to the logged gear.
         signal: ``brake`` only: 'pressure' or 'switch'.
         fusion: ``imu`` only: settings of the IMU fusion for this sensor (field of
-            `estimation.imu_grade.ImuGradeConfig`, value), e.g. a vibrating phone-class
+            `estimation.imu_settings.ImuGradeConfig`, value), e.g. a vibrating phone-class
             sensor's ``lag_compensation: false``.
     """
 

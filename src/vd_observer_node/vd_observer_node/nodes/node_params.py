@@ -42,7 +42,7 @@ from vd_observer_node.estimation.estimator import (
     TORQUE_OFFSET_PREFIX,
     EstimatorConfig,
 )
-from vd_observer_node.estimation.imu_grade import VEHICLE_FIELDS, ImuGradeConfig
+from vd_observer_node.estimation.imu_settings import VEHICLE_FIELDS, ImuGradeConfig
 from vd_observer_node.estimation.mass_grade import MassGradeConfig
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.rolling_radius import RollingRadiusConfig

@@ -20,7 +20,7 @@ from vd_observer_node.estimation.cascade import CascadeSettings
 from vd_observer_node.estimation.differentiator import LevantGains
 from vd_observer_node.estimation.drivetrain import Drivetrain
 from vd_observer_node.estimation.estimator import EstimatorConfig
-from vd_observer_node.estimation.imu_grade import imu_grade_config
+from vd_observer_node.estimation.imu_settings import imu_grade_config
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import (
     EstimatorVehicle,

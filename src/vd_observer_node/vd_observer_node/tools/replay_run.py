@@ -38,10 +38,8 @@ from vd_observer_node.estimation.cascade import (
 from vd_observer_node.estimation.drivetrain import (
     TORQUE_SOURCES,
 )
-from vd_observer_node.estimation.imu_grade import (
-    RATE_FOLLOWING,
-)
 from vd_observer_node.estimation.imu_regression import bias_pitch_deg
+from vd_observer_node.estimation.imu_settings import RATE_FOLLOWING
 from vd_observer_node.estimation.rate_settings import (
     SPEED_STAMPS_KEPT,
     RateMeter,
@@ -336,7 +334,7 @@ class ReplayRun:
         imu_config = self.settings.imu
         if self.mapping.imu is not None and imu_config is not None:
             # the fusion's grade takes the speed's derivative as the slope filter does
-            # (`imu_grade.tau_for_rate`); a fusion made later starts with the fixed values
+            # (`imu_settings.tau_for_rate`); a fusion made later starts with the fixed values
             imu_config, fixed = imu_config.at_rate(self.input_rate_hz)
             self.settings = replace(self.settings, imu=imu_config)
             self.rate_settings.update({f'{IMU_FUSION_PREFIX}{k}': v for k, v in fixed.items()})
