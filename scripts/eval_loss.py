@@ -13,9 +13,13 @@ Each is replayed (compiled cascade) with the default alignment of vd's own topic
 ``latest`` (``--max-age``); printed per case: wheel stamps in the bag, stamps estimated, the
 share of those whose slope is valid, and slope RMS [deg] against the truth over the
 evaluation mask of eval_estimators.py, where the estimate is valid, with its ratio to the
-lossless run. Asserts nothing.
+lossless run. Then ``random30`` alone on other drives and sensor seeds (``--drives``,
+``--drive-seeds``, ``--drive-duration``; `latest` alignment): slope RMS with and without the
+loss and their ratio (issue 38's goal: <= 1.2x). Asserts nothing.
 
     python scripts/eval_loss.py [--duration 30] [--max-age 0.05] [--seed 1]
+        [--drives paper_table1,braking_low_mu,mass_drive] [--drive-seeds 3,11,12]
+        [--drive-duration 60]
 """
 
 from __future__ import annotations
@@ -94,6 +98,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--duration', type=float, default=30.0, help='[s] of paper_table1')
     parser.add_argument('--max-age', type=float, default=0.05, help="'latest' max_age [s]")
     parser.add_argument('--seed', type=int, default=1, help='seed of the random loss')
+    parser.add_argument('--drives', default='paper_table1,braking_low_mu,mass_drive')
+    parser.add_argument('--drive-seeds', default='3,11,12', help='sensor noise seeds')
+    parser.add_argument('--drive-duration', type=float, default=60.0, help='[s] at most')
     args = parser.parse_args(argv)
 
     scenario = load_scenario(SCENARIO_FILE)
@@ -143,7 +150,47 @@ def main(argv: list[str] | None = None) -> int:
             f'| {case} | {name} | {wheels} | {estimated} ({share:.0f} %)'
             f' | {valid_share:.1f} % | {slope:.3f}° | {ratio:.2f}× |'
         )
+    drives = [d for d in args.drives.split(',') if d]
+    seeds = [int(k) for k in args.drive_seeds.split(',') if k]
+    if drives and seeds:
+        random_loss_on_drives(
+            drives, seeds, args.drive_duration, alignments[f'latest {args.max_age:g} s']
+        )
     return 0
+
+
+def random_loss_on_drives(
+    drives: list[str], seeds: list[int], duration: float, mapping: Any
+) -> None:
+    """Print slope RMS without and with 30 % random loss per topic, and their ratio, on each
+    drive (a scenario of vd_sim_node's config, cut to `duration` [s]) and sensor seed."""
+    scenarios = SCENARIO_FILE.parent
+    print('\n| drive | seed | lossless | 30 % lost at random | ratio |')
+    print('|---|---|---|---|---|')
+    for drive in drives:
+        scenario = load_scenario(scenarios / f'{drive}.yaml')
+        for seed in seeds:
+            sensors = dataclasses.replace(
+                scenario.sensors, encoder_counts_per_rev=96, speed_noise_std=0.05, seed=seed
+            )
+            run = dataclasses.replace(
+                scenario, duration=min(duration, scenario.duration), sensors=sensors
+            )
+            sim = simulate(load_vehicle(VEHICLE_FILE), run, rate_hz=RATE_HZ)
+            mask = evaluation_mask(sim.t, sim.events)
+            rng = np.random.default_rng(seed)
+            slopes = []
+            with tempfile.TemporaryDirectory() as tmp:
+                for case in ('none', 'random30'):
+                    bag, out = Path(tmp) / case, Path(tmp) / f'{case}-out'
+                    lossy_bag(bag, sim, keep_masks(sim.t.shape[0], case, rng))
+                    replay_bag(bag, out, progress=False, mapping=mapping)
+                    slopes.append(slope_figure(out, sim, mask)[2])
+            print(
+                f'| {drive} | {seed} | {slopes[0]:.3f}° | {slopes[1]:.3f}° |'
+                f' {slopes[1] / slopes[0]:.2f}× |',
+                flush=True,
+            )
 
 
 if __name__ == '__main__':

@@ -38,7 +38,7 @@ at its latest value: it is the default where an input is headerless. On a lossle
 of vd's own sensors, stamped together, the two give the same estimates; when messages are
 lost, ``exact`` loses every stamp that misses
 any input (30 % random loss per topic: half the wheel stamps estimated, slope RMS 1.47x the
-lossless one), ``latest`` estimates them all (1.16x; scripts/eval_loss.py).
+lossless one), ``latest`` estimates them all (1.03x; scripts/eval_loss.py).
 
 ``torque_source`` (``vd replay``, ``vd report`` and ``pipeline_node``; the other live nodes
 read measured torques; a mapping file's key, not a node parameter): where the wheel
