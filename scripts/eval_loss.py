@@ -103,16 +103,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--drive-duration', type=float, default=60.0, help='[s] at most')
     args = parser.parse_args(argv)
 
-    scenario = load_scenario(SCENARIO_FILE)
-    scenario = dataclasses.replace(
-        scenario,
-        duration=args.duration,
-        sensors=dataclasses.replace(
-            scenario.sensors, encoder_counts_per_rev=96, speed_noise_std=0.05
-        ),
-    )
     print(f'simulating paper_table1, {args.duration:g} s at {RATE_HZ:g} Hz ...', flush=True)
-    sim = simulate(load_vehicle(VEHICLE_FILE), scenario, rate_hz=RATE_HZ)
+    vehicle = load_vehicle(VEHICLE_FILE)
+    sim = noisy_drive(vehicle, load_scenario(SCENARIO_FILE), args.duration)
     mask = evaluation_mask(sim.t, sim.events)
     n = sim.t.shape[0]
     alignments = {
@@ -154,13 +147,25 @@ def main(argv: list[str] | None = None) -> int:
     seeds = [int(k) for k in args.drive_seeds.split(',') if k]
     if drives and seeds:
         random_loss_on_drives(
-            drives, seeds, args.drive_duration, alignments[f'latest {args.max_age:g} s']
+            vehicle, drives, seeds, args.drive_duration, alignments[f'latest {args.max_age:g} s']
         )
     return 0
 
 
+def noisy_drive(vehicle: Any, scenario: Any, duration: float, seed: int | None = None) -> Any:
+    """`scenario` simulated for `duration` [s] at `RATE_HZ` with the 96 counts/rev encoder
+    and 0.05 m/s speed noise (sensor seed `seed`; None: the scenario's)."""
+    sensors = dataclasses.replace(
+        scenario.sensors, encoder_counts_per_rev=96, speed_noise_std=0.05
+    )
+    if seed is not None:
+        sensors = dataclasses.replace(sensors, seed=seed)
+    run = dataclasses.replace(scenario, duration=duration, sensors=sensors)
+    return simulate(vehicle, run, rate_hz=RATE_HZ)
+
+
 def random_loss_on_drives(
-    drives: list[str], seeds: list[int], duration: float, mapping: Any
+    vehicle: Any, drives: list[str], seeds: list[int], duration: float, mapping: Any
 ) -> None:
     """Print slope RMS without and with 30 % random loss per topic, and their ratio, on each
     drive (a scenario of vd_sim_node's config, cut to `duration` [s]) and sensor seed."""
@@ -170,13 +175,7 @@ def random_loss_on_drives(
     for drive in drives:
         scenario = load_scenario(scenarios / f'{drive}.yaml')
         for seed in seeds:
-            sensors = dataclasses.replace(
-                scenario.sensors, encoder_counts_per_rev=96, speed_noise_std=0.05, seed=seed
-            )
-            run = dataclasses.replace(
-                scenario, duration=min(duration, scenario.duration), sensors=sensors
-            )
-            sim = simulate(load_vehicle(VEHICLE_FILE), run, rate_hz=RATE_HZ)
+            sim = noisy_drive(vehicle, scenario, min(duration, scenario.duration), seed)
             mask = evaluation_mask(sim.t, sim.events)
             rng = np.random.default_rng(seed)
             slopes = []

@@ -32,6 +32,7 @@ from vd_observer_node.estimation.levant_step import (
     PARAMS_DTYPE,
     STATE_DTYPE,
     LevantParts,
+    followed_lipschitz,
     levant_reset,
     levant_update,
     levant_update_arrays,
@@ -294,10 +295,14 @@ class LevantDifferentiator:
     def lipschitz_in_use(self) -> FloatArray:
         """Shape (n,), the L each channel steps with now [unit/s^3]: `lipschitz`, or where it
         follows the resolution, what the resolution seen so far gives."""
-        raised = self.channels.lipschitz
         if not self.params.follow_resolution:
             return self.lipschitz.copy()
-        return np.where(raised > 0.0, raised, self.lipschitz)
+        # the law the step used, on what it learnt (the step keeps it per channel only so as
+        # not to take a square root per sample)
+        return np.array([
+            followed_lipschitz(floor, resolution)
+            for floor, resolution in zip(self.lipschitz, self.resolution, strict=True)
+        ])  # fmt: skip
 
     @property
     def resolution(self) -> FloatArray:
