@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
 """Detection delay, false alarms and friction-potential error of the alert core.
 
-Simulates each scenario (default: launch_low_mu, braking_low_mu_hard, paper_table1) with ideal
-sensors and with a 96 counts/rev encoder plus 0.05 m/s body-speed noise, runs the observer /
-estimator cascade (`run_cascade`), then `SituationMonitor` (fast wheel observer, friction
-potential, alerts) per stamp exactly as the alerts node and `vd replay` do, and prints against
-the simulator's truth (definitions in docs/alerts.md):
+Simulates each scenario (default: launch_low_mu, braking_low_mu_hard, braking_low_mu,
+paper_table1) with ideal sensors and with a 96 counts/rev encoder plus 0.05 m/s body-speed
+noise, runs the observer / estimator cascade (`run_cascade`), then `SituationMonitor` (fast
+wheel observer, friction potential, alerts) per stamp exactly as the alerts node and
+`vd replay` do, and prints against the simulator's truth (definitions in docs/alerts.md):
 
 * per (kind, wheel) with a true onset: true onset, detection stamp (alert becomes active),
   delay = detection - true onset (goal <= 100 ms), and the reported onset stamp ("already
@@ -20,7 +20,7 @@ and the metrics (``vd_observer_node.tools.report.alerts``) are the ones ``vd rep
 bag.
 
 Usage:
-    python scripts/eval_alerts.py [--scenarios launch_low_mu,braking_low_mu_hard,paper_table1]
+    python scripts/eval_alerts.py [--scenarios launch_low_mu,braking_low_mu,paper_table1]
         [--cases ideal,noisy]
 """
 
@@ -197,7 +197,9 @@ def report_mu_max(sim: Any, det: dict[str, np.ndarray]) -> None:
 def main() -> None:
     """Parse arguments, simulate, estimate, detect, print figures."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--scenarios', default='launch_low_mu,braking_low_mu_hard,paper_table1')
+    parser.add_argument(
+        '--scenarios', default='launch_low_mu,braking_low_mu_hard,braking_low_mu,paper_table1'
+    )
     parser.add_argument('--cases', default='ideal,noisy')
     args = parser.parse_args()
 

@@ -300,3 +300,33 @@ def test_confidence_decays_without_fresh_evidence() -> None:
     assert est.last.confidence[0] == pytest.approx(undecayed.confidence[0] * math.exp(-age / 2.0))
     assert est.last.road_class[0] == ROAD_UNKNOWN
     assert est.last.mu_max[0] > 0.75  # most of the way back to the prior dry road (1.03)
+
+
+@pytest.mark.parametrize('second_road', [0.3, 1.0])
+def test_data_no_curve_explains_are_not_held(second_road: float) -> None:
+    """A snow sweep, then 0.1 s on a second road, then 1 s with nothing usable.
+
+    The same road again: the confidence decays over the hold time (5 s) alone and the snow
+    class is kept. A dry road: the forgetting window holds both roads when the samples stop
+    (the braking_low_mu patch's exit, where the car slows below the usable slip), no curve
+    explains them (misfit about 17, against below 0.01 for one road), and within the second
+    the class is UNKNOWN and mu_max back near the prior dry road. Before, a confident 0.46
+    (snow) was held for seconds on the dry road.
+    """
+    est = FrictionPotentialEstimator(curves(), STATIC)
+    rng = np.random.default_rng(13)
+    slips = sweep(600, 0.1, rng)
+    t = feed(est, 0.0, slips, true_mu(slips, 0.3))
+    burst = np.linspace(0.0, 0.08, 100) + rng.normal(0.0, 0.001, 100)
+    t = feed(est, t, burst, true_mu(burst, second_road))
+    assert est.last.confidence[0] >= 0.95  # both: confident while the samples come
+    assert est.last.road_class[0] == ROAD_SNOW
+    for k in range(int(RATE)):
+        est.update(t + k / RATE, np.zeros(4), SPEED, np.zeros(4), np.zeros(4, bool), np.ones(4))
+    if second_road == 0.3:
+        assert est.last.confidence[0] == pytest.approx(math.exp(-1.0 / 5.0), rel=1e-3)
+        assert est.last.road_class[0] == ROAD_SNOW
+    else:
+        assert est.last.confidence[0] < 0.1  # measured 0.03
+        assert est.last.road_class[0] == ROAD_UNKNOWN
+        assert est.last.mu_max[0] > 0.9  # measured 1.00 (prior 1.03); the truth is 1.05

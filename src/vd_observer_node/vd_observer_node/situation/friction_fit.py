@@ -262,7 +262,9 @@ def fit_solution(
     direction, and the confidence: the least extra cost of a scale whose peak is more than
     ``confidence_margin`` from the best one's, per sample times ``evidence_samples``, mapped
     linearly from ``evidence_low`` (0) to ``evidence_high`` (1), decayed with the time since
-    the axle's last usable sample (``evidence_hold_time``). Below ``class_min_confidence``
+    the axle's last usable sample over ``evidence_hold_time`` divided by the misfit (the mean
+    weighted squared residual per sample at the best scale, when above 1). Below
+    ``class_min_confidence``
     the reported scale is shrunk towards the prior road (``shrink_to_prior``): unexcited,
     every scale fits the linear part of the curve.
 
@@ -298,12 +300,18 @@ def fit_solution(
                 rival = cost[a, j]
         informed = s.count[a] > 0.0 and math.isfinite(rival)
         advantage = rival - cost[a, best] if informed else 0.0
+        # about 1 (or less: mu_noise_std is an upper bound) when one curve explains the data
+        misfit = cost[a, best] / s.count[a] if s.count[a] > 0.0 else 0.0
         evidence = advantage / max(s.count[a], 1.0) * p.evidence_samples
         conf = (evidence - p.evidence_low) / (p.evidence_high - p.evidence_low)
         conf = min(max(conf, 0.0), 1.0) if not math.isnan(conf) else conf
         if p.evidence_hold_time > 0.0:
             age = s.t - s.last_sample[a] if math.isfinite(s.last_sample[a]) else 0.0
-            conf *= math.exp(-max(age, 0.0) / p.evidence_hold_time)
+            # the data disagree among themselves (two roads in the window, a force transient):
+            # while fresh samples come the forgetting sorts it out; once they stop, nothing
+            # will, and the estimate must not be kept for the hold time (braking_low_mu: a
+            # confident 0.52 for 3 s on the dry road after the patch, class 'wet' with noise)
+            conf *= math.exp(-max(age, 0.0) * max(misfit, 1.0) / p.evidence_hold_time)
         weight = min(max(conf / max(p.class_min_confidence, 1e-9), 0.0), 1.0)
         if p.shrink_to_prior:
             scale = weight * fitted + (1.0 - weight) * p.prior_road_scale

@@ -24,7 +24,11 @@ if the curve were right, ``mu_noise_std^2 + (d mu/d s)^2 sigma_s^2`` with
 Confidence (profile likelihood): the least extra weighted cost of any road scale whose peak
 is more than ``confidence_margin`` from the estimate, per sample times ``evidence_samples``
 (correlated samples are not independent evidence), mapped linearly from ``evidence_low``
-(0) to ``evidence_high`` (1). Below ``class_min_confidence`` the reported values are shrunk
+(0) to ``evidence_high`` (1). Once no usable sample comes, it decays with the age of the
+evidence over ``evidence_hold_time``, faster by the misfit (the mean weighted squared residual
+per sample at the best scale, about 1 or less when one road's curve explains the data): data
+that no curve explains (a road change inside the forgetting window, a force transient) are not
+a road the car can keep claiming. Below ``class_min_confidence`` the reported values are shrunk
 towards the prior road; the road class (dry / wet / snow / ice) is UNKNOWN there.
 
 The per-sample math is in `vd_observer_node.situation.friction_fit` (step functions on named
@@ -131,10 +135,13 @@ class FrictionPotentialConfig:
             evidence is the mean weighted cost advantage per sample times this. Consecutive
             samples are correlated (one observer filters them) and a small systematic model
             error summed over a thousand samples a second would otherwise become certainty.
-        evidence_hold_time: [s] the confidence decays as exp(-age / this), age = time since
-            the axle's last usable sample: a friction potential measured a kilometre back
-            says little about the road here, and a wrong estimate must not outlive its
-            evidence for minutes of cruising. 0 keeps the confidence forever.
+        evidence_hold_time: [s] the confidence decays as exp(-age * max(misfit, 1) / this),
+            age = time since the axle's last usable sample, misfit = the mean weighted
+            squared residual per sample at the best road scale: a friction potential measured
+            a kilometre back says little about the road here, a wrong estimate must not
+            outlive its evidence for minutes of cruising, and data no curve explains (two
+            roads in one forgetting window) must not outlive it for seconds. 0 keeps the
+            confidence forever.
         evidence_low: evidence at and below which the confidence is 0.
         evidence_high: evidence at and above which the confidence is 1.
         class_bounds: mu_max boundaries ice|snow, snow|wet, wet|dry [-], increasing.
