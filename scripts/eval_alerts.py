@@ -59,11 +59,13 @@ from vd_observer_node.situation.monitor import (  # noqa: E402
 )
 from vd_observer_node.tools.report.alerts import (  # noqa: E402
     AlertSettings,
-    axle_utilisation,
     evaluate_alerts,
+    truth_conditions,
+)
+from vd_observer_node.tools.report.mu_max import (  # noqa: E402
+    axle_utilisation,
     mu_max_errors,
     segments_from_road,
-    truth_conditions,
 )
 
 VEHICLE_FILE = ROOT / 'src' / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'

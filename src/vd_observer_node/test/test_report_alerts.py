@@ -26,19 +26,21 @@ from vd_observer_node.tools.report.alerts import (
     AlertSettings,
     activation_indices,
     already_active,
-    axle_utilisation,
     evaluate_alerts,
     false_alarms,
-    mu_max_errors,
     score_episodes,
-    segments_from_peaks,
-    segments_from_road,
     truth_conditions,
     truth_episodes,
 )
 from vd_observer_node.tools.report.cli import add_report_parser
 from vd_observer_node.tools.report.evaluation import evaluate
 from vd_observer_node.tools.report.load import load_bag_series
+from vd_observer_node.tools.report.mu_max import (
+    axle_utilisation,
+    mu_max_errors,
+    segments_from_peaks,
+    segments_from_road,
+)
 
 RATE = 100.0  # [Hz]
 CFG = AlertSettings()

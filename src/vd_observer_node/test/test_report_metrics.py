@@ -8,21 +8,34 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from vd_observer_node.tools.report.accumulate import ConvergenceAccumulator
 from vd_observer_node.tools.report.metrics import (
     change_times,
-    convergence_time,
-    convergence_times,
     error_stats,
     evaluation_mask,
     relative_error_stats,
     step_times,
 )
+from vd_observer_node.tools.report.results import EvaluationSettings
 
 RATE = 1000.0  # [Hz]
 
 
 def _time(duration: float) -> np.ndarray:
     return np.arange(round(duration * RATE) + 1) / RATE
+
+
+def _delays(
+    t: np.ndarray, error: np.ndarray, steps: list[float], blocks: int = 1
+) -> list[float | None]:
+    """Convergence delays [s] after `steps` of a slope error (truth 0, threshold 0.5, hold
+    1 s), the samples fed in `blocks` equal parts."""
+    acc = ConvergenceAccumulator(
+        EvaluationSettings(convergence_threshold_deg=0.5, convergence_hold_s=1.0)
+    )
+    for part in np.array_split(np.arange(t.size), blocks):
+        acc.feed(t[part], error[part], np.zeros(part.size), np.asarray(steps))
+    return [c.delay_s for c in acc.result()]
 
 
 def test_constant_offset_gives_known_rms_max_and_mean() -> None:
@@ -136,7 +149,7 @@ def test_convergence_time_of_a_decaying_error() -> None:
     # Error 2 deg decaying with tau 0.5 s after a step at 2 s: below 0.5 deg from
     # 2 + 0.5 ln(4) s on, and it stays there.
     error = np.where(t < 2.0, 0.0, 2.0 * np.exp(-(t - 2.0) / 0.5))
-    delay = convergence_time(t, error, 2.0, 10.0, 0.5, 1.0)
+    delay = _delays(t, error, [2.0])[0]
     assert delay == pytest.approx(0.5 * math.log(4.0), abs=1.5 / RATE)
 
 
@@ -145,24 +158,38 @@ def test_convergence_needs_the_error_to_stay_below_for_the_hold_time() -> None:
     error = np.full(t.size, 2.0)
     error[(t >= 3.0) & (t < 3.8)] = 0.1  # 0.8 s below: too short
     error[t >= 5.0] = 0.1  # from here on it stays
-    assert convergence_time(t, error, 2.0, 11.0, 0.5, 1.0) == pytest.approx(3.0)
+    assert _delays(t, error, [2.0])[0] == pytest.approx(3.0)
     error[(t >= 3.0) & (t < 3.8)] = 2.0
     error[(t >= 3.0) & (t < 4.2)] = 0.1  # 1.2 s below, then diverges again
-    assert convergence_time(t, error, 2.0, 11.0, 0.5, 1.0) == pytest.approx(1.0)
+    assert _delays(t, error, [2.0])[0] == pytest.approx(1.0)
 
 
 def test_convergence_not_reached_before_next_step_or_end() -> None:
     t = _time(10.0)
     error = np.where(t < 9.5, 3.0, 0.0)  # below only for the last 0.5 s
-    assert convergence_time(t, error, 2.0, 11.0, 0.5, 1.0) is None
+    assert _delays(t, error, [2.0])[0] is None
     error = np.where(t < 6.0, 3.0, 0.0)
-    delays = convergence_times(t, error, [2.0, 5.0], 0.5, 1.0)
+    delays = _delays(t, error, [2.0, 5.0])
     assert delays[0] is None  # converged only after the next step
     assert delays[1] == pytest.approx(1.0)
+
+
+@settings(max_examples=25, deadline=None)
+@given(blocks=st.integers(min_value=2, max_value=40), seed=st.integers(0, 2**16))
+def test_convergence_is_the_same_block_by_block(blocks: int, seed: int) -> None:
+    """The streamed evaluation feeds blocks, the whole-record one everything at once: a
+    stretch that goes on across blocks, and a step's window across them, give the same
+    delays (the closed-form cases above fix what they are)."""
+    rng = np.random.default_rng(seed)
+    t = _time(12.0)
+    error = np.where(rng.random(t.size) < 0.002, 3.0, 0.1)  # rare spikes break stretches
+    error[(t > 4.0) & (t < 4.5)] = 2.0
+    steps = [2.0, 4.2, 8.0]
+    assert _delays(t, error, steps, blocks) == _delays(t, error, steps)
 
 
 def test_nan_error_breaks_a_stretch() -> None:
     t = _time(6.0)
     error = np.zeros(t.size)
     error[np.searchsorted(t, 1.5)] = np.nan
-    assert convergence_time(t, error, 1.0, 7.0, 0.5, 1.0) == pytest.approx(0.501, abs=1e-9)
+    assert _delays(t, error, [1.0])[0] == pytest.approx(0.501, abs=1e-9)

@@ -20,6 +20,7 @@ The metric functions are pure array functions, shared by ``vd report`` (arrays f
 * μ_max error = estimate - true μ_max per axle and constant-road segment, (a) at samples where
   the axle's true utilisation |μ| / peak μ reached 0.5 within the last 0.5 s (from 0.1 s after
   the first such sample), (b) every sample after the first excitation. Goal |err| <= 0.1.
+  Computed in `report.mu_max`.
 
 Kinds in the order of ``vd_msgs/Alert`` (KIND_TRACTION=0, KIND_LOCK=1, KIND_LOW_FRICTION=2);
 wheels FL=0, FR=1, RL=2, RR=3; axles 0 front, 1 rear. Time in seconds.
@@ -49,17 +50,12 @@ __all__ = [
     'activation_indices',
     'alerts_section',
     'already_active',
-    'axle_utilisation',
     'channel_episodes',
     'data_conditions',
     'evaluate_alerts',
-    'evaluate_alerts_section',
     'false_alarms',
-    'mu_max_errors',
     'road_name',
     'score_episodes',
-    'segments_from_peaks',
-    'segments_from_road',
     'truth_conditions',
     'truth_episodes',
 ]
@@ -485,143 +481,6 @@ def channel_episodes(
 # -- friction potential ----------------------------------------------------------------------
 
 
-def axle_utilisation(mu: ArrayLike, peak_mu: ArrayLike) -> FloatArray:
-    """True utilisation of each axle: the larger |μ| / peak μ of its two wheels.
-
-    Args:
-        mu: shape (N, 4), [-] true μ.
-        peak_mu: shape (N, 4), [-] true peak μ (floored at 1e-6: no division by zero).
-
-    Returns:
-        Shape (N, 2) (front, rear).
-    """
-    util = np.abs(np.asarray(mu, dtype=np.float64)) / np.maximum(
-        np.asarray(peak_mu, dtype=np.float64), 1e-6
-    )
-    out: FloatArray = np.maximum(util[:, 0::2], util[:, 1::2])
-    return out
-
-
-def segments_from_road(road_mu: ArrayLike) -> IntArray:
-    """Start indices of the constant-road segments from the true road_mu (in memory)."""
-    r = np.asarray(road_mu, dtype=np.float64)
-    out: IntArray = np.concatenate([[0], np.flatnonzero(np.diff(r) != 0.0) + 1]).astype(np.int64)
-    return out
-
-
-def segments_from_peaks(axle_mu_max: ArrayLike, road_jump: float = 0.05) -> IntArray:
-    """Start indices of constant-road segments from the true μ_max of both axles (bags).
-
-    A road step scales both axles' peak by the same factor within one sample; a load step
-    moves them by a few per cent and in opposite directions. A new segment starts where both
-    axles jump by more than ``road_jump`` (relative) the same way.
-
-    Args:
-        axle_mu_max: shape (N, 2), [-] true μ_max (front, rear).
-        road_jump: relative jump threshold.
-    """
-    m = np.maximum(np.asarray(axle_mu_max, dtype=np.float64), 1e-9)
-    ratio = np.log(m[1:] / m[:-1])
-    step = math.log1p(road_jump)
-    jump = ((ratio > step).all(axis=1)) | ((ratio < -step).all(axis=1))
-    out: IntArray = np.concatenate([[0], np.flatnonzero(jump) + 1]).astype(np.int64)
-    return out
-
-
-def _recently(mask: BoolArray, t: FloatArray, window: float) -> BoolArray:
-    """shape (N,), bool: mask held at some stamp in [t - window, t]."""
-    last = np.maximum.accumulate(np.where(mask, t, -np.inf))
-    out: BoolArray = t - last <= window
-    return out
-
-
-def _mode(values: IntArray) -> int:
-    return int(np.bincount(values).argmax()) if values.size else -1
-
-
-def mu_max_errors(
-    t: ArrayLike,
-    utilisation: ArrayLike,
-    true_mu_max: ArrayLike,
-    estimate: ArrayLike,
-    segment_starts: ArrayLike,
-    *,
-    confidence: ArrayLike | None = None,
-    road_classes: tuple[ArrayLike | None, ArrayLike | None] = (None, None),
-    settings: AlertSettings | None = None,
-) -> list[MuMaxSegment]:
-    """μ_max error per axle and constant-road segment after the axle's first excitation.
-
-    Args:
-        t: shape (N,), [s].
-        utilisation: shape (N, 2), true |μ| / peak μ per axle (:func:`axle_utilisation`).
-        true_mu_max: shape (N, 2), [-].
-        estimate: shape (N, 2), [-] estimated μ_max.
-        segment_starts: start indices of the segments (first 0), increasing.
-        confidence: shape (N, 2), estimated confidence, or None.
-        road_classes: the estimated and the true road class codes, each shape (N, 2) or
-            None.
-        settings: definitions.
-
-    Returns:
-        One :class:`MuMaxSegment` per axle (front first) and segment with an excitation.
-    """
-    cfg = settings or AlertSettings()
-    tt = np.asarray(t, dtype=np.float64)
-    util = np.asarray(utilisation, dtype=np.float64)
-    truth = np.asarray(true_mu_max, dtype=np.float64)
-    est = np.asarray(estimate, dtype=np.float64)
-    starts = np.asarray(segment_starts, dtype=np.int64)
-    conf = None if confidence is None else np.asarray(confidence, dtype=np.float64)
-    klass, tclass = (None if c is None else np.asarray(c, dtype=np.int64) for c in road_classes)
-    segments = np.split(np.arange(tt.size), starts[1:])
-    out: list[MuMaxSegment] = []
-    for axle in range(2):
-        for seg in segments:
-            if seg.size == 0:
-                continue
-            excited_mask = util[seg, axle] >= cfg.excitation_ratio
-            excited = np.flatnonzero(excited_mask)
-            if excited.size == 0:
-                continue
-            idx = seg[excited[0] :]
-            t_excited = float(tt[idx[0]])
-            err = est[idx, axle] - truth[idx, axle]
-            within = np.abs(err) <= cfg.mu_max_goal
-            bad = np.flatnonzero(~within)
-            recent = _recently(excited_mask, tt[seg], cfg.excitation_window_s)
-            recent_idx = seg[recent & (tt[seg] >= t_excited + cfg.excitation_start_s)]
-            err_recent = est[recent_idx, axle] - truth[recent_idx, axle]
-            has_recent = recent_idx.size > 0
-            recent_rms = math.sqrt(float(np.mean(err_recent**2))) if has_recent else math.nan
-            out.append(
-                MuMaxSegment(
-                    axle=axle,
-                    start_index=int(seg[0]),
-                    start_s=float(tt[seg[0]]),
-                    end_s=float(tt[seg[-1]]),
-                    excited_s=t_excited,
-                    true_mu_max=float(np.mean(truth[idx, axle])),
-                    true_road_class=-1 if tclass is None else _mode(tclass[idx, axle]),
-                    recent_samples=int(recent_idx.size),
-                    recent_rms=recent_rms,
-                    recent_within_pct=(
-                        100.0 * float(np.mean(np.abs(err_recent) <= cfg.mu_max_goal))
-                        if has_recent
-                        else math.nan
-                    ),
-                    estimate_mean=float(np.mean(est[idx, axle])),
-                    max_abs=float(np.abs(err).max()),
-                    rms=math.sqrt(float(np.mean(err**2))),
-                    within_pct=100.0 * float(within.mean()),
-                    last_miss_s=float(tt[idx[bad[-1]]] - t_excited) if bad.size else 0.0,
-                    confidence_mean=math.nan if conf is None else float(np.mean(conf[idx, axle])),
-                    road_class=-1 if klass is None else _mode(klass[idx, axle]),
-                )
-            )
-    return out
-
-
 def data_conditions(data: AlertData, settings: AlertSettings) -> tuple[BoolArray, BoolArray]:
     """The truth and the relaxed truth conditions of paired rows, each shape (N, 3, 4)."""
     cfg = settings
@@ -637,33 +496,6 @@ def data_conditions(data: AlertData, settings: AlertSettings) -> tuple[BoolArray
         low_friction_ratio=cfg.low_friction_ratio,
     )
     return truth, relaxed
-
-
-def evaluate_alerts_section(
-    data: AlertData, settings: AlertSettings | None = None, notes: tuple[str, ...] = ()
-) -> AlertsSection:
-    """All metrics of the section from the paired arrays."""
-    cfg = settings or AlertSettings()
-    episodes: list[AlertEpisode] = []
-    alarms: list[FalseAlarm] = []
-    if data.level is not None:
-        truth, relaxed = data_conditions(data, cfg)
-        episodes, alarms = evaluate_alerts(data.t, truth, relaxed, data.level, data.onset, cfg)
-    segments: list[MuMaxSegment] = []
-    if data.mu_max is not None:
-        segments = mu_max_errors(
-            data.t,
-            axle_utilisation(data.mu, data.peak_mu),
-            data.true_mu_max,
-            data.mu_max,
-            segments_from_peaks(data.true_mu_max, cfg.road_jump),
-            confidence=data.confidence,
-            road_classes=(data.road_class, data.true_road_class),
-            settings=cfg,
-        )
-    return alerts_section(
-        cfg, int(data.t.size), data.level is not None, episodes, alarms, segments, notes
-    )
 
 
 def alerts_section(

@@ -34,20 +34,31 @@ from vd_common.topics import (
 )
 
 from vd_observer_node.inputs.decode import InputStats
-from vd_observer_node.tools.report.alert_data import alert_data
-from vd_observer_node.tools.report.alerts import AlertSettings, evaluate_alerts_section
+from vd_observer_node.tools.report.accumulate import ConvergenceAccumulator, QuantityAccumulator
+from vd_observer_node.tools.report.alert_data import AlertData, alert_data
+from vd_observer_node.tools.report.alerts import (
+    AlertEpisode,
+    AlertSettings,
+    AlertsSection,
+    FalseAlarm,
+    MuMaxSegment,
+    alerts_section,
+    data_conditions,
+    evaluate_alerts,
+)
 from vd_observer_node.tools.report.errors import ReportInputError
 from vd_observer_node.tools.report.load import BagSeries, TopicSeries
 from vd_observer_node.tools.report.metrics import (
-    ErrorStats,
     ValueStats,
     change_times,
-    convergence_times,
-    error_stats,
     evaluation_mask,
-    relative_error_stats,
     step_times,
     value_stats,
+)
+from vd_observer_node.tools.report.mu_max import (
+    axle_utilisation,
+    mu_max_errors,
+    segments_from_peaks,
 )
 from vd_observer_node.tools.report.results import (
     NO_REFERENCE_HINT,
@@ -65,6 +76,7 @@ __all__ = [
     'build_comparisons',
     'closing_notes',
     'evaluate',
+    'evaluate_alerts_section',
     'evaluate_estimates',
     'has_reference',
     'quantity_note',
@@ -345,57 +357,6 @@ def _mu_mask(
     return selected
 
 
-def _wheel_stats(c: Comparison) -> tuple[ErrorStats, tuple[ErrorStats, ...]]:
-    assert c.estimate is not None and c.truth is not None
-    overall = error_stats(c.estimate, c.truth, c.mask)
-    if not c.per_wheel:
-        return overall, ()
-    wheels = tuple(
-        error_stats(c.estimate[:, k], c.truth[:, k], c.mask if c.mask.ndim == 1 else c.mask[:, k])
-        for k in range(4)
-    )
-    return overall, wheels
-
-
-def _row_mask(c: Comparison) -> BoolArray:
-    """shape like the data: the mask broadcast to per-wheel columns."""
-    assert c.truth is not None
-    return np.broadcast_to(
-        c.mask if c.mask.ndim == c.truth.ndim else c.mask[:, None], c.truth.shape
-    )
-
-
-def _extras(
-    c: Comparison, static_loads: FloatArray | None, cfg: EvaluationSettings
-) -> dict[str, float]:
-    assert c.estimate is not None and c.truth is not None
-    mask = _row_mask(c)
-    extras: dict[str, float] = {}
-    if c.key == 'omega':
-        error = c.estimate - c.truth
-        # the RMS of the error over the RMS of the truth, on the same spinning samples (the
-        # standard relative RMS; the mean of per-sample ratios weighted slow wheels 3x more)
-        spinning = mask & (np.abs(c.truth) > cfg.omega_min) & np.isfinite(error)
-        extras['rel_rms_pct'] = 100.0 * (
-            error_stats(error, 0.0, spinning).rms / error_stats(c.truth, 0.0, spinning).rms
-        )
-        rel = relative_error_stats(np.abs(error), 0.0, np.abs(c.truth), spinning)
-        extras['rel_max_pct'] = 100.0 * rel.max_abs
-    elif c.key == 'fx':
-        peak = float(np.abs(c.truth[mask]).max()) if mask.any() else float('nan')
-        extras['max_abs_truth'] = peak
-        rms = error_stats(c.estimate, c.truth, mask).rms
-        # a drive that never pulls (true Fx zero in the window) has no percentage, not a crash
-        extras['rms_pct_of_max_truth'] = 100.0 * rms / peak if peak > 0 else float('nan')
-    elif c.key == 'fz' and static_loads is not None:
-        rel = relative_error_stats(c.estimate, c.truth, static_loads[None, :], mask)
-        extras['rms_pct_of_static'] = 100.0 * rel.rms
-        extras['max_pct_of_static'] = 100.0 * rel.max_abs
-        for name, load in zip(('FL', 'FR', 'RL', 'RR'), static_loads.tolist(), strict=True):
-            extras[f'static_load_{name}'] = load
-    return extras
-
-
 def _static_loads(series: BagSeries, settle_s: float) -> FloatArray | None:
     """Median true Fz over the first ``settle_s`` seconds, per wheel [N]."""
     forces = series.topics.get(TRUTH_TIRE_FORCES)
@@ -447,19 +408,17 @@ def evaluate(
     for c in comparisons:
         if c.estimate is None or c.truth is None:
             continue
-        overall, wheels = _wheel_stats(c)
-        extras = _extras(c, loads, cfg)
+        window = None
         if c.key == 'slope':
-            base = evaluation_mask(
+            window = evaluation_mask(
                 c.t,
                 start=cfg.settle_s,
                 events=np.concatenate([steps, gears]),
                 half_width=cfg.exclusion_half_width_s,
             )
-            extras['valid_pct'] = 100.0 * float(c.mask.sum()) / max(int(base.sum()), 1)
-            extras['rms_incl_invalid'] = error_stats(c.estimate, c.truth, base).rms
-        note = quantity_note(c.key, cfg, overall.samples)
-        quantities.append(QuantityMetrics(c.key, c.title, c.unit, overall, wheels, extras, note))
+        metrics = QuantityAccumulator(c.key, c.title, c.unit, cfg)
+        metrics.add(c.estimate, c.truth, c.mask, window=window, static_loads=loads)
+        quantities.append(metrics.result(quantity_note(c.key, cfg, metrics.overall.samples)))
     convergence = _convergence(comparisons, steps, cfg, notes)
     truth_t = (series.topics[present_truth[0]].stamp_ns - t0) * 1e-9
     window = evaluation_mask(
@@ -588,6 +547,33 @@ def evaluate_estimates(
     return report, comparisons
 
 
+def evaluate_alerts_section(
+    data: AlertData, settings: AlertSettings | None = None, notes: tuple[str, ...] = ()
+) -> AlertsSection:
+    """All metrics of the section from the paired arrays."""
+    cfg = settings or AlertSettings()
+    episodes: list[AlertEpisode] = []
+    alarms: list[FalseAlarm] = []
+    if data.level is not None:
+        truth, relaxed = data_conditions(data, cfg)
+        episodes, alarms = evaluate_alerts(data.t, truth, relaxed, data.level, data.onset, cfg)
+    segments: list[MuMaxSegment] = []
+    if data.mu_max is not None:
+        segments = mu_max_errors(
+            data.t,
+            axle_utilisation(data.mu, data.peak_mu),
+            data.true_mu_max,
+            data.mu_max,
+            segments_from_peaks(data.true_mu_max, cfg.road_jump),
+            confidence=data.confidence,
+            road_classes=(data.road_class, data.true_road_class),
+            settings=cfg,
+        )
+    return alerts_section(
+        cfg, int(data.t.size), data.level is not None, episodes, alarms, segments, notes
+    )
+
+
 def quantity_note(key: str, cfg: EvaluationSettings, samples: int) -> str:
     """The caveat printed with a quantity's metrics ('' for none).
 
@@ -680,17 +666,9 @@ def _convergence(
         # is not interpolated onto the estimates yet
         notes.append('slope convergence skipped: no stamp shared by the estimate and the truth')
         return []
-    error = slope.estimate - slope.truth
-    delays = convergence_times(
-        slope.t, error, steps, cfg.convergence_threshold_deg, cfg.convergence_hold_s
-    )
-    out = []
-    for step, delay in zip(steps.tolist(), delays, strict=True):
-        k = int(np.searchsorted(slope.t, step))
-        before = float(slope.truth[max(k - 1, 0)])
-        after = float(slope.truth[min(k, slope.t.size - 1)])
-        out.append(SlopeConvergence(step, before, after, delay))
-    return out
+    convergence = ConvergenceAccumulator(cfg)
+    convergence.feed(slope.t, slope.estimate, slope.truth, steps)
+    return convergence.result()
 
 
 def target_values(quantities: Sequence[QuantityMetrics]) -> dict[str, float]:

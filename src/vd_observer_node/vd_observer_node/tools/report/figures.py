@@ -28,10 +28,12 @@ from vd_observer_node.tools.report.alerts import (
     ALERT_KINDS,
     AXLE_NAMES,
     AlertsSection,
-    axle_utilisation,
     truth_conditions,
 )
 from vd_observer_node.tools.report.metrics import error_stats
+from vd_observer_node.tools.report.mu_max import (
+    axle_utilisation,
+)
 from vd_observer_node.tools.report.results import TARGETS_TITLE, AccuracyReport, Comparison
 from vd_observer_node.tools.report.topics import WHEEL_NAMES
 

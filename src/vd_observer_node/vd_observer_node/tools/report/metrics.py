@@ -17,8 +17,6 @@ __all__ = [
     'ErrorStats',
     'ValueStats',
     'change_times',
-    'convergence_time',
-    'convergence_times',
     'error_stats',
     'evaluation_mask',
     'merge_times',
@@ -241,75 +239,3 @@ def evaluation_mask(
     for event in np.asarray(events, dtype=np.float64).ravel().tolist():
         mask &= np.abs(times - event) > half_width
     return mask
-
-
-def convergence_time(
-    t: ArrayLike,
-    error: ArrayLike,
-    start: float,
-    stop: float,
-    threshold: float,
-    hold: float,
-) -> float | None:
-    """Delay after ``start`` until ``|error|`` stays below ``threshold`` for ``hold`` seconds.
-
-    Only samples with ``start <= t < stop`` are looked at (``stop``: the next step or the end
-    of the data). The error must stay below the threshold on every sample of a stretch
-    spanning at least ``hold``; a non-finite error breaks a stretch.
-
-    Args:
-        t: shape (N,), [s].
-        error: shape (N,), estimate - truth.
-        start: [s], the step time.
-        stop: [s], end of the search window (exclusive).
-        threshold: same unit as ``error``.
-        hold: [s].
-
-    Returns:
-        [s] from ``start`` to the first sample of the first long-enough stretch, or None if
-        there is none inside the window.
-    """
-    times = np.asarray(t, dtype=np.float64)
-    err = np.asarray(error, dtype=np.float64)
-    window = (times >= start) & (times < stop)
-    tw = times[window]
-    ok = np.abs(err[window]) < threshold  # nan compares False: breaks the stretch
-    if tw.size == 0:
-        return None
-    # Stretches of consecutive good samples: their first and last indices.
-    edges = np.diff(np.concatenate(([0], ok.astype(np.int8), [0])))
-    firsts = np.flatnonzero(edges == 1)
-    lasts = np.flatnonzero(edges == -1) - 1
-    long_enough = tw[lasts] - tw[firsts] >= hold - 1e-9
-    if not long_enough.any():
-        return None
-    return float(tw[firsts[np.argmax(long_enough)]] - start)
-
-
-def convergence_times(
-    t: ArrayLike,
-    error: ArrayLike,
-    steps: Sequence[float] | ArrayLike,
-    threshold: float,
-    hold: float,
-) -> list[float | None]:
-    """:func:`convergence_time` after each step, searching up to the next step (or the end).
-
-    Args:
-        t: shape (N,), [s].
-        error: shape (N,).
-        steps: shape (K,), [s], increasing step times.
-        threshold: same unit as ``error``.
-        hold: [s].
-
-    Returns:
-        K delays [s] (None: not converged before the next step or the end of the data).
-    """
-    times = np.asarray(t, dtype=np.float64)
-    starts = np.asarray(steps, dtype=np.float64).ravel().tolist()
-    end = float(times[-1]) + 1.0 if times.size else 0.0
-    stops = [*starts[1:], end]
-    return [
-        convergence_time(times, error, start, stop, threshold, hold)
-        for start, stop in zip(starts, stops, strict=True)
-    ]

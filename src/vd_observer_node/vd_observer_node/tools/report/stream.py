@@ -14,8 +14,9 @@ without holding the bag's series: it reads the bag in file order, in blocks of
   their stamp), holds the paired rows until the events that could exclude them are known (a
   sample within +-0.5 s of a step or shift is excluded, also one *before* it: rows wait
   until the slope truth and the gear are 0.5 s past them, and for the first second's true
-  forces), then adds them into running sums (:class:`_StatsSum`: sums of squares, sums,
-  maxima, counts) and the slope convergence trackers; the alert-episode state machines
+  forces), then adds them into running sums (`accumulate.QuantityAccumulator`, which
+  `evaluate` uses too: sums of squares, sums, maxima, counts) and the slope convergence
+  trackers; the alert-episode state machines
   (:class:`~.stream_alerts.AlertStream`: ~2 s of rows either side of the rows being scored,
   since a false alarm and a detection look up to 1 s back and ahead) and the μ_max
   accumulators per axle and road segment take the paired alert rows.
@@ -38,7 +39,6 @@ caller falls back to the whole-bag path, which sorts).
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -54,6 +54,7 @@ from vd_common.topics import (
 )
 
 from vd_observer_node.bag.reader import BagReader
+from vd_observer_node.tools.report.accumulate import ConvergenceAccumulator, QuantityAccumulator
 from vd_observer_node.tools.report.alert_data import (
     NO_COMMON_STAMP,
     alert_data_notes,
@@ -74,17 +75,11 @@ from vd_observer_node.tools.report.evaluation import (
     quantity_note,
 )
 from vd_observer_node.tools.report.load import decode_topic, select_report_topics
-from vd_observer_node.tools.report.metrics import (
-    ErrorStats,
-    evaluation_mask,
-    merge_times,
-    selected_errors,
-)
+from vd_observer_node.tools.report.metrics import evaluation_mask, merge_times
 from vd_observer_node.tools.report.results import (
     AccuracyReport,
     EvaluationSettings,
     QuantityMetrics,
-    SlopeConvergence,
 )
 from vd_observer_node.tools.report.stream_alerts import AlertStream
 from vd_observer_node.tools.report.stream_join import (
@@ -111,30 +106,6 @@ BoolArray = NDArray[np.bool_]
 _STEP_MERGE_S = 0.5  # [s] metrics.step_times' default merge window (the reference's)
 
 
-class _StatsSum:
-    """Running :class:`ErrorStats` of the selected finite elements (``metrics.error_stats``)."""
-
-    def __init__(self) -> None:
-        self.squares = 0.0
-        self.total = 0.0
-        self.max_abs = -math.inf
-        self.samples = 0
-
-    def add(self, error: FloatArray, mask: BoolArray | None) -> None:
-        values = selected_errors(error, mask)
-        if values.size:
-            self.squares += float(np.sum(np.square(values)))
-            self.total += float(np.sum(values))
-            self.max_abs = max(self.max_abs, float(np.max(np.abs(values))))
-            self.samples += int(values.size)
-
-    def result(self) -> ErrorStats:
-        if self.samples == 0:
-            return ErrorStats(math.nan, math.nan, math.nan, 0)
-        n = self.samples
-        return ErrorStats(math.sqrt(self.squares / n), self.max_abs, self.total / n, n)
-
-
 @dataclass
 class _Events:
     """What the verdict of a sample depends on, as far as the bag has been read: the true
@@ -146,94 +117,16 @@ class _Events:
     loads: FloatArray | None = None
 
 
-class _Convergence:
-    """Slope convergence after each true step, as ``metrics.convergence_times`` and
-    ``evaluation._convergence`` take it, from the compared slope samples in stamp order.
-
-    Steps are added as they are found; samples come only once every step up to them is known
-    (so a new step lies after every sample seen: the one before it is the last seen)."""
-
-    def __init__(self, known: _Events, cfg: EvaluationSettings) -> None:
-        self.known = known
-        self.cfg = cfg
-        self.steps: list[float] = []
-        self.delays: list[float | None] = []
-        self._open: list[float | None] = []  # start of a good stretch
-        self._before: list[float | None] = []
-        self._after: list[float | None] = []
-        self._first: float | None = None
-        self._last: float | None = None
-
-    def feed(self, t: FloatArray, estimate: FloatArray, truth: FloatArray) -> None:
-        for step in self.known.steps.tolist()[len(self.steps) :]:
-            self.steps.append(step)
-            self.delays.append(None)
-            self._open.append(None)
-            self._before.append(self._last)
-            self._after.append(None)
-        if t.size == 0 or not self.steps:
-            if t.size:
-                self._first = float(truth[0]) if self._first is None else self._first
-                self._last = float(truth[-1])
-            return
-        if self._first is None:
-            self._first = float(truth[0])
-        ok = np.abs(estimate - truth) < self.cfg.convergence_threshold_deg
-        stops = [*self.steps[1:], math.inf]
-        for i, (start, stop) in enumerate(zip(self.steps, stops, strict=True)):
-            k = int(np.searchsorted(t, start))  # first sample at or after the step
-            if k > 0:
-                self._before[i] = float(truth[k - 1])
-            if k < t.size and self._after[i] is None:
-                self._after[i] = float(truth[k])
-            if self.delays[i] is not None:
-                continue
-            window = (t >= start) & (t < stop)
-            if window.any():
-                self._stretches(i, start, t[window], ok[window])
-        self._last = float(truth[-1])
-
-    def _stretches(self, i: int, start: float, tw: FloatArray, ok: BoolArray) -> None:
-        edges = np.diff(np.concatenate(([0], ok.astype(np.int8), [0])))
-        firsts = np.flatnonzero(edges == 1)
-        lasts = np.flatnonzero(edges == -1) - 1
-        begin = tw[firsts]
-        if firsts.size and firsts[0] == 0 and self._open[i] is not None:
-            begin[0] = self._open[i]  # the stretch goes on from the previous block
-        long_enough = tw[lasts] - begin >= self.cfg.convergence_hold_s - 1e-9
-        if long_enough.any():
-            self.delays[i] = float(begin[np.argmax(long_enough)] - start)
-        open_at_end = lasts.size > 0 and lasts[-1] == tw.size - 1
-        self._open[i] = float(begin[-1]) if open_at_end else None
-
-    def result(self) -> list[SlopeConvergence]:
-        out = []
-        for i, step in enumerate(self.steps):
-            before = self._before[i] if self._before[i] is not None else self._first
-            after = self._after[i] if self._after[i] is not None else self._last
-            assert before is not None and after is not None
-            out.append(SlopeConvergence(step, before, after, self.delays[i]))
-        return out
-
-
 class _Quantity:
-    """One estimated quantity against its truth: ``evaluate``'s metrics, streamed."""
+    """One estimated quantity against its truth: the joined rows made into compared samples
+    for its `QuantityAccumulator` (the metrics `evaluate` computes too), and the slope's
+    convergence."""
 
     def __init__(self, spec: _Spec, cfg: EvaluationSettings, t0: int, known: _Events) -> None:
         self.spec, self.cfg, self.t0, self.known = spec, cfg, t0, known
         self.rows = 0
-        self.overall = _StatsSum()
-        self.wheels = [_StatsSum() for _ in range(4)]
-        self.per_wheel = False
-        self.relative = _StatsSum()  # omega: |error| / |truth|; fz: error / static load
-        self.spinning_error = _StatsSum()  # omega: the error where the wheel spins
-        self.spinning_truth = _StatsSum()  # omega: the truth on the same samples
-        self.peak = -math.inf  # fx: max |true Fx| in the window
-        self.peak_seen = False
-        self.base = _StatsSum()  # slope: every sample of the window, valid or not
-        self.base_count = 0
-        self.mask_count = 0
-        self.convergence = _Convergence(known, cfg) if spec.key == 'slope' else None
+        self.metrics = QuantityAccumulator(spec.key, spec.title, spec.unit, cfg)
+        self.convergence = ConvergenceAccumulator(cfg) if spec.key == 'slope' else None
 
     def feed(
         self,
@@ -246,13 +139,11 @@ class _Quantity:
         estimate = est[spec.field].astype(np.float64) * spec.factor
         true = truth[spec.field].astype(np.float64) * spec.factor
         self.rows += stamps.size
-        self.per_wheel = estimate.ndim == 2
         t = (stamps - self.t0) * 1e-9
-        mask = evaluation_mask(
+        window = evaluation_mask(
             t, start=cfg.settle_s, events=self.known.events, half_width=cfg.exclusion_half_width_s
         )
-        base = mask
-        loads = self.known.loads
+        mask = window
         if spec.key == 'mu':
             valid = est['valid'].astype(bool)
             excited = np.zeros(valid.shape, dtype=bool)
@@ -264,62 +155,19 @@ class _Quantity:
             mask = mask[:, None] & excited & valid
         elif spec.key == 'slope':
             mask = mask & est['valid'].astype(bool)
-        error = estimate - true
-        self.overall.add(error, mask)
-        if self.per_wheel:
-            for k in range(4):
-                self.wheels[k].add(error[:, k], mask if mask.ndim == 1 else mask[:, k])
-        row_mask = np.broadcast_to(mask if mask.ndim == true.ndim else mask[:, None], true.shape)
-        if spec.key == 'omega':
-            # the RMS of the error over the RMS of the truth, as `evaluation._extras`
-            spinning = row_mask & (np.abs(true) > cfg.omega_min) & np.isfinite(error)
-            with np.errstate(divide='ignore', invalid='ignore'):
-                ratio = np.abs(error) / np.abs(true)
-            self.relative.add(ratio, spinning)
-            self.spinning_error.add(error, spinning)
-            self.spinning_truth.add(true, spinning)
-        elif spec.key == 'fx' and row_mask.any():
-            self.peak = float(np.maximum(self.peak, np.abs(true[row_mask]).max()))
-            self.peak_seen = True
-        elif spec.key == 'fz' and loads is not None:
-            with np.errstate(divide='ignore', invalid='ignore'):
-                ratio = error / loads[None, :]
-            self.relative.add(ratio, row_mask)
-        elif spec.key == 'slope':
-            self.base.add(error, base)
-            self.base_count += int(base.sum())
-            self.mask_count += int(mask.sum())
-            assert self.convergence is not None
-            self.convergence.feed(t, estimate, true)
+        self.metrics.add(
+            estimate,
+            true,
+            mask,
+            window=window if spec.key == 'slope' else None,
+            static_loads=self.known.loads,
+        )
+        if self.convergence is not None:
+            self.convergence.feed(t, estimate, true, self.known.steps)
 
     def result(self) -> QuantityMetrics:
-        spec, cfg = self.spec, self.cfg
-        overall = self.overall.result()
-        wheels = tuple(w.result() for w in self.wheels) if self.per_wheel else ()
-        extras: dict[str, float] = {}
-        if spec.key == 'omega':
-            rel = self.relative.result()
-            extras['rel_rms_pct'] = (
-                100.0 * self.spinning_error.result().rms / self.spinning_truth.result().rms
-            )
-            extras['rel_max_pct'] = 100.0 * rel.max_abs
-        elif spec.key == 'fx':
-            peak = self.peak if self.peak_seen else math.nan
-            extras['max_abs_truth'] = peak
-            rms = overall.rms
-            extras['rms_pct_of_max_truth'] = 100.0 * rms / peak if peak > 0 else math.nan
-        elif spec.key == 'fz' and self.known.loads is not None:
-            rel = self.relative.result()
-            extras['rms_pct_of_static'] = 100.0 * rel.rms
-            extras['max_pct_of_static'] = 100.0 * rel.max_abs
-            loads = self.known.loads.tolist()
-            for name, load in zip(('FL', 'FR', 'RL', 'RR'), loads, strict=True):
-                extras[f'static_load_{name}'] = load
-        elif spec.key == 'slope':
-            extras['valid_pct'] = 100.0 * float(self.mask_count) / max(self.base_count, 1)
-            extras['rms_incl_invalid'] = self.base.result().rms
-        note = quantity_note(spec.key, cfg, overall.samples)
-        return QuantityMetrics(spec.key, spec.title, spec.unit, overall, wheels, extras, note)
+        note = quantity_note(self.spec.key, self.cfg, self.metrics.overall.samples)
+        return self.metrics.result(note)
 
 
 # -- alerts and μ_max -----------------------------------------------------------------------------

@@ -26,10 +26,13 @@ from vd_observer_node.tools.report.alerts import (
     MuMaxSegment,
     activation_indices,
     alerts_section,
-    axle_utilisation,
     channel_episodes,
     data_conditions,
     false_alarms,
+)
+from vd_observer_node.tools.report.mu_max import (
+    MuMaxAccumulator,
+    axle_utilisation,
     segments_from_peaks,
 )
 from vd_observer_node.tools.report.stream_join import with_previous
@@ -63,103 +66,6 @@ def _tail(a: AlertData, start: int) -> AlertData:
 
 
 @dataclass
-class _AxleSegment:
-    """Running μ_max figures of one axle over one road segment (``alerts.mu_max_errors``)."""
-
-    excited_s: float | None = None
-    last_excited: float = -math.inf
-    n: int = 0
-    truth_sum: float = 0.0
-    estimate_sum: float = 0.0
-    squares: float = 0.0
-    max_abs: float = -math.inf
-    within: int = 0
-    last_miss: float | None = None
-    confidence_sum: float = 0.0
-    classes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    true_classes: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
-    recent_n: int = 0
-    recent_squares: float = 0.0
-    recent_within: int = 0
-
-    def feed(
-        self,
-        t: FloatArray,
-        util: FloatArray,
-        truth: FloatArray,
-        est: FloatArray,
-        conf: FloatArray,
-        klass: np.ndarray,
-        tclass: np.ndarray,
-        cfg: AlertSettings,
-    ) -> None:
-        excited_mask = util >= cfg.excitation_ratio
-        last = np.maximum.accumulate(np.where(excited_mask, t, -np.inf))
-        last = np.maximum(last, self.last_excited)
-        self.last_excited = float(last[-1])
-        if self.excited_s is None:
-            excited = np.flatnonzero(excited_mask)
-            if excited.size == 0:
-                return
-            self.excited_s = float(t[excited[0]])
-            begin = int(excited[0])
-        else:
-            begin = 0
-        recent = (t - last <= cfg.excitation_window_s) & (
-            t >= self.excited_s + cfg.excitation_start_s
-        )
-        err_recent = est[recent] - truth[recent]
-        self.recent_n += int(err_recent.size)
-        self.recent_squares += float(np.sum(err_recent**2))
-        self.recent_within += int(np.sum(np.abs(err_recent) <= cfg.mu_max_goal))
-        err = est[begin:] - truth[begin:]
-        within = np.abs(err) <= cfg.mu_max_goal
-        bad = np.flatnonzero(~within)
-        self.n += int(err.size)
-        self.truth_sum += float(np.sum(truth[begin:]))
-        self.estimate_sum += float(np.sum(est[begin:]))
-        self.squares += float(np.sum(err**2))
-        self.max_abs = float(np.maximum(self.max_abs, np.abs(err).max()))
-        self.within += int(within.sum())
-        if bad.size:
-            self.last_miss = float(t[begin:][bad[-1]])
-        self.confidence_sum += float(np.sum(conf[begin:]))
-        self.classes = _add_counts(self.classes, klass[begin:])
-        self.true_classes = _add_counts(self.true_classes, tclass[begin:])
-
-    def result(self, axle: int, start_index: int, start_s: float, end_s: float) -> MuMaxSegment:
-        assert self.excited_s is not None
-        has_recent = self.recent_n > 0
-        return MuMaxSegment(
-            axle=axle,
-            start_index=start_index,
-            start_s=start_s,
-            end_s=end_s,
-            excited_s=self.excited_s,
-            true_mu_max=self.truth_sum / self.n,
-            true_road_class=int(self.true_classes.argmax()),
-            recent_samples=self.recent_n,
-            recent_rms=math.sqrt(self.recent_squares / self.recent_n) if has_recent else math.nan,
-            recent_within_pct=(
-                100.0 * self.recent_within / self.recent_n if has_recent else math.nan
-            ),
-            estimate_mean=self.estimate_sum / self.n,
-            max_abs=self.max_abs,
-            rms=math.sqrt(self.squares / self.n),
-            within_pct=100.0 * self.within / self.n,
-            last_miss_s=self.last_miss - self.excited_s if self.last_miss is not None else 0.0,
-            confidence_mean=self.confidence_sum / self.n,
-            road_class=int(self.classes.argmax()),
-        )
-
-
-def _add_counts(counts: np.ndarray, codes: np.ndarray) -> np.ndarray:
-    more = np.bincount(codes)
-    size = max(counts.size, more.size)
-    return np.pad(counts, (0, size - counts.size)) + np.pad(more, (0, size - more.size))
-
-
-@dataclass
 class _Channel:
     last_start: float | None = None  # [s] the last raw onset (episodes merge against it)
     episodes: list[AlertEpisode] = field(default_factory=list)
@@ -188,7 +94,7 @@ class AlertStream:
         self.channels = [[_Channel() for _ in range(4)] for _ in ALERT_KINDS]
         self.segments: list[list[MuMaxSegment]] = [[], []]
         self._segment: tuple[int, float, float] | None = None  # (start index, start_s, end_s)
-        self._axles = [_AxleSegment(), _AxleSegment()]
+        self._axles = [MuMaxAccumulator(), MuMaxAccumulator()]
         self._previous_peak: np.ndarray | None = None
 
     def feed(self, data: AlertData) -> None:
@@ -284,7 +190,7 @@ class AlertStream:
             for axle in range(2):
                 if self._axles[axle].excited_s is not None:
                     self.segments[axle].append(self._axles[axle].result(axle, *self._segment))
-        self._axles = [_AxleSegment(), _AxleSegment()]
+        self._axles = [MuMaxAccumulator(), MuMaxAccumulator()]
         self._segment = None
 
     def result(self, notes: tuple[str, ...]) -> AlertsSection:
