@@ -181,7 +181,9 @@ def report_mu_max(sim: Any, det: dict[str, np.ndarray]) -> None:
         recent_text = (
             f'while excited in the last {SETTINGS.excitation_window_s:g} s (from '
             f'+{SETTINGS.excitation_start_s:g} s): |err| rms {m.recent_rms:.3f}, '
-            f'{m.recent_within_pct:.1f} % within {SETTINGS.mu_max_goal:g}; '
+            f'{m.recent_within_pct:.1f} % within {SETTINGS.mu_max_goal:g} '
+            f'({m.recent_unknown_pct:.1f} % class unknown, '
+            f'{m.recent_known_wrong_pct:.1f} % known and wrong); '
             if m.recent_samples
             else ''
         )

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -433,3 +434,28 @@ def test_simulated_run_with_a_perfect_late_detector(tmp_path: Path) -> None:
     # the first traction episode is the spin-up at 6.1 s, exactly 20 ms before detection
     first = next(e for e in section.episodes if e.kind == 'traction')
     assert 6.0 < first.true_onset_s < 6.3 and first.delay_s == pytest.approx(0.02)
+
+
+def test_mu_max_says_how_often_the_class_was_unknown_or_confidently_wrong() -> None:
+    """While excited (2.1 .. 3.49 s, 140 samples): the first 40 off by 0.3 and class unknown
+    for 30 of them; 100 within 0.1, 20 of those unknown. Unknown 50 of 140; known and wrong
+    the 10 off by 0.3 with a class."""
+    t = _t(10.0)
+    n = t.size
+    truth = np.ones((n, 2))
+    util = np.zeros((n, 2))
+    util[(t >= 2.0) & (t < 3.0), 0] = 0.9
+    est = np.ones((n, 2))
+    est[(t >= 2.0) & (t < 2.5), 0] = 1.3
+    klass = np.full((n, 2), 4)  # dry
+    first = int(np.searchsorted(t, 2.1))
+    klass[first : first + 30, 0] = 0  # unknown while wrong
+    klass[first + 40 : first + 60, 0] = 0  # unknown while right
+    (dry,) = mu_max_errors(
+        t, util, truth, est, np.array([0]), road_classes=(klass, None), settings=CFG
+    )
+    assert dry.recent_samples == 140
+    assert dry.recent_unknown_pct == pytest.approx(100 * 50 / 140)
+    assert dry.recent_known_wrong_pct == pytest.approx(100 * 10 / 140)
+    (bare,) = mu_max_errors(t, util, truth, est, np.array([0]), settings=CFG)
+    assert math.isnan(bare.recent_unknown_pct) and math.isnan(bare.recent_known_wrong_pct)

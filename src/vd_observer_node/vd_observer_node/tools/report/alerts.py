@@ -167,6 +167,11 @@ class MuMaxSegment:
         recent_samples: samples of metric (a) (excited within the window).
         recent_rms: [-] RMS error of (a) (nan if no sample).
         recent_within_pct: [%] share of (a) within the goal (nan if no sample).
+        recent_unknown_pct: [%] share of (a) with the estimated road class unknown: the
+            estimator said the excitation does not determine μ_max (nan if no sample or no
+            class).
+        recent_known_wrong_pct: [%] share of (a) with a known class and the error beyond the
+            goal: a confident wrong μ_max (nan if no sample or no class).
         estimate_mean: [-] mean estimate from the first excitation on (b).
         max_abs: [-] largest |error| of (b).
         rms: [-] RMS error of (b).
@@ -187,6 +192,8 @@ class MuMaxSegment:
     recent_samples: int
     recent_rms: float
     recent_within_pct: float
+    recent_unknown_pct: float
+    recent_known_wrong_pct: float
     estimate_mean: float
     max_abs: float
     rms: float

@@ -255,7 +255,9 @@ def _episode_text(e: Any) -> str:
 
 def _segment_text(m: Any) -> str:
     recent = (
-        f'while excited rms {m.recent_rms:.3f}, {m.recent_within_pct:.0f} % within 0.1; '
+        f'while excited rms {m.recent_rms:.3f}, {m.recent_within_pct:.0f} % within 0.1 '
+        f'({_num(m.recent_unknown_pct, 3)} % class unknown, '
+        f'{_num(m.recent_known_wrong_pct, 3)} % known and wrong); '
         if m.recent_samples
         else 'never excited for long, '
     )
@@ -445,9 +447,10 @@ def _alerts_markdown(section: AlertsSection) -> list[str]:
             'the first excitation of the constant-road segment.',
             '',
             '| axle | segment [s] | excited at [s] | true mu_max | true class | (a) samples '
-            '| (a) RMS | (a) within 0.1 | (b) mean estimate | (b) RMS | (b) max err '
+            '| (a) RMS | (a) within 0.1 | (a) class unknown | (a) known and wrong '
+            '| (b) mean estimate | (b) RMS | (b) max err '
             '| (b) within 0.1 | last miss after [s] | confidence | class |',
-            '|' + '---|' * 15,
+            '|' + '---|' * 17,
         ]
         for m in section.mu_max:
             out.append(
@@ -461,6 +464,8 @@ def _alerts_markdown(section: AlertsSection) -> list[str]:
                         str(m.recent_samples),
                         _num(m.recent_rms, 3),
                         f'{_num(m.recent_within_pct, 3)} %',
+                        f'{_num(m.recent_unknown_pct, 3)} %',
+                        f'{_num(m.recent_known_wrong_pct, 3)} %',
                         f'{m.estimate_mean:.3f}',
                         f'{m.rms:.3f}',
                         f'{m.max_abs:.3f}',

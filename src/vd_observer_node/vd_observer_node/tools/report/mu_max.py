@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from vd_observer_node.tools.report.alerts import AlertSettings, MuMaxSegment
+from vd_observer_node.tools.report.alerts import ROAD_NAMES, AlertSettings, MuMaxSegment
 
 __all__ = [
     'MuMaxAccumulator',
@@ -25,6 +25,9 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+
+#: the road class code of 'unknown' (vd_msgs/FrictionPotential ROAD_UNKNOWN)
+ROAD_UNKNOWN = ROAD_NAMES.index('unknown')
 
 
 def axle_utilisation(mu: ArrayLike, peak_mu: ArrayLike) -> FloatArray:
@@ -94,6 +97,9 @@ class MuMaxAccumulator:
     recent_n: int = 0
     recent_squares: float = 0.0
     recent_within: int = 0
+    recent_unknown: int = 0
+    recent_known_wrong: int = 0
+    classified: bool = True
 
     def feed(
         self,
@@ -138,6 +144,13 @@ class MuMaxAccumulator:
         self.recent_n += int(err_recent.size)
         self.recent_squares += float(np.sum(err_recent**2))
         self.recent_within += int(np.sum(np.abs(err_recent) <= cfg.mu_max_goal))
+        if klass is None:
+            self.classified = False
+        else:
+            unknown = klass[recent] == ROAD_UNKNOWN
+            self.recent_unknown += int(unknown.sum())
+            wrong = np.abs(err_recent) > cfg.mu_max_goal
+            self.recent_known_wrong += int(np.sum(wrong & ~unknown))
         err = est[begin:] - truth[begin:]
         if err.size == 0:
             return
@@ -171,9 +184,9 @@ class MuMaxAccumulator:
             true_road_class=int(self.true_classes.argmax()) if self.true_classes.size else -1,
             recent_samples=self.recent_n,
             recent_rms=math.sqrt(self.recent_squares / self.recent_n) if has_recent else math.nan,
-            recent_within_pct=(
-                100.0 * self.recent_within / self.recent_n if has_recent else math.nan
-            ),
+            recent_within_pct=self._recent_pct(self.recent_within, True),
+            recent_unknown_pct=self._recent_pct(self.recent_unknown, self.classified),
+            recent_known_wrong_pct=self._recent_pct(self.recent_known_wrong, self.classified),
             estimate_mean=self.estimate_sum / self.n,
             max_abs=self.max_abs,
             rms=math.sqrt(self.squares / self.n),
@@ -182,6 +195,10 @@ class MuMaxAccumulator:
             confidence_mean=self.confidence_sum / self.n,
             road_class=int(self.classes.argmax()) if self.classes.size else -1,
         )
+
+    def _recent_pct(self, count: int, available: bool) -> float:
+        """[%] `count` of the recent samples (nan without any, or without `available`)."""
+        return 100.0 * count / self.recent_n if self.recent_n and available else math.nan
 
 
 def _add_counts(counts: IntArray, codes: IntArray) -> IntArray:
