@@ -330,3 +330,22 @@ def test_data_no_curve_explains_are_not_held(second_road: float) -> None:
         assert est.last.confidence[0] < 0.1  # measured 0.03
         assert est.last.road_class[0] == ROAD_UNKNOWN
         assert est.last.mu_max[0] > 0.9  # measured 1.00 (prior 1.03); the truth is 1.05
+
+
+@pytest.mark.parametrize(('stamps', 'confident'), [(2, False), (20, True)])
+def test_a_few_samples_are_not_a_hundred(stamps: int, confident: bool) -> None:
+    """Near the snow road's peak (slip 0.04): the evidence counts at most as many independent
+    samples as the window holds (2 per stamp here). Two stamps (4 samples) leave the class
+    unknown (confidence measured 0.03); 20 stamps (38 samples after forgetting) give snow.
+    Before, evidence_samples (100) was claimed from the first stamp on: one stamp after a
+    pause gave snow with confidence 1."""
+    rng = np.random.default_rng(3)
+    est = FrictionPotentialEstimator(curves(), STATIC)
+    slips = np.full(stamps, 0.04) + rng.normal(0.0, 0.001, stamps)
+    feed(est, 0.0, slips, true_mu(slips, 0.3))
+    if confident:
+        assert est.last.confidence[0] == 1.0
+        assert est.last.road_class[0] == ROAD_SNOW
+    else:
+        assert est.last.confidence[0] < 0.1
+        assert est.last.road_class[0] == ROAD_UNKNOWN

@@ -260,7 +260,8 @@ def fit_solution(
 
     Per axle: the best road scale (least cost), its peak at the smoothed load and force
     direction, and the confidence: the least extra cost of a scale whose peak is more than
-    ``confidence_margin`` from the best one's, per sample times ``evidence_samples``, mapped
+    ``confidence_margin`` from the best one's, per sample times ``evidence_samples`` (or the
+    forgotten sample count, if smaller), mapped
     linearly from ``evidence_low`` (0) to ``evidence_high`` (1), decayed with the time since
     the axle's last usable sample over ``evidence_hold_time`` divided by the misfit (the mean
     weighted squared residual per sample at the best scale, when above 1). Below
@@ -302,7 +303,9 @@ def fit_solution(
         advantage = rival - cost[a, best] if informed else 0.0
         # about 1 (or less: mu_noise_std is an upper bound) when one curve explains the data
         misfit = cost[a, best] / s.count[a] if s.count[a] > 0.0 else 0.0
-        evidence = advantage / max(s.count[a], 1.0) * p.evidence_samples
+        # never more independent samples than the window holds: after a pause one new sample
+        # replaces the forgotten data and must not count as evidence_samples of them
+        evidence = advantage / max(s.count[a], 1.0) * min(s.count[a], p.evidence_samples)
         conf = (evidence - p.evidence_low) / (p.evidence_high - p.evidence_low)
         conf = min(max(conf, 0.0), 1.0) if not math.isnan(conf) else conf
         if p.evidence_hold_time > 0.0:

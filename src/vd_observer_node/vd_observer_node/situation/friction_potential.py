@@ -23,13 +23,14 @@ if the curve were right, ``mu_noise_std^2 + (d mu/d s)^2 sigma_s^2`` with
 
 Confidence (profile likelihood): the least extra weighted cost of any road scale whose peak
 is more than ``confidence_margin`` from the estimate, per sample times ``evidence_samples``
-(correlated samples are not independent evidence), mapped linearly from ``evidence_low``
-(0) to ``evidence_high`` (1). Once no usable sample comes, it decays with the age of the
-evidence over ``evidence_hold_time``, faster by the misfit (the mean weighted squared residual
-per sample at the best scale, about 1 or less when one road's curve explains the data): data
-that no curve explains (a road change inside the forgetting window, a force transient) are not
-a road the car can keep claiming. Below ``class_min_confidence`` the reported values are shrunk
-towards the prior road; the road class (dry / wet / snow / ice) is UNKNOWN there.
+(correlated samples are not independent evidence; fewer if the window holds fewer), mapped
+linearly from ``evidence_low`` (0) to ``evidence_high`` (1). Once no usable sample comes, it
+decays with the age of the evidence over ``evidence_hold_time``, faster by the misfit (the
+mean weighted squared residual per sample at the best scale, about 1 or less when one road's
+curve explains the data): data that no curve explains (a road change inside the forgetting
+window, a force transient) are not a road the car can keep claiming. Below
+``class_min_confidence`` the reported values are shrunk towards the prior road; the road class
+(dry / wet / snow / ice) is UNKNOWN there.
 
 The per-sample math is in `vd_observer_node.situation.friction_fit` (step functions on named
 records, compiled); here are the settings, the result, and the stateful wrapper
@@ -131,10 +132,12 @@ class FrictionPotentialConfig:
         mu_noise_std: [-] noise of the mu estimates.
         confidence_margin: [-] the confidence says how firmly the data exclude peaks further
             than this from the estimate (the accuracy goal, 0.1).
-        evidence_samples: the forgotten data count as this many independent samples: the
-            evidence is the mean weighted cost advantage per sample times this. Consecutive
-            samples are correlated (one observer filters them) and a small systematic model
-            error summed over a thousand samples a second would otherwise become certainty.
+        evidence_samples: the forgotten data count as this many independent samples at
+            most (as many as they hold, if fewer): the evidence is the mean weighted cost
+            advantage per sample times this. Consecutive samples are correlated (one
+            observer filters them) and a small systematic model error summed over a thousand
+            samples a second would otherwise become certainty; and two samples after a pause
+            are two, not a hundred.
         evidence_hold_time: [s] the confidence decays as exp(-age * max(misfit, 1) / this),
             age = time since the axle's last usable sample, misfit = the mean weighted
             squared residual per sample at the best road scale: a friction potential measured
