@@ -261,13 +261,12 @@ def fit_solution(
     Per axle: the best road scale (least cost), its peak at the smoothed load and force
     direction, and the confidence: the least extra cost of a scale whose peak is more than
     ``confidence_margin`` from the best one's, per sample times ``evidence_samples`` (or the
-    forgotten sample count, if smaller), mapped
-    linearly from ``evidence_low`` (0) to ``evidence_high`` (1), decayed with the time since
-    the axle's last usable sample over ``evidence_hold_time`` divided by the misfit (the mean
-    weighted squared residual per sample at the best scale, when above 1). Below
-    ``class_min_confidence``
-    the reported scale is shrunk towards the prior road (``shrink_to_prior``): unexcited,
-    every scale fits the linear part of the curve.
+    forgotten sample count, if smaller), mapped linearly from ``evidence_low`` (0) to
+    ``evidence_high`` (1), decayed with the time since the axle's last usable sample over
+    ``evidence_hold_time`` divided by the misfit (the mean weighted squared residual per
+    sample at the best scale, when above 1). Below ``class_min_confidence`` the reported
+    scale is shrunk towards the prior road (``shrink_to_prior``): unexcited, every scale fits
+    the linear part of the curve.
 
     Args:
         p: `FRICTION_PARAMS` record.

@@ -26,7 +26,7 @@ from vd_observer_node.tools.report.results import (
     SlopeConvergence,
 )
 
-__all__ = ['ConvergenceAccumulator', 'QuantityAccumulator', 'StatsSum']
+__all__ = ['ConvergenceAccumulator', 'QuantityAccumulator', 'StatsSum', 'quantity_note']
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -58,6 +58,24 @@ class StatsSum:
             return ErrorStats(math.nan, math.nan, math.nan, 0)
         n = self.samples
         return ErrorStats(math.sqrt(self.squares / n), self.max_abs, self.total / n, n)
+
+
+def quantity_note(key: str, cfg: EvaluationSettings, samples: int) -> str:
+    """The caveat printed with a quantity's metrics ('' for none).
+
+    Args:
+        key: the quantity ('mu', 'slope', ...).
+        cfg: evaluation settings.
+        samples: elements its overall statistics were taken over.
+    """
+    note = ''
+    if key == 'mu':
+        note = f'|Fx_true| > {cfg.mu_excitation:g} Fz_true and estimate valid'
+    elif key == 'slope':
+        note = 'where the estimate is valid'
+    if samples == 0:
+        note = (note + '; ' if note else '') + 'no sample in the evaluation window'
+    return note
 
 
 class QuantityAccumulator:
@@ -132,8 +150,8 @@ class QuantityAccumulator:
             self.window_count += int(window.sum())
             self.selected_count += int(mask.sum())
 
-    def result(self, note: str = '') -> QuantityMetrics:
-        """The metrics of every sample added so far, with `note` as their caveat."""
+    def result(self) -> QuantityMetrics:
+        """The metrics of every sample added so far, with their caveat (`quantity_note`)."""
         overall = self.overall.result()
         wheels = tuple(w.result() for w in self.wheels) if self.per_wheel else ()
         extras: dict[str, float] = {}
@@ -156,6 +174,7 @@ class QuantityAccumulator:
         if self.key == 'slope':
             extras['valid_pct'] = 100.0 * float(self.selected_count) / max(self.window_count, 1)
             extras['rms_incl_invalid'] = self.window.result().rms
+        note = quantity_note(self.key, self.settings, overall.samples)
         return QuantityMetrics(self.key, self.title, self.unit, overall, wheels, extras, note)
 
 

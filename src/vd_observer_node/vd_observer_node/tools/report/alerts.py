@@ -485,7 +485,7 @@ def channel_episodes(
     return out
 
 
-# -- friction potential ----------------------------------------------------------------------
+# -- the section ------------------------------------------------------------------------------
 
 
 def data_conditions(data: AlertData, settings: AlertSettings) -> tuple[BoolArray, BoolArray]:

@@ -79,7 +79,6 @@ __all__ = [
     'evaluate_alerts_section',
     'evaluate_estimates',
     'has_reference',
-    'quantity_note',
     'reference_kind',
     'target_values',
     'torque_path',
@@ -418,7 +417,7 @@ def evaluate(
             )
         metrics = QuantityAccumulator(c.key, c.title, c.unit, cfg)
         metrics.add(c.estimate, c.truth, c.mask, window=window, static_loads=loads)
-        quantities.append(metrics.result(quantity_note(c.key, cfg, metrics.overall.samples)))
+        quantities.append(metrics.result())
     convergence = _convergence(comparisons, steps, cfg, notes)
     truth_t = (series.topics[present_truth[0]].stamp_ns - t0) * 1e-9
     window = evaluation_mask(
@@ -572,24 +571,6 @@ def evaluate_alerts_section(
     return alerts_section(
         cfg, int(data.t.size), data.level is not None, episodes, alarms, segments, notes
     )
-
-
-def quantity_note(key: str, cfg: EvaluationSettings, samples: int) -> str:
-    """The caveat printed with a quantity's metrics ('' for none).
-
-    Args:
-        key: the quantity ('mu', 'slope', ...).
-        cfg: evaluation settings.
-        samples: elements its overall statistics were taken over.
-    """
-    note = ''
-    if key == 'mu':
-        note = f'|Fx_true| > {cfg.mu_excitation:g} Fz_true and estimate valid'
-    elif key == 'slope':
-        note = 'where the estimate is valid'
-    if samples == 0:
-        note = (note + '; ' if note else '') + 'no sample in the evaluation window'
-    return note
 
 
 def closing_notes(

@@ -12,8 +12,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from vd_common.vehicle.friction import ROAD_UNKNOWN
 
-from vd_observer_node.tools.report.alerts import ROAD_NAMES, AlertSettings, MuMaxSegment
+from vd_observer_node.tools.report.alerts import AlertSettings, MuMaxSegment
 
 __all__ = [
     'MuMaxAccumulator',
@@ -25,9 +26,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-
-#: the road class code of 'unknown' (vd_msgs/FrictionPotential ROAD_UNKNOWN)
-ROAD_UNKNOWN = ROAD_NAMES.index('unknown')
 
 
 def axle_utilisation(mu: ArrayLike, peak_mu: ArrayLike) -> FloatArray:

@@ -72,7 +72,6 @@ from vd_observer_node.tools.report.evaluation import (
     _Spec,
     _targets,
     closing_notes,
-    quantity_note,
 )
 from vd_observer_node.tools.report.load import decode_topic, select_report_topics
 from vd_observer_node.tools.report.metrics import evaluation_mask, merge_times
@@ -166,8 +165,7 @@ class _Quantity:
             self.convergence.feed(t, estimate, true, self.known.steps)
 
     def result(self) -> QuantityMetrics:
-        note = quantity_note(self.spec.key, self.cfg, self.metrics.overall.samples)
-        return self.metrics.result(note)
+        return self.metrics.result()
 
 
 # -- alerts and μ_max -----------------------------------------------------------------------------
