@@ -26,6 +26,7 @@ from vd_observer_node.errors import InputShapeError
 from vd_observer_node.estimation.brakes import no_brakes
 from vd_observer_node.estimation.cascade import (
     CascadeParts,
+    checked_speed_samples,
     empty_outputs,
     no_imu,
 )
@@ -157,7 +158,8 @@ class Chain:
             self.parts.grade(settings.imu)
         # one stamp's inputs and outputs: buffers filled and read at every `update`
         self._in = CascadeInputs(
-            np.zeros(1), np.zeros((1, 4)), np.zeros(1), np.zeros((1, 4)), np.zeros((1, 4)),
+            np.zeros(1), np.zeros((1, 4)), np.zeros(1), *checked_speed_samples(
+                np.zeros(1), np.zeros(1), None), np.zeros((1, 4)), np.zeros((1, 4)),
             no_brakes(1), no_imu(1),
         )  # fmt: skip
         self._out = empty_outputs(1, self.parts.offset_on)
@@ -178,6 +180,7 @@ class Chain:
         engine: ArrayLike | None = None,
         imu: tuple[float, ...] | None = None,
         brake: ArrayLike | None = None,
+        speed_samples: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
     ) -> ChainOutput:
         """Advance to stamp t.
 
@@ -196,6 +199,10 @@ class Chain:
                 gives none) (read with ``settings.imu`` only; None: none yet).
             brake: shape (4,): the brake input (`estimation.brakes.brake_torques`; nan where
                 unknown); None: nothing known at this stamp (with a brake input: invalid).
+            speed_samples: the body-speed samples stamped since the previous stamp, which the
+                speed observer takes at their own stamps: stamps [s] and values [m/s], shape
+                (1, K) each as `alignment.SampleQueue.take` gives them (nan after the last);
+                None: ``speed`` at ``t``.
 
         Raises:
             InputShapeError: an array input has the wrong shape, or no engine on the engine
@@ -213,6 +220,16 @@ class Chain:
         inputs.t[0] = float(t)
         inputs.wheel_angle[0] = angles
         inputs.body_speed[0] = float(speed)
+        inputs.speed_stamp[0] = math.nan
+        inputs.speed_sample[0] = math.nan
+        if speed_samples is None:
+            inputs.speed_stamp[0, 0] = inputs.t[0]
+            inputs.speed_sample[0, 0] = inputs.body_speed[0]
+        else:
+            given_stamps, given_values = speed_samples
+            width = given_stamps.shape[-1]
+            inputs.speed_stamp[0, :width] = given_stamps
+            inputs.speed_sample[0, :width] = given_values
         # the replay's without torque: no torque topic, zeros everywhere
         inputs.wheel_torque[0] = 0.0 if self._none else torques
         if parts.engine_on:

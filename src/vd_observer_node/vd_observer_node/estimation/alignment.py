@@ -9,6 +9,10 @@ the replay), and the two give the same sets on the same data:
   with the newest sample of every other input whose stamp is not later (sample and hold: a
   car's topics run on their own clocks). A driving stamp is dropped while another input has
   no sample yet or only one older than ``max_age``.
+
+Whatever the policy, an input that a part takes at its own stamps (the body speed, for the
+speed observer) also gives each cascade stamp every sample stamped since the previous one
+(`samples_between`, `SampleQueue`): a sample whose driving stamp was lost is not lost with it.
 """
 
 from __future__ import annotations
@@ -27,14 +31,17 @@ __all__ = [
     'Alignment',
     'BlockAligner',
     'LatestAligner',
+    'SampleQueue',
     'StampAligner',
     'align_exact',
     'align_latest',
     'align_stamps',
+    'samples_between',
 ]
 
 IntArray = NDArray[np.int64]
 BoolArray = NDArray[np.bool_]
+FloatArray = NDArray[np.float64]
 #: Alignment policies (module docstring).
 ALIGNMENTS: Final = ('exact', 'latest')
 
@@ -493,3 +500,123 @@ class BlockAligner:
         order = np.argsort(stamps[below], kind='stable')
         keep[below[order[-1]]] = True
         return keep
+
+
+def samples_between(
+    stamps_ns: IntArray, values: FloatArray, rows_ns: IntArray, after_ns: int | None, most: int
+) -> tuple[FloatArray, FloatArray]:
+    """Each row's samples of one input: stamped after the previous row, not after the row.
+
+    Args:
+        stamps_ns: shape (M,), int64 [ns], the samples' stamps, sorted.
+        values: shape (M,), the samples.
+        rows_ns: shape (N,), int64 [ns], the rows' stamps, increasing.
+        after_ns: [ns] the stamp of the row before the first (None: the first row takes what
+            came before it).
+        most: the most samples a row takes (the newest of its own).
+
+    Returns:
+        Shape (N, most) each, oldest first: the samples' stamps [s] (nan after the last) and
+        the samples (nan there).
+    """
+    n = rows_ns.shape[0]
+    stamp = np.full((n, most), np.nan)
+    sample = np.full((n, most), np.nan)
+    if n == 0 or stamps_ns.shape[0] == 0:
+        return stamp, sample
+    high = np.searchsorted(stamps_ns, rows_ns, side='right')
+    low = np.empty_like(high)
+    low[0] = 0 if after_ns is None else np.searchsorted(stamps_ns, after_ns, side='right')
+    low[1:] = high[:-1]
+    index = np.maximum(low, high - most)[:, None] + np.arange(most)
+    have = index < high[:, None]
+    picked = index[have]
+    stamp[have] = stamps_ns[picked] * 1e-9
+    sample[have] = values[picked]
+    return stamp, sample
+
+
+class SampleQueue:
+    """`samples_between` over samples that arrive in any chunks: one message (the live node)
+    or one block (the replay), so both give each stamp the same samples.
+
+    Samples stamped not after the last row taken come too late and are dropped; the carried
+    ones (stamped after it) are bounded by ``capacity``, the oldest dropped first. A row stamped
+    before the last one starts a new time line (a looped bag): the samples carried from the
+    old line are dropped.
+
+    Attributes:
+        taken: samples given to a row so far.
+    """
+
+    def __init__(self, most: int, capacity: int = 4096) -> None:
+        """Args:
+        most: the most samples a row takes (`samples_between`), >= 1.
+        capacity: the most samples carried between rows, >= most.
+
+        Raises:
+            ConfigurationError: most < 1 or capacity < most.
+        """
+        if most < 1 or capacity < most:
+            raise ConfigurationError(f'need 1 <= most <= capacity, got {most}, {capacity}')
+        self._most = most
+        self._capacity = capacity
+        self._stamps = np.zeros(0, dtype=np.int64)
+        self._values = np.zeros(0)
+        self._new_stamps: list[int] = []
+        self._new_values: list[float] = []
+        self._after: int | None = None
+        self.taken = 0
+
+    def __len__(self) -> int:
+        return self._stamps.shape[0] + len(self._new_stamps)
+
+    def add(self, stamp_ns: int, value: float) -> None:
+        """One sample (a message)."""
+        self._new_stamps.append(stamp_ns)
+        self._new_values.append(value)
+        if len(self._new_stamps) > 2 * self._capacity:  # no row for long: keep the newest
+            self._gather(trim=True)
+
+    def add_many(self, stamps_ns: IntArray, values: FloatArray) -> None:
+        """A block of samples, shape (M,) each."""
+        self._gather()
+        self._stamps = np.concatenate([self._stamps, np.asarray(stamps_ns, dtype=np.int64)])
+        self._values = np.concatenate([self._values, np.asarray(values, dtype=np.float64)])
+
+    def _gather(self, trim: bool = False) -> None:
+        if self._new_stamps:
+            stamps = np.concatenate([self._stamps, np.array(self._new_stamps, dtype=np.int64)])
+            values = np.concatenate([self._values, np.array(self._new_values)])
+            self._new_stamps, self._new_values = [], []
+        else:
+            stamps, values = self._stamps, self._values
+        order = np.argsort(stamps, kind='stable')
+        stamps, values = stamps[order], values[order]
+        if self._after is not None:
+            late = np.searchsorted(stamps, self._after, side='right')
+            stamps, values = stamps[late:], values[late:]
+        if trim:
+            stamps, values = stamps[-self._capacity :], values[-self._capacity :]
+        self._stamps, self._values = stamps, values
+
+    def take(self, rows_ns: IntArray) -> tuple[FloatArray, FloatArray]:
+        """The rows' samples (`samples_between`), and the rows are done.
+
+        Args:
+            rows_ns: shape (N,), int64 [ns], increasing.
+        """
+        rows = np.asarray(rows_ns, dtype=np.int64)
+        if rows.shape[0] == 0:
+            return np.zeros((0, self._most)), np.zeros((0, self._most))
+        if self._after is not None and rows[0] <= self._after:  # a new time line
+            after, self._after = self._after, None
+            self._gather()
+            keep = np.searchsorted(self._stamps, after, side='right')  # the old line's: after
+            self._stamps, self._values = self._stamps[:keep], self._values[:keep]
+        self._gather()
+        out = samples_between(self._stamps, self._values, rows, self._after, self._most)
+        self.taken += int(np.count_nonzero(~np.isnan(out[0])))
+        self._after = int(rows[-1])
+        self._gather(trim=True)  # what the rows took is now too late
+        return out

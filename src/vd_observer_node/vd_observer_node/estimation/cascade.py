@@ -36,7 +36,11 @@ from vd_observer_node.estimation.drivetrain import (
     torque_source_code,
 )
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
-from vd_observer_node.estimation.estimator_step import ESTIMATES, ESTIMATOR_INPUT
+from vd_observer_node.estimation.estimator_step import (
+    ESTIMATES,
+    ESTIMATOR_INPUT,
+    SPEED_SAMPLES_MAX,
+)
 from vd_observer_node.estimation.faults import ENGINE_FAULTS, FaultCounter
 from vd_observer_node.estimation.imu_grade import GRADE_INPUT, GRADE_OUT, SOURCE_FORCE, ImuGrade
 from vd_observer_node.estimation.imu_settings import ImuGradeConfig
@@ -63,6 +67,7 @@ __all__ = [
     'checked_brake',
     'checked_engine',
     'checked_record',
+    'checked_speed_samples',
     'empty_outputs',
     'no_imu',
     'offset_result_name',
@@ -265,6 +270,10 @@ class CascadeSeries:
             rate [rad/s] (REP 103, nose down positive; nan or absent: no angular rate); the
             slope is then the fusion of `imu_grade` (None: the force balance's slope, as
             without an IMU).
+        speed_samples: the body-speed samples each stamp feeds the speed observer at their
+            own stamps (`alignment.samples_between`): their stamps [s] and values [m/s],
+            shape (N, K) each, K <= `estimator_step.SPEED_SAMPLES_MAX`, oldest first, nan after
+            the last; None: each stamp's ``body_speed`` at the stamp.
     """
 
     t: ArrayLike
@@ -274,6 +283,7 @@ class CascadeSeries:
     engine: ArrayLike | None = None
     brake: ArrayLike | None = None
     imu: ArrayLike | None = None
+    speed_samples: tuple[ArrayLike, ArrayLike] | None = None
 
 
 @dataclass
@@ -382,6 +392,39 @@ def checked_engine(
     return code, record
 
 
+def checked_speed_samples(
+    stamps: FloatArray, speeds: FloatArray, given: tuple[ArrayLike, ArrayLike] | None
+) -> tuple[FloatArray, FloatArray]:
+    """The speed observer's samples per stamp (`CascadeInputs.speed_stamp`, ``speed_sample``),
+    shape (N, `SPEED_SAMPLES_MAX`) each.
+
+    Args:
+        stamps: shape (N,), [s] the stamps.
+        speeds: shape (N,), [m/s] the body speed at each (used where `given` is None).
+        given: `CascadeSeries.speed_samples`.
+
+    Raises:
+        InputShapeError: `given` is not two arrays of shape (N, K), K <= SPEED_SAMPLES_MAX.
+    """
+    n = stamps.shape[0]
+    stamp = np.full((n, SPEED_SAMPLES_MAX), np.nan)
+    sample = np.full((n, SPEED_SAMPLES_MAX), np.nan)
+    if given is None:
+        stamp[:, 0], sample[:, 0] = stamps, speeds
+        return stamp, sample
+    at, values = (np.asarray(a, dtype=np.float64) for a in given)
+    if at.ndim != 2 or at.shape != values.shape or at.shape[0] != n:
+        raise InputShapeError(
+            f'speed_samples must be two arrays of shape ({n}, K), got {at.shape}, {values.shape}'
+        )
+    if at.shape[1] > SPEED_SAMPLES_MAX:
+        raise InputShapeError(
+            f'speed_samples hold at most {SPEED_SAMPLES_MAX} samples a stamp, got {at.shape[1]}'
+        )
+    stamp[:, : at.shape[1]], sample[:, : at.shape[1]] = at, values
+    return stamp, sample
+
+
 def checked_brake(n: int, brake: ArrayLike | None) -> FloatArray:
     """The brake record (N, 4) (`brakes.brake_torques`), nan without one.
 
@@ -485,7 +528,7 @@ class CascadeParts:
         switches['imu_fused'] = self.imu_on
         self._records = CascadeRecords(
             switches, self.wheels.parts(), self.speed.parts(), self.estimator.parts,
-            new_records(ESTIMATOR_INPUT, 1),
+            _estimator_input(),
             EnginePathParts(
                 self.drivetrain, self.engine_state, a(self.offset_params), a(self.offset_state),
                 a(self.offset_estimate),
@@ -512,6 +555,13 @@ class CascadeParts:
         if self.offset_on:
             counts['engine.torque_offset_clamped'] = int(self.offset_state.clamped)
         return counts
+
+
+def _estimator_input() -> NDArray[Any]:
+    """The estimator's input buffer (`estimator_step.ESTIMATOR_INPUT`), no speed sample."""
+    buffer: NDArray[Any] = new_records(ESTIMATOR_INPUT, 1)
+    buffer['speed_stamps'] = np.nan
+    return buffer
 
 
 def empty_outputs(n: int, offsets: bool) -> CascadeOutputs:
@@ -565,9 +615,11 @@ def run_cascade(
         imu_record[:, : given.shape[1]] = given
         parts.grade(settings.imu)
     out = empty_outputs(n, parts.offset_on)
+    speed_stamp, speed_sample = checked_speed_samples(stamps, speeds, series.speed_samples)
     inputs = CascadeInputs(
-        stamps, angles, speeds, torques, engine_record, brake_record, imu_record
-    )
+        stamps, angles, speeds, speed_stamp, speed_sample, torques, engine_record, brake_record,
+        imu_record,
+    )  # fmt: skip
     cascade_block(parts.records(), inputs, out)
     if source == TORQUE_NONE:
         out.torque_valid[:] = False

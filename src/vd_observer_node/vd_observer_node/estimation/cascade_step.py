@@ -13,6 +13,10 @@ reads their fields by name; records live in 1-element arrays, as numba types arr
 fast path): the parts (`CascadeRecords`: every part's parameters and state, owned by
 `cascade.CascadeParts`), the inputs (`CascadeInputs`: one row per stamp) and the outputs
 (`CascadeOutputs`: one row per stamp).
+The speed observer and the estimator's speed low-pass (with the measured speed) take every
+body-speed sample at its own stamp: a stamp's samples are those stamped after the previous
+stamp and not after its own (`alignment.samples_between`), so a sample whose wheel stamp was
+lost still counts, and a held sample is not fed to the observer twice.
 A new input is a field of `CascadeInputs`, filled where the inputs are built
 (`cascade.cascade_inputs`, `chain.Chain`) and read by the part that uses it here.
 """
@@ -33,9 +37,12 @@ from vd_observer_node.estimation.brakes import (
     brake_torques,
 )
 from vd_observer_node.estimation.drivetrain import TORQUE_NONE, engine_torques
-from vd_observer_node.estimation.estimator_step import EstimatorParts, estimator_update
+from vd_observer_node.estimation.estimator_step import (
+    EstimatorParts,
+    estimator_update,
+)
 from vd_observer_node.estimation.imu_grade import imu_grade_step
-from vd_observer_node.estimation.levant_step import LevantParts, levant_update
+from vd_observer_node.estimation.levant_step import LevantParts, levant_held, levant_update
 from vd_observer_node.estimation.torque_offset import torque_offset_step
 from vd_observer_node.kernel._jit import jit, jit_inlined
 
@@ -137,7 +144,11 @@ class CascadeInputs(NamedTuple):
         t: shape (N,), [s] stamps.
         wheel_angle: shape (N, 4), [rad] wheel angles (or speeds [rad/s], as the observer
             takes them), order FL, FR, RL, RR.
-        body_speed: shape (N,), [m/s] measured body speed.
+        body_speed: shape (N,), [m/s] measured body speed (the newest sample not later than
+            the stamp).
+        speed_stamp: shape (N, `SPEED_SAMPLES_MAX`), [s] the stamps of the body-speed samples
+            the stamp feeds the speed observer, oldest first (nan: no more).
+        speed_sample: shape (N, `SPEED_SAMPLES_MAX`), [m/s] those samples.
         wheel_torque: shape (N, 4), [N m] measured wheel torques (read off the engine path
             only).
         engine: shape (N, 4): engine torque [N m], gear, engine speed [rad/s], turbine speed
@@ -151,6 +162,8 @@ class CascadeInputs(NamedTuple):
     t: FloatArray
     wheel_angle: FloatArray
     body_speed: FloatArray
+    speed_stamp: FloatArray
+    speed_sample: FloatArray
     wheel_torque: FloatArray
     engine: FloatArray
     brake: FloatArray
@@ -213,10 +226,19 @@ def cascade_step(
         w.params[0], w.lipschitz, w.state[0], w.channels, t, inputs.wheel_angle[k], wheel,
         out.wheel_valid[k],
     )  # fmt: skip
-    levant_update(
-        s.params[0], s.lipschitz, s.state[0], s.channels, t, inputs.body_speed[k : k + 1], body,
-        out.body_valid[k : k + 1],
-    )  # fmt: skip
+    body_valid = out.body_valid[k : k + 1]
+    fed = False
+    for j in range(inputs.speed_stamp.shape[1]):
+        stamp = inputs.speed_stamp[k, j]
+        if math.isnan(stamp):
+            break
+        levant_update(
+            s.params[0], s.lipschitz, s.state[0], s.channels, stamp,
+            inputs.speed_sample[k, j : j + 1], body, body_valid,
+        )  # fmt: skip
+        fed = True
+    if not fed:  # no new sample: the estimate of the newest one
+        levant_held(s.channels, body, body_valid)
     out.body[k, 0] = body[0, 0]
     out.body[k, 1] = body[1, 0]
     out.body[k, 2] = body[2, 0]
@@ -260,6 +282,11 @@ def cascade_step(
     inp.omega_dot[:] = wheel[2]
     inp.torque[:] = used
     inp.speed = v_est
+    if switches.measured_speed:  # the slope's speed low-pass takes them at their own stamps
+        inp.speed_stamps[:] = inputs.speed_stamp[k]
+        inp.speed_samples[:] = inputs.speed_sample[k]
+    else:
+        inp.speed_stamps[:] = math.nan
     inp.accel = body[1, 0]
     inp.torque_ok = torque_ok
     est = out.estimates[k]

@@ -498,6 +498,7 @@ class Estimator:
         self._synced = np.zeros(len(ESTIMATOR_FAULTS), dtype=np.int64)
         self._est = new_record(ESTIMATES)
         self._input = new_record(ESTIMATOR_INPUT)
+        self._input.speed_stamps[:] = np.nan  # a stamp's speed only (the estimator node's)
         #: the records (never replaced: a reset works in place) as `estimator_update` takes
         #: them; input and output as the arrays they live in (`update`'s fast numba call)
         self.parts = EstimatorParts(

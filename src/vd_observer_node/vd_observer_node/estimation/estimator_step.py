@@ -61,6 +61,7 @@ __all__ = [
     'GAP_FORCE_CHANGE',
     'HELD_INPUTS',
     'REJECTED_SLOT',
+    'SPEED_SAMPLES_MAX',
     'EstimatorParts',
     'estimator_reset',
     'estimator_update',
@@ -165,10 +166,17 @@ assert ROLLING_RADIUS_FAULTS.index('radius_clamped') == _M_CLAMPED
 #: after the gap.
 GAP_FORCE_CHANGE: Final = 0.05
 
+#: The most body-speed samples one stamp brings (the newest of them; more arrive only after
+#: several lost wheel stamps, or with a speed much faster than the wheels).
+SPEED_SAMPLES_MAX: Final = 16
+
 #: One stamp's inputs of the estimator: omega [rad/s] and omega_dot [rad/s^2] per wheel (the
 #: wheel observer's), torque [N m] per wheel (drive minus brake), speed [m/s] and accel
-#: [m/s^2] of the body, and torque_ok: False where the torque source cannot be trusted at
-#: the stamp (the engine path while the clutch slips: mu and slope are then invalid).
+#: [m/s^2] of the body, torque_ok: False where the torque source cannot be trusted at the
+#: stamp (the engine path while the clutch slips: mu and slope are then invalid), and the
+#: measured body-speed samples stamped since the previous stamp and before this one, which the
+#: slope's speed low-pass takes at their own stamps (stamps [s] and speeds [m/s], oldest
+#: first, nan after the last: a sample whose wheel stamp was lost still counts).
 _INPUT_FIELDS: Final = [
     ('omega', 'f8', (4,)),
     ('omega_dot', 'f8', (4,)),
@@ -176,7 +184,15 @@ _INPUT_FIELDS: Final = [
     ('speed', 'f8'),
     ('accel', 'f8'),
 ]
-ESTIMATOR_INPUT: Final = np.dtype([*_INPUT_FIELDS, ('torque_ok', 'b1')], align=True)
+ESTIMATOR_INPUT: Final = np.dtype(
+    [
+        *_INPUT_FIELDS,
+        ('torque_ok', 'b1'),
+        ('speed_stamps', 'f8', (SPEED_SAMPLES_MAX,)),
+        ('speed_samples', 'f8', (SPEED_SAMPLES_MAX,)),
+    ],
+    align=True,
+)
 #: The last finite inputs, held where a stamp's are not: `ESTIMATOR_INPUT` but its
 #: ``torque_ok``.
 HELD_INPUTS: Final = np.dtype(_INPUT_FIELDS, align=True)
@@ -185,7 +201,8 @@ HELD_INPUTS: Final = np.dtype(_INPUT_FIELDS, align=True)
 #: estimate, the radius of the last stamp's Fx (nan: none), the stamp until which the slope
 #: settles after a gap (`GAP_FORCE_CHANGE`; -inf: none), the last finite inputs (omega,
 #: omega_dot, torque (4 each), v, accel), the three low-passes' previous output and input and
-#: bookkeeping, the online mass's and radius's states, the fault counts, and a mass known from
+#: bookkeeping, the stamp of the speed low-pass's last sample (nan: none), the online mass's
+#: and radius's states, the fault counts, and a mass known from
 #: elsewhere that replaces the file's or the online mass's (nan: none; `cascade_step` sets it
 #: from the IMU's regression, `imu_grade`).
 ESTIMATOR_STATE: Final = np.dtype(
@@ -202,6 +219,7 @@ ESTIMATOR_STATE: Final = np.dtype(
         ('force_lp', LOWPASS_META),
         ('slope_lp', LOWPASS_META),
         ('speed_lp', LOWPASS_META),
+        ('speed_t', 'f8'),
         ('mass_s', MASS_STATE),
         ('radius_s', RADIUS_STATE),
         ('last', ESTIMATES),
@@ -256,6 +274,7 @@ def _forget(p: np.record, s: np.record) -> None:
     lowpass_reset(s.force_lp)
     lowpass_reset(s.slope_lp)
     lowpass_reset(s.speed_lp)
+    s.speed_t = math.nan
     mass_reset(p.mass_p, s.mass_s)
     radius_reset(p.radius_p, s.radius_s)
     s.mass_known = math.nan
@@ -403,6 +422,35 @@ def _bridge_speed(
 
 
 @jit
+def _speed_samples_before(parts: EstimatorParts, t: float, dt: float, inp: np.record) -> None:
+    """Feed the slope's speed low-pass the stamp's speed samples stamped before it, each at
+    its own stamp (the stamp's own speed follows in `_estimate`).
+
+    Only between two stamps of a running filter that are not a gap (`filters.lowpass_gap`:
+    over a gap the speed is bridged along the force balance, `_bridge_speed`), and only where
+    the slope takes m dv/dt from the speed.
+    """
+    p, s = parts.params[0], parts.state[0]
+    tau = p.slope_tau
+    if not (p.slope_accel == 0 and tau > 0.0 and dt > 0.0 and s.speed_lp.started):
+        return
+    if math.isnan(s.speed_t) or lowpass_gap(tau, s.speed_lp, dt) > 0.0:
+        return
+    sample = np.empty(1)
+    out = np.empty(1)
+    for j in range(inp.speed_stamps.shape[0]):
+        at = inp.speed_stamps[j]
+        if not at < t:  # nan: no more; the stamp's own sample is the stamp's speed
+            break
+        if at <= s.speed_t or not math.isfinite(inp.speed_samples[j]):
+            continue
+        sample[0] = inp.speed_samples[j]
+        lowpass_update(tau, parts.speed_stages, s.speed_prev, s.speed_lp, at - s.speed_t,
+                       sample, out)  # fmt: skip
+        s.speed_t = at
+
+
+@jit
 def _take(value: float, held: FloatArray, i: int) -> bool:
     """Whether ``value`` is finite; if so it is ``held[i]`` from now on."""
     if math.isfinite(value):
@@ -515,9 +563,12 @@ def _estimate(
             s.settle_until = t + (s_stages.shape[0] + 1) * p.slope_tau
     if by_speed:
         # m*dv/dt as the derivative of the same low-pass applied to the speed
-        dt_v = _bridge_speed(p.slope_tau, s, v_stages, s_stages, dt, forces, mass)
+        # the step from the speed's last sample (`_speed_samples_before`)
+        dt_speed = dt if math.isnan(s.speed_t) else t - s.speed_t
+        dt_v = _bridge_speed(p.slope_tau, s, v_stages, s_stages, dt_speed, forces, mass)
         speed_in = np.full(1, v)
         lowpass_update(p.slope_tau, v_stages, s.speed_prev, s.speed_lp, dt_v, speed_in, net_out)
+        s.speed_t = t
         lowpass_derivative(v_stages, s.speed_prev, s.speed_lp, net_out)
         accel_f = net_out[0]
         lowpass_update(p.slope_tau, s_stages, s.slope_prev, s.slope_lp, dt, one, net_out)
@@ -610,6 +661,7 @@ def estimator_update(parts: EstimatorParts, t: float, inp: np.record, est: np.re
     if not torque_ok:
         wheel_ok[:] = False
         body_ok = False
+    _speed_samples_before(parts, t, dt, inp)
     _estimate(parts, t, dt, x, wheel_ok, body_ok, torque_known, est)
     # one sum is the cheapest check: NaN/Inf anywhere makes it non-finite
     total = est.aero + est.slope

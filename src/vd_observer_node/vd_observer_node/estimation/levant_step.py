@@ -89,6 +89,7 @@ __all__ = [
     'first_order_implicit_step',
     'followed_lipschitz',
     'implicit_step',
+    'levant_held',
     'levant_reset',
     'levant_step',
     'levant_update',
@@ -497,6 +498,22 @@ def _write_output(channels: np.recarray, out: FloatArray) -> None:
 def _rejected(channels: np.recarray, out: FloatArray, valid: BoolArray) -> None:
     _write_output(channels, out)
     valid[:] = False
+
+
+@jit
+def levant_held(channels: np.recarray, out: FloatArray, valid: BoolArray) -> None:
+    """The estimates of the last stamp fed, again, where a stamp brings no new sample.
+
+    Args:
+        channels: (n,) `CHANNEL_DTYPE` records (unchanged).
+        out: shape (3, n), written: (f, f', f'') at the last stamp fed.
+        valid: shape (n,), written: what `levant_update` said at the last stamp it took (a
+            channel initialised whose sample was finite).
+    """
+    _write_output(channels, out)
+    for i in range(channels.shape[0]):
+        c = channels[i]
+        valid[i] = c.active and math.isfinite(c.f_last)
 
 
 @jit

@@ -76,6 +76,8 @@ from vd_msgs.msg import (
 from vd_observer_node.bag.cdr_message import MessageCodec
 from vd_observer_node.bag.errors import BagFormatError
 from vd_observer_node.chain import Chain, ChainOutput
+from vd_observer_node.estimation.alignment import SampleQueue
+from vd_observer_node.estimation.estimator_step import SPEED_SAMPLES_MAX
 from vd_observer_node.estimation.faults import ERROR
 from vd_observer_node.estimation.rate_settings import RateMeter, follow_rate_hz
 from vd_observer_node.inputs.decode import InputDecoder, has_header
@@ -215,6 +217,13 @@ class PipelineNode(Node):
             'withheld_non_finite': 0,
             'alerts_raised': 0,
         }
+        # every stamped body-speed sample reaches the speed observer at its own stamp, also
+        # those whose wheel stamp is lost (as vd replay's queue); a held speed (headerless,
+        # 'exact') is taken at the stamps it is held at
+        speed_name = mapping.body_speed.name
+        self._speed_samples = (
+            None if speed_name in self.aligner.held else SampleQueue(SPEED_SAMPLES_MAX)
+        )
         clock = self.get_clock()
         for spec, cls in zip(specs, classes, strict=True):
             callback = mapped_input(
@@ -225,6 +234,7 @@ class PipelineNode(Node):
                 self.watch,
                 lambda: clock.now().nanoseconds,
                 radius=settings.vehicle.effective_radius,
+                sample=self._speed_sample if spec.name == speed_name else None,
             )
             self.create_subscription(cls, spec.topic, callback, STREAM_QOS, raw=True)
         # the IMU samples received (stamp [s], forward specific force [m/s^2], pitch rate
@@ -275,6 +285,10 @@ class PipelineNode(Node):
                 f'friction potential and alerts {self._situation_off}; every estimate runs'
             )
 
+    def _speed_sample(self, stamp_ns: int, values: tuple[float, ...]) -> None:
+        if self._speed_samples is not None:
+            self._speed_samples.add(stamp_ns, values[0])
+
     def _codec(self, key: str, frame: bytes) -> MessageCodec:
         return self.encoders(self._types[key], frame)
 
@@ -297,7 +311,11 @@ class PipelineNode(Node):
         engine = m[ENGINE_INPUT][1] if source == 'engine' else None
         brake = m[BRAKE_INPUT][1] if BRAKE_INPUT in m else None
         t = stamp_ns * 1e-9
-        out = self.chain.update(t, angles, speed, torques, engine, imu=imu, brake=brake)
+        queue = self._speed_samples
+        samples = queue.take(np.array([stamp_ns], dtype=np.int64)) if queue is not None else None
+        out = self.chain.update(
+            t, angles, speed, torques, engine, imu=imu, brake=brake, speed_samples=samples
+        )
         if self._wheel_rate is not None and self._wheel_rate.add(stamp_ns):
             # from the next stamp on, as vd replay does (rate_settings.FOLLOW_AFTER)
             speed_stamps = self.watch.first_stamps(self._speed_topic)

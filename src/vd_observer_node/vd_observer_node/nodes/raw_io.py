@@ -647,6 +647,7 @@ def mapped_input(
     clock_ns: Callable[[], int],
     key: str | None = None,
     radius: float | None = None,
+    sample: Callable[[int, tuple[float, ...]], None] | None = None,
 ) -> Callable[[bytes], None]:
     """Subscription callback of a mapped input: decode to SI values, then match or hold.
 
@@ -663,6 +664,8 @@ def mapped_input(
             by the matcher's `ReceiptStamps` where the stamped inputs run on another clock.
         key: the input's name in `matcher` (default ``spec.name``).
         radius: effective rolling radius [m], for wheel speeds in m/s or km/h.
+        sample: also called with every matched sample (stamp [ns], values), before the
+            matcher takes it (pipeline_node's speed samples).
     """
     decoder = InputDecoder(spec, radius)
     name = key or spec.name
@@ -696,6 +699,8 @@ def mapped_input(
         if held:
             matcher.hold(name, now, (frame, values))
             return
+        if sample is not None:
+            sample(stamp_ns, values)
         for stamp, matched in matcher.push_all(name, stamp_ns, (frame, values), now):
             on_matched(stamp, matched)
 

@@ -27,7 +27,7 @@ from vd_observer_node.bag.alerts_cdr import encode_alerts_packed
 from vd_observer_node.bag.cdr_batch import encode_packed
 from vd_observer_node.bag.errors import ReplayInputError
 from vd_observer_node.bag.reader import TopicArrays
-from vd_observer_node.estimation.alignment import BlockAligner
+from vd_observer_node.estimation.alignment import BlockAligner, SampleQueue
 from vd_observer_node.estimation.cascade import (
     CascadeResult,
     CascadeSeries,
@@ -38,6 +38,7 @@ from vd_observer_node.estimation.cascade import (
 from vd_observer_node.estimation.drivetrain import (
     TORQUE_SOURCES,
 )
+from vd_observer_node.estimation.estimator_step import SPEED_SAMPLES_MAX
 from vd_observer_node.estimation.imu_regression import bias_pitch_deg
 from vd_observer_node.estimation.imu_settings import RATE_FOLLOWING
 from vd_observer_node.estimation.rate_settings import (
@@ -102,7 +103,9 @@ class ReplayReport:
         cascade_time_s: [s] wall time of the cascade.
         unmatched: sensor messages not used: with 'exact' alignment, those whose stamp is
             missing on another sensor topic; with 'latest', the wheel messages dropped
-            (repeated stamps, ``stale`` ones) and the other inputs' messages never held.
+            (repeated stamps, ``stale`` ones) and the other inputs' messages never held; a
+            body-speed sample is used where a wheel stamp took it at its own stamp (all but
+            those that came too late, or beyond `estimator_step.SPEED_SAMPLES_MAX` a stamp).
         stale: with 'latest' alignment, wheel stamps dropped because another input had no
             sample yet or only one older than the mapping's ``max_age``.
         situation_time_s: [s] wall time of the situation monitor (alerts and friction
@@ -260,6 +263,9 @@ class ReplayRun:
         self.aligner = BlockAligner(
             len(self.used), mapping.alignment, mapping.max_age, max_wait=MAX_WAIT_S
         )
+        # every body-speed sample reaches the speed observer at its own stamp, also those
+        # whose wheel stamp was lost (as pipeline_node's queue)
+        self.speed_samples = SampleQueue(SPEED_SAMPLES_MAX)
         max_gap = settings.observer.max_gap
         self.gaps = [GapStats(s, max_gap) for s in self.used]
         # the IMU is counted like the other inputs (it is not aligned: held at each stamp)
@@ -410,6 +416,8 @@ class ReplayRun:
             *({'v': d.values} for d in decoded[1:]),
         ]  # fmt: skip
         common, picked = self.aligner.push([d.stamp_ns for d in decoded], columns, final)
+        self.speed_samples.add_many(decoded[1].stamp_ns, decoded[1].values[:, 0])
+        speed_at, speed_values = self.speed_samples.take(common)
         n = len(common)
         if n and self.frame_id is None:
             self.frame_id = picked[0]['frame'][0].decode()
@@ -436,6 +444,7 @@ class ReplayRun:
                 engine=engine[rows] if engine is not None else None,
                 brake=brake[rows] if brake is not None else None,
                 imu=imu[rows] if imu is not None else None,
+                speed_samples=(speed_at[rows], speed_values[rows]),
             )
             return self.cascade(series, self.settings, self.state)
 
@@ -534,7 +543,12 @@ class ReplayRun:
             bag_duration_s=float(high - low) * 1e-9 if high >= low else 0.0,
             wall_time_s=wall,
             cascade_time_s=self.cascade_time,
-            unmatched=self.sensor_messages - self.samples - sum(self.aligner.used[1:]),
+            # the body speed's samples count where the speed path took them (every one that
+            # came in time), the others' where a set held them
+            unmatched=self.sensor_messages
+            - self.samples
+            - self.speed_samples.taken
+            - sum(self.aligner.used[2:]),
             situation_time_s=self.situation_time,
             stale=self.aligner.stale,
             faults=dict(result.faults),
