@@ -609,6 +609,12 @@ class SampleQueue:
         rows = np.asarray(rows_ns, dtype=np.int64)
         if rows.shape[0] == 0:
             return np.zeros((0, self._most)), np.zeros((0, self._most))
+        if rows.shape[0] == 1:
+            return self.take_one(int(rows[0]))
+        return self._take_rows(rows)
+
+    def _take_rows(self, rows: IntArray) -> tuple[FloatArray, FloatArray]:
+        """`take` on arrays (a block, or a row after a block or a jump back)."""
         if self._after is not None and rows[0] <= self._after:  # a new time line
             after, self._after = self._after, None
             self._gather()
@@ -620,3 +626,29 @@ class SampleQueue:
         self._after = int(rows[-1])
         self._gather(trim=True)  # what the rows took is now too late
         return out
+
+    def take_one(self, row_ns: int) -> tuple[FloatArray, FloatArray]:
+        """`take` of one row stamped ``row_ns`` [ns]: shape (1, most) each.
+
+        With the samples given one at a time (`add`: the live node, a few a stamp) in plain
+        Python, without array work but the two rows returned.
+        """
+        row = row_ns
+        if self._stamps.shape[0] or (self._after is not None and row <= self._after):
+            return self._take_rows(np.array([row], dtype=np.int64))
+        stamps, values, after = self._new_stamps, self._new_values, self._after
+        # stable, as argsort (one sample: nothing to sort)
+        order = [0] if len(stamps) == 1 else sorted(range(len(stamps)), key=stamps.__getitem__)
+        due = [i for i in order if stamps[i] <= row and (after is None or stamps[i] > after)]
+        use = due[-self._most :]
+        stamp = np.full((1, self._most), np.nan)
+        sample = np.full((1, self._most), np.nan)
+        for j, i in enumerate(use):
+            stamp[0, j] = stamps[i] * 1e-9
+            sample[0, j] = values[i]
+        later = [i for i in order if stamps[i] > row][-self._capacity :]
+        self._new_stamps = [stamps[i] for i in later]
+        self._new_values = [values[i] for i in later]
+        self.taken += len(use)
+        self._after = row
+        return stamp, sample

@@ -312,7 +312,7 @@ class PipelineNode(Node):
         brake = m[BRAKE_INPUT][1] if BRAKE_INPUT in m else None
         t = stamp_ns * 1e-9
         queue = self._speed_samples
-        samples = queue.take(np.array([stamp_ns], dtype=np.int64)) if queue is not None else None
+        samples = queue.take_one(stamp_ns) if queue is not None else None
         out = self.chain.update(
             t, angles, speed, torques, engine, imu=imu, brake=brake, speed_samples=samples
         )
