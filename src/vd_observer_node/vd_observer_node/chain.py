@@ -28,9 +28,15 @@ from vd_observer_node.estimation.cascade import (
     CascadeParts,
     checked_speed_samples,
     empty_outputs,
+    input_records,
     no_imu,
 )
-from vd_observer_node.estimation.cascade_step import CascadeInputs, cascade_block
+from vd_observer_node.estimation.cascade_step import (
+    ENGINE_INPUT,
+    IMU_INPUT,
+    CascadeInputs,
+    cascade_block,
+)
 from vd_observer_node.estimation.drivetrain import TORQUE_NONE
 from vd_observer_node.estimation.estimator import (
     Estimates,
@@ -159,8 +165,8 @@ class Chain:
         # one stamp's inputs and outputs: buffers filled and read at every `update`
         self._in = CascadeInputs(
             np.zeros(1), np.zeros((1, 4)), np.zeros(1), *checked_speed_samples(
-                np.zeros(1), np.zeros(1), None), np.zeros((1, 4)), np.zeros((1, 4)),
-            no_brakes(1), no_imu(1),
+                np.zeros(1), np.zeros(1), None), np.zeros((1, 4)),
+            input_records(ENGINE_INPUT, np.zeros((1, 4))), no_brakes(1), no_imu(1),
         )  # fmt: skip
         self._out = empty_outputs(1, self.parts.offset_on)
         #: the estimate as a plain structured array: its fields read without a recarray's
@@ -233,11 +239,13 @@ class Chain:
         # the replay's without torque: no torque topic, zeros everywhere
         inputs.wheel_torque[0] = 0.0 if self._none else torques
         if parts.engine_on:
-            inputs.engine[0] = engine_row(engine)
+            inputs.engine[0] = tuple(engine_row(engine))
         inputs.brake[0] = math.nan if brake is None else np.reshape(brake, 4)
-        inputs.imu[0] = math.nan
+        row = inputs.imu[0]
+        row['stamp'] = row['f_x'] = row['pitch_rate'] = math.nan
         if imu is not None:
-            inputs.imu[0, : len(imu)] = imu
+            for name, value in zip(IMU_INPUT.names or (), imu, strict=False):
+                row[name] = value
         self._block()
         out = self._out
         stamp, speeds = inputs.t, inputs.body_speed

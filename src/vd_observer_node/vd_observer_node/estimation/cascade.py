@@ -18,7 +18,9 @@ from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.brakes import Brakes, no_brakes
 from vd_observer_node.estimation.cascade_step import (
     CASCADE_SWITCHES,
+    ENGINE_INPUT,
     ENGINE_STATE,
+    IMU_INPUT,
     CascadeInputs,
     CascadeOutputs,
     CascadeRecords,
@@ -69,6 +71,7 @@ __all__ = [
     'checked_record',
     'checked_speed_samples',
     'empty_outputs',
+    'input_records',
     'no_imu',
     'offset_result_name',
     'run_cascade',
@@ -612,13 +615,13 @@ def run_cascade(
                 f'imu must have shape ({n}, 3) (sample stamp, specific force, pitch rate) or '
                 f'({n}, 2), got {given.shape}'
             )
-        imu_record[:, : given.shape[1]] = given
+        imu_record = input_records(IMU_INPUT, given)
         parts.grade(settings.imu)
     out = empty_outputs(n, parts.offset_on)
     speed_stamp, speed_sample = checked_speed_samples(stamps, speeds, series.speed_samples)
     inputs = CascadeInputs(
-        stamps, angles, speeds, speed_stamp, speed_sample, torques, engine_record, brake_record,
-        imu_record,
+        stamps, angles, speeds, speed_stamp, speed_sample, torques,
+        input_records(ENGINE_INPUT, engine_record), brake_record, imu_record,
     )  # fmt: skip
     cascade_block(parts.records(), inputs, out)
     if source == TORQUE_NONE:
@@ -626,9 +629,20 @@ def run_cascade(
     return cascade_result(stamps, source, parts, out)
 
 
-def no_imu(n: int) -> FloatArray:
-    """The IMU input of N stamps without an IMU (no sample: nan), shape (N, 3)."""
-    return np.full((n, 3), np.nan)
+def no_imu(n: int) -> NDArray[Any]:
+    """The IMU input of N stamps without an IMU (no sample: nan): shape (N,)
+    `cascade_step.IMU_INPUT` records."""
+    return input_records(IMU_INPUT, np.zeros((n, 0)))
+
+
+def input_records(dtype: np.dtype[Any], columns: FloatArray) -> NDArray[Any]:
+    """The records of an input given as columns (the API's (N, C) arrays, in the order of
+    the record's fields; the fields after the C given are nan): shape (N,)."""
+    records: NDArray[Any] = new_records(dtype, columns.shape[0])
+    names = dtype.names or ()
+    for i, name in enumerate(names):
+        records[name] = columns[:, i] if i < columns.shape[1] else np.nan
+    return records
 
 
 def cascade_result(

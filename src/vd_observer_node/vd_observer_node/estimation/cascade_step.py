@@ -48,7 +48,9 @@ from vd_observer_node.kernel._jit import jit, jit_inlined
 
 __all__ = [
     'CASCADE_SWITCHES',
+    'ENGINE_INPUT',
     'ENGINE_STATE',
+    'IMU_INPUT',
     'CascadeInputs',
     'CascadeOutputs',
     'CascadeRecords',
@@ -64,6 +66,17 @@ BoolArray = NDArray[np.bool_]
 #: The engine path's memory: the stamp [s] the clutch last slipped or the gear changed (-inf
 #: before), and the last gear (nan before).
 ENGINE_STATE: Final = np.dtype([('changed_at', 'f8'), ('gear', 'f8')], align=True)
+
+#: One stamp's engine-path input: engine torque [N m], gear (0 neutral, -1 reverse), engine
+#: speed [rad/s] and an automatic gearbox's turbine speed [rad/s] (the speeds nan where not
+#: logged).
+ENGINE_INPUT: Final = np.dtype(
+    [('torque', 'f8'), ('gear', 'f8'), ('speed', 'f8'), ('turbine_speed', 'f8')], align=True
+)
+
+#: One stamp's IMU input: the stamp [s] of the newest IMU sample (nan: none), its forward
+#: specific force [m/s^2] and the body's pitch rate [rad/s] (nose down positive; nan: none).
+IMU_INPUT: Final = np.dtype([('stamp', 'f8'), ('f_x', 'f8'), ('pitch_rate', 'f8')], align=True)
 
 #: Which parts run: measured_speed (the estimator gets the measured speed, else the speed
 #: observer's), engine_path (the wheel torques come from the engine torque and gear),
@@ -151,12 +164,9 @@ class CascadeInputs(NamedTuple):
         speed_sample: shape (N, `SPEED_SAMPLES_MAX`), [m/s] those samples.
         wheel_torque: shape (N, 4), [N m] measured wheel torques (read off the engine path
             only).
-        engine: shape (N, 4): engine torque [N m], gear, engine speed [rad/s], turbine speed
-            [rad/s] (engine path; the speeds nan where not logged).
+        engine: shape (N,), `ENGINE_INPUT` records (read on the engine path).
         brake: shape (N, 4), the brake input (`brakes.brake_torques`; nan: none).
-        imu: shape (N, 3): stamp [s] of the newest IMU sample (nan: none), its forward
-            specific force [m/s^2] and the body's pitch rate [rad/s] (nose down positive;
-            nan: none) (read with the IMU fusion on).
+        imu: shape (N,), `IMU_INPUT` records (read with the IMU fusion on).
     """
 
     t: FloatArray
@@ -165,9 +175,9 @@ class CascadeInputs(NamedTuple):
     speed_stamp: FloatArray
     speed_sample: FloatArray
     wheel_torque: FloatArray
-    engine: FloatArray
+    engine: NDArray[Any]
     brake: FloatArray
-    imu: FloatArray
+    imu: NDArray[Any]
 
 
 class CascadeOutputs(NamedTuple):
@@ -249,21 +259,22 @@ def cascade_step(
         engine = inputs.engine[k]
         e = parts.engine
         line, memory = e.drivetrain[0], e.engine_state[0]
-        engine_torque = engine[0]
+        engine_torque = engine.torque
         if switches.offset_learnt:
             oout = e.offset_estimate[0]
             torque_offset_step(
-                e.offset_params[0], line.engine_inertia, e.offset_state[0], t, engine[0],
-                engine[1], engine[2], oout,
+                e.offset_params[0], line.engine_inertia, e.offset_state[0], t, engine.torque,
+                engine.gear, engine.speed, oout,
             )  # fmt: skip
             engine_torque = engine_torque - oout.used
             out.offsets[k] = oout
         engaged = engine_torques(
-            line, engine_torque, engine[1], engine[2], engine[3], wheel[1], wheel[2], used
-        )
-        if not engaged or engine[1] != memory.gear:
+            line, engine_torque, engine.gear, engine.speed, engine.turbine_speed, wheel[1],
+            wheel[2], used,
+        )  # fmt: skip
+        if not engaged or engine.gear != memory.gear:
             memory.changed_at = t
-        memory.gear = engine[1]
+        memory.gear = engine.gear
         torque_ok = engaged and t - memory.changed_at >= line.clutch_settle_time
     else:
         used[:] = inputs.wheel_torque[k]
@@ -310,9 +321,10 @@ def _imu_step(
     speed = inputs.body_speed[k]
     # the longitudinal balance without gravity and rolling: what the regression explains
     force = est.fx[0] + est.fx[1] + est.fx[2] + est.fx[3] - math.copysign(est.aero, speed)
-    inp.imu_stamp = inputs.imu[k, 0]
-    inp.f_x = inputs.imu[k, 1]
-    inp.pitch_rate = inputs.imu[k, 2]
+    imu = inputs.imu[k]
+    inp.imu_stamp = imu.stamp
+    inp.f_x = imu.f_x
+    inp.pitch_rate = imu.pitch_rate
     inp.speed = speed
     inp.slope_force = est.slope
     inp.force_valid = est.slope_valid
