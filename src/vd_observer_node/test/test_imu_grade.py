@@ -258,7 +258,7 @@ def test_the_live_chain_fuses_as_the_cascade_does(gyro: bool) -> None:
         held = None if np.isnan(imu[k, 0]) else tuple(float(x) for x in imu[k])
         out = chain.update(
             float(sim.t[k]), sim.wheel_angle[k], float(sim.body_speed[k]), sim.wheel_torque[k],
-            imu=held,
+            held={'imu': held},
         )  # fmt: skip
         slope[k] = out.estimates.slope
         mass_used[k] = out.estimates.mass_used

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import NamedTuple
 
@@ -28,12 +29,12 @@ from vd_observer_node.estimation.cascade import (
     CascadeParts,
     checked_speed_samples,
     empty_outputs,
+    held_records,
     input_records,
-    no_imu,
 )
 from vd_observer_node.estimation.cascade_step import (
-    ENGINE_INPUT,
-    IMU_INPUT,
+    ENGINE_SAMPLE,
+    HELD_INPUTS,
     CascadeInputs,
     cascade_block,
 )
@@ -166,8 +167,14 @@ class Chain:
         self._in = CascadeInputs(
             np.zeros(1), np.zeros((1, 4)), np.zeros(1), *checked_speed_samples(
                 np.zeros(1), np.zeros(1), None), np.zeros((1, 4)),
-            input_records(ENGINE_INPUT, np.zeros((1, 4))), no_brakes(1), no_imu(1),
+            input_records(ENGINE_SAMPLE, np.zeros((1, 4))), no_brakes(1),
+            **held_records(1, {}),
         )  # fmt: skip
+        #: per held input, its one-row buffer and the row of a stamp without a sample
+        self._held = {
+            name: (getattr(self._in, name), (math.nan,) * len(dtype.names or ()))
+            for name, dtype in HELD_INPUTS.items()
+        }
         self._out = empty_outputs(1, self.parts.offset_on)
         #: the estimate as a plain structured array: its fields read without a recarray's
         #: Python attribute lookup (the live chain reads them every stamp)
@@ -184,9 +191,9 @@ class Chain:
         speed: float,
         wheel_torque: ArrayLike,
         engine: ArrayLike | None = None,
-        imu: tuple[float, ...] | None = None,
         brake: ArrayLike | None = None,
         speed_samples: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
+        held: Mapping[str, Sequence[float] | None] | None = None,
     ) -> ChainOutput:
         """Advance to stamp t.
 
@@ -200,15 +207,16 @@ class Chain:
             engine: shape (3,) or (4,): engine torque [N m], gear, engine speed [rad/s] (nan
                 if not measured), turbine speed [rad/s] (nan or absent if not logged); read
                 on the engine path only, where it is required.
-            imu: the newest IMU sample: its stamp [s], forward specific force [m/s^2] and
-                the body's pitch rate [rad/s] (nose down positive; nan or absent: the sensor
-                gives none) (read with ``settings.imu`` only; None: none yet).
             brake: shape (4,): the brake input (`estimation.brakes.brake_torques`; nan where
                 unknown); None: nothing known at this stamp (with a brake input: invalid).
             speed_samples: the body-speed samples stamped since the previous stamp, which the
                 speed observer takes at their own stamps: stamps [s] and values [m/s], shape
                 (1, K) each as `alignment.SampleQueue.take` gives them (nan after the last);
                 None: ``speed`` at ``t``.
+            held: the held inputs' newest samples by name (`cascade_step.HELD_INPUTS`), e.g.
+                ``{'imu': (stamp [s], forward specific force [m/s^2], pitch rate [rad/s])}``
+                (nose down positive; read with ``settings.imu`` only): the sample's stamp and
+                its first fields (the others nan); a name absent or None: none yet.
 
         Raises:
             InputShapeError: an array input has the wrong shape, or no engine on the engine
@@ -241,11 +249,13 @@ class Chain:
         if parts.engine_on:
             inputs.engine[0] = tuple(engine_row(engine))
         inputs.brake[0] = math.nan if brake is None else np.reshape(brake, 4)
-        row = inputs.imu[0]
-        row['stamp'] = row['f_x'] = row['pitch_rate'] = math.nan
-        if imu is not None:
-            for name, value in zip(IMU_INPUT.names or (), imu, strict=False):
-                row[name] = value
+        given = held or {}
+        for name in given:
+            if name not in self._held:
+                raise InputShapeError(f'no held input {name!r}; known: {sorted(self._held)}')
+        for name, (buffer, none) in self._held.items():
+            sample = given.get(name)
+            buffer[0] = none if sample is None else (*sample, *none[len(sample) :])
         self._block()
         out = self._out
         stamp, speeds = inputs.t, inputs.body_speed

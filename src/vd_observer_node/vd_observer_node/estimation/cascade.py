@@ -8,6 +8,7 @@ run in blocks with a carried `CascadeState` (what the streamed replay does).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, Final
 
@@ -18,9 +19,10 @@ from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.brakes import Brakes, no_brakes
 from vd_observer_node.estimation.cascade_step import (
     CASCADE_SWITCHES,
-    ENGINE_INPUT,
+    ENGINE_SAMPLE,
     ENGINE_STATE,
-    IMU_INPUT,
+    HELD_INPUTS,
+    IMU_SAMPLE,
     CascadeInputs,
     CascadeOutputs,
     CascadeRecords,
@@ -71,6 +73,7 @@ __all__ = [
     'checked_record',
     'checked_speed_samples',
     'empty_outputs',
+    'held_records',
     'input_records',
     'no_imu',
     'offset_result_name',
@@ -277,6 +280,9 @@ class CascadeSeries:
             own stamps (`alignment.samples_between`): their stamps [s] and values [m/s],
             shape (N, K) each, K <= `estimator_step.SPEED_SAMPLES_MAX`, oldest first, nan after
             the last; None: each stamp's ``body_speed`` at the stamp.
+        held: the held inputs by name (`cascade_step.HELD_INPUTS`; ``imu`` above is one of
+            them), each shape (N, C): the newest sample's stamp [s] at each stamp (nan: none)
+            and its first C - 1 fields (the record's fields after them nan).
     """
 
     t: ArrayLike
@@ -287,6 +293,7 @@ class CascadeSeries:
     brake: ArrayLike | None = None
     imu: ArrayLike | None = None
     speed_samples: tuple[ArrayLike, ArrayLike] | None = None
+    held: Mapping[str, ArrayLike] | None = None
 
 
 @dataclass
@@ -607,21 +614,18 @@ def run_cascade(
         parts = CascadeParts(settings)
         if state is not None:
             state.parts = parts
-    imu_record = no_imu(n)
+    held = dict(series.held or {})
     if series.imu is not None:
-        given = np.asarray(series.imu, dtype=np.float64)
-        if given.ndim != 2 or given.shape[0] != n or given.shape[1] not in (2, 3):
-            raise InputShapeError(
-                f'imu must have shape ({n}, 3) (sample stamp, specific force, pitch rate) or '
-                f'({n}, 2), got {given.shape}'
-            )
-        imu_record = input_records(IMU_INPUT, given)
+        held['imu'] = series.imu
+    if 'imu' in held:  # an IMU turns its fusion on
         parts.grade(settings.imu)
     out = empty_outputs(n, parts.offset_on)
     speed_stamp, speed_sample = checked_speed_samples(stamps, speeds, series.speed_samples)
     inputs = CascadeInputs(
-        stamps, angles, speeds, speed_stamp, speed_sample, torques,
-        input_records(ENGINE_INPUT, engine_record), brake_record, imu_record,
+        t=stamps, wheel_angle=angles, body_speed=speeds, speed_stamp=speed_stamp,
+        speed_sample=speed_sample, wheel_torque=torques,
+        engine=input_records(ENGINE_SAMPLE, engine_record), brake=brake_record,
+        **held_records(n, held),
     )  # fmt: skip
     cascade_block(parts.records(), inputs, out)
     if source == TORQUE_NONE:
@@ -631,8 +635,38 @@ def run_cascade(
 
 def no_imu(n: int) -> NDArray[Any]:
     """The IMU input of N stamps without an IMU (no sample: nan): shape (N,)
-    `cascade_step.IMU_INPUT` records."""
-    return input_records(IMU_INPUT, np.zeros((n, 0)))
+    `cascade_step.IMU_SAMPLE` records."""
+    return input_records(IMU_SAMPLE, np.zeros((n, 0)))
+
+
+def held_records(n: int, held: Mapping[str, ArrayLike]) -> dict[str, NDArray[Any]]:
+    """Every held input's records over N stamps (`cascade_step.HELD_INPUTS`), nan where not
+    given.
+
+    Args:
+        held: by name, shape (N, C) each: the sample's stamp [s] and its first C - 1 fields
+            (`CascadeSeries.held`).
+
+    Raises:
+        InputShapeError: an unknown name, or columns of another shape.
+    """
+    unknown = sorted(set(held) - set(HELD_INPUTS))
+    if unknown:
+        raise InputShapeError(f'no held input {unknown}; known: {sorted(HELD_INPUTS)}')
+    out = {}
+    for name, dtype in HELD_INPUTS.items():
+        given = held.get(name)
+        columns = np.zeros((n, 0)) if given is None else np.asarray(given, dtype=np.float64)
+        fields = dtype.names or ()
+        if given is not None and (
+            columns.ndim != 2 or columns.shape[0] != n or not 2 <= columns.shape[1] <= len(fields)
+        ):
+            raise InputShapeError(
+                f'{name} must have shape ({n}, C), 2 <= C <= {len(fields)} '
+                f'({", ".join(fields)}), got {columns.shape}'
+            )
+        out[name] = input_records(dtype, columns)
+    return out
 
 
 def input_records(dtype: np.dtype[Any], columns: FloatArray) -> NDArray[Any]:

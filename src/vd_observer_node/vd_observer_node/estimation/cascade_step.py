@@ -48,9 +48,10 @@ from vd_observer_node.kernel._jit import jit, jit_inlined
 
 __all__ = [
     'CASCADE_SWITCHES',
-    'ENGINE_INPUT',
+    'ENGINE_SAMPLE',
     'ENGINE_STATE',
-    'IMU_INPUT',
+    'HELD_INPUTS',
+    'IMU_SAMPLE',
     'CascadeInputs',
     'CascadeOutputs',
     'CascadeRecords',
@@ -70,13 +71,21 @@ ENGINE_STATE: Final = np.dtype([('changed_at', 'f8'), ('gear', 'f8')], align=Tru
 #: One stamp's engine-path input: engine torque [N m], gear (0 neutral, -1 reverse), engine
 #: speed [rad/s] and an automatic gearbox's turbine speed [rad/s] (the speeds nan where not
 #: logged).
-ENGINE_INPUT: Final = np.dtype(
+ENGINE_SAMPLE: Final = np.dtype(
     [('torque', 'f8'), ('gear', 'f8'), ('speed', 'f8'), ('turbine_speed', 'f8')], align=True
 )
 
 #: One stamp's IMU input: the stamp [s] of the newest IMU sample (nan: none), its forward
 #: specific force [m/s^2] and the body's pitch rate [rad/s] (nose down positive; nan: none).
-IMU_INPUT: Final = np.dtype([('stamp', 'f8'), ('f_x', 'f8'), ('pitch_rate', 'f8')], align=True)
+IMU_SAMPLE: Final = np.dtype([('stamp', 'f8'), ('f_x', 'f8'), ('pitch_rate', 'f8')], align=True)
+
+#: The held inputs, by their field of `CascadeInputs`: each stamp takes the newest sample not
+#: later than it (sample and hold, as a live node sees it), a record whose first field is the
+#: sample's stamp [s] (nan: none yet; the part that reads it judges its age). The replay, the
+#: live chain and the pipeline node carry every one of them alike (`cascade.held_records`,
+#: `chain.Chain.update`, ``InputMapping.held_specs``): a new held input is its record here, its
+#: field of `CascadeInputs`, its key in the input mapping, and the part that reads it.
+HELD_INPUTS: Final = {'imu': IMU_SAMPLE}  # by the input mapping's names
 
 #: Which parts run: measured_speed (the estimator gets the measured speed, else the speed
 #: observer's), engine_path (the wheel torques come from the engine torque and gear),
@@ -164,9 +173,9 @@ class CascadeInputs(NamedTuple):
         speed_sample: shape (N, `SPEED_SAMPLES_MAX`), [m/s] those samples.
         wheel_torque: shape (N, 4), [N m] measured wheel torques (read off the engine path
             only).
-        engine: shape (N,), `ENGINE_INPUT` records (read on the engine path).
+        engine: shape (N,), `ENGINE_SAMPLE` records (read on the engine path).
         brake: shape (N, 4), the brake input (`brakes.brake_torques`; nan: none).
-        imu: shape (N,), `IMU_INPUT` records (read with the IMU fusion on).
+        imu: shape (N,), `IMU_SAMPLE` records (held; read with the IMU fusion on).
     """
 
     t: FloatArray

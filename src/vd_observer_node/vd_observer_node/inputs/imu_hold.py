@@ -1,4 +1,5 @@
-"""The IMU sample each stamp of the live chain takes, independent of delivery order.
+"""The IMU sample (any held input's) each stamp of the live chain takes, independent of
+delivery order.
 
 A replay holds, at each wheel stamp, the newest IMU sample not later than it. A live node
 receives the IMU and the wheel sensors on separate subscriptions, and which of the IMU sample
@@ -19,8 +20,9 @@ from typing import Generic, TypeVar
 
 __all__ = ['ImuHold', 'ImuSample']
 
-#: stamp [s], forward specific force [m/s^2], pitch rate [rad/s] (nan: none)
-ImuSample = tuple[float, float, float]
+#: a held input's sample: its stamp [s], then its values (the IMU's: forward specific force
+#: [m/s^2], pitch rate [rad/s] (nan: none))
+ImuSample = tuple[float, ...]
 T = TypeVar('T')
 
 

@@ -51,8 +51,8 @@ from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.mapping import (
     ALIGNMENTS,
     FUSION_KEY,
+    HELD_KEYS,
     IMU_INPUT,
-    IMU_KEYS,
     INPUT_KEYS,
     INPUTS,
     SUPPORTED_TYPES,
@@ -133,17 +133,19 @@ INPUT_PARAMS: Final = [
         'wheel stamp with the newest not-later sample of the others (topics on their own clocks)',
     ),
     ParamSpec('inputs.max_age', None, "'latest' alignment: oldest held sample [s]"),
-    # the IMU (optional; fused by pipeline_node, `imu_grade`): as the mapping file's ``imu``
+    # the held inputs (optional; the IMU, fused by pipeline_node, `imu_grade`): as the mapping
+    # file's
     *(
         ParamSpec(
-            f'inputs.{IMU_INPUT}.{key}',
+            f'inputs.{name}.{key}',
             None,
-            f'{IMU_INPUT}: {_KEY_DOCS.get(key, "message type" if key == "type" else key)}'
-            + (f' ({" | ".join(UNITS[IMU_INPUT])})' if key == 'unit' else '')
-            + (f' ({" | ".join(SUPPORTED_TYPES[IMU_INPUT])})' if key == 'type' else '')
-            + ('; unset: no IMU, the force balance slope' if key == 'topic' else ''),
+            f'{name}: {_KEY_DOCS.get(key, "message type" if key == "type" else key)}'
+            + (f' ({" | ".join(UNITS[name])})' if key == 'unit' else '')
+            + (f' ({" | ".join(SUPPORTED_TYPES[name])})' if key == 'type' else '')
+            + (f'; unset: no {name} input' if key == 'topic' else ''),
         )
-        for key in IMU_KEYS
+        for name, keys in HELD_KEYS.items()
+        for key in keys
     ),
     *(
         ParamSpec(

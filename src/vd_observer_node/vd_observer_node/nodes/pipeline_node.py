@@ -83,7 +83,7 @@ from vd_observer_node.estimation.rate_settings import RateMeter, follow_rate_hz
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.imu_hold import ImuHold
-from vd_observer_node.inputs.mapping import BRAKE_INPUT, ENGINE_INPUT
+from vd_observer_node.inputs.mapping import BRAKE_INPUT, ENGINE_INPUT, InputSpec
 from vd_observer_node.nodes.node_params import (
     INPUT_PARAMS,
     PIPELINE_PARAMS,
@@ -136,10 +136,13 @@ _OUTPUTS = (
 )
 #: the per-quantity outputs that ``estimate_topics: combined`` carries in one message
 _SEPARATE = ('states', 'accel', 'velocity', 'forces', 'friction', 'resistances', 'slope')
-#: [s] how far the IMU may be behind the newest completed stamp before the stamps go on
-#: without it (`ImuHold`): a busy executor taking the IMU's queue late is not a dropout (the
-#: fusion judges the sample's age by its stamp); as the lockstep demo's window
-_IMU_WAIT = 0.5
+#: [s] how far a held input (the IMU) may be behind the newest completed stamp before the
+#: stamps go on without it (`ImuHold`): a busy executor taking its queue late is not a dropout
+#: (the part that reads it judges the sample's age by its stamp); as the lockstep demo's window
+_HELD_WAIT = 0.5
+#: What a stamp carries through the held inputs' holds: its matched set, and the samples
+#: known so far by held input
+_HeldItem = tuple[dict[str, Any], dict[str, Any]]
 
 
 def _stamp_ns(t: float) -> int:
@@ -175,10 +178,11 @@ class PipelineNode(Node):
         self.aligner = input_matcher(
             mapping, names, capacity, max_jump_back_ns=max_gap_ns, max_age_ns=max_gap_ns
         )
-        # the IMU is watched like the other inputs: a stopped one is a WARN on /diagnostics
-        imu_topics = [mapping.imu.topic] if mapping.imu is not None else []
+        # the held inputs (the IMU) are watched like the others: a stopped one is a WARN on
+        # /diagnostics
+        held_topics = [spec.topic for spec in mapping.held_specs]
         self.watch = InputWatch(
-            list(dict.fromkeys([*(spec.topic for spec in specs), *imu_topics])), max_gap_ns
+            list(dict.fromkeys([*(spec.topic for spec in specs), *held_topics])), max_gap_ns
         )
         # the wheel stamps and a stamped body speed's set what follows the rate
         self._wheel_rate: RateMeter | None = RateMeter()
@@ -237,40 +241,18 @@ class PipelineNode(Node):
                 sample=self._speed_sample if spec.name == speed_name else None,
             )
             self.create_subscription(cls, spec.topic, callback, STREAM_QOS, raw=True)
-        # the IMU samples received (stamp [s], forward specific force [m/s^2], pitch rate
-        # [rad/s] or nan): each stamp takes the newest not later than it, as the replay holds
-        # them, whatever the order the executor takes the subscriptions in (`ImuHold`); the
-        # fusion judges its age
-        self._imu: ImuHold[dict[str, Any]] | None = None
-        self._imu_oldest_before: int | None = None
+        # the held inputs' samples (the IMU's: stamp [s], forward specific force [m/s^2],
+        # pitch rate [rad/s] or nan): each stamp takes the newest not later than it, as the
+        # replay holds them, whatever the order the executor takes the subscriptions in (one
+        # `ImuHold` a held input; a stamp passes each in turn); the part that reads a sample
+        # judges its age
+        self._holds: list[tuple[str, ImuHold[_HeldItem]]] = []
+        self._oldest_before: list[int | None] = []
+        for spec in mapping.held_specs:
+            self._subscribe_held(spec, len(self._holds))
+            self._holds.append((spec.name, ImuHold(_HELD_WAIT)))
+            self._oldest_before.append(None)
         self._imu_said = False  # the learnt bias logged once it is trusted
-        if mapping.imu is not None:
-            self._imu = ImuHold(_IMU_WAIT)
-            imu_decoder = InputDecoder(mapping.imu)
-            imu_topic, imu_stamped = mapping.imu.topic, has_header(mapping.imu)
-
-            def on_imu(data: bytes) -> None:
-                self.watch.seen(imu_topic, time.monotonic_ns())
-                now = clock.now().nanoseconds
-                try:
-                    stamp, _, row = imu_decoder.decode(data, now)
-                except BagFormatError:
-                    self.counts['undecodable'] += 1
-                    return
-                except MappingError as exc:  # as the other inputs (`raw_io.mapped_input`)
-                    self.counts['unfit'] = self.counts.get('unfit', 0) + 1
-                    self.watch.unfit(imu_topic, str(exc))
-                    return
-                if imu_stamped:
-                    self.watch.stamped(imu_topic, stamp, now - stamp)
-                assert self._imu is not None
-                for ready in self._imu.sample((stamp * 1e-9, row[0], row[1])):
-                    self._estimate(*ready)
-
-            self.create_subscription(
-                input_message_class(mapping.imu), mapping.imu.topic, on_imu, STREAM_QOS,
-                raw=True,
-            )  # fmt: skip
         self._active = 0
         self._last_alerts = ''
         self.create_timer(1.0, self.publish_diagnostics)
@@ -285,6 +267,44 @@ class PipelineNode(Node):
                 f'friction potential and alerts {self._situation_off}; every estimate runs'
             )
 
+    def _subscribe_held(self, spec: InputSpec, index: int) -> None:
+        """Subscribe to held input `index` (``InputMapping.held_specs``)."""
+        decoder = InputDecoder(spec)
+        topic, stamped = spec.topic, has_header(spec)
+        clock = self.get_clock()
+
+        def on_sample(data: bytes) -> None:
+            self.watch.seen(topic, time.monotonic_ns())
+            now = clock.now().nanoseconds
+            try:
+                stamp, _, row = decoder.decode(data, now)
+            except BagFormatError:
+                self.counts['undecodable'] += 1
+                return
+            except MappingError as exc:  # as the other inputs (`raw_io.mapped_input`)
+                self.counts['unfit'] = self.counts.get('unfit', 0) + 1
+                self.watch.unfit(topic, str(exc))
+                return
+            if stamped:
+                self.watch.stamped(topic, stamp, now - stamp)
+            self._pass(index, self._holds[index][1].sample((stamp * 1e-9, *row)))
+
+        self.create_subscription(input_message_class(spec), topic, on_sample, STREAM_QOS, raw=True)
+
+    def _hold(self, index: int, stamp_ns: int, m: dict[str, Any], samples: dict[str, Any]) -> None:
+        """A completed stamp into held input `index`'s hold (estimated after the last)."""
+        if index == len(self._holds):
+            self._estimate(stamp_ns, m, samples)
+            return
+        self._pass(index, self._holds[index][1].stamp(stamp_ns, (m, samples)))
+
+    def _pass(self, index: int, released: list[tuple[int, _HeldItem, Any]]) -> None:
+        """The stamps held input `index` released, each with its sample, on to the next."""
+        name = self._holds[index][0]
+        for stamp_ns, (m, samples), sample in released:
+            samples[name] = sample
+            self._hold(index + 1, stamp_ns, m, samples)
+
     def _speed_sample(self, stamp_ns: int, values: tuple[float, ...]) -> None:
         if self._speed_samples is not None:
             self._speed_samples.add(stamp_ns, values[0])
@@ -293,16 +313,11 @@ class PipelineNode(Node):
         return self.encoders(self._types[key], frame)
 
     def process(self, stamp_ns: int, m: dict[str, Any]) -> None:
-        """A completed set of inputs: estimated now, or with an IMU once its sample is known."""
-        if self._imu is None:
-            self._estimate(stamp_ns, m, None)
-            return
-        for ready in self._imu.stamp(stamp_ns, dict(m)):
-            self._estimate(*ready)
+        """A completed set of inputs: estimated now, or once the held inputs' samples of its
+        stamp are known."""
+        self._hold(0, stamp_ns, dict(m) if self._holds else m, {})
 
-    def _estimate(
-        self, stamp_ns: int, m: dict[str, Any], imu: tuple[float, float, float] | None
-    ) -> None:
+    def _estimate(self, stamp_ns: int, m: dict[str, Any], held: dict[str, Any]) -> None:
         # SI values with the mapping's signs (raw_io.mapped_input)
         frame, angles = m[self._wheels]  # angles [rad] or speeds [rad/s]
         speed = float(m['body_speed'][1][0])
@@ -314,7 +329,7 @@ class PipelineNode(Node):
         queue = self._speed_samples
         samples = queue.take_one(stamp_ns) if queue is not None else None
         out = self.chain.update(
-            t, angles, speed, torques, engine, imu=imu, brake=brake, speed_samples=samples
+            t, angles, speed, torques, engine, brake=brake, speed_samples=samples, held=held
         )
         if self._wheel_rate is not None and self._wheel_rate.add(stamp_ns):
             # from the next stamp on, as vd replay does (rate_settings.FOLLOW_AFTER)
@@ -333,7 +348,7 @@ class PipelineNode(Node):
                     )
             self._wheel_rate = None
         self.counts['estimates'] += 1
-        if self._imu is not None and not self._imu_said and self.chain.imu_trusted:
+        if self.chain.parts.imu_on and not self._imu_said and self.chain.imu_trusted:
             self._say_imu_learnt(t)
         if not self._finite(out):
             self.counts['withheld_non_finite'] += 1
@@ -474,15 +489,14 @@ class PipelineNode(Node):
         )
 
     def publish_diagnostics(self) -> None:
-        if self._imu is not None:
-            # the oldest stamp held back is still the one of a period ago: its IMU sample is
-            # not coming (the drive ended before the IMU's last sample came); estimated with
+        for index, (_, hold) in enumerate(self._holds):
+            # the oldest stamp held back is still the one of a period ago: its sample is not
+            # coming (the drive ended before the input's last sample came); estimated with
             # what there is
-            oldest = self._imu.oldest
-            if oldest is not None and oldest == self._imu_oldest_before:
-                for ready in self._imu.flush():
-                    self._estimate(*ready)
-            self._imu_oldest_before = self._imu.oldest
+            oldest = hold.oldest
+            if oldest is not None and oldest == self._oldest_before[index]:
+                self._pass(index, hold.flush())
+            self._oldest_before[index] = hold.oldest
         # Level and message name the faults of the last period; the counters are totals.
         report = self.chain.fault_report()
         level, message = report.level, report.message
@@ -507,9 +521,8 @@ class PipelineNode(Node):
         imu_values: dict[str, Any] = {}
         if learnt is not None:
             # what the IMU fusion has learnt (logged once, when it is trusted: `_estimate`)
-            assert self._imu is not None  # an IMU is mapped
             imu_values = {
-                'imu_late_samples': self._imu.late,
+                'imu_late_samples': dict(self._holds)['imu'].late,  # an IMU is mapped
                 'imu_bias_mps2': round(learnt.bias, 4),
                 'imu_bias_std_mps2': round(learnt.bias_std, 4),
                 'imu_sensor_pitch_deg': round(learnt.pitch_deg, 3),

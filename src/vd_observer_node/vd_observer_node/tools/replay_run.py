@@ -268,8 +268,9 @@ class ReplayRun:
         self.speed_samples = SampleQueue(SPEED_SAMPLES_MAX)
         max_gap = settings.observer.max_gap
         self.gaps = [GapStats(s, max_gap) for s in self.used]
-        # the IMU is counted like the other inputs (it is not aligned: held at each stamp)
-        self.imu_gaps = GapStats(mapping.imu, max_gap) if mapping.imu is not None else None
+        # the held inputs (the IMU) are counted like the others (not aligned: held at each
+        # stamp)
+        self.held_gaps = {spec.name: GapStats(spec, max_gap) for spec in mapping.held_specs}
         self.frame_id: str | None = None
         self.samples = 0
         self.sensor_messages = 0
@@ -296,35 +297,38 @@ class ReplayRun:
         # (episodes, converged) of the last engine-torque offset written: it is written
         # where it changes, as pipeline_node publishes it
         self.offset_last: tuple[int, bool] | None = None
-        # the IMU samples of the blocks so far that later stamps may still take: the newest
-        # not later than the last stamp estimated, and every one after it (a block read by
-        # log time holds samples of the next block's stamps): stamps [ns], values (M, 2)
-        self.imu_carry: tuple[np.ndarray, np.ndarray] | None = None
+        # per held input, its samples of the blocks so far that later stamps may still take:
+        # the newest not later than the last stamp estimated, and every one after it (a block
+        # read by log time holds samples of the next block's stamps): stamps [ns], values
+        self.held_carry: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 
-    def held_imu(self, arrays: Mapping[str, TopicArrays], common: np.ndarray) -> np.ndarray:
-        """Shape (N, 3): for each stamp of ``common`` [ns] the stamp [s] of the newest IMU
-        sample not later than it (nan: none yet), its forward specific force [m/s^2] and
-        the body's pitch rate [rad/s] (nan: none) (sample and hold, as a live node sees it;
-        the fusion judges the age)."""
-        spec = self.mapping.imu
-        assert spec is not None  # called with an IMU only
+    def held(self, arrays: Mapping[str, TopicArrays], common: np.ndarray) -> dict[str, np.ndarray]:
+        """Every held input (``InputMapping.held_specs``) at the stamps ``common`` [ns]:
+        shape (N, 1 + width) each, the stamp [s] of the newest sample not later than the
+        stamp (nan: none yet) and its values (sample and hold, as a live node sees it; the
+        part that reads it judges the age)."""
+        return {spec.name: self._held(spec, arrays, common) for spec in self.mapping.held_specs}
+
+    def _held(
+        self, spec: InputSpec, arrays: Mapping[str, TopicArrays], common: np.ndarray
+    ) -> np.ndarray:
         series = self._decode(spec, arrays)
-        if self.imu_gaps is not None:
-            self.imu_gaps.add(series.stamp_ns)
+        self.held_gaps[spec.name].add(series.stamp_ns)
         stamps, values = series.stamp_ns, series.values
-        if self.imu_carry is not None:
-            stamps = np.concatenate([self.imu_carry[0], stamps])
-            values = np.concatenate([self.imu_carry[1], values])
+        carry = self.held_carry.get(spec.name)
+        if carry is not None:
+            stamps = np.concatenate([carry[0], stamps])
+            values = np.concatenate([carry[1], values])
         order = np.argsort(stamps, kind='stable')
         stamps, values = stamps[order], values[order]
-        out = np.full((common.shape[0], 3), np.nan)
+        out = np.full((common.shape[0], 1 + values.shape[1]), np.nan)
         if stamps.size:
             idx = np.searchsorted(stamps, common, side='right') - 1
             have = idx >= 0
             out[have, 0] = stamps[idx[have]] * 1e-9
             out[have, 1:] = values[idx[have]]
             keep = max(int(idx[-1]), 0) if common.size else 0
-            self.imu_carry = (stamps[keep:], values[keep:])
+            self.held_carry[spec.name] = (stamps[keep:], values[keep:])
         return out
 
     def _follow_rate(self, wheel_stamps: list[int]) -> None:
@@ -432,7 +436,7 @@ class ReplayRun:
         wheel_torque = picked[2]['v'] if source == 'measured' else np.zeros((n, 4))
         engine = picked[2]['v'] if source == 'engine' else None
         brake = picked[3]['v'] if self.mapping.brake is not None and len(picked) > 3 else None
-        imu = self.held_imu(arrays, common) if self.mapping.imu is not None else None
+        held = self.held(arrays, common)
 
         def run(rows: slice) -> CascadeResult:
             # the block's rows where it is split (the settings follow the rate from there)
@@ -443,7 +447,7 @@ class ReplayRun:
                 wheel_torque[rows],
                 engine=engine[rows] if engine is not None else None,
                 brake=brake[rows] if brake is not None else None,
-                imu=imu[rows] if imu is not None else None,
+                held={name: columns[rows] for name, columns in held.items()},
                 speed_samples=(speed_at[rows], speed_values[rows]),
             )
             return self.cascade(series, self.settings, self.state)
@@ -552,7 +556,7 @@ class ReplayRun:
             situation_time_s=self.situation_time,
             stale=self.aligner.stale,
             faults=dict(result.faults),
-            inputs=tuple(g.stats() for g in [*self.gaps, *filter(None, [self.imu_gaps])]),
+            inputs=tuple(g.stats() for g in [*self.gaps, *self.held_gaps.values()]),
             torque_source=TORQUE_SOURCES[result.torque_source],
             torque_valid_fraction=self.torque_valid / self.samples if self.samples else 0.0,
             input_rate_hz=self.input_rate_hz,
