@@ -250,9 +250,8 @@ INPUT_KEYS: Final = ('topic', 'type', 'joints', 'indices', 'unit', 'scale', 'sig
 FUSION_KEY: Final = 'fusion'
 #: The settings of the IMU besides its fusion's (node parameters ``inputs.imu.<key>``).
 IMU_KEYS: Final = ('topic', 'type', 'indices', 'unit', 'scale', 'mount_rpy_deg')
-#: The held inputs (`InputMapping.held_specs`; each stamp takes their newest sample not later
-#: than it), optional, with their settings (node parameters ``inputs.<name>.<key>``): what
-#: the nodes declare and the mapping reads for each.
+#: The optional held inputs (`InputMapping.held_specs`) and their settings, which the nodes
+#: declare as parameters ``inputs.<name>.<key>``.
 HELD_KEYS: Final = {IMU_INPUT: IMU_KEYS}
 # speed_unit and gear_offset: engine_torque only; signal: brake only; mount_rpy_deg and
 # fusion: imu only
@@ -407,9 +406,7 @@ class InputMapping:
     def held_specs(self) -> tuple[InputSpec, ...]:
         """The held inputs mapped (each stamp takes the newest sample not later than it;
         ``spec.name`` is their `estimation.cascade_step.HELD_INPUTS` name): the IMU."""
-        held = {IMU_INPUT: self.imu}
-        assert held.keys() == HELD_KEYS.keys()  # every held input is a field here
-        return tuple(spec for spec in held.values() if spec is not None)
+        return tuple(spec for spec in (self.imu,) if spec is not None)
 
     @property
     def topics(self) -> tuple[str, ...]:
