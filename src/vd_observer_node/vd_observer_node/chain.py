@@ -43,6 +43,7 @@ from vd_observer_node.estimation.estimator import (
     Estimates,
     estimates_from_record,
 )
+from vd_observer_node.estimation.estimator_step import SPEED_SAMPLES_MAX
 from vd_observer_node.estimation.faults import FaultCounter, FaultReport, merge_reports
 from vd_observer_node.estimation.imu_grade import SOURCE_FORCE
 from vd_observer_node.estimation.imu_regression import bias_pitch_deg
@@ -166,7 +167,7 @@ class Chain:
         # one stamp's inputs and outputs: buffers filled and read at every `update`
         self._in = CascadeInputs(
             np.zeros(1), np.zeros((1, 4)), np.zeros(1), *checked_speed_samples(
-                np.zeros(1), np.zeros(1), None), np.zeros((1, 4)),
+                np.zeros(1), np.zeros(1), None, SPEED_SAMPLES_MAX), np.zeros((1, 4)),
             input_records(ENGINE_SAMPLE, np.zeros((1, 4))), no_brakes(1),
             **held_records(1, {}),
         )  # fmt: skip
@@ -175,6 +176,7 @@ class Chain:
             name: (getattr(self._in, name), (math.nan,) * len(dtype.names or ()))
             for name, dtype in HELD_INPUTS.items()
         }
+        self._held_given = False  # a buffer holds a sample (else all are the empty row)
         self._out = empty_outputs(1, self.parts.offset_on)
         #: the estimate as a plain structured array: its fields read without a recarray's
         #: Python attribute lookup (the live chain reads them every stamp)
@@ -183,6 +185,17 @@ class Chain:
         self._grade = self._out.grade.view(np.recarray)
         self._block = FixedCall(cascade_block, (self.parts.records(), self._in, self._out), ())
         self._situation = SituationBlock.empty(1)
+
+    def _take_held(self, held: Mapping[str, Sequence[float] | None]) -> None:
+        """The held inputs' samples of a stamp into their buffers (`update`)."""
+        for name in held:
+            if name not in self._held:
+                raise InputShapeError(f'no held input {name!r}; known: {sorted(self._held)}')
+        self._held_given = False
+        for name, (buffer, none) in self._held.items():
+            sample = held.get(name)
+            buffer[0] = none if sample is None else (*sample, *none[len(sample) :])
+            self._held_given = self._held_given or sample is not None
 
     def update(
         self,
@@ -234,28 +247,25 @@ class Chain:
         inputs.t[0] = float(t)
         inputs.wheel_angle[0] = angles
         inputs.body_speed[0] = float(speed)
-        inputs.speed_stamp[0] = math.nan
-        inputs.speed_sample[0] = math.nan
+        # the samples, then a nan where they end (the cascade reads up to it)
         if speed_samples is None:
             inputs.speed_stamp[0, 0] = inputs.t[0]
             inputs.speed_sample[0, 0] = inputs.body_speed[0]
+            inputs.speed_stamp[0, 1] = math.nan
         else:
             given_stamps, given_values = speed_samples
             width = given_stamps.shape[-1]
             inputs.speed_stamp[0, :width] = given_stamps
             inputs.speed_sample[0, :width] = given_values
+            if width < SPEED_SAMPLES_MAX:
+                inputs.speed_stamp[0, width] = math.nan
         # the replay's without torque: no torque topic, zeros everywhere
         inputs.wheel_torque[0] = 0.0 if self._none else torques
         if parts.engine_on:
             inputs.engine[0] = tuple(engine_row(engine))
         inputs.brake[0] = math.nan if brake is None else np.reshape(brake, 4)
-        given = held or {}
-        for name in given:
-            if name not in self._held:
-                raise InputShapeError(f'no held input {name!r}; known: {sorted(self._held)}')
-        for name, (buffer, none) in self._held.items():
-            sample = given.get(name)
-            buffer[0] = none if sample is None else (*sample, *none[len(sample) :])
+        if held or self._held_given:
+            self._take_held(held or {})
         self._block()
         out = self._out
         stamp, speeds = inputs.t, inputs.body_speed

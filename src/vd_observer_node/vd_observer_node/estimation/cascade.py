@@ -403,23 +403,27 @@ def checked_engine(
 
 
 def checked_speed_samples(
-    stamps: FloatArray, speeds: FloatArray, given: tuple[ArrayLike, ArrayLike] | None
+    stamps: FloatArray,
+    speeds: FloatArray,
+    given: tuple[ArrayLike, ArrayLike] | None,
+    width: int | None = None,
 ) -> tuple[FloatArray, FloatArray]:
-    """The speed observer's samples per stamp (`CascadeInputs.speed_stamp`, ``speed_sample``),
-    shape (N, `SPEED_SAMPLES_MAX`) each.
+    """The speed samples per stamp (`CascadeInputs.speed_stamp`, ``speed_sample``).
 
     Args:
         stamps: shape (N,), [s] the stamps.
         speeds: shape (N,), [m/s] the body speed at each (used where `given` is None).
         given: `CascadeSeries.speed_samples`.
+        width: the arrays' columns (the live chain's buffer: `SPEED_SAMPLES_MAX`); None:
+            those given (1 without).
 
     Raises:
         InputShapeError: `given` is not two arrays of shape (N, K), K <= SPEED_SAMPLES_MAX.
     """
     n = stamps.shape[0]
-    stamp = np.full((n, SPEED_SAMPLES_MAX), np.nan)
-    sample = np.full((n, SPEED_SAMPLES_MAX), np.nan)
     if given is None:
+        stamp = np.full((n, width or 1), np.nan)
+        sample = np.full((n, width or 1), np.nan)
         stamp[:, 0], sample[:, 0] = stamps, speeds
         return stamp, sample
     at, values = (np.asarray(a, dtype=np.float64) for a in given)
@@ -431,6 +435,8 @@ def checked_speed_samples(
         raise InputShapeError(
             f'speed_samples hold at most {SPEED_SAMPLES_MAX} samples a stamp, got {at.shape[1]}'
         )
+    stamp = np.full((n, width or at.shape[1]), np.nan)
+    sample = np.full((n, width or at.shape[1]), np.nan)
     stamp[:, : at.shape[1]], sample[:, : at.shape[1]] = at, values
     return stamp, sample
 

@@ -168,9 +168,10 @@ class CascadeInputs(NamedTuple):
             takes them), order FL, FR, RL, RR.
         body_speed: shape (N,), [m/s] measured body speed (the newest sample not later than
             the stamp).
-        speed_stamp: shape (N, `SPEED_SAMPLES_MAX`), [s] the stamps of the body-speed samples
-            the stamp feeds the speed observer, oldest first (nan: no more).
-        speed_sample: shape (N, `SPEED_SAMPLES_MAX`), [m/s] those samples.
+        speed_stamp: shape (N, K), K <= `SPEED_SAMPLES_MAX`, [s] the stamps of the body-speed
+            samples the stamp feeds the speed observer and the estimator, oldest first (nan:
+            no more).
+        speed_sample: shape (N, K), [m/s] those samples.
         wheel_torque: shape (N, 4), [N m] measured wheel torques (read off the engine path
             only).
         engine: shape (N,), `ENGINE_SAMPLE` records (read on the engine path).
@@ -303,10 +304,9 @@ def cascade_step(
     inp.torque[:] = used
     inp.speed = v_est
     if switches.measured_speed:  # the slope's speed low-pass takes them at their own stamps
-        inp.speed_stamps[:] = inputs.speed_stamp[k]
-        inp.speed_samples[:] = inputs.speed_sample[k]
+        _speed_samples_in(inputs.speed_stamp[k], inputs.speed_sample[k], inp)
     else:
-        inp.speed_stamps[:] = math.nan
+        inp.speed_stamps[0] = math.nan
     inp.accel = body[1, 0]
     inp.torque_ok = torque_ok
     est = out.estimates[k]
@@ -318,6 +318,21 @@ def cascade_step(
     if switches.imu_fused:
         _imu_step(parts, inputs, k, torque_ok, est, out.grade[k])
     out.torque_valid[k] = torque_ok
+
+
+@jit
+def _speed_samples_in(stamps: FloatArray, samples: FloatArray, inp: Any) -> None:
+    """The stamp's speed samples into the estimator's input, up to the first nan (the
+    estimator reads up to there; a stamp brings one or two)."""
+    taken = 0
+    for j in range(stamps.shape[0]):
+        if math.isnan(stamps[j]):
+            break
+        inp.speed_stamps[j] = stamps[j]
+        inp.speed_samples[j] = samples[j]
+        taken += 1
+    if taken < inp.speed_stamps.shape[0]:
+        inp.speed_stamps[taken] = math.nan
 
 
 @jit

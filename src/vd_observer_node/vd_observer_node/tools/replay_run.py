@@ -422,6 +422,9 @@ class ReplayRun:
         common, picked = self.aligner.push([d.stamp_ns for d in decoded], columns, final)
         self.speed_samples.add_many(decoded[1].stamp_ns, decoded[1].values[:, 0])
         speed_at, speed_values = self.speed_samples.take(common)
+        # as many columns as a stamp of the block has samples (most have one)
+        width = max(1, int(np.count_nonzero(~np.isnan(speed_at), axis=1).max(initial=0)))
+        speed_at, speed_values = speed_at[:, :width], speed_values[:, :width]
         n = len(common)
         if n and self.frame_id is None:
             self.frame_id = picked[0]['frame'][0].decode()
