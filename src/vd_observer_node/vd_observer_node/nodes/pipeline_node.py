@@ -228,6 +228,7 @@ class PipelineNode(Node):
         self._speed_samples = (
             None if speed_name in self.aligner.held else SampleQueue(SPEED_SAMPLES_MAX)
         )
+        self.aligner.taps[speed_name] = self._speed_sample
         clock = self.get_clock()
         for spec, cls in zip(specs, classes, strict=True):
             callback = mapped_input(
@@ -238,7 +239,6 @@ class PipelineNode(Node):
                 self.watch,
                 lambda: clock.now().nanoseconds,
                 radius=settings.vehicle.effective_radius,
-                sample=self._speed_sample if spec.name == speed_name else None,
             )
             self.create_subscription(cls, spec.topic, callback, STREAM_QOS, raw=True)
         # the held inputs' samples (the IMU's: stamp [s], forward specific force [m/s^2],

@@ -352,6 +352,8 @@ class InputMatcher:
         check: reports matched inputs whose stamps never meet (`MatchCheck`).
         receipts: the stamps of headerless inputs that are matched, not held (a headerless
             driver): `ReceiptStamps`.
+        taps: by matched input, called with each of its samples (stamp [ns], values) before
+            it is matched (pipeline_node's speed samples, `mapped_input`).
     """
 
     def __init__(
@@ -375,6 +377,7 @@ class InputMatcher:
         self.held = tuple(held)
         self.check = MatchCheck(matched, 'exact')
         self.receipts = ReceiptStamps(matched[0])
+        self.taps: dict[str, Callable[[int, tuple[float, ...]], None]] = {}
         self.max_age_ns = max_age_ns
         self._latest: dict[str, tuple[int, Any]] = {}
         self.withheld_stale = 0
@@ -424,6 +427,8 @@ class LatestMatcher:
     Attributes:
         check: reports inputs whose stamps never meet (`MatchCheck`).
         receipts: the stamps of the headerless inputs (`ReceiptStamps`).
+        taps: by input, called with each of its samples (stamp [ns], values) before it is
+            matched (pipeline_node's speed samples, `mapped_input`).
     """
 
     held: tuple[str, ...] = ()
@@ -435,6 +440,7 @@ class LatestMatcher:
         self.aligner = LatestAligner(names, max_age_ns, capacity, max_jump_back_ns)
         self.check = MatchCheck(names, 'latest', max_age_ns)
         self.receipts = ReceiptStamps(names[0])
+        self.taps: dict[str, Callable[[int, tuple[float, ...]], None]] = {}
 
     def hold(self, key: str, receive_ns: int, payload: Any) -> None:
         """Never called: no input is held (``held`` is empty)."""
@@ -647,7 +653,6 @@ def mapped_input(
     clock_ns: Callable[[], int],
     key: str | None = None,
     radius: float | None = None,
-    sample: Callable[[int, tuple[float, ...]], None] | None = None,
 ) -> Callable[[bytes], None]:
     """Subscription callback of a mapped input: decode to SI values, then match or hold.
 
@@ -664,8 +669,6 @@ def mapped_input(
             by the matcher's `ReceiptStamps` where the stamped inputs run on another clock.
         key: the input's name in `matcher` (default ``spec.name``).
         radius: effective rolling radius [m], for wheel speeds in m/s or km/h.
-        sample: also called with every matched sample (stamp [ns], values), before the
-            matcher takes it (pipeline_node's speed samples).
     """
     decoder = InputDecoder(spec, radius)
     name = key or spec.name
@@ -699,8 +702,9 @@ def mapped_input(
         if held:
             matcher.hold(name, now, (frame, values))
             return
-        if sample is not None:
-            sample(stamp_ns, values)
+        tap = matcher.taps.get(name)
+        if tap is not None:  # every sample, matched or not
+            tap(stamp_ns, values)
         for stamp, matched in matcher.push_all(name, stamp_ns, (frame, values), now):
             on_matched(stamp, matched)
 
