@@ -236,8 +236,9 @@ def brake_torques(
     Args:
         p: `BRAKE_PARAMS` record.
         gains: shape (4,), [N m per unit] (`brake_gains`; nan: not known yet).
-        brake: shape (4,): each wheel's pressure (its axle's, or the one pressure), or the
-            switch (0 off, else on) in ``brake[0]``; nan where not known at this stamp.
+        brake: shape (4,): each wheel's pressure (its axle's, or the one pressure), or its
+            switch (0 off, else on; the one switch on every wheel, `inputs.decode.brake_row`);
+            nan where not known at this stamp.
         omega: shape (4,), [rad/s] wheel speeds (the brake torque opposes the rotation).
         used: shape (4,), [N m] drive torques, written: drive minus brake torque; nan where
             the pressure is not known (the estimator then says invalid, it never holds).
@@ -247,8 +248,11 @@ def brake_torques(
     standstill it is a reaction), and a gain not learnt yet gives no torque: not held.
     """
     kind = p.kind
-    if kind == BRAKE_SWITCH:
-        return bool(math.isfinite(brake[0]) and brake[0] == 0.0)
+    if kind == BRAKE_SWITCH:  # holds while no wheel's switch is on (or unknown)
+        off = True
+        for i in range(4):
+            off = off and math.isfinite(brake[i]) and brake[i] == 0.0
+        return off
     if kind != BRAKE_PRESSURE:
         return True
     holds = True

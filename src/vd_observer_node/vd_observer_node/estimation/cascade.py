@@ -270,7 +270,7 @@ class CascadeSeries:
             engine speed [rad/s] (nan if not measured), turbine speed [rad/s] (an automatic
             gearbox's; nan or absent if not logged); needed by the engine path only.
         brake: shape (N, 4): the brake input per wheel (`brakes.brake_torques`: pressures,
-            or the switch in column 0; nan where unknown); None: no brake input.
+            or the switch on every wheel; nan where unknown); None: no brake input.
         imu: shape (N, 3) or (N, 2): stamp [s] of the newest IMU sample at each stamp (nan:
             none), its longitudinal specific force in body axes [m/s^2] and the body's pitch
             rate [rad/s] (REP 103, nose down positive; nan or absent: no angular rate); the
