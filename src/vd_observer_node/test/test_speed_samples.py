@@ -16,11 +16,14 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from vd_observer_node.chain import Chain
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.alignment import SampleQueue, samples_between
 from vd_observer_node.estimation.cascade import CascadeSeries, CascadeSettings, run_cascade
+from vd_observer_node.estimation.estimator_step import SPEED_SAMPLES_MAX
 from vd_observer_node.estimation.observer import ObserverConfig, SpeedObserver
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
+from vd_observer_node.situation.chain_settings import ChainSettings
 from vd_observer_node.testing.synthetic import synthetic_trajectory
 
 VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
@@ -167,3 +170,28 @@ def test_the_speed_of_a_lost_wheel_stamp_still_reaches_the_slope() -> None:
         [observer.update(float(tk), float(v)).speed for tk, v in zip(t, noisy, strict=True)]
     )
     np.testing.assert_array_equal(every_sample.speed, speeds[rows])
+
+
+def test_the_live_chain_takes_the_speed_samples_as_the_cascade_does() -> None:
+    """pipeline_node's path (`Chain.speed_samples` before each `Chain.update`) gives the
+    record's slope, stamp for stamp, also where a stamp brings two samples or one."""
+    t, traj, noisy = _drive()
+    vehicle = load_estimator_vehicle(VEHICLE_FILE)
+    n = 6000
+    keep = np.flatnonzero(np.random.default_rng(4).random(n) >= 0.3)  # 30 % of stamps lost
+    queue = SampleQueue(SPEED_SAMPLES_MAX)
+    queue.add_many(np.round(t[:n] * 1e9).astype(np.int64), noisy[:n])
+    at, values = queue.take(np.round(t[keep] * 1e9).astype(np.int64))
+    angle, torque = traj.angle[keep], traj.torque[keep]  # type: ignore[attr-defined]
+    offline = run_cascade(
+        CascadeSeries(t[keep], angle, noisy[keep], torque, speed_samples=(at, values)),
+        CascadeSettings(vehicle),
+    )
+    chain = Chain(ChainSettings(vehicle=vehicle))
+    slope = np.empty(keep.size)
+    for k in range(keep.size):
+        chain.speed_samples(at[k : k + 1], values[k : k + 1])
+        out = chain.update(float(t[keep[k]]), angle[k], float(noisy[keep[k]]), torque[k])
+        slope[k] = out.estimates.slope
+    assert np.any(np.isfinite(at).sum(axis=1) > 1)  # stamps that bring a lost stamp's sample
+    np.testing.assert_array_equal(slope, offline.slope)

@@ -177,6 +177,7 @@ class Chain:
             for name, dtype in HELD_INPUTS.items()
         }
         self._held_given = False  # a buffer holds a sample (else all are the empty row)
+        self._speed_given = False  # `speed_samples` filled the next stamp's
         self._out = empty_outputs(1, self.parts.offset_on)
         #: the estimate as a plain structured array: its fields read without a recarray's
         #: Python attribute lookup (the live chain reads them every stamp)
@@ -185,6 +186,24 @@ class Chain:
         self._grade = self._out.grade.view(np.recarray)
         self._block = FixedCall(cascade_block, (self.parts.records(), self._in, self._out), ())
         self._situation = SituationBlock.empty(1)
+
+    def speed_samples(self, stamps: NDArray[np.float64], values: NDArray[np.float64]) -> None:
+        """The body-speed samples of the next `update`'s stamp, which the speed observer and
+        the estimator take at their own stamps instead of that stamp's ``speed`` at ``t``.
+
+        Args:
+            stamps: shape (1, K), K <= `SPEED_SAMPLES_MAX`, [s] the samples stamped since
+                the previous stamp, oldest first, nan after the last (as
+                `alignment.SampleQueue.take_one` gives them).
+            values: shape (1, K), [m/s] the samples.
+        """
+        inputs = self._in
+        width = stamps.shape[-1]
+        inputs.speed_stamp[0, :width] = stamps
+        inputs.speed_sample[0, :width] = values
+        if width < SPEED_SAMPLES_MAX:  # a nan where they end: the cascade reads up to it
+            inputs.speed_stamp[0, width] = math.nan
+        self._speed_given = True
 
     def _take_held(self, held: Mapping[str, Sequence[float] | None]) -> None:
         """The held inputs' samples of a stamp into their buffers (`update`)."""
@@ -205,7 +224,6 @@ class Chain:
         wheel_torque: ArrayLike,
         engine: ArrayLike | None = None,
         brake: ArrayLike | None = None,
-        speed_samples: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
         held: Mapping[str, Sequence[float] | None] | None = None,
     ) -> ChainOutput:
         """Advance to stamp t.
@@ -222,10 +240,6 @@ class Chain:
                 on the engine path only, where it is required.
             brake: shape (4,): the brake input (`estimation.brakes.brake_torques`; nan where
                 unknown); None: nothing known at this stamp (with a brake input: invalid).
-            speed_samples: the body-speed samples stamped since the previous stamp, which the
-                speed observer takes at their own stamps: stamps [s] and values [m/s], shape
-                (1, K) each as `alignment.SampleQueue.take` gives them (nan after the last);
-                None: ``speed`` at ``t``.
             held: the held inputs' newest samples by name (`cascade_step.HELD_INPUTS`), e.g.
                 ``{'imu': (stamp [s], forward specific force [m/s^2], pitch rate [rad/s])}``
                 (nose down positive; read with ``settings.imu`` only): the sample's stamp and
@@ -247,18 +261,12 @@ class Chain:
         inputs.t[0] = float(t)
         inputs.wheel_angle[0] = angles
         inputs.body_speed[0] = float(speed)
-        # the samples, then a nan where they end (the cascade reads up to it)
-        if speed_samples is None:
+        if self._speed_given:  # given by `speed_samples` for this stamp
+            self._speed_given = False
+        else:  # the stamp's own speed, then a nan where the samples end (read up to it)
             inputs.speed_stamp[0, 0] = inputs.t[0]
             inputs.speed_sample[0, 0] = inputs.body_speed[0]
             inputs.speed_stamp[0, 1] = math.nan
-        else:
-            given_stamps, given_values = speed_samples
-            width = given_stamps.shape[-1]
-            inputs.speed_stamp[0, :width] = given_stamps
-            inputs.speed_sample[0, :width] = given_values
-            if width < SPEED_SAMPLES_MAX:
-                inputs.speed_stamp[0, width] = math.nan
         # the replay's without torque: no torque topic, zeros everywhere
         inputs.wheel_torque[0] = 0.0 if self._none else torques
         if parts.engine_on:

@@ -633,22 +633,21 @@ class SampleQueue:
         With the samples given one at a time (`add`: the live node, a few a stamp) in plain
         Python, without array work but the two rows returned.
         """
-        row = row_ns
-        if self._stamps.shape[0] or (self._after is not None and row <= self._after):
-            return self._take_rows(np.array([row], dtype=np.int64))
+        if self._stamps.shape[0] or (self._after is not None and row_ns <= self._after):
+            return self._take_rows(np.array([row_ns], dtype=np.int64))
         stamps, values, after = self._new_stamps, self._new_values, self._after
         # stable, as argsort (one sample: nothing to sort)
         order = [0] if len(stamps) == 1 else sorted(range(len(stamps)), key=stamps.__getitem__)
-        due = [i for i in order if stamps[i] <= row and (after is None or stamps[i] > after)]
+        due = [i for i in order if stamps[i] <= row_ns and (after is None or stamps[i] > after)]
         use = due[-self._most :]
         stamp = np.full((1, self._most), np.nan)
         sample = np.full((1, self._most), np.nan)
         for j, i in enumerate(use):
             stamp[0, j] = stamps[i] * 1e-9
             sample[0, j] = values[i]
-        later = [i for i in order if stamps[i] > row][-self._capacity :]
+        later = [i for i in order if stamps[i] > row_ns][-self._capacity :]
         self._new_stamps = [stamps[i] for i in later]
         self._new_values = [values[i] for i in later]
         self.taken += len(use)
-        self._after = row
+        self._after = row_ns
         return stamp, sample

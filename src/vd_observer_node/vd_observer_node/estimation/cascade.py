@@ -22,7 +22,6 @@ from vd_observer_node.estimation.cascade_step import (
     ENGINE_SAMPLE,
     ENGINE_STATE,
     HELD_INPUTS,
-    IMU_SAMPLE,
     CascadeInputs,
     CascadeOutputs,
     CascadeRecords,
@@ -42,8 +41,8 @@ from vd_observer_node.estimation.drivetrain import (
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.estimator_step import (
     ESTIMATES,
-    ESTIMATOR_INPUT,
     SPEED_SAMPLES_MAX,
+    new_estimator_input,
 )
 from vd_observer_node.estimation.faults import ENGINE_FAULTS, FaultCounter
 from vd_observer_node.estimation.imu_grade import GRADE_INPUT, GRADE_OUT, SOURCE_FORCE, ImuGrade
@@ -75,7 +74,6 @@ __all__ = [
     'empty_outputs',
     'held_records',
     'input_records',
-    'no_imu',
     'offset_result_name',
     'run_cascade',
 ]
@@ -544,7 +542,7 @@ class CascadeParts:
         switches['imu_fused'] = self.imu_on
         self._records = CascadeRecords(
             switches, self.wheels.parts(), self.speed.parts(), self.estimator.parts,
-            _estimator_input(),
+            record_array(new_estimator_input()),
             EnginePathParts(
                 self.drivetrain, self.engine_state, a(self.offset_params), a(self.offset_state),
                 a(self.offset_estimate),
@@ -571,13 +569,6 @@ class CascadeParts:
         if self.offset_on:
             counts['engine.torque_offset_clamped'] = int(self.offset_state.clamped)
         return counts
-
-
-def _estimator_input() -> NDArray[Any]:
-    """The estimator's input buffer (`estimator_step.ESTIMATOR_INPUT`), no speed sample."""
-    buffer: NDArray[Any] = new_records(ESTIMATOR_INPUT, 1)
-    buffer['speed_stamps'] = np.nan
-    return buffer
 
 
 def empty_outputs(n: int, offsets: bool) -> CascadeOutputs:
@@ -637,12 +628,6 @@ def run_cascade(
     if source == TORQUE_NONE:
         out.torque_valid[:] = False
     return cascade_result(stamps, source, parts, out)
-
-
-def no_imu(n: int) -> NDArray[Any]:
-    """The IMU input of N stamps without an IMU (no sample: nan): shape (N,)
-    `cascade_step.IMU_SAMPLE` records."""
-    return input_records(IMU_SAMPLE, np.zeros((n, 0)))
 
 
 def held_records(n: int, held: Mapping[str, ArrayLike]) -> dict[str, NDArray[Any]]:

@@ -58,13 +58,13 @@ from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation.drivetrain import TORQUE_MEASURED, TORQUE_SOURCES
 from vd_observer_node.estimation.estimator_step import (
     ESTIMATES,
-    ESTIMATOR_INPUT,
     ESTIMATOR_PARAMS,
     ESTIMATOR_STATE,
     REJECTED_SLOT,
     EstimatorParts,
     estimator_reset,
     estimator_update_arrays,
+    new_estimator_input,
 )
 from vd_observer_node.estimation.faults import ESTIMATOR_FAULTS, FaultCounter
 from vd_observer_node.estimation.mass_grade import MassGradeConfig, mass_params
@@ -497,8 +497,7 @@ class Estimator:
         self._faults = FaultCounter(ESTIMATOR_FAULTS)
         self._synced = np.zeros(len(ESTIMATOR_FAULTS), dtype=np.int64)
         self._est = new_record(ESTIMATES)
-        self._input = new_record(ESTIMATOR_INPUT)
-        self._input.speed_stamps[:] = np.nan  # a stamp's speed only (the estimator node's)
+        self._input = new_estimator_input()  # a stamp's speed only (the estimator node's)
         #: the records (never replaced: a reset works in place) as `estimator_update` takes
         #: them; input and output as the arrays they live in (`update`'s fast numba call)
         self.parts = EstimatorParts(

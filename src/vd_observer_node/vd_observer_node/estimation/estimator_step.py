@@ -51,7 +51,7 @@ from vd_observer_node.estimation.rolling_radius import (
     radius_reset,
     radius_update,
 )
-from vd_observer_node.kernel._jit import jit
+from vd_observer_node.kernel._jit import jit, new_record
 
 __all__ = [
     'ESTIMATES',
@@ -66,6 +66,7 @@ __all__ = [
     'estimator_reset',
     'estimator_update',
     'estimator_update_arrays',
+    'new_estimator_input',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -193,6 +194,16 @@ ESTIMATOR_INPUT: Final = np.dtype(
     ],
     align=True,
 )
+
+
+def new_estimator_input() -> np.record:
+    """An `ESTIMATOR_INPUT` record without speed samples (``speed_stamps`` nan: the stamp's
+    own speed only), living in a 1-element array (`kernel._jit.record_array`)."""
+    record = new_record(ESTIMATOR_INPUT)
+    record.speed_stamps[:] = math.nan
+    return record
+
+
 #: The last finite inputs, held where a stamp's are not: `ESTIMATOR_INPUT` but its
 #: ``torque_ok``.
 HELD_INPUTS: Final = np.dtype(_INPUT_FIELDS, align=True)

@@ -326,11 +326,9 @@ class PipelineNode(Node):
         engine = m[ENGINE_INPUT][1] if source == 'engine' else None
         brake = m[BRAKE_INPUT][1] if BRAKE_INPUT in m else None
         t = stamp_ns * 1e-9
-        queue = self._speed_samples
-        samples = queue.take_one(stamp_ns) if queue is not None else None
-        out = self.chain.update(
-            t, angles, speed, torques, engine, brake=brake, speed_samples=samples, held=held
-        )
+        if self._speed_samples is not None:
+            self.chain.speed_samples(*self._speed_samples.take_one(stamp_ns))
+        out = self.chain.update(t, angles, speed, torques, engine, brake=brake, held=held)
         if self._wheel_rate is not None and self._wheel_rate.add(stamp_ns):
             # from the next stamp on, as vd replay does (rate_settings.FOLLOW_AFTER)
             speed_stamps = self.watch.first_stamps(self._speed_topic)
