@@ -10,6 +10,7 @@ import pytest
 import yaml
 from vd_common.vehicle.params import load_vehicle
 from vd_observer_node.errors import VehicleParameterError
+from vd_observer_node.estimation.body_pitch import vehicle_body_pitch
 from vd_observer_node.estimation.vehicle import (
     EstimatorVehicle,
     load_estimator_vehicle,
@@ -56,6 +57,9 @@ def test_values_are_the_files_own_numbers() -> None:
         'rolling_c1': raw['rolling_resistance']['c1'],
         'gravity': raw['environment']['gravity'],
         'rolling_regularisation_speed': raw['rolling_resistance']['regularisation_speed'],
+        # the one derived pair: the body's pitch mode (`body_pitch.pitch_mode`, its own tests)
+        'pitch_frequency': vehicle_body_pitch(VEHICLE_FILE).frequency,
+        'pitch_damping': vehicle_body_pitch(VEHICLE_FILE).damping,
         'name': raw['name'],
     }
     assert dataclasses.asdict(vehicle) == expected  # exact: tolerance 0
@@ -75,6 +79,8 @@ def test_values_are_the_files_own_numbers() -> None:
         rolling_c1=3.6,
         gravity=9.81,
         rolling_regularisation_speed=0.05,
+        pitch_frequency=1.5674993357762024,
+        pitch_damping=0.45323726576977247,
         name='Renault Clio RL 1.1',
     )
     assert vehicle.static_wheel_loads.tolist() == [
@@ -90,7 +96,12 @@ def test_same_numbers_as_the_simulator() -> None:
     params = load_vehicle(VEHICLE_FILE)
     assert EstimatorVehicle.from_params(params) == load_estimator_vehicle(VEHICLE_FILE)
     read = load_vehicle_params(VEHICLE_FILE)
-    assert EstimatorVehicle.from_params(read) == EstimatorVehicle.from_params(params)
+    # the estimators' own parse reads no suspension: rigid until given the file's pitch mode
+    assert EstimatorVehicle.from_params(read).pitch_frequency == 0.0
+    pitch = vehicle_body_pitch(VEHICLE_FILE)
+    assert EstimatorVehicle.from_params(read).with_body_pitch(pitch) == (
+        EstimatorVehicle.from_params(params)
+    )
     assert read.tire == params.tire
     default = load_vehicle_params()  # the Clio: the installed copy, or the source tree's
     assert dataclasses.replace(default, source='') == dataclasses.replace(read, source='')
@@ -113,7 +124,13 @@ def test_an_estimation_only_file_estimates_and_says_what_it_lacks(tmp_path: Path
     path = tmp_path / 'estimation_only.yaml'
     path.write_text(yaml.safe_dump(only), encoding='utf-8')
     params = load_vehicle_params(path)
-    assert EstimatorVehicle.from_params(params) == load_estimator_vehicle(VEHICLE_FILE)
+    # the same numbers, but no suspension: a rigid body (no pitch mode)
+    rigid = load_estimator_vehicle(path)
+    assert rigid.pitch_frequency == 0.0 and rigid.pitch_damping == 0.0
+    assert EstimatorVehicle.from_params(params) == rigid
+    assert rigid == dataclasses.replace(
+        load_estimator_vehicle(VEHICLE_FILE), pitch_frequency=0.0, pitch_damping=0.0
+    )
     with pytest.raises(VehicleParameterError, match=r'tire is missing'):
         vehicle_tire(params)
     with pytest.raises(ConfigurationError, match=r'gearbox is missing'):

@@ -3,10 +3,11 @@
 The longitudinal ground force ``F`` acts ``cg_height`` below the centre of gravity: the body
 squats and dives by `pitch_compliance` times ``F`` once settled, and gets there as its pitch
 mode (`pitch_mode`: the springs' pitch stiffness against the body's pitch inertia, damped by
-the dampers) lets it. An IMU on the body turns with it: `imu_grade` reads its specific force
-as ``(1 + k) f`` (``k = g m compliance``), and the angular rate's grade (`gyro_grade`) takes the
-modelled pitch out of the rate it integrates. An estimation-only vehicle file has no springs:
-a rigid body (compliance 0).
+the dampers) lets it; the same mode carries the ground force's moment to the axle loads
+(`estimator_step._pitched_ground_force`). An IMU on the body turns with it: `imu_grade` reads
+its specific force as ``(1 + k) f`` (``k = g m compliance``), and the angular rate's grade
+(`gyro_grade`) takes the modelled pitch out of the rate it integrates. An estimation-only
+vehicle file has no springs: a rigid body (compliance 0).
 """
 
 from __future__ import annotations
@@ -17,9 +18,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from vd_common.errors import ParameterError
-from vd_common.vehicle.params import default_vehicle_file, load_vehicle
+from vd_common.vehicle.params import VehicleParams, default_vehicle_file, load_vehicle
 
-__all__ = ['BodyPitch', 'pitch_compliance', 'pitch_mode', 'vehicle_body_pitch']
+__all__ = ['BodyPitch', 'body_pitch_of', 'pitch_compliance', 'pitch_mode', 'vehicle_body_pitch']
 
 
 @dataclass(frozen=True)
@@ -100,6 +101,11 @@ def vehicle_body_pitch(path: str | os.PathLike[str] | None) -> BodyPitch:
         vp = load_vehicle(Path(path) if path is not None else default_vehicle_file())
     except ParameterError:
         return BodyPitch()
+    return body_pitch_of(vp)
+
+
+def body_pitch_of(vp: VehicleParams) -> BodyPitch:
+    """`BodyPitch` of a full vehicle's suspension and tyres."""
     c, s, tyre = vp.chassis, vp.suspension, vp.wheel.tyre_vertical_stiffness
     front = (_corner_pair(s.stiffness_front, tyre), 2.0 * s.damping_front)
     rear = (_corner_pair(s.stiffness_rear, tyre), 2.0 * s.damping_rear)

@@ -362,6 +362,8 @@ def estimator_params(
     p.cg_to_front = vehicle.cg_to_front_axle
     p.cg_to_rear = vehicle.cg_to_rear_axle
     p.wheelbase = vehicle.wheelbase
+    p.pitch_omega = 2.0 * math.pi * vehicle.pitch_frequency
+    p.pitch_zeta = vehicle.pitch_damping
     p.load_transfer = LOAD_TRANSFER_SOURCES.index(config.load_transfer_source)
     p.force_tau = config.force_filter_tau
     p.slope_tau = config.slope_tau

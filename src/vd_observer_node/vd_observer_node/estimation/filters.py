@@ -39,6 +39,7 @@ __all__ = [
     'lowpass_on_ramp',
     'lowpass_reset',
     'lowpass_update',
+    'mode_step',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -277,3 +278,25 @@ class LowPass:
         out = np.empty(flat.shape[0])
         lowpass_update(self._tau, self._stages, self._prev, self._meta, float(dt), flat, out)
         return out.reshape(value.shape)
+
+
+@jit
+def mode_step(
+    omega: float, zeta: float, dt: float, target: float, x: float, rate: float
+) -> tuple[float, float]:
+    """One step of a damped second-order mode ``x'' = omega^2 (target - x) - 2 zeta omega x'``
+    (semi-implicit Euler: stable, and near the mode's own response at ``omega dt <= 0.5``).
+
+    Args:
+        omega: undamped angular frequency [rad/s] (> 0).
+        zeta: damping ratio [-].
+        dt: step [s].
+        target: where the mode settles (the input, held over the step).
+        x, rate: the state and its rate [per s] before the step.
+
+    Returns:
+        (x, rate) after the step.
+    """
+    accel = omega * omega * (target - x) - 2.0 * zeta * omega * rate
+    rate = rate + dt * accel
+    return x + dt * rate, rate

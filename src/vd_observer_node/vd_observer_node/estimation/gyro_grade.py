@@ -37,6 +37,7 @@ from vd_observer_node.estimation.filters import (
     lowpass_on_ramp,
     lowpass_reset,
     lowpass_update,
+    mode_step,
 )
 from vd_observer_node.kernel._jit import jit
 
@@ -94,11 +95,8 @@ def _body_pitch_step(p: np.record, s: np.record, dt: float, settled: float) -> N
         s.body_pitch += -math.expm1(-dt / _BODY_PITCH_TAU) * (settled - s.body_pitch)
         s.body_pitch_rate = 0.0
         return
-    # semi-implicit Euler: stable, and near the mode's own response at w dt <= 0.5
-    accel: float = w * w * (settled - s.body_pitch) - 2.0 * p.pitch_zeta * w * s.body_pitch_rate
-    rate: float = s.body_pitch_rate + dt * accel
-    s.body_pitch_rate = rate
-    s.body_pitch += dt * rate
+    pitch, rate = mode_step(w, p.pitch_zeta, dt, settled, s.body_pitch, s.body_pitch_rate)
+    s.body_pitch, s.body_pitch_rate = pitch, rate
 
 
 @jit

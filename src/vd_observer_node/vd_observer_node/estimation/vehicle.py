@@ -10,6 +10,7 @@ there is no second key table here.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from dataclasses import dataclass
@@ -22,6 +23,7 @@ from vd_common.vehicle.estimation import EstimationVehicleParams, load_estimatio
 from vd_common.vehicle.params import TireParams, VehicleParams, default_vehicle_file
 
 from vd_observer_node.errors import VehicleParameterError
+from vd_observer_node.estimation.body_pitch import BodyPitch, body_pitch_of, vehicle_body_pitch
 
 __all__ = [
     'EstimatorVehicle',
@@ -35,7 +37,15 @@ __all__ = [
 # c0 = 0, c1 = 0, Cx = 0, A = 0 or rho = 0 switch a resistance off, as the simulator's
 # parser allows; every other quantity is a divisor or a physical size and must be > 0.
 _ZERO_ALLOWED = frozenset(
-    ('rolling_c0', 'rolling_c1', 'drag_coefficient', 'frontal_area', 'air_density')
+    (
+        'rolling_c0',
+        'rolling_c1',
+        'drag_coefficient',
+        'frontal_area',
+        'air_density',
+        'pitch_frequency',
+        'pitch_damping',
+    )
 )
 
 
@@ -59,6 +69,11 @@ class EstimatorVehicle:
         gravity: g [m/s^2].
         rolling_regularisation_speed: v_r [m/s] of tanh(v / v_r), the smooth sign the
             simulator applies to rolling resistance (optional key, default 0.05).
+        pitch_frequency: undamped frequency of the body's pitch mode on its springs [Hz]
+            (`body_pitch.pitch_mode`, from a full file's suspension, tyres and pitch inertia;
+            0: a rigid body, as an estimation-only file describes): the load transfer
+            follows the ground force through it.
+        pitch_damping: damping ratio of that mode [-].
         name: free text.
     """
 
@@ -76,6 +91,8 @@ class EstimatorVehicle:
     rolling_c1: float
     gravity: float
     rolling_regularisation_speed: float = 0.05
+    pitch_frequency: float = 0.0
+    pitch_damping: float = 0.0
     name: str = ''
 
     def __post_init__(self) -> None:
@@ -107,7 +124,10 @@ class EstimatorVehicle:
         The file already holds whole-vehicle quantities (``chassis.mass`` includes the
         unsprung masses, ``chassis.cg_to_front_axle`` and ``cg_height`` locate the
         whole-vehicle CG), so every field is the parsed value itself, unchanged: the
-        estimators and the simulator see the same numbers bit for bit.
+        estimators and the simulator see the same numbers bit for bit. The body's pitch mode
+        is the full file's (`VehicleParams`: suspension, tyres, pitch inertia); the
+        estimators' own parse (`EstimationVehicleParams`) reads no suspension: rigid, which
+        `load_estimator_vehicle` completes from the file.
 
         Args:
             params: parameters from :func:`vd_common.vehicle.estimation.load_estimation_vehicle`
@@ -118,6 +138,7 @@ class EstimatorVehicle:
         """
         chassis, wheel, aero = params.chassis, params.wheel, params.aero
         rolling = params.rolling_resistance
+        pitch = body_pitch_of(params) if isinstance(params, VehicleParams) else BodyPitch()
         return cls(
             mass=chassis.mass,
             wheelbase=chassis.wheelbase,
@@ -133,8 +154,15 @@ class EstimatorVehicle:
             rolling_c1=rolling.c1,
             gravity=params.environment.gravity,
             rolling_regularisation_speed=rolling.regularisation_speed,
+            pitch_frequency=pitch.frequency,
+            pitch_damping=pitch.damping if pitch.frequency > 0.0 else 0.0,
             name=params.name,
         )
+
+    def with_body_pitch(self, pitch: BodyPitch) -> EstimatorVehicle:
+        """This vehicle with the pitch mode of ``pitch`` (rigid: frequency 0, damping 0)."""
+        damping = pitch.damping if pitch.frequency > 0.0 else 0.0
+        return dataclasses.replace(self, pitch_frequency=pitch.frequency, pitch_damping=damping)
 
     @property
     def cg_to_rear_axle(self) -> float:
@@ -230,11 +258,12 @@ def mapped_without_vehicle_warning() -> str:
     )
 
 
-def load_estimator_vehicle(path: str | os.PathLike[str]) -> EstimatorVehicle:
-    """Read the vehicle parameter file (the simulator's YAML) for the estimators.
+def load_estimator_vehicle(path: str | os.PathLike[str] | None) -> EstimatorVehicle:
+    """Read the vehicle parameter file (the simulator's YAML) for the estimators, with the
+    body's pitch mode where the file is a full one (`body_pitch.vehicle_body_pitch`).
 
     Args:
-        path: YAML file, e.g. vd_common/config/clio_rl_1_1.yaml.
+        path: YAML file, e.g. vd_common/config/clio_rl_1_1.yaml; None: the shipped Clio.
 
     Returns:
         The estimator vehicle.
@@ -243,4 +272,5 @@ def load_estimator_vehicle(path: str | os.PathLike[str]) -> EstimatorVehicle:
         VehicleParameterError: unreadable file, missing key or invalid value (one line that
             names the file and the dotted key).
     """
-    return EstimatorVehicle.from_params(load_vehicle_params(path))
+    vehicle = EstimatorVehicle.from_params(load_vehicle_params(path))
+    return vehicle.with_body_pitch(vehicle_body_pitch(path))

@@ -190,9 +190,10 @@ def chain_settings(
             f'unknown cascade setting {extra[0]!r} (settings: {", ".join(_CASCADE_KEYS)})'
         )
     params = load_vehicle_params(vehicle_file)
+    pitch = vehicle_body_pitch(vehicle_file)
     source = mapping.torque_source
     return ChainSettings(
-        vehicle=EstimatorVehicle.from_params(params),
+        vehicle=EstimatorVehicle.from_params(params).with_body_pitch(pitch),
         observer=ObserverConfig.from_mapping(
             {**given.get('observer', {}), 'wheel_input': mapping.wheel_input}
         ),
@@ -201,9 +202,7 @@ def chain_settings(
         torque_source=source,
         drivetrain=Drivetrain.from_params(params) if source == 'engine' else None,
         imu=(
-            imu_grade_config(vehicle_body_pitch(vehicle_file), mapping.imu_fusion)
-            if mapping.imu_fusion is not None
-            else None
+            imu_grade_config(pitch, mapping.imu_fusion) if mapping.imu_fusion is not None else None
         ),
         brakes=(
             Brakes.from_params(_brake_in_use(mapping), params, mapping.source)
