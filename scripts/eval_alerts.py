@@ -165,7 +165,9 @@ def report_alerts(
 
 
 def report_mu_max(sim: Any, det: dict[str, np.ndarray]) -> None:
-    """Print the mu_max error per axle and road segment after true excitation."""
+    """Print the mu_max error per axle and road segment after true excitation, then over all
+    of them (issue 38's figure: the share of the excited samples within 0.1, and the share
+    known and wrong: a road class given and the error beyond 0.1)."""
     true_mu_max = axle_mean(sim.peak_mu)
     segments = mu_max_errors(
         sim.t,
@@ -195,6 +197,18 @@ def report_mu_max(sim: Any, det: dict[str, np.ndarray]) -> None:
             f'{m.within_pct:.1f} % within {SETTINGS.mu_max_goal:g} '
             f'(last miss {m.last_miss_s:.3f} s after excitation), '
             f'confidence mean {m.confidence_mean:.2f}, class {ROAD_CLASS_NAMES[m.road_class]}'
+        )
+    n = sum(m.recent_samples for m in segments)
+    if n:
+
+        def share(pct: str) -> float:
+            return sum(m.recent_samples * getattr(m, pct) for m in segments) / n
+
+        print(
+            f'   mu_max while excited, all segments ({n} samples): '
+            f'{share("recent_within_pct"):.1f} % within {SETTINGS.mu_max_goal:g} (goal 95), '
+            f'{share("recent_known_wrong_pct"):.1f} % known and wrong, '
+            f'{share("recent_unknown_pct"):.1f} % class unknown'
         )
 
 

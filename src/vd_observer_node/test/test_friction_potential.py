@@ -304,7 +304,8 @@ def test_confidence_decays_without_fresh_evidence() -> None:
 
 @pytest.mark.parametrize('second_road', [0.3, 1.0])
 def test_data_no_curve_explains_are_not_held(second_road: float) -> None:
-    """A snow sweep, then 0.1 s on a second road, then 1 s with nothing usable.
+    """A snow sweep, then 0.1 s on a second road, then 1 s with nothing usable; the road-change
+    test off (``change_evidence`` 0), so the forgetting window holds both roads.
 
     The same road again: the confidence decays over the hold time (5 s) alone and the snow
     class is kept. A dry road: the forgetting window holds both roads when the samples stop
@@ -313,7 +314,7 @@ def test_data_no_curve_explains_are_not_held(second_road: float) -> None:
     the class is UNKNOWN and mu_max back near the prior dry road. Before, a confident 0.46
     (snow) was held for seconds on the dry road.
     """
-    est = FrictionPotentialEstimator(curves(), STATIC)
+    est = FrictionPotentialEstimator(curves(), STATIC, FrictionPotentialConfig(change_evidence=0))
     rng = np.random.default_rng(13)
     slips = sweep(600, 0.1, rng)
     t = feed(est, 0.0, slips, true_mu(slips, 0.3))
@@ -330,6 +331,56 @@ def test_data_no_curve_explains_are_not_held(second_road: float) -> None:
         assert est.last.confidence[0] < 0.1  # measured 0.03
         assert est.last.road_class[0] == ROAD_UNKNOWN
         assert est.last.mu_max[0] > 0.9  # measured 1.00 (prior 1.03); the truth is 1.05
+
+
+def _snow_then(second_road: float, change_evidence: float) -> tuple[list[float], int]:
+    """A snow sweep, then a sweep to slip 0.2 on a second road, 1 ms a stamp: the front
+    axle's mu_max at every stamp of the second sweep, and the road changes detected."""
+    est = FrictionPotentialEstimator(
+        curves(), STATIC, FrictionPotentialConfig(change_evidence=change_evidence)
+    )
+    rng = np.random.default_rng(21)
+    slips = sweep(600, 0.1, rng)
+    t = feed(est, 0.0, slips, true_mu(slips, 0.3))
+    second = np.linspace(0.0, 0.2, 200) + rng.normal(0.0, 0.001, 200)
+    trace = []
+    for s in second:
+        t = feed(est, t, np.array([s]), true_mu(np.array([s]), second_road))
+        trace.append(float(est.last.mu_max[0]))
+    return trace, int(est.state.changes[0])
+
+
+def test_a_road_change_restarts_the_window() -> None:
+    """Snow, then a dry road pushed towards its peak (slip 0 to 0.2 in 0.2 s; the first
+    ~40 ms are below the usable slip): the recent samples reject the snow road, the window
+    restarts from them, and mu_max stays within 0.1 of the dry peak from 68 ms on (measured).
+    Without the test (``change_evidence`` 0) the window mixes the two roads and crawls from
+    snow to dry: within 0.1 from 165 ms on. The same road again is no change."""
+    dry = true_peak(1.0)
+
+    def settled(trace: list[float]) -> int:
+        """Stamps before mu_max stays within 0.1 of the dry peak."""
+        off = np.flatnonzero(np.abs(np.asarray(trace) - dry) > 0.1)
+        return int(off[-1]) + 1 if off.size else 0
+
+    with_test, changes = _snow_then(1.0, FrictionPotentialConfig().change_evidence)
+    without, none = _snow_then(1.0, 0.0)
+    assert changes >= 1 and none == 0
+    assert settled(with_test) <= 80
+    assert settled(without) >= 150
+    _, same = _snow_then(0.3, FrictionPotentialConfig().change_evidence)
+    assert same == 0
+
+
+def test_noise_on_one_road_is_no_change() -> None:
+    """10 s of noisy samples around one road's peak (slip noise of a 96-count encoder and
+    0.05 mu): no road change is detected."""
+    rng = np.random.default_rng(5)
+    est = FrictionPotentialEstimator(curves(), STATIC)
+    slips = np.abs(0.08 + 0.05 * np.sin(np.arange(10000) / 300.0)) + rng.normal(0, 0.004, 10000)
+    feed(est, 0.0, slips, true_mu(slips, 0.6) + rng.normal(0.0, 0.05, slips.size))
+    assert int(est.state.changes[0]) == 0
+    assert est.last.mu_max[0] == pytest.approx(true_peak(0.6), abs=0.1)
 
 
 @pytest.mark.parametrize(('stamps', 'confident'), [(2, False), (20, True)])

@@ -13,7 +13,8 @@ Records (`vd_observer_node.situation.records`; fields by name, in numba too):
 * `POTENTIAL`: the last friction potential (what `FrictionPotential` reports).
 
 Arrays whose length is a setting stay arrays next to them: ``scales`` (M,) the road scales,
-``cost`` (2, M) the forgotten weighted squared residuals per axle and road scale, ``table``
+``cost`` (2, M) the forgotten weighted squared residuals per axle and road scale, ``recent``
+(2, M) the same forgotten over ``change_time`` (the road-change test), ``table``
 (5, L) the tyre's peaks at road scale 1 against the load (rows load, mu_drive, slip_drive,
 mu_brake, slip_brake; `vd_common.vehicle.friction.FrictionTable`).
 
@@ -67,6 +68,8 @@ FRICTION_PARAMS: Final = np.dtype(
         ('evidence_hold_time', 'f8'),
         ('evidence_low', 'f8'),
         ('evidence_high', 'f8'),
+        ('change_time', 'f8'),
+        ('change_evidence', 'f8'),
         ('class_bounds', 'f8', (3,)),
         ('class_margin', 'f8'),
         ('class_min_confidence', 'f8'),
@@ -102,10 +105,13 @@ TYRE: Final = np.dtype(
 #: count: forgotten number of used samples; load: [N] smoothed wheel load of the used
 #: samples; direction: smoothed sign of their force (> 0 driving); t: [s] stamp of the last
 #: accepted step (nan before the first); last_sample: [s] stamp of the axle's last usable
-#: sample (nan if none).
+#: sample (nan if none); recent_count: the sample count of ``recent``; changes: road changes
+#: detected per axle (the statistics restarted from ``recent``).
 FIT_STATE: Final = np.dtype(
     [
         ('count', 'f8', (2,)),
+        ('recent_count', 'f8', (2,)),
+        ('changes', 'i8', (2,)),
         ('load', 'f8', (2,)),
         ('direction', 'f8', (2,)),
         ('t', 'f8'),
@@ -148,6 +154,7 @@ class FrictionFit(NamedTuple):
         static_load: shape (2,), [N] wheel load per axle before any sample.
         state: shape (1,), `FIT_STATE`.
         cost: shape (2, M), the forgotten weighted squared residuals.
+        recent: shape (2, M), the same forgotten over ``change_time``.
         potential: shape (1,), `POTENTIAL`: the last solution.
     """
 
@@ -158,6 +165,7 @@ class FrictionFit(NamedTuple):
     static_load: FloatArray
     state: NDArray[Any]
     cost: FloatArray
+    recent: FloatArray
     potential: NDArray[Any]
 
 
@@ -253,6 +261,51 @@ def classify_road(mu_max: float, confidence: float, previous: int, p: Any) -> in
 
 
 @jit
+def _argmin(row: FloatArray) -> int:
+    """Index of the least value (the first of equals)."""
+    best = 0
+    for j in range(1, row.shape[0]):
+        if row[j] < row[best]:
+            best = j
+    return best
+
+
+@jit
+def _unit_peak(table: FloatArray, load: float, direction: float) -> tuple[float, float]:
+    """The tyre's peak mu and slip at road scale 1 at a load [N], driving (direction >= 0) or
+    braking, from the peak table (module docstring; the load clipped to the table)."""
+    tl = table[0]
+    z = min(max(load, tl[0]), tl[-1])
+    if direction >= 0.0:
+        return np.interp(z, tl, table[1]), np.interp(z, tl, table[2])
+    return np.interp(z, tl, table[3]), np.interp(z, tl, table[4])
+
+
+@jit
+def _road_changed(fit: FrictionFit, a: int) -> bool:
+    """Whether axle ``a``'s recent samples reject the road of its whole window.
+
+    The profile-likelihood test of the confidence, on the recent statistics: the extra cost
+    of the window's best road scale over the recent samples' own best, per recent sample
+    times ``evidence_samples`` (or the recent count, if smaller), at least
+    ``change_evidence``, and the two peaks more than ``confidence_margin`` apart.
+    """
+    p, s, recent = fit.params[0], fit.state[0], fit.recent
+    count = s.recent_count[a]
+    if p.change_evidence <= 0.0 or count <= 0.0:
+        return False
+    window = _argmin(fit.cost[a])
+    own = _argmin(recent[a])
+    unit_mu = _unit_peak(fit.table, s.load[a], s.direction[a])[0]
+    if abs(fit.scales[window] - fit.scales[own]) * unit_mu <= p.confidence_margin:
+        return False
+    extra = (recent[a, window] - recent[a, own]) / max(count, 1.0)
+    evidence: float = extra * min(count, p.evidence_samples)
+    threshold: float = p.change_evidence
+    return evidence >= threshold
+
+
+@jit
 def fit_solution(
     p: Any, scales: FloatArray, table: FloatArray, s: Any, cost: FloatArray, pot: Any
 ) -> None:
@@ -279,19 +332,9 @@ def fit_solution(
     """
     m = scales.shape[0]
     pot.t = s.t
-    tl = table[0]
     for a in range(2):
-        best = 0
-        for j in range(1, m):
-            if cost[a, j] < cost[a, best]:
-                best = j
-        z = min(max(s.load[a], tl[0]), tl[-1])
-        if s.direction[a] >= 0.0:
-            unit_mu = np.interp(z, tl, table[1])
-            unit_slip = np.interp(z, tl, table[2])
-        else:
-            unit_mu = np.interp(z, tl, table[3])
-            unit_slip = np.interp(z, tl, table[4])
+        best = _argmin(cost[a])
+        unit_mu, unit_slip = _unit_peak(table, s.load[a], s.direction[a])
         fitted = scales[best] if s.count[a] > 0.0 else p.prior_road_scale
         best_peak = scales[best] * unit_mu
         rival = math.inf
@@ -337,7 +380,10 @@ def fit_reset(fit: FrictionFit) -> None:
     """
     s, pot, cost = fit.state[0], fit.potential[0], fit.cost
     cost[:, :] = 0.0
+    fit.recent[:, :] = 0.0
     s.count[:] = 0.0
+    s.recent_count[:] = 0.0
+    s.changes[:] = 0
     s.load[:] = fit.static_load
     s.direction[:] = 1.0
     s.t = math.nan
@@ -380,6 +426,7 @@ def fit_step(
         force has the sign of its slip; the opposite is an estimation transient).
     """
     p, tyre, scales, s, cost = fit.params[0], fit.tyre[0], fit.scales, fit.state[0], fit.cost
+    recent = fit.recent
     st = s.t
     if not math.isfinite(t) or (math.isfinite(st) and t <= st):
         return False
@@ -413,6 +460,7 @@ def fit_step(
         if n_use > 0:
             dt = 0.0 if not math.isfinite(st) else t - st
             lam = math.exp(-dt / p.forgetting_time)
+            lam_recent = math.exp(-dt / p.change_time) if p.change_time > 0.0 else 0.0
             blend = 1.0 - math.exp(-dt / p.load_time) if dt > 0.0 else 1.0
             mid = np.empty(m)
             up = np.empty(m)
@@ -442,7 +490,14 @@ def fit_step(
                     continue
                 for j in range(m):
                     cost[a, j] = lam * cost[a, j] + acc[j]
+                    recent[a, j] = lam_recent * recent[a, j] + acc[j]
                 s.count[a] = lam * s.count[a] + float(rows)
+                s.recent_count[a] = lam_recent * s.recent_count[a] + float(rows)
+                if _road_changed(fit, a):
+                    # another road: what the window holds from before is not this road's
+                    cost[a, :] = recent[a, :]
+                    s.count[a] = s.recent_count[a]
+                    s.changes[a] += 1
                 s.load[a] += blend * (z_sum / rows - s.load[a])
                 s.direction[a] += blend * (s_sum / rows - s.direction[a])
                 s.last_sample[a] = t

@@ -147,6 +147,14 @@ class FrictionPotentialConfig:
             confidence forever.
         evidence_low: evidence at and below which the confidence is 0.
         evidence_high: evidence at and above which the confidence is 1.
+        change_time: time constant [s] of the recent statistics the road-change test
+            compares with the whole window (0: the last stamp's samples alone).
+        change_evidence: a road change is detected, and the window restarted from the
+            recent statistics, where these reject the window's best road by this much
+            evidence (the confidence's measure, on the recent samples) with peaks more than
+            ``confidence_margin`` apart. Without it a road change mixes two roads in one
+            window for about ``forgetting_time``, and the fit between them is confidently
+            wrong. 0 turns the test off.
         class_bounds: mu_max boundaries ice|snow, snow|wet, wet|dry [-], increasing.
         class_margin: hysteresis margin [-] on the class boundaries.
         class_min_confidence: below this confidence the class is UNKNOWN [-].
@@ -168,6 +176,8 @@ class FrictionPotentialConfig:
     evidence_hold_time: float = 5.0
     evidence_low: float = 10.0
     evidence_high: float = 100.0
+    change_time: float = 0.05
+    change_evidence: float = 300.0
     class_bounds: tuple[float, float, float] = ROAD_CLASS_BOUNDS
     class_margin: float = 0.03
     class_min_confidence: float = 0.5
@@ -333,6 +343,7 @@ class FrictionPotentialEstimator:
         table: shape (5, L), the tyre's unit peaks.
         state: `FIT_STATE` record.
         cost: shape (2, M), the weighted squared residuals per axle and road scale.
+        recent: shape (2, M), the same forgotten over ``change_time``.
         potential: `POTENTIAL` record of the last solution.
         last: the last solution as a `FrictionPotential`.
     """
@@ -366,13 +377,14 @@ class FrictionPotentialEstimator:
         self.scales = np.asarray(self.config.road_scales, dtype=np.float64)
         self.state = new_record(FIT_STATE)
         self.cost = np.zeros((2, self.scales.shape[0]))
+        self.recent = np.zeros_like(self.cost)
         self.potential = new_record(POTENTIAL)
         r = record_array
         #: the records above (never replaced: every reset works in place) as the step
         #: functions take them
         self.parts = FrictionFit(
             r(self.params), r(self.tyre), self.scales, self.table, self.static_load,
-            r(self.state), self.cost, r(self.potential),
+            r(self.state), self.cost, self.recent, r(self.potential),
         )  # fmt: skip
         self.reset()
 
