@@ -11,14 +11,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from vd_observer_node.errors import ConfigurationError, InputShapeError
 from vd_observer_node.estimation import formulas as phys
-from vd_observer_node.estimation.body_pitch import BodyPitch
 from vd_observer_node.estimation.estimator import Estimator, EstimatorConfig
 from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.testing.synthetic import TrajectoryShape, synthetic_trajectory
 
 VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
-#: rigid, as the synthetic trajectory's loads are (the pitch mode's loads: test_load_transfer)
-VEHICLE = load_estimator_vehicle(VEHICLE_FILE).with_body_pitch(BodyPitch())
+#: rigid, as the synthetic trajectory's loads are (the vertical model's: test_load_transfer)
+VEHICLE = load_estimator_vehicle(VEHICLE_FILE).with_vertical(None)
 NO_FILTER = EstimatorConfig(slope_filter_tau=0.0, force_filter_tau=0.0)
 
 

@@ -10,7 +10,7 @@ import pytest
 import yaml
 from vd_common.vehicle.params import load_vehicle
 from vd_observer_node.errors import VehicleParameterError
-from vd_observer_node.estimation.body_pitch import vehicle_body_pitch
+from vd_observer_node.estimation.axle_loads import VerticalModel, vehicle_vertical_model
 from vd_observer_node.estimation.vehicle import (
     EstimatorVehicle,
     load_estimator_vehicle,
@@ -57,10 +57,9 @@ def test_values_are_the_files_own_numbers() -> None:
         'rolling_c1': raw['rolling_resistance']['c1'],
         'gravity': raw['environment']['gravity'],
         'rolling_regularisation_speed': raw['rolling_resistance']['regularisation_speed'],
-        # the one derived pair: the body's pitch mode (`body_pitch.pitch_mode`, its own tests)
-        'pitch_frequency': vehicle_body_pitch(VEHICLE_FILE).frequency,
-        'pitch_damping': vehicle_body_pitch(VEHICLE_FILE).damping,
         'name': raw['name'],
+        # the chassis's vertical dynamics: the file's suspension, tyres and masses
+        'vertical': dataclasses.asdict(VerticalModel.from_params(load_vehicle(VEHICLE_FILE))),
     }
     assert dataclasses.asdict(vehicle) == expected  # exact: tolerance 0
     # The values the old estimator-only reader gave (pinned before issue 19 merged the two).
@@ -79,9 +78,18 @@ def test_values_are_the_files_own_numbers() -> None:
         rolling_c1=3.6,
         gravity=9.81,
         rolling_regularisation_speed=0.05,
-        pitch_frequency=1.5674993357762024,
-        pitch_damping=0.45323726576977247,
         name='Renault Clio RL 1.1',
+        vertical=VerticalModel(
+            sprung_mass=791.0,
+            pitch_inertia=1050.0,
+            sprung_cg_to_front=(905.0 * 0.95 - 50.0 * 2.472) / 791.0,
+            wheelbase=2.472,
+            cg_height=0.55,
+            unsprung=(64.0, 50.0),
+            spring=(38000.0, 34000.0),
+            damper=(3200.0, 2800.0),
+            tyre=(320000.0, 300.0),
+        ),
     )
     assert vehicle.static_wheel_loads.tolist() == [
         2733.0890169902914,
@@ -96,10 +104,10 @@ def test_same_numbers_as_the_simulator() -> None:
     params = load_vehicle(VEHICLE_FILE)
     assert EstimatorVehicle.from_params(params) == load_estimator_vehicle(VEHICLE_FILE)
     read = load_vehicle_params(VEHICLE_FILE)
-    # the estimators' own parse reads no suspension: rigid until given the file's pitch mode
-    assert EstimatorVehicle.from_params(read).pitch_frequency == 0.0
-    pitch = vehicle_body_pitch(VEHICLE_FILE)
-    assert EstimatorVehicle.from_params(read).with_body_pitch(pitch) == (
+    # the estimators' own parse reads no suspension: rigid until given the file's model
+    assert EstimatorVehicle.from_params(read).vertical is None
+    vertical = vehicle_vertical_model(VEHICLE_FILE)
+    assert EstimatorVehicle.from_params(read).with_vertical(vertical) == (
         EstimatorVehicle.from_params(params)
     )
     assert read.tire == params.tire
@@ -124,13 +132,11 @@ def test_an_estimation_only_file_estimates_and_says_what_it_lacks(tmp_path: Path
     path = tmp_path / 'estimation_only.yaml'
     path.write_text(yaml.safe_dump(only), encoding='utf-8')
     params = load_vehicle_params(path)
-    # the same numbers, but no suspension: a rigid body (no pitch mode)
+    # the same numbers, but no suspension: a rigid body (no vertical model)
     rigid = load_estimator_vehicle(path)
-    assert rigid.pitch_frequency == 0.0 and rigid.pitch_damping == 0.0
+    assert rigid.vertical is None
     assert EstimatorVehicle.from_params(params) == rigid
-    assert rigid == dataclasses.replace(
-        load_estimator_vehicle(VEHICLE_FILE), pitch_frequency=0.0, pitch_damping=0.0
-    )
+    assert rigid == load_estimator_vehicle(VEHICLE_FILE).with_vertical(None)
     with pytest.raises(VehicleParameterError, match=r'tire is missing'):
         vehicle_tire(params)
     with pytest.raises(ConfigurationError, match=r'gearbox is missing'):

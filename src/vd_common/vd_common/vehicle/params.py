@@ -52,6 +52,7 @@ __all__ = [
     'read_environment',
     'read_rolling',
     'read_tire',
+    'sprung_cg_to_front_axle',
 ]
 
 #: [m/s^2] ``environment.gravity`` when the file does not give it.
@@ -71,6 +72,25 @@ class ChassisParams:
     pitch_inertia: float  # [kg m^2] sprung mass about y through its CG
     track_front: float  # [m] unused in the x-z model
     track_rear: float  # [m] unused in the x-z model
+
+    @property
+    def sprung_cg_to_front_axle(self) -> float:
+        """[m] the sprung mass's CG to the front axle (the unsprung masses sit on the axles)."""
+        return sprung_cg_to_front_axle(
+            self.mass,
+            2.0 * self.unsprung_mass_front,
+            2.0 * self.unsprung_mass_rear,
+            self.wheelbase,
+            self.cg_to_front_axle,
+        )
+
+
+def sprung_cg_to_front_axle(
+    mass: float, unsprung_front: float, unsprung_rear: float, wheelbase: float, a: float
+) -> float:
+    """[m] the sprung mass's CG to the front axle from the whole vehicle's ``a`` [m], its mass
+    and each axle's unsprung mass [kg] (both corners), which sit on the axles."""
+    return (mass * a - unsprung_rear * wheelbase) / (mass - unsprung_front - unsprung_rear)
 
 
 @dataclass(frozen=True)
@@ -298,7 +318,7 @@ def _chassis(r: MappingReader) -> ChassisParams:
         )
     wheelbase = r.number('wheelbase', 'm', gt=0.0)
     a = r.number('cg_to_front_axle', 'm', gt=0.0, lt=wheelbase)
-    a_sprung = (mass * a - 2.0 * mu_r * wheelbase) / (mass - 2.0 * (mu_f + mu_r))
+    a_sprung = sprung_cg_to_front_axle(mass, 2.0 * mu_f, 2.0 * mu_r, wheelbase, a)
     if not 0.0 < a_sprung < wheelbase:
         raise ParameterError(
             f'chassis.cg_to_front_axle = {a:g} m with these unsprung masses puts the sprung '

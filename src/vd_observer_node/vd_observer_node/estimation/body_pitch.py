@@ -3,11 +3,11 @@
 The longitudinal ground force ``F`` acts ``cg_height`` below the centre of gravity: the body
 squats and dives by `pitch_compliance` times ``F`` once settled, and gets there as its pitch
 mode (`pitch_mode`: the springs' pitch stiffness against the body's pitch inertia, damped by
-the dampers) lets it; the same mode carries the ground force's moment to the axle loads
-(`estimator_step._pitched_ground_force`). An IMU on the body turns with it: `imu_grade` reads
-its specific force as ``(1 + k) f`` (``k = g m compliance``), and the angular rate's grade
-(`gyro_grade`) takes the modelled pitch out of the rate it integrates. An estimation-only
-vehicle file has no springs: a rigid body (compliance 0).
+the dampers) lets it (the axle loads take the whole chassis, `axle_loads`). An IMU on the
+body turns with it: `imu_grade` reads its specific force as ``(1 + k) f`` (``k = g m
+compliance``), and the angular rate's grade (`gyro_grade`) takes the modelled pitch out of
+the rate it integrates. An estimation-only vehicle file has no springs: a rigid body
+(compliance 0).
 """
 
 from __future__ import annotations

@@ -55,6 +55,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from vd_observer_node.errors import ConfigurationError, InputShapeError
+from vd_observer_node.estimation.axle_loads import load_model_params
 from vd_observer_node.estimation.drivetrain import TORQUE_MEASURED, TORQUE_SOURCES
 from vd_observer_node.estimation.estimator_step import (
     ESTIMATES,
@@ -362,8 +363,6 @@ def estimator_params(
     p.cg_to_front = vehicle.cg_to_front_axle
     p.cg_to_rear = vehicle.cg_to_rear_axle
     p.wheelbase = vehicle.wheelbase
-    p.pitch_omega = 2.0 * math.pi * vehicle.pitch_frequency
-    p.pitch_zeta = vehicle.pitch_damping
     p.load_transfer = LOAD_TRANSFER_SOURCES.index(config.load_transfer_source)
     p.force_tau = config.force_filter_tau
     p.slope_tau = config.slope_tau
@@ -384,6 +383,7 @@ def estimator_params(
     p.mass_waits = config.mass_waits_for_radius
     p.mass_p = mass_params(vehicle, config.mass)
     p.radius_p = radius_params(vehicle, config.radius)
+    p.loads = load_model_params(vehicle.vertical)
     return p
 
 

@@ -22,6 +22,7 @@ from typing import Any, Final, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from vd_observer_node.estimation.axle_loads import LOAD_MODEL, axle_transfer_step
 from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_NONE
 from vd_observer_node.estimation.faults import ESTIMATOR_FAULTS
 from vd_observer_node.estimation.filters import (
@@ -32,7 +33,6 @@ from vd_observer_node.estimation.filters import (
     lowpass_input,
     lowpass_reset,
     lowpass_update,
-    mode_step,
 )
 from vd_observer_node.estimation.formulas import rolling_coefficient_at
 from vd_observer_node.estimation.mass_grade_step import (
@@ -120,8 +120,6 @@ ESTIMATOR_PARAMS: Final = np.dtype(
         ('cg_to_front', 'f8'),
         ('cg_to_rear', 'f8'),
         ('wheelbase', 'f8'),
-        ('pitch_omega', 'f8'),
-        ('pitch_zeta', 'f8'),
         ('load_transfer', 'i8'),
         ('force_tau', 'f8'),
         ('slope_tau', 'f8'),
@@ -141,6 +139,7 @@ ESTIMATOR_PARAMS: Final = np.dtype(
         ('mass_waits', 'b1'),
         ('mass_p', MASS_PARAMS),
         ('radius_p', RADIUS_PARAMS),
+        ('loads', LOAD_MODEL),
     ],
     align=True,
 )
@@ -215,9 +214,8 @@ HELD_INPUTS: Final = np.dtype(_INPUT_FIELDS, align=True)
 #: estimate, the radius of the last stamp's Fx (nan: none), the stamp until which the slope
 #: settles after a gap (`GAP_FORCE_CHANGE`; -inf: none), the last finite inputs (omega,
 #: omega_dot, torque (4 each), v, accel), the three low-passes' previous output and input and
-#: bookkeeping, the stamp of the speed low-pass's last sample (nan: none), the ground force
-#: through the body's pitch mode [N] and its rate [N/s] (`_pitched_ground_force`; nan: not
-#: started), the online mass's
+#: bookkeeping, the stamp of the speed low-pass's last sample (nan: none), the chassis's
+#: positions and rates (`axle_loads`; nan: not started), the online mass's
 #: and radius's states, the fault counts, and a mass known from
 #: elsewhere that replaces the file's or the online mass's (nan: none; `cascade_step` sets it
 #: from the IMU's regression, `imu_grade`).
@@ -236,8 +234,8 @@ ESTIMATOR_STATE: Final = np.dtype(
         ('slope_lp', LOWPASS_META),
         ('speed_lp', LOWPASS_META),
         ('speed_t', 'f8'),
-        ('pitch_force', 'f8'),
-        ('pitch_force_rate', 'f8'),
+        ('axle_pos', 'f8', (4,)),
+        ('axle_vel', 'f8', (4,)),
         ('mass_s', MASS_STATE),
         ('radius_s', RADIUS_STATE),
         ('last', ESTIMATES),
@@ -293,8 +291,8 @@ def _forget(p: np.record, s: np.record) -> None:
     lowpass_reset(s.slope_lp)
     lowpass_reset(s.speed_lp)
     s.speed_t = math.nan
-    s.pitch_force = math.nan
-    s.pitch_force_rate = 0.0
+    s.axle_pos[:] = math.nan
+    s.axle_vel[:] = 0.0
     mass_reset(p.mass_p, s.mass_s)
     radius_reset(p.radius_p, s.radius_s)
     s.mass_known = math.nan
@@ -480,32 +478,6 @@ def _take(value: float, held: FloatArray, i: int) -> bool:
 
 
 @jit
-def _pitched_ground_force(p: np.record, s: np.record, dt: float, ground: float) -> float:
-    """The ground force whose moment the axle loads carry at this stamp [N].
-
-    The ground force ``G`` acts ``cg_height`` below the CG; on a body that pitches on springs
-    its moment reaches the axles through the springs and dampers, ``(C theta' + K theta) / L``,
-    while the body's pitch inertia takes the rest until the pitch mode settles: the load
-    transfer is ``h G`` through ``(2 zeta w s + w^2) / (s^2 + 2 zeta w s + w^2)`` (the mode
-    of `body_pitch.pitch_mode`), overshoot included: a braking that starts at once unloads the
-    rear axle by about a third more than the settled transfer, 0.15-0.2 s later. A rigid body
-    (a vehicle file without suspension: ``pitch_omega`` 0) carries it at once, as before. The
-    mode starts settled, and restarts settled after a step too long to integrate.
-    """
-    w = p.pitch_omega
-    if not w > 0.0:
-        return ground
-    if math.isnan(s.pitch_force) or not dt > 0.0 or w * dt > 0.5:
-        s.pitch_force, s.pitch_force_rate = ground, 0.0
-    else:
-        s.pitch_force, s.pitch_force_rate = mode_step(
-            w, p.pitch_zeta, dt, ground, s.pitch_force, s.pitch_force_rate
-        )
-    result: float = s.pitch_force + 2.0 * p.pitch_zeta / w * s.pitch_force_rate
-    return result
-
-
-@jit
 def _estimate(
     parts: EstimatorParts, t: float, dt: float, x: np.record, wheel_ok: BoolArray,
     body_ok: bool, torque_known: bool, est: np.record,
@@ -562,13 +534,20 @@ def _estimate(
     force_in[4] = ground
     filtered = np.empty(5)
     lowpass_update(p.force_tau, f_stages, s.force_prev, s.force_lp, dt, force_in, filtered)
-    ground_f = _pitched_ground_force(p, s, dt, filtered[4])
+    ground_f = filtered[4]
 
     # the moment balance; a load transfer beyond the axle's load lifts the wheel: Fz = 0
     weight_normal = mass * gravity * cos_prev
-    transfer = ground_f * p.cg_height
-    front = max(0.5 * (weight_normal * p.cg_to_rear - transfer) / p.wheelbase, 0.0)
-    rear = max(0.5 * (weight_normal * p.cg_to_front + transfer) / p.wheelbase, 0.0)
+    if p.loads.on:
+        # through the chassis's heave and pitch on its springs (`axle_loads`)
+        axle = np.empty(2)
+        axle_transfer_step(p.loads, s.axle_pos, s.axle_vel, dt, ground_f, axle)
+        front = max(0.5 * (weight_normal * p.cg_to_rear / p.wheelbase + axle[0]), 0.0)
+        rear = max(0.5 * (weight_normal * p.cg_to_front / p.wheelbase + axle[1]), 0.0)
+    else:
+        transfer = ground_f * p.cg_height
+        front = max(0.5 * (weight_normal * p.cg_to_rear - transfer) / p.wheelbase, 0.0)
+        rear = max(0.5 * (weight_normal * p.cg_to_front + transfer) / p.wheelbase, 0.0)
     min_load = p.min_load
     lift = False
     implausible = False

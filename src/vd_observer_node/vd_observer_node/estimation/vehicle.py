@@ -23,7 +23,7 @@ from vd_common.vehicle.estimation import EstimationVehicleParams, load_estimatio
 from vd_common.vehicle.params import TireParams, VehicleParams, default_vehicle_file
 
 from vd_observer_node.errors import VehicleParameterError
-from vd_observer_node.estimation.body_pitch import BodyPitch, body_pitch_of, vehicle_body_pitch
+from vd_observer_node.estimation.axle_loads import VerticalModel, vehicle_vertical_model
 
 __all__ = [
     'EstimatorVehicle',
@@ -43,8 +43,6 @@ _ZERO_ALLOWED = frozenset(
         'drag_coefficient',
         'frontal_area',
         'air_density',
-        'pitch_frequency',
-        'pitch_damping',
     )
 )
 
@@ -69,12 +67,10 @@ class EstimatorVehicle:
         gravity: g [m/s^2].
         rolling_regularisation_speed: v_r [m/s] of tanh(v / v_r), the smooth sign the
             simulator applies to rolling resistance (optional key, default 0.05).
-        pitch_frequency: undamped frequency of the body's pitch mode on its springs [Hz]
-            (`body_pitch.pitch_mode`, from a full file's suspension, tyres and pitch inertia;
-            0: a rigid body, as an estimation-only file describes): the load transfer
-            follows the ground force through it.
-        pitch_damping: damping ratio of that mode [-].
         name: free text.
+        vertical: the chassis's vertical dynamics (`axle_loads.VerticalModel`, from a full
+            file's suspension, tyres and masses): the load transfer follows the ground force
+            through them. None: a rigid body, as an estimation-only file describes.
     """
 
     mass: float
@@ -91,15 +87,14 @@ class EstimatorVehicle:
     rolling_c1: float
     gravity: float
     rolling_regularisation_speed: float = 0.05
-    pitch_frequency: float = 0.0
-    pitch_damping: float = 0.0
     name: str = ''
+    vertical: VerticalModel | None = None
 
     def __post_init__(self) -> None:
         # The file's values are checked by the shared parser (with their YAML names); this
         # guards vehicles built directly, e.g. by tests and the kernel's warm-up.
         for key, value in self.__dict__.items():
-            if key == 'name':
+            if key in ('name', 'vertical'):
                 continue
             zero_ok = key in _ZERO_ALLOWED
             allowed = 'a finite number >= 0' if zero_ok else 'a finite number > 0'
@@ -124,9 +119,9 @@ class EstimatorVehicle:
         The file already holds whole-vehicle quantities (``chassis.mass`` includes the
         unsprung masses, ``chassis.cg_to_front_axle`` and ``cg_height`` locate the
         whole-vehicle CG), so every field is the parsed value itself, unchanged: the
-        estimators and the simulator see the same numbers bit for bit. The body's pitch mode
-        is the full file's (`VehicleParams`: suspension, tyres, pitch inertia); the
-        estimators' own parse (`EstimationVehicleParams`) reads no suspension: rigid, which
+        estimators and the simulator see the same numbers bit for bit. The vertical model is
+        the full file's (`VehicleParams`: suspension, tyres, masses); the estimators' own
+        parse (`EstimationVehicleParams`) reads no suspension: rigid, which
         `load_estimator_vehicle` completes from the file.
 
         Args:
@@ -138,7 +133,7 @@ class EstimatorVehicle:
         """
         chassis, wheel, aero = params.chassis, params.wheel, params.aero
         rolling = params.rolling_resistance
-        pitch = body_pitch_of(params) if isinstance(params, VehicleParams) else BodyPitch()
+        vertical = VerticalModel.from_params(params) if isinstance(params, VehicleParams) else None
         return cls(
             mass=chassis.mass,
             wheelbase=chassis.wheelbase,
@@ -154,15 +149,13 @@ class EstimatorVehicle:
             rolling_c1=rolling.c1,
             gravity=params.environment.gravity,
             rolling_regularisation_speed=rolling.regularisation_speed,
-            pitch_frequency=pitch.frequency,
-            pitch_damping=pitch.damping if pitch.frequency > 0.0 else 0.0,
             name=params.name,
+            vertical=vertical,
         )
 
-    def with_body_pitch(self, pitch: BodyPitch) -> EstimatorVehicle:
-        """This vehicle with the pitch mode of ``pitch`` (rigid: frequency 0, damping 0)."""
-        damping = pitch.damping if pitch.frequency > 0.0 else 0.0
-        return dataclasses.replace(self, pitch_frequency=pitch.frequency, pitch_damping=damping)
+    def with_vertical(self, vertical: VerticalModel | None) -> EstimatorVehicle:
+        """This vehicle with that vertical model (None: rigid)."""
+        return dataclasses.replace(self, vertical=vertical)
 
     @property
     def cg_to_rear_axle(self) -> float:
@@ -260,7 +253,7 @@ def mapped_without_vehicle_warning() -> str:
 
 def load_estimator_vehicle(path: str | os.PathLike[str] | None) -> EstimatorVehicle:
     """Read the vehicle parameter file (the simulator's YAML) for the estimators, with the
-    body's pitch mode where the file is a full one (`body_pitch.vehicle_body_pitch`).
+    vertical model where the file is a full one (`axle_loads.vehicle_vertical_model`).
 
     Args:
         path: YAML file, e.g. vd_common/config/clio_rl_1_1.yaml; None: the shipped Clio.
@@ -273,4 +266,4 @@ def load_estimator_vehicle(path: str | os.PathLike[str] | None) -> EstimatorVehi
             names the file and the dotted key).
     """
     vehicle = EstimatorVehicle.from_params(load_vehicle_params(path))
-    return vehicle.with_body_pitch(vehicle_body_pitch(path))
+    return vehicle.with_vertical(vehicle_vertical_model(path))

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any, Final, Protocol
 
 from vd_observer_node.errors import ConfigurationError
+from vd_observer_node.estimation.axle_loads import vehicle_vertical_model
 from vd_observer_node.estimation.body_pitch import vehicle_body_pitch
 from vd_observer_node.estimation.brakes import Brakes
 from vd_observer_node.estimation.cascade import CascadeSettings
@@ -193,7 +194,9 @@ def chain_settings(
     pitch = vehicle_body_pitch(vehicle_file)
     source = mapping.torque_source
     return ChainSettings(
-        vehicle=EstimatorVehicle.from_params(params).with_body_pitch(pitch),
+        vehicle=EstimatorVehicle.from_params(params).with_vertical(
+            vehicle_vertical_model(vehicle_file)
+        ),
         observer=ObserverConfig.from_mapping(
             {**given.get('observer', {}), 'wheel_input': mapping.wheel_input}
         ),

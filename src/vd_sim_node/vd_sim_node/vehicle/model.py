@@ -106,7 +106,7 @@ class Geometry:
         m_ur = 2.0 * c.unsprung_mass_rear
         m_s = c.mass - m_uf - m_ur
         # The unsprung masses sit on the axles, so the sprung CG follows from the whole one.
-        a_s = (c.mass * c.cg_to_front_axle - m_ur * c.wheelbase) / m_s
+        a_s = c.sprung_cg_to_front_axle
         return cls(
             m=c.mass,
             m_s=m_s,
