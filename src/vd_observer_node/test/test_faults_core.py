@@ -30,7 +30,8 @@ from vd_observer_node.estimation.vehicle import load_estimator_vehicle
 from vd_observer_node.testing.synthetic import SyntheticTrajectory, synthetic_trajectory
 
 VEHICLE_FILE = Path(__file__).resolve().parents[2] / 'vd_common' / 'config' / 'clio_rl_1_1.yaml'
-VEHICLE = load_estimator_vehicle(VEHICLE_FILE)
+#: rigid, as the synthetic trajectories' loads are: a one-stamp braking lifts a wheel at once
+VEHICLE = load_estimator_vehicle(VEHICLE_FILE).with_vertical(None)
 DT = 1e-3
 NO_FILTER = EstimatorConfig(slope_filter_tau=0.0, force_filter_tau=0.0)
 
