@@ -7,13 +7,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from adaptation_setup import VEHICLE, G, model_drive, replay_estimator_config, series
+from adaptation_setup import VEHICLE as CLIO
+from adaptation_setup import G, model_drive, replay_estimator_config, series
 from numpy.typing import NDArray
 from vd_observer_node.errors import ConfigurationError
 from vd_observer_node.estimation.drivetrain import TORQUE_ENGINE, TORQUE_MEASURED, TORQUE_NONE
 from vd_observer_node.estimation.estimator import Estimates, Estimator, EstimatorConfig
 from vd_observer_node.estimation.mass_grade import MassGradeConfig
 
+#: rigid, as the model drive's car is (its loads sum to the weight at every stamp)
+VEHICLE = CLIO.with_vertical(None)
 M0 = VEHICLE.mass
 FloatArray = NDArray[np.float64]
 Drive = tuple[FloatArray, FloatArray, FloatArray, FloatArray]

@@ -539,7 +539,11 @@ def _estimate(
     # the moment balance; a load transfer beyond the axle's load lifts the wheel: Fz = 0
     weight_normal = mass * gravity * cos_prev
     if p.loads.on:
-        # through the chassis's heave and pitch on its springs (`axle_loads`)
+        # through the chassis's heave and pitch on its springs (`axle_loads`); a force no wheel
+        # can use (the engine path while the clutch slips) gives its settled transfer, as a
+        # rigid body would, and does not swing the chassis for the next second
+        if not (wheel_ok[0] or wheel_ok[1] or wheel_ok[2] or wheel_ok[3]):
+            s.axle_pos[0] = math.nan
         axle = np.empty(2)
         axle_transfer_step(p.loads, s.axle_pos, s.axle_vel, dt, ground_f, axle)
         front = max(0.5 * (weight_normal * p.cg_to_rear / p.wheelbase + axle[0]), 0.0)
