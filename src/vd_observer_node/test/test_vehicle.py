@@ -10,7 +10,7 @@ import pytest
 import yaml
 from vd_common.vehicle.params import load_vehicle
 from vd_observer_node.errors import VehicleParameterError
-from vd_observer_node.estimation.axle_loads import VerticalModel, vehicle_vertical_model
+from vd_observer_node.estimation.axle_loads import VerticalModel
 from vd_observer_node.estimation.vehicle import (
     EstimatorVehicle,
     load_estimator_vehicle,
@@ -106,7 +106,7 @@ def test_same_numbers_as_the_simulator() -> None:
     read = load_vehicle_params(VEHICLE_FILE)
     # the estimators' own parse reads no suspension: rigid until given the file's model
     assert EstimatorVehicle.from_params(read).vertical is None
-    vertical = vehicle_vertical_model(VEHICLE_FILE)
+    vertical = VerticalModel.from_params(params)
     assert EstimatorVehicle.from_params(read).with_vertical(vertical) == (
         EstimatorVehicle.from_params(params)
     )

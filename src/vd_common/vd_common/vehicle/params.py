@@ -23,6 +23,7 @@ the estimation-only keys (``gearbox.efficiency``, ``gearbox.reverse_ratio``, ``d
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,6 +48,7 @@ __all__ = [
     'check_vehicle_keys',
     'default_vehicle_file',
     'load_vehicle',
+    'load_vehicle_if_full',
     'parse_vehicle',
     'read_aero',
     'read_environment',
@@ -521,6 +523,15 @@ def load_vehicle(path: str | Path) -> VehicleParams:
     except ParameterError as exc:
         # A node or tool prints this line alone: say which file holds the bad key.
         raise ParameterError(f'vehicle file {Path(path)}: {exc}') from exc
+
+
+def load_vehicle_if_full(path: str | os.PathLike[str] | None) -> VehicleParams | None:
+    """The full (simulator) vehicle file at ``path``, or None where it is not one (an
+    estimation-only file, whose own reader says what it lacks); None: the shipped Clio."""
+    try:
+        return load_vehicle(default_vehicle_file() if path is None else Path(path))
+    except ParameterError:
+        return None
 
 
 def default_vehicle_file() -> Path:

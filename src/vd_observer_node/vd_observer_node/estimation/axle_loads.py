@@ -25,15 +25,12 @@ has settled).
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Final
 
 import numpy as np
 from numpy.typing import NDArray
-from vd_common.errors import ParameterError
-from vd_common.vehicle.params import VehicleParams, default_vehicle_file, load_vehicle
+from vd_common.vehicle.params import VehicleParams
 
 from vd_observer_node.kernel._jit import jit, new_record
 
@@ -44,7 +41,6 @@ __all__ = [
     'VerticalModel',
     'axle_transfer_step',
     'load_model_params',
-    'vehicle_vertical_model',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -157,16 +153,6 @@ def load_model_params(model: VerticalModel | None) -> Any:
     p.cv[:] = np.column_stack([model.forces(zero, e)[1] for e in unit])
     p.settle[:] = np.linalg.solve(p.kp, -p.b)
     return p
-
-
-def vehicle_vertical_model(path: str | os.PathLike[str] | None) -> VerticalModel | None:
-    """The `VerticalModel` of a full vehicle file; None for a file without one (an
-    estimation-only file: a rigid body); path None: the shipped Clio."""
-    try:
-        vp = load_vehicle(Path(path) if path is not None else default_vehicle_file())
-    except ParameterError:
-        return None
-    return VerticalModel.from_params(vp)
 
 
 @jit

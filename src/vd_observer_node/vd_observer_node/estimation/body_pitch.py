@@ -15,10 +15,8 @@ from __future__ import annotations
 import math
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
-from vd_common.errors import ParameterError
-from vd_common.vehicle.params import VehicleParams, default_vehicle_file, load_vehicle
+from vd_common.vehicle.params import VehicleParams, load_vehicle_if_full
 
 __all__ = ['BodyPitch', 'body_pitch_of', 'pitch_compliance', 'pitch_mode', 'vehicle_body_pitch']
 
@@ -97,15 +95,13 @@ def pitch_mode(
 def vehicle_body_pitch(path: str | os.PathLike[str] | None) -> BodyPitch:
     """`BodyPitch` of a full vehicle file's suspension and tyres; a rigid body for a file
     that has none (an estimation-only file); None: the shipped Clio."""
-    try:
-        vp = load_vehicle(Path(path) if path is not None else default_vehicle_file())
-    except ParameterError:
+    return body_pitch_of(load_vehicle_if_full(path))
+
+
+def body_pitch_of(vp: VehicleParams | None) -> BodyPitch:
+    """`BodyPitch` of a full vehicle's suspension and tyres (None: a rigid body)."""
+    if vp is None:
         return BodyPitch()
-    return body_pitch_of(vp)
-
-
-def body_pitch_of(vp: VehicleParams) -> BodyPitch:
-    """`BodyPitch` of a full vehicle's suspension and tyres."""
     c, s, tyre = vp.chassis, vp.suspension, vp.wheel.tyre_vertical_stiffness
     front = (_corner_pair(s.stiffness_front, tyre), 2.0 * s.damping_front)
     rear = (_corner_pair(s.stiffness_rear, tyre), 2.0 * s.damping_rear)

@@ -20,13 +20,19 @@ import numpy as np
 from numpy.typing import NDArray
 from vd_common.errors import ParameterError
 from vd_common.vehicle.estimation import EstimationVehicleParams, load_estimation_vehicle
-from vd_common.vehicle.params import TireParams, VehicleParams, default_vehicle_file
+from vd_common.vehicle.params import (
+    TireParams,
+    VehicleParams,
+    default_vehicle_file,
+    load_vehicle_if_full,
+)
 
 from vd_observer_node.errors import VehicleParameterError
-from vd_observer_node.estimation.axle_loads import VerticalModel, vehicle_vertical_model
+from vd_observer_node.estimation.axle_loads import VerticalModel
 
 __all__ = [
     'EstimatorVehicle',
+    'estimator_vehicle',
     'load_estimator_vehicle',
     'load_vehicle_params',
     'mapped_without_vehicle_warning',
@@ -37,13 +43,7 @@ __all__ = [
 # c0 = 0, c1 = 0, Cx = 0, A = 0 or rho = 0 switch a resistance off, as the simulator's
 # parser allows; every other quantity is a divisor or a physical size and must be > 0.
 _ZERO_ALLOWED = frozenset(
-    (
-        'rolling_c0',
-        'rolling_c1',
-        'drag_coefficient',
-        'frontal_area',
-        'air_density',
-    )
+    ('rolling_c0', 'rolling_c1', 'drag_coefficient', 'frontal_area', 'air_density')
 )
 
 
@@ -253,7 +253,7 @@ def mapped_without_vehicle_warning() -> str:
 
 def load_estimator_vehicle(path: str | os.PathLike[str] | None) -> EstimatorVehicle:
     """Read the vehicle parameter file (the simulator's YAML) for the estimators, with the
-    vertical model where the file is a full one (`axle_loads.vehicle_vertical_model`).
+    vertical model where the file is a full one (`estimator_vehicle`).
 
     Args:
         path: YAML file, e.g. vd_common/config/clio_rl_1_1.yaml; None: the shipped Clio.
@@ -265,5 +265,14 @@ def load_estimator_vehicle(path: str | os.PathLike[str] | None) -> EstimatorVehi
         VehicleParameterError: unreadable file, missing key or invalid value (one line that
             names the file and the dotted key).
     """
-    vehicle = EstimatorVehicle.from_params(load_vehicle_params(path))
-    return vehicle.with_vertical(vehicle_vertical_model(path))
+    return estimator_vehicle(load_vehicle_params(path), load_vehicle_if_full(path))
+
+
+def estimator_vehicle(
+    params: EstimationVehicleParams, full: VehicleParams | None
+) -> EstimatorVehicle:
+    """The estimators' vehicle of a file read both ways: its numbers from the estimators' own
+    reading ``params``, the vertical model from the simulator's ``full`` (None, an
+    estimation-only file: a rigid body)."""
+    vertical = None if full is None else VerticalModel.from_params(full)
+    return EstimatorVehicle.from_params(params).with_vertical(vertical)

@@ -13,9 +13,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final, Protocol
 
+from vd_common.vehicle.params import load_vehicle_if_full
+
 from vd_observer_node.errors import ConfigurationError
-from vd_observer_node.estimation.axle_loads import vehicle_vertical_model
-from vd_observer_node.estimation.body_pitch import vehicle_body_pitch
+from vd_observer_node.estimation.body_pitch import body_pitch_of
 from vd_observer_node.estimation.brakes import Brakes
 from vd_observer_node.estimation.cascade import CascadeSettings
 from vd_observer_node.estimation.differentiator import LevantGains
@@ -24,7 +25,7 @@ from vd_observer_node.estimation.estimator import EstimatorConfig
 from vd_observer_node.estimation.imu_settings import imu_grade_config
 from vd_observer_node.estimation.observer import ObserverConfig
 from vd_observer_node.estimation.vehicle import (
-    EstimatorVehicle,
+    estimator_vehicle,
     load_vehicle_params,
     no_tire_note,
 )
@@ -191,12 +192,11 @@ def chain_settings(
             f'unknown cascade setting {extra[0]!r} (settings: {", ".join(_CASCADE_KEYS)})'
         )
     params = load_vehicle_params(vehicle_file)
-    pitch = vehicle_body_pitch(vehicle_file)
+    # the simulator's reading of the same file, once: the chassis's springs, if it has any
+    full = load_vehicle_if_full(vehicle_file)
     source = mapping.torque_source
     return ChainSettings(
-        vehicle=EstimatorVehicle.from_params(params).with_vertical(
-            vehicle_vertical_model(vehicle_file)
-        ),
+        vehicle=estimator_vehicle(params, full),
         observer=ObserverConfig.from_mapping(
             {**given.get('observer', {}), 'wheel_input': mapping.wheel_input}
         ),
@@ -205,7 +205,9 @@ def chain_settings(
         torque_source=source,
         drivetrain=Drivetrain.from_params(params) if source == 'engine' else None,
         imu=(
-            imu_grade_config(pitch, mapping.imu_fusion) if mapping.imu_fusion is not None else None
+            imu_grade_config(body_pitch_of(full), mapping.imu_fusion)
+            if mapping.imu_fusion is not None
+            else None
         ),
         brakes=(
             Brakes.from_params(_brake_in_use(mapping), params, mapping.source)
