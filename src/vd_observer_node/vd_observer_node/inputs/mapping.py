@@ -139,6 +139,7 @@ from vd_observer_node.estimation.alignment import ALIGNMENTS
 from vd_observer_node.estimation.drivetrain import TORQUE_SOURCES
 from vd_observer_node.estimation.imu_settings import VEHICLE_FIELDS, ImuGradeConfig
 from vd_observer_node.inputs.errors import MappingError
+from vd_observer_node.inputs.rotation import forward_axis, lateral_axis
 
 __all__ = [
     'ALIGNMENTS',
@@ -605,26 +606,6 @@ def _fusion(where: str, raw: Any) -> tuple[tuple[str, float], ...]:
         else:
             items.append((str(key), _number(f'{where}.fusion.{key}', value)))
     return tuple(items)
-
-
-def forward_axis(roll: float, pitch: float, yaw: float) -> tuple[float, float, float]:
-    """The first row of the rotation body <- sensor of a sensor frame at (roll, pitch, yaw)
-    [rad] in the body frame (tf's convention, R = Rz(yaw) Ry(pitch) Rx(roll)): the body's
-    forward specific force is this row times the sensor's (x, y, z) vector."""
-    cr, sr = math.cos(roll), math.sin(roll)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    return (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr)
-
-
-def lateral_axis(roll: float, pitch: float, yaw: float) -> tuple[float, float, float]:
-    """The second row of the rotation body <- sensor of `forward_axis`'s mounting: the
-    body's rate about its y axis (pitch, nose down positive) is this row times the sensor's
-    angular velocity (x, y, z)."""
-    cr, sr = math.cos(roll), math.sin(roll)
-    cp, sp = math.cos(pitch), math.sin(pitch)
-    cy, sy = math.cos(yaw), math.sin(yaw)
-    return (sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr)
 
 
 def mapping_from_dict(data: Any, source: str = 'mapping') -> InputMapping:
