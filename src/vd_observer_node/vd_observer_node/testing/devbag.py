@@ -39,6 +39,7 @@ from vd_observer_node.bag.cdr_batch import encode_batch
 from vd_observer_node.bag.writer import BagWriter
 from vd_observer_node.estimation.cascade import CascadeResult
 from vd_observer_node.estimation.estimator import EstimatorConfig
+from vd_observer_node.inputs.rotation import mount_rotation
 from vd_observer_node.tools.replay import estimate_topics
 from vd_observer_node.tools.report.topics import (
     ALERT_TOPICS,
@@ -122,7 +123,11 @@ def write_topic_arrays_bag(
 
 
 def sim_topics(
-    sim: Any, *, truth: bool = True, imu: bool = False
+    sim: Any,
+    *,
+    truth: bool = True,
+    imu: bool = False,
+    imu_mount_rpy_deg: tuple[float, float, float] = (0.0, 0.0, 0.0),
 ) -> dict[str, dict[str, np.ndarray]]:
     """Sensor (and truth) topic values of a simulator run, as the simulator node publishes them.
 
@@ -133,6 +138,9 @@ def sim_topics(
             ``linear_acceleration`` x and z, ``sim.gyro``'s pitch rate in
             ``angular_velocity.y``, the orientation marked unknown as REP 145 says), as the
             simulator node publishes it for a scenario with an IMU.
+        imu_mount_rpy_deg: the IMU's frame in the body (roll, pitch, yaw) [deg]: its
+            vectors are written in that frame, as a sensor mounted so would measure them
+            (the simulator node publishes the body's axes: (0, 0, 0)).
     """
     topics: dict[str, dict[str, np.ndarray]] = {
         SENSORS_WHEEL_ANGLES: {'angle': sim.wheel_angle},
@@ -148,14 +156,26 @@ def sim_topics(
         n = len(sim.imu)
         unknown = np.zeros((n, 9))
         unknown[:, 0] = -1.0
-        topics[SENSORS_IMU] = {
+        force = np.zeros((n, 3))
+        force[:, 0], force[:, 2] = sim.imu[:, 0], sim.imu[:, 1]
+        rate = np.zeros((n, 3))
+        rate[:, 1] = sim.gyro
+        fields: dict[str, np.ndarray] = {
             'orientation.w': np.ones(n),
             'orientation_covariance': unknown,
             'angular_velocity_covariance': np.zeros((n, 9)),
-            'angular_velocity.y': sim.gyro,
-            'linear_acceleration.x': sim.imu[:, 0],
-            'linear_acceleration.z': sim.imu[:, 1],
         }
+        if any(imu_mount_rpy_deg):
+            # the sensor reads R^T v of a body vector v (R body <- sensor)
+            rows = np.array(mount_rotation(*np.radians(imu_mount_rpy_deg)))
+            force, rate = force @ rows, rate @ rows
+            fields['angular_velocity.x'] = rate[:, 0]
+            fields['angular_velocity.z'] = rate[:, 2]
+            fields['linear_acceleration.y'] = force[:, 1]
+        fields['angular_velocity.y'] = rate[:, 1]
+        fields['linear_acceleration.x'] = force[:, 0]
+        fields['linear_acceleration.z'] = force[:, 2]
+        topics[SENSORS_IMU] = fields
     if truth:
         topics.update(
             {

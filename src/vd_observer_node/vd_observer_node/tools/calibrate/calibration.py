@@ -28,6 +28,7 @@ from vd_observer_node.tools.calibrate.converter import (
 from vd_observer_node.tools.calibrate.drive import GRID_HZ, WINDOW_S, CalibrationDrive
 from vd_observer_node.tools.calibrate.errors import NotDeterminedError
 from vd_observer_node.tools.calibrate.force_balance import fit_force_balance
+from vd_observer_node.tools.calibrate.mounting import MountingFit, fit_mounting
 from vd_observer_node.tools.calibrate.radius import (
     FittedValue,
     fit_rolling_radius,
@@ -107,6 +108,9 @@ class Calibration:
         drive_seconds: the drives' total duration [s].
         gear_offset: added to the logged gear to give the gearbox's (fitted, else the
             mapping's).
+        mounting: the IMU's mounting (for the input mapping, not the vehicle file); None
+            without an IMU with three axes, or where the drive does not determine it (then
+            ``not_determined`` has ``imu.mount_rpy_deg``).
     """
 
     fits: dict[str, Fit] = field(default_factory=dict)
@@ -115,6 +119,7 @@ class Calibration:
     residuals: dict[str, tuple[FloatArray, FloatArray, str, str]] = field(default_factory=dict)
     drive_seconds: float = 0.0
     gear_offset: int = 0
+    mounting: MountingFit | None = None
 
     def value(self, key: str, default: float) -> float:
         """A fitted number, or ``default`` where the key was not fitted."""
@@ -164,7 +169,32 @@ def calibrate(drive: CalibrationDrive, base: EstimationVehicleParams) -> Calibra
     _force_balance(drive, base, out)
     _torque_ratio(drive, base, out)
     _brake_gain(drive, base, out)
+    _mounting(drive, out)
     return out
+
+
+#: the mapping's mounting is called wrong where its forward axis is further than this many
+#: of the fit's standard deviations (and 1 deg) from the drive's
+_MOUNTING_SIGMAS = 3.0
+
+
+def _mounting(drive: CalibrationDrive, out: Calibration) -> None:
+    """The IMU's mounting from its three axes against the reference's acceleration."""
+    if drive.imu_force_mps2 is None:
+        return
+    try:
+        fit = fit_mounting(drive.imu_force_mps2, drive.accel_mps2)
+    except NotDeterminedError as error:
+        out.not_determined['imu.mount_rpy_deg'] = str(error)
+        return
+    out.mounting = fit
+    off = fit.forward_angle_deg(drive.imu_forward_axis)
+    bound = max(1.0, _MOUNTING_SIGMAS * math.hypot(fit.std_deg[1], fit.std_deg[2]))
+    if off > bound:
+        out.notes.append(
+            f"the mapping's imu.mount_rpy_deg puts the body's forward axis {off:.1f} deg from "
+            f'where the drive shows it (more than {bound:.1f} deg): use the fitted mounting'
+        )
 
 
 def _axle_means(drive: CalibrationDrive) -> tuple[FloatArray, FloatArray]:

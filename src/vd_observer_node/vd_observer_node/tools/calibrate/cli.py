@@ -56,6 +56,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from vd_observer_node.tools.calibrate.calibration import calibrate
     from vd_observer_node.tools.calibrate.drive import concatenated, read_drive
     from vd_observer_node.tools.calibrate.errors import CalibrationError
+    from vd_observer_node.tools.calibrate.report import mounting_line
     from vd_observer_node.tools.calibrate.vehicle_file import (
         vehicle_file_text,
         write_vehicle_file,
@@ -79,7 +80,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     radius = base.wheel.effective_radius
     drives = [read_drive(bag, mapping, radius, level_road=args.level_road) for bag in args.bags]
     calibration = calibrate(concatenated(drives), base)
-    if not calibration.fits:
+    if not calibration.fits and calibration.mounting is None:
         reasons = '; '.join(f'{k}: {v}' for k, v in calibration.not_determined.items())
         raise CalibrationError(f'the drive determines nothing ({reasons})')
     sources = ', '.join(Path(b).name for b in args.bags)
@@ -98,6 +99,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
         spread = f' ± {fit.std:.3g}' if isinstance(fit.std, float) else ''
         value = f'{fit.value:.6g}' if isinstance(fit.value, float) else str(fit.value)
         print(f'  fitted {fit.key}: {value}{spread} ({fit.samples} samples)')
+    if calibration.mounting is not None:
+        print(f'  fitted {mounting_line(calibration.mounting)} (for the input mapping)')
     for key, reason in calibration.not_determined.items():
         print(f'  not determined {key}: {reason}')
     for note in calibration.notes:

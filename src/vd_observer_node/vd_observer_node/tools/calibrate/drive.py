@@ -10,8 +10,9 @@ speed-squared and grade terms), so a common boxcar keeps it exact while it avera
 encoder quantisation (96 counts/rev: 0.13 rad/s over 0.5 s) and the speed noise out.
 
 What the bag has decides what is read: the wheels and the speed reference always; the
-measured wheel torques, the engine input (torque, gear, engine and turbine speed) and the
-brake where the mapping names them and the bag has their topic.
+measured wheel torques, the engine input (torque, gear, engine and turbine speed), the
+brake and the IMU's three axes (its mounting) where the mapping names them and the bag has
+their topic.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.typestore import deserialize
 from vd_observer_node.inputs.decode import decode_brake, decode_engine, decode_input
+from vd_observer_node.inputs.imu_vectors import decode_imu_vectors, has_three_axes
 from vd_observer_node.inputs.mapping import (
     GRADE_INPUT,
     NAVSATFIX,
@@ -99,6 +101,11 @@ class CalibrationDrive:
         has_brake_input: the mapping has a brake input and the bag its topic.
         engine_path: the mapping's torque source is the engine (no measured torques).
         grade_source: where the grade comes from, for the file's comments.
+        imu_force_mps2: shape (N, 3), [m/s^2], the IMU's specific force in its own frame (no
+            mounting applied); None where the mapping has no IMU with three axes or the bag
+            not its topic.
+        imu_forward_axis: the mapping's IMU mounting's first row (the body's forward axis in
+            the sensor's frame; () without an IMU).
     """
 
     source: str
@@ -121,6 +128,8 @@ class CalibrationDrive:
     has_brake_input: bool
     engine_path: bool
     grade_source: str = 'the reference'
+    imu_force_mps2: FloatArray | None = None
+    imu_forward_axis: tuple[float, ...] = ()
 
     @property
     def duration_s(self) -> float:
@@ -308,7 +317,10 @@ def read_drive(
     brake_spec = (
         mapping.brake if mapping.brake is not None and mapping.brake.topic in topics else None
     )
-    wanted = [mapping.wheels, speed_spec, grade_spec, engine_spec, brake_spec]
+    imu_spec = mapping.imu
+    if imu_spec is not None and (imu_spec.topic not in topics or not has_three_axes(imu_spec)):
+        imu_spec = None
+    wanted = [mapping.wheels, speed_spec, grade_spec, engine_spec, brake_spec, imu_spec]
     if measured:
         wanted.append(mapping.wheel_torques)
     arrays = reader.topic_arrays({s.topic for s in wanted if s is not None})
@@ -354,6 +366,12 @@ def read_drive(
         if brake_spec.signal == 'pressure':
             brake_bar = w.mean(brake_t, brake_v)
     engine = _engine(engine_spec, arrays, w, t0) if engine_spec is not None else None
+    imu_force = None
+    if imu_spec is not None:
+        vectors = decode_imu_vectors(imu_spec, arrays[imu_spec.topic])
+        imu_t, imu_v = _sorted(vectors.stamp_ns, vectors.values[:, :3], t0)
+        imu_force = w.mean(imu_t, imu_v)
+        imu_force[(w.lo < imu_t[0]) | (w.hi > imu_t[-1])] = np.nan  # beyond the IMU's span
     return CalibrationDrive(
         source=str(bag),
         t=t,
@@ -377,6 +395,8 @@ def read_drive(
         has_brake_input=brake_spec is not None,
         engine_path=mapping.torque_source == 'engine',
         grade_source='level road (--level-road)' if level_road else 'the reference',
+        imu_force_mps2=imu_force,
+        imu_forward_axis=() if imu_spec is None else imu_spec.axis,
     )
 
 
@@ -449,4 +469,6 @@ def concatenated(drives: Sequence[CalibrationDrive]) -> CalibrationDrive:
         has_brake_input=all(d.has_brake_input for d in drives),
         engine_path=first.engine_path,
         grade_source=first.grade_source,
+        imu_force_mps2=cat('imu_force_mps2'),  # type: ignore[arg-type]
+        imu_forward_axis=first.imu_forward_axis,
     )

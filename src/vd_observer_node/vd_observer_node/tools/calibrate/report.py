@@ -1,9 +1,9 @@
 """The calibration's report: the fitted values as JSON and Markdown, each fit's residuals as PNG.
 
 ``calibration.json`` (machine-readable: key, value, std, samples, how; the keys not
-determined with their reason; the notes), ``calibration.md`` (the same as tables) and one
-``residuals_<fit>.png`` per fit with residuals (rolling radius, final drive per gear, force
-balance, driven axle).
+determined with their reason; the notes; the IMU's mounting), ``calibration.md`` (the same
+as tables) and one ``residuals_<fit>.png`` per fit with residuals (rolling radius, final
+drive per gear, force balance, driven axle).
 """
 
 from __future__ import annotations
@@ -15,11 +15,13 @@ from typing import Any
 
 from vd_observer_node.tools.calibrate.calibration import Calibration
 from vd_observer_node.tools.calibrate.errors import CalibrationError
+from vd_observer_node.tools.calibrate.mounting import MountingFit
 
-__all__ = ['write_report']
+__all__ = ['mounting_line', 'write_report']
 
 
 def _json(calibration: Calibration, sources: str) -> dict[str, Any]:
+    m = calibration.mounting
     return {
         'sources': sources,
         'drive_seconds': calibration.drive_seconds,
@@ -35,7 +37,23 @@ def _json(calibration: Calibration, sources: str) -> dict[str, Any]:
         ],
         'not_determined': dict(calibration.not_determined),
         'notes': list(calibration.notes),
+        'imu_mounting': None
+        if m is None
+        else {
+            'mount_rpy_deg': list(m.rpy_deg),
+            'std_deg': list(m.std_deg),
+            'gain': m.gain,
+            'samples': m.samples,
+        },
     }
+
+
+def mounting_line(fit: MountingFit) -> str:
+    """The fitted mounting as the mapping's key, e.g. ``imu.mount_rpy_deg: [180.0, 0.8,
+    -1.0] ± [0.3, 0.2, 0.4] deg (1200 samples)``."""
+    values = ', '.join(f'{v:.1f}' for v in fit.rpy_deg)
+    spread = ', '.join(f'{v:.1f}' for v in fit.std_deg)
+    return f'imu.mount_rpy_deg: [{values}] ± [{spread}] deg ({fit.samples} samples)'
 
 
 def _markdown(calibration: Calibration, sources: str, figures: list[str]) -> str:
@@ -51,6 +69,9 @@ def _markdown(calibration: Calibration, sources: str, figures: list[str]) -> str
         value = f'{f.value:.6g}' if isinstance(f.value, float) else str(f.value)
         std = f'{f.std:.3g}' if isinstance(f.std, float) else ('-' if f.std is None else 'table')
         lines.append(f'| `{f.key}` | {value} | {std} | {f.samples} | {f.how} |')
+    if calibration.mounting is not None:
+        lines += ['', '## IMU mounting (for the input mapping)', '']
+        lines += [f'`{mounting_line(calibration.mounting)}`']
     if calibration.not_determined:
         lines += ['', '## Not determined', '']
         lines += [f'- `{k}`: {v}' for k, v in calibration.not_determined.items()]
