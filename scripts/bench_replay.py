@@ -15,7 +15,8 @@
    process start to its end, Python start-up, imports and loading the cached kernels
    included, on a 1 s bag (the start-up alone) and on bags of ``--command-durations``
    seconds, ``--command-runs`` each, with the load average at the start (figures taken at a
-   load above ~1.5 on 2 cores are not figures).
+   load above ~1.5 on 2 cores are not figures), beside rosbags' and mcap's raw read of the
+   same bag run by run (issue 39's ratio).
 """
 
 from __future__ import annotations
@@ -188,14 +189,34 @@ def _children_cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
+def _peer_reads(bag: Path) -> tuple[float, float]:
+    """Seconds rosbags' Reader and mcap's reader take to iterate the bag's raw messages (no
+    decoding: the least any tool reading the bag does), in this process."""
+    from mcap.reader import make_reader
+    from rosbags.rosbag2 import Reader
+
+    start = time.perf_counter()
+    with Reader(bag) as reader:
+        for _ in reader.messages():
+            pass
+    rosbags = time.perf_counter() - start
+    start = time.perf_counter()
+    for path in sorted(bag.glob('*.mcap')):
+        with path.open('rb') as f:
+            for _ in make_reader(f).iter_messages():
+                pass
+    return rosbags, time.perf_counter() - start
+
+
 def bench_command(folder: Path, durations: list[float], rate: float, runs: int) -> None:
-    """`vd replay` as a process, start to end, on bags of each duration [s]."""
+    """`vd replay` as a process, start to end, on bags of each duration [s], beside the peers'
+    raw reads of the same bag (issue 39: vd replay's wall clock <= rosbags' raw read)."""
     print(f'== the vd replay command, wall clock start to end, {rate:.0f} Hz, {runs} runs each')
     command = [sys.executable, '-m', 'vd_observer_node.tools.cli', 'replay', '--no-progress']
     for seconds in [1.0, *durations]:
         bag = folder / f'command_{seconds:g}'
         write_synthetic_drive_bag(bag, seconds, rate)
-        walls, cpus = [], []
+        walls, cpus, peers = [], [], []
         load = os.getloadavg()[0]
         for k in range(runs):
             out = folder / f'command_out_{seconds:g}_{k}'
@@ -204,11 +225,19 @@ def bench_command(folder: Path, durations: list[float], rate: float, runs: int) 
             subprocess.run([*command, str(bag), str(out)], check=True, capture_output=True)
             walls.append(time.perf_counter() - start)
             cpus.append(_children_cpu() - cpu_start)
+            peers.append(_peer_reads(bag))
         label = 'start-up (1 s bag)' if seconds == 1.0 else f'{seconds:.0f} s bag'
         print(
             f'  {label}: wall {min(walls):.2f}-{max(walls):.2f} s '
             f'({seconds / max(walls):.0f}-{seconds / min(walls):.0f}x real time), CPU '
             f'{min(cpus):.2f}-{max(cpus):.2f} s, load average {load:.2f} at the start'
+        )
+        ratios = [w / p[0] for w, p in zip(walls, peers, strict=True)]
+        print(
+            f'    raw read of the same bag: rosbags {min(p[0] for p in peers):.2f}-'
+            f'{max(p[0] for p in peers):.2f} s, mcap {min(p[1] for p in peers):.2f}-'
+            f'{max(p[1] for p in peers):.2f} s; vd replay / rosbags (run by run) '
+            f'{min(ratios):.2f}-{max(ratios):.2f}x (goal <= 1.0x)'
         )
 
 
@@ -220,7 +249,7 @@ def main() -> int:
         '--command-durations',
         type=float,
         nargs='*',
-        default=[150.0, 600.0],
+        default=[120.0, 600.0],
         help='bag lengths [s] for the vd replay command (none: skip section 4)',
     )
     parser.add_argument('--command-runs', type=int, default=3, help='runs per bag')

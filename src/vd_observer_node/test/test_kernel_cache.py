@@ -73,3 +73,35 @@ def test_vd_jit_0_runs_the_same_source_uncompiled() -> None:
         [sys.executable, '-c', code], env=env, capture_output=True, text=True, check=True
     )
     assert out.stdout.split() == ['False', 'function', '2']
+
+
+def test_numba_finds_blas_without_scipy_linalg_and_scipy_linalg_still_works() -> None:
+    """`_jit` loads scipy's BLAS module alone before numba looks for it (start-up of a short
+    replay): a kernel loads without importing scipy.linalg, numba still says BLAS is there and
+    np.dot compiles, and scipy.linalg imported afterwards is whole."""
+    code = '\n'.join(
+        [
+            'import sys',
+            'import numpy as np',
+            'import vd_observer_node.kernel._jit',
+            'import numba',
+            'from numba.np import arraymath',
+            "assert 'scipy.linalg' not in sys.modules, 'scipy.linalg imported'",
+            'assert arraymath._HAVE_BLAS',
+            '@numba.njit',
+            'def dot(a, b):',
+            '    return np.dot(a, b)',
+            'assert dot(np.eye(2), np.ones(2)).tolist() == [1.0, 1.0]',
+            'import scipy.linalg',
+            'from scipy.linalg import cython_blas',
+            "assert cython_blas is sys.modules['scipy.linalg.cython_blas']",
+            'assert scipy.linalg.solve(2.0 * np.eye(2), np.ones(2)).tolist() == [0.5, 0.5]',
+            "print('ok')",
+        ]
+    )
+    env = {**os.environ, 'VD_JIT': '1'}
+    done = subprocess.run(
+        [sys.executable, '-c', code], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == 'ok'

@@ -13,13 +13,53 @@ functions, their callees, the constants they read), and the numba, numpy and Pyt
 from __future__ import annotations
 
 import hashlib
+import importlib.machinery
+import importlib.util
 import os
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar, cast
 
-import numba
-import numpy as np
+
+def _load_blas_module_alone() -> None:
+    """Load ``scipy.linalg.cython_blas`` without the ``scipy.linalg`` package around it.
+
+    numba's ``numba.np.arraymath``, imported when the first kernel loads, imports that
+    extension module only to learn that a BLAS is there. Imported the usual way it first runs
+    ``scipy.linalg``'s package (0.1-0.15 s, a tenth of a short `vd replay`'s start; our
+    kernels call no BLAS, nor does the replay need scipy.linalg). Loaded alone (3 ms) and
+    registered under its name, numba finds it there and says BLAS is available (np.dot in a
+    kernel works, tested); ``import scipy.linalg`` stays what it is. Anything unexpected (no
+    scipy, another layout) leaves the import to numba.
+    """
+    name = 'scipy.linalg.cython_blas'
+    if name in sys.modules or 'scipy.linalg' in sys.modules:
+        return
+    try:
+        scipy = importlib.util.find_spec('scipy')
+        if scipy is None or not scipy.submodule_search_locations:
+            return
+        folder = Path(next(iter(scipy.submodule_search_locations))) / 'linalg'
+        for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+            path = folder / f'cython_blas{suffix}'
+            if path.is_file():
+                loader = importlib.machinery.ExtensionFileLoader(name, str(path))
+                spec = importlib.util.spec_from_file_location(name, path, loader=loader)
+                if spec is None:
+                    return
+                module = importlib.util.module_from_spec(spec)
+                loader.exec_module(module)
+                sys.modules[name] = module
+                return
+    except Exception:  # numba then imports it its own way
+        sys.modules.pop(name, None)
+
+
+_load_blas_module_alone()
+
+import numba  # noqa: E402 - after the BLAS module above
+import numpy as np  # noqa: E402
 
 __all__ = [
     'JIT_ENABLED',
