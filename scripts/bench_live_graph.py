@@ -412,6 +412,11 @@ def _print_runs(title: str, runs: Sequence[RunResult]) -> None:
             bag_lost = [r.published - r.in_bag.get(topic, 0) for r in good]
             line += f'   bag: {spread(bag_lost, ".0f")}'
         print(line)
+    shares = ', '.join(
+        f'{100.0 * (1.0 - r.lost().get(ESTIMATES_SLOPE, r.published) / max(r.published, 1)):.1f}'
+        for r in good
+    )
+    print(f'  slope estimates delivered per run: {shares} % (issue 39: >= 99 % in every run)')
     if good[0].recorder:
         others = sorted({t for r in good for t in r.in_bag} - set(WATCHED))
         for topic in others:
