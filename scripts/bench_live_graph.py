@@ -89,7 +89,12 @@ LAYOUTS = {
         ('alerts_node', 'alerts', 'alerts ready'),
     ),
     'pipeline': (('pipeline_node', 'pipeline', 'pipeline ready'),),
+    # the same, pinned: pipeline_node alone on the last CPU, the simulator and the probe on
+    # the others (as `ros2 run --prefix 'taskset -c 1' ...` does; docs/performance.md)
+    'pipeline-pinned': (('pipeline_node', 'pipeline', 'pipeline ready'),),
 }
+#: layouts whose estimation processes get a CPU of their own
+PINNED = {'pipeline-pinned'}
 WATCHED = SENSOR_TOPICS + DERIVED_TOPICS
 _FINISHED = re.compile(r'scenario finished: (\d+) samples, ([0-9.]+) s simulated in ([0-9.]+) s')
 _TICK = os.sysconf('SC_CLK_TCK')
@@ -202,6 +207,13 @@ class _Probe:
                 os.killpg(self.popen.pid, signal.SIGKILL)
                 self.popen.wait(5.0)
         self._log.close()
+
+
+def _pin(pid: int, cpus: set[int]) -> None:
+    """Pin every thread of process ``pid`` to ``cpus`` (threads it starts later inherit)."""
+    for task in Path(f'/proc/{pid}/task').glob('*'):
+        with contextlib.suppress(OSError):
+            os.sched_setaffinity(int(task.name), cpus)
 
 
 def _domain_id(salt: int) -> str:
@@ -327,9 +339,16 @@ def run_graph(
             )
             others = {n.spec.name: n.popen.pid for n in graph.nodes if n is not sim}
             others['probe'] = probe.popen.pid
+            cpus = sorted(os.sched_getaffinity(0))
+            if layout in PINNED:
+                _pin(sim.popen.pid, set(cpus[:-1]))
             if not _wait_for(sim.log_path, 'progress t=0.0', [sim.popen], 60.0):
                 result.error = f'sim did not start: {sim.log_tail(800)}'
                 return result
+            if layout in PINNED:  # before the first sample (the sim's start_delay)
+                for name, pid in [*others.items(), ('sim', sim.popen.pid)]:
+                    mine = name in {n for _, n, _ in LAYOUTS[layout]}
+                    _pin(pid, {cpus[-1]} if mine else set(cpus[:-1]))
             t0 = time.monotonic()
             start = {name: proc_stats(pid) for name, pid in others.items()}
             sim_start = proc_stats(sim.popen.pid)
