@@ -490,7 +490,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument('--keep', type=Path, default=None, help='keep logs/bags in this folder')
     parser.add_argument(
-        '--layouts', nargs='*', default=['nodes', 'pipeline'], choices=sorted(LAYOUTS)
+        '--layouts',
+        nargs='*',
+        default=['nodes', 'pipeline', 'pipeline-pinned'],
+        choices=sorted(LAYOUTS),
     )
     args = parser.parse_args(argv)
     if args.quick:
