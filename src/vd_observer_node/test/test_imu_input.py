@@ -282,3 +282,26 @@ def test_report_summary_lists_the_fused_imu(imu_bag: Path) -> None:
     assert series.inputs[-1].messages == 299
     plain = load_bag_series(imu_bag, progress=False, mapping=mapping_from_dict(STANDARD_MAPPING))
     assert 'imu' not in [s.name for s in plain.inputs]
+
+
+def test_vd_replay_says_when_the_mapping_states_no_mounting(
+    imu_bag: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A mapping without ``imu.mount_rpy_deg`` takes the sensor as aligned with the body; the
+    replay says so and names vd calibrate, which learns it (an upside-down windscreen device
+    read that way is 3 deg off on the RAV4); a stated mounting, even [0, 0, 0], is not
+    questioned."""
+    import yaml
+    from vd_observer_node.tools.cli import main
+
+    hint = 'the mapping states no imu.mount_rpy_deg'
+    for k, imu in enumerate(
+        [IMU_MAPPING['imu'], {**IMU_MAPPING['imu'], 'mount_rpy_deg': [0, 0, 0]}]
+    ):
+        path = tmp_path / f'mapping{k}.yaml'
+        path.write_text(yaml.safe_dump({**IMU_MAPPING, 'imu': imu}))
+        args = ['replay', '--no-progress', '--mapping', str(path), str(imu_bag)]
+        assert main([*args, str(tmp_path / f'out{k}')]) == 0
+        printed = capsys.readouterr().out
+        assert 'imu: angular rate used on' in printed
+        assert (hint in printed) == (k == 0), printed

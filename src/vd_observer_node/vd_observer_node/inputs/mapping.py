@@ -283,6 +283,8 @@ class InputSpec:
             sensor's frame (the second row of the mounting rotation): the body's pitch rate
             (nose down positive) is pitch_axis . (w_sx, w_sy, w_sz) of an Imu's
             ``angular_velocity``; () where the type carries no angular rate.
+        mount_stated: ``imu`` only: the mapping states ``mount_rpy_deg`` (else the sensor is
+            taken as aligned with the body, and `vd replay` says so).
         gear_offset: ``engine_torque`` only: added to the logged gear.
         signal: ``brake`` only: 'pressure' or 'switch'.
         fusion: ``imu`` only: settings of the IMU fusion for this sensor (field of
@@ -301,6 +303,7 @@ class InputSpec:
     speed_factor: float = 1.0
     axis: tuple[float, ...] = ()
     pitch_axis: tuple[float, ...] = ()
+    mount_stated: bool = False
     gear_offset: int = 0
     signal: str = ''
     fusion: tuple[tuple[str, float], ...] = ()
@@ -585,6 +588,7 @@ def _spec(name: str, data: Any, where: str) -> InputSpec:
         speed_factor=speed_factor,
         axis=axis,
         pitch_axis=pitch_axis,
+        mount_stated='mount_rpy_deg' in data,
         gear_offset=gear_offset,
         signal=signal,
         fusion=fusion,

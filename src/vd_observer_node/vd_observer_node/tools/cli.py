@@ -126,6 +126,12 @@ def _replay(args: argparse.Namespace) -> int:
     print(f'torque path: {path}')
     if report.imu:
         print(f'imu: {report.imu}')
+        if mapping.imu is not None and mapping.imu.axis and not mapping.imu.mount_stated:
+            print(
+                '  the mapping states no imu.mount_rpy_deg: the sensor is taken as aligned '
+                'with the body (vd calibrate learns the mounting from this bag; '
+                'docs/calibrate.md)'
+            )
     print(f'vehicle: {report.vehicle}')
     # the IMU fusion's are named as the mapping names them (imu.fusion.*)
     derived = {
