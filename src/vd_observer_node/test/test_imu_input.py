@@ -294,7 +294,7 @@ def test_vd_replay_says_when_the_mapping_states_no_mounting(
     import yaml
     from vd_observer_node.tools.cli import main
 
-    hint = 'the mapping states no imu.mount_rpy_deg'
+    hint = 'the mapping states no imu.mount_rpy_deg: the sensor is taken as aligned'
     for k, imu in enumerate(
         [IMU_MAPPING['imu'], {**IMU_MAPPING['imu'], 'mount_rpy_deg': [0, 0, 0]}]
     ):

@@ -168,6 +168,7 @@ __all__ = [
     'load_input_mapping',
     'mapping_from_dict',
     'mapping_from_params',
+    'unstated_mounting_note',
 ]
 
 #: The cascade's inputs, in the order of a mapping file (wheel angles OR wheel speeds).
@@ -765,6 +766,17 @@ def mapping_from_params(
             raise MappingError(f'{source}: {name}: expected {prefix}<input>.<key>')
         data.setdefault(parts[0], {})[parts[1]] = value
     return mapping_from_dict(data, source=source)
+
+
+def unstated_mounting_note(mapping: InputMapping) -> str:
+    """What to say of an IMU with three axes whose mounting the mapping does not state ('' for
+    any other mapping): it is taken as aligned with the body (`vd replay`, `pipeline_node`)."""
+    if mapping.imu is None or not mapping.imu.axis or mapping.imu.mount_stated:
+        return ''
+    return (
+        'the mapping states no imu.mount_rpy_deg: the sensor is taken as aligned with the '
+        'body (vd calibrate learns the mounting from a recorded drive; docs/calibrate.md)'
+    )
 
 
 def load_input_mapping(path: str | os.PathLike[str]) -> InputMapping:

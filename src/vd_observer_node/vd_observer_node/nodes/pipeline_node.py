@@ -83,7 +83,12 @@ from vd_observer_node.estimation.rate_settings import RateMeter, follow_rate_hz
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.imu_hold import ImuHold
-from vd_observer_node.inputs.mapping import BRAKE_INPUT, ENGINE_INPUT, InputSpec
+from vd_observer_node.inputs.mapping import (
+    BRAKE_INPUT,
+    ENGINE_INPUT,
+    InputSpec,
+    unstated_mounting_note,
+)
 from vd_observer_node.nodes.node_params import (
     INPUT_PARAMS,
     PIPELINE_PARAMS,
@@ -261,6 +266,8 @@ class PipelineNode(Node):
             f'({vehicle_file}), torque source {self.torque_source}'
             + (f', inputs from {mapping.source}' if mapping.source else '')
         )
+        if unstated_mounting_note(mapping):
+            self.get_logger().warning(unstated_mounting_note(mapping))
         if self._situation_off is not None:
             # a configuration, not a fault: said once here, and as a value on /diagnostics
             self.get_logger().info(

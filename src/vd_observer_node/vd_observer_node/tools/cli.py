@@ -84,7 +84,11 @@ def _repair(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     from vd_common.settings_log import settings_line
 
-    from vd_observer_node.inputs.mapping import default_mapping, load_input_mapping
+    from vd_observer_node.inputs.mapping import (
+        default_mapping,
+        load_input_mapping,
+        unstated_mounting_note,
+    )
     from vd_observer_node.tools.replay import replay_bag
     from vd_observer_node.tools.settings_file import SettingsFile, load_settings_file
 
@@ -126,12 +130,8 @@ def _replay(args: argparse.Namespace) -> int:
     print(f'torque path: {path}')
     if report.imu:
         print(f'imu: {report.imu}')
-        if mapping.imu is not None and mapping.imu.axis and not mapping.imu.mount_stated:
-            print(
-                '  the mapping states no imu.mount_rpy_deg: the sensor is taken as aligned '
-                'with the body (vd calibrate learns the mounting from this bag; '
-                'docs/calibrate.md)'
-            )
+        if unstated_mounting_note(mapping):
+            print(f'  {unstated_mounting_note(mapping)}')
     print(f'vehicle: {report.vehicle}')
     # the IMU fusion's are named as the mapping names them (imu.fusion.*)
     derived = {
