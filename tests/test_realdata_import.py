@@ -308,7 +308,7 @@ def test_vd_calibrate_finds_the_hand_measured_final_drive_on_the_real_drive(
 
 
 def test_vd_calibrate_learns_the_windscreen_imu_s_mounting(
-    imported: tuple[ModuleType, Path, Path], tmp_path: Path
+    imported: tuple[ModuleType, Path, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """The device's mounting from its three axes against the pose's acceleration (issue 36
     item 1): upside down (roll 180 deg) and straight (yaw 0), as the hand-made mapping says;
@@ -334,6 +334,8 @@ def test_vd_calibrate_learns_the_windscreen_imu_s_mounting(
     report = tmp_path / 'report'
     args = ['calibrate', str(bag), '--out', str(tmp_path / 'rav4.yaml'), '--mapping', str(path)]
     assert main([*args, '--vehicle', str(hand), '--report', str(report)]) == 0
+    # the mapping without a mounting reads the device upright: its pitch rate upside down
+    assert "puts the body's lateral axis 17" in capsys.readouterr().out  # 178.6 deg
     found = json.loads((report / 'calibration.json').read_text())['imu_mounting']
     roll, pitch, yaw = found['mount_rpy_deg']
     assert abs(abs(roll) - 180.0) < 1.5 and found['std_deg'][0] < 0.5

@@ -291,3 +291,4 @@ def test_the_imu_mounting_is_learnt_from_the_drive(
     assert found['std_deg'][1] < 0.5  # 0.25 measured
     assert 'fitted imu.mount_rpy_deg: [' in printed
     assert "the mapping's imu.mount_rpy_deg puts the body's forward axis" in printed
+    assert "the mapping's imu.mount_rpy_deg puts the body's lateral axis 175.0 deg" in printed

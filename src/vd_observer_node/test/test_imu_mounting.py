@@ -76,7 +76,8 @@ def test_a_known_mounting_is_found(rpy_deg: tuple[float, float, float]) -> None:
     # of its std; roll 0.03-0.1 deg, pitch 0.16-0.21, yaw 0.22-0.34)
     assert np.all(np.abs(error) <= 3.0 * np.array(fit.std_deg))
     assert max(fit.std_deg) < 0.4
-    assert fit.forward_angle_deg(forward_axis(*np.radians(rpy_deg))) < 0.5
+    assert fit.axis_angle_deg(0, forward_axis(*np.radians(rpy_deg))) < 0.5
+    assert fit.axis_angle_deg(1, lateral_axis(*np.radians(rpy_deg))) < 0.5
     assert fit.gain == pytest.approx(0.99, abs=0.02)  # the hills' coasting and the squat
     assert 1300 < fit.samples < 1500  # 6 s of every 10 straight: the bends are left out
 

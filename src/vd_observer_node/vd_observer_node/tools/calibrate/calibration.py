@@ -188,13 +188,18 @@ def _mounting(drive: CalibrationDrive, out: Calibration) -> None:
         out.not_determined['imu.mount_rpy_deg'] = str(error)
         return
     out.mounting = fit
-    off = fit.forward_angle_deg(drive.imu_forward_axis)
-    bound = max(1.0, _MOUNTING_SIGMAS * math.hypot(fit.std_deg[1], fit.std_deg[2]))
-    if off > bound:
-        out.notes.append(
-            f"the mapping's imu.mount_rpy_deg puts the body's forward axis {off:.1f} deg from "
-            f'where the drive shows it (more than {bound:.1f} deg): use the fitted mounting'
-        )
+    # the forward axis rests on the pitch and the yaw, the lateral one on the roll and the yaw
+    spreads = (math.hypot(fit.std_deg[1], fit.std_deg[2]), math.hypot(*fit.std_deg[::2]))
+    for row, axis in enumerate(drive.imu_mapped_axes):
+        name = ('forward', 'lateral')[row]
+        off = fit.axis_angle_deg(row, axis)
+        bound = max(1.0, _MOUNTING_SIGMAS * spreads[row])
+        if off > bound:
+            out.notes.append(
+                f"the mapping's imu.mount_rpy_deg puts the body's {name} axis {off:.1f} deg "
+                f'from where the drive shows it (more than {bound:.1f} deg): use the fitted '
+                'mounting'
+            )
 
 
 def _axle_means(drive: CalibrationDrive) -> tuple[FloatArray, FloatArray]:

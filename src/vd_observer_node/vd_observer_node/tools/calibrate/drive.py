@@ -104,8 +104,9 @@ class CalibrationDrive:
         imu_force_mps2: shape (N, 3), [m/s^2], the IMU's specific force in its own frame (no
             mounting applied); None where the mapping has no IMU with three axes or the bag
             not its topic.
-        imu_forward_axis: the mapping's IMU mounting's first row (the body's forward axis in
-            the sensor's frame; () without an IMU).
+        imu_mapped_axes: the rows of the mapping's IMU mounting it uses (the body's forward
+            axis in the sensor's frame, and for an Imu the lateral one its pitch rate is read
+            about; () without an IMU).
     """
 
     source: str
@@ -129,7 +130,7 @@ class CalibrationDrive:
     engine_path: bool
     grade_source: str = 'the reference'
     imu_force_mps2: FloatArray | None = None
-    imu_forward_axis: tuple[float, ...] = ()
+    imu_mapped_axes: tuple[tuple[float, ...], ...] = ()
 
     @property
     def duration_s(self) -> float:
@@ -396,7 +397,9 @@ def read_drive(
         engine_path=mapping.torque_source == 'engine',
         grade_source='level road (--level-road)' if level_road else 'the reference',
         imu_force_mps2=imu_force,
-        imu_forward_axis=() if imu_spec is None else imu_spec.axis,
+        imu_mapped_axes=()
+        if imu_spec is None
+        else tuple(a for a in (imu_spec.axis, imu_spec.pitch_axis) if a),
     )
 
 
@@ -470,5 +473,5 @@ def concatenated(drives: Sequence[CalibrationDrive]) -> CalibrationDrive:
         engine_path=first.engine_path,
         grade_source=first.grade_source,
         imu_force_mps2=cat('imu_force_mps2'),  # type: ignore[arg-type]
-        imu_forward_axis=first.imu_forward_axis,
+        imu_mapped_axes=first.imu_mapped_axes,
     )

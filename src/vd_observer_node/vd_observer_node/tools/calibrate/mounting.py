@@ -93,12 +93,13 @@ class MountingFit:
     gain: float
     samples: int
 
-    def forward_angle_deg(self, axis: tuple[float, ...]) -> float:
-        """The angle [deg] between this forward axis and ``axis`` (another mounting's first
-        row, e.g. the mapping's): what a wrong mounting turns into the forward specific
-        force."""
+    def axis_angle_deg(self, row: int, axis: tuple[float, ...]) -> float:
+        """The angle [deg] between the body axis ``row`` (0 forward, 1 lateral) as this fit
+        finds it and as ``axis`` gives it (the same row of another mounting, e.g. the
+        mapping's): what a wrong mounting turns into the forward specific force (row 0) or
+        the pitch rate (row 1)."""
         u = np.asarray(axis, dtype=np.float64)
-        cosine = float(np.dot(self.rows[0], u) / np.linalg.norm(u))
+        cosine = float(np.dot(self.rows[row], u) / np.linalg.norm(u))
         return math.degrees(math.acos(max(-1.0, min(1.0, cosine))))
 
 
