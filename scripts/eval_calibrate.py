@@ -10,6 +10,12 @@ used seeds 300-301); the bag (vd's own topics with the truth) goes through the c
 path (`run_calibrate`) with the Clio file as base, and the fitted values are compared with the
 true car's. A value the drive does not determine is printed as 'n.d.' (and counted as a miss).
 
+Each drive's IMU (the simulator's, on the sprung body) is written as a sensor mounted in a
+random orientation (any roll and yaw, pitch within +-60 deg, seeded) would read it, and the
+mapping names it without its mounting: the table's last columns are how far the forward and
+the lateral axis of the mounting `vd calibrate` learns are from the true one (the drive's own
+IMU pitch composed with the written rotation), in degrees.
+
 Then the speed goal: a 10 min drive at 100 Hz, wall time of the whole command (read, fit,
 write) against the 10 s goal, with the load average.
 
@@ -23,6 +29,7 @@ import argparse
 import contextlib
 import dataclasses
 import io
+import json
 import os
 import sys
 import tempfile
@@ -37,8 +44,10 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_observer_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_sim_node'))
 sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 
+from vd_common.topics import SENSORS_IMU  # noqa: E402
 from vd_common.vehicle.estimation import load_estimation_vehicle  # noqa: E402
 from vd_common.vehicle.params import VehicleParams, default_vehicle_file, load_vehicle  # noqa: E402
+from vd_observer_node.inputs.rotation import mount_rotation  # noqa: E402
 from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag  # noqa: E402
 from vd_observer_node.tools.calibrate.cli import run_calibrate  # noqa: E402
 from vd_sim_node.vehicle.everyday import EverydaySettings, everyday_scenario  # noqa: E402
@@ -103,22 +112,37 @@ def drive_bag(
     seed: int,
     settings: EverydaySettings,
     bag: Path,
-) -> None:
-    """Simulate the true car on an everyday drive and write vd's bag of it with the truth."""
+) -> np.ndarray:
+    """Simulate the true car on an everyday drive and write vd's bag of it with the truth and
+    its IMU in a random mounting; returns the true mounting's rows (body <- sensor)."""
     scenario = dataclasses.replace(everyday_scenario(seed, params, settings), true_vehicle=variant)
     sim = simulate(car, scenario, rate_hz=settings.rate_hz)
-    write_topic_arrays_bag(bag, np.round(sim.t * 1e9).astype(np.int64), sim_topics(sim))
+    rng = np.random.default_rng(seed)
+    written = (rng.uniform(-180, 180), rng.uniform(-60, 60), rng.uniform(-180, 180))
+    topics = sim_topics(sim, imu=True, imu_mount_rpy_deg=written)
+    write_topic_arrays_bag(bag, np.round(sim.t * 1e9).astype(np.int64), topics)
+    own = np.array(mount_rotation(0.0, scenario.sensors.imu_mount_pitch, 0.0))
+    rows: np.ndarray = own @ np.array(mount_rotation(*np.radians(written)))
+    return rows
 
 
-def calibrated(bag: Path, out: Path) -> tuple[dict[str, float], float]:
-    """Run the command's path; the fitted values by key and the wall time [s]."""
+def calibrated(
+    bag: Path, out: Path, mapping: Path | None = None
+) -> tuple[dict[str, float], float, dict[str, Any] | None]:
+    """Run the command's path; the fitted values by key, the wall time [s] and the report's
+    IMU mounting (None where not determined or without a mapping)."""
+    # the report (its figures take a second) only where the mounting is read from it
+    report = out.with_suffix('.report') if mapping is not None else None
     args = argparse.Namespace(
-        bags=[bag], out=out, mapping=None, vehicle=None, report=None, level_road=False
+        bags=[bag], out=out, mapping=mapping, vehicle=None, report=report, level_road=False
     )
     started = time.perf_counter()
     with contextlib.redirect_stdout(io.StringIO()):
         run_calibrate(args)
     wall = time.perf_counter() - started
+    mounting = None
+    if report is not None:
+        mounting = json.loads((report / 'calibration.json').read_text())['imu_mounting']
     fitted = load_estimation_vehicle(out)
     text = out.read_text(encoding='utf-8')
 
@@ -136,7 +160,18 @@ def calibrated(bag: Path, out: Path) -> tuple[dict[str, float], float]:
         'wheel.effective_radius': fitted.wheel.effective_radius,
         'gearbox.final_drive': fitted.require_driveline().final_drive,
     }
-    return {k: v for k, v in values.items() if fitted_line(k)}, wall
+    return {k: v for k, v in values.items() if fitted_line(k)}, wall, mounting
+
+
+def _axes_off_deg(found: dict[str, Any] | None, true_rows: np.ndarray) -> str:
+    """How far the learnt forward and lateral axes are from the true ones [deg]."""
+    if found is None:
+        return f'{"n.d.":>9} {"n.d.":>9}'
+    rows = np.array(mount_rotation(*np.radians(found['mount_rpy_deg'])))
+    off = [
+        np.degrees(np.arccos(np.clip(np.dot(rows[k], true_rows[k]), -1.0, 1.0))) for k in (0, 1)
+    ]
+    return f'{off[0]:>9.2f} {off[1]:>9.2f}'
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -155,14 +190,16 @@ def main(argv: list[str] | None = None) -> int:
     )
     keys = list(GOALS)
     header = ' '.join(f'{k.split(".")[1][:14]:>14}' for k in keys)
-    print(f'{"variant":32} {header}')
+    print(f'{"variant":32} {header}  imu fwd°  imu lat°')
     misses = 0
     with tempfile.TemporaryDirectory() as tmp:
+        mapping = Path(tmp) / 'imu_mapping.yaml'
+        mapping.write_text(f'imu:\n  topic: {SENSORS_IMU}\n  type: sensor_msgs/msg/Imu\n')
         for n, (name, change) in enumerate(VARIANTS.items()):
             car, variant = true_car(params, change)
             bag = Path(tmp) / f'drive{n}'
-            drive_bag(params, car, variant, args.first + n, settings, bag)
-            fitted, _ = calibrated(bag, Path(tmp) / f'car{n}.yaml')
+            true_rows = drive_bag(params, car, variant, args.first + n, settings, bag)
+            fitted, _, mounting = calibrated(bag, Path(tmp) / f'car{n}.yaml', mapping)
             truth = truth_values(apply_variant(car, variant))
             cells = []
             for key in keys:
@@ -173,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
                 error = fitted[key] / truth[key] - 1.0
                 misses += abs(error) > GOALS[key]
                 cells.append(f'{100.0 * error:>+13.2f}%')
-            print(f'{name:32} {" ".join(cells)}')
+            print(f'{name:32} {" ".join(cells)} {_axes_off_deg(mounting, true_rows)}')
         print(
             'goal (|error| <=)                '
             + ' '.join(f'{100 * GOALS[k]:>13.1f}%' for k in keys)
@@ -186,7 +223,7 @@ def main(argv: list[str] | None = None) -> int:
         bag = Path(tmp) / 'ten_minutes'
         drive_bag(params, car, variant, args.first + len(VARIANTS), long, bag)
         load = os.getloadavg()[0]
-        _, wall = calibrated(bag, Path(tmp) / 'ten_minutes.yaml')
+        _, wall, _ = calibrated(bag, Path(tmp) / 'ten_minutes.yaml')
         print(
             f'10 min drive at 100 Hz: calibrated in {wall:.1f} s (goal <= 10 s), load {load:.2f}'
         )
