@@ -106,6 +106,17 @@ def test_a_short_rough_drive_is_refused_by_its_spread() -> None:
         fit_mounting(force + shake, accel)
 
 
+def test_a_sensor_that_does_not_follow_the_car_is_refused() -> None:
+    """Another topic's vector, or g read as m/s^2: no mounting, no nan."""
+    force, accel = _drive()
+    with pytest.raises(NotDeterminedError, match=r'gain of 0\.1\d, less than 0\.5'):
+        fit_mounting(force / G, accel)  # a unit of g mapped as m/s^2
+    still = np.random.default_rng(1).normal(0.0, 0.05, force.shape)
+    still[:, 2] += G
+    with pytest.raises(NotDeterminedError, match='gain of'):
+        fit_mounting(still, accel)
+
+
 def test_rows_with_a_nan_are_left_out() -> None:
     force, accel = _drive()
     holes = force.copy()

@@ -45,6 +45,7 @@ __all__ = [
     'BLOCKS',
     'MAX_STD_DEG',
     'MIN_ACCEL_STD_MPS2',
+    'MIN_GAIN',
     'STRAIGHT_MPS2',
     'MountingFit',
     'fit_mounting',
@@ -63,6 +64,10 @@ STRAIGHT_MPS2: Final = 0.5
 #: the straight samples are chosen by the previous fit's lateral axis until the choice stays
 #: (each pass takes out bends the last one's yaw had left in), at most this many times
 _STRAIGHT_PASSES: Final = 30
+#: the least specific force [m/s^2] along the forward axis per m/s^2 of the car's acceleration
+#: (0.8-1.0 on the drives measured): less is a sensor that does not follow the car (another
+#: topic, a unit of g read as m/s^2)
+MIN_GAIN: Final = 0.5
 #: the largest jackknife std of the roll and of the yaw [deg] at which the mounting is stated:
 #: a yaw off by 1 deg puts 1.7 % of the lateral acceleration in the forward one (0.3 deg of
 #: grade in a 3 m/s^2 bend), a roll off by 1 deg 1.7 % of the yaw rate in the pitch rate. The
@@ -148,8 +153,9 @@ def fit_mounting(force: npt.ArrayLike, accel: npt.ArrayLike) -> MountingFit:
         The mounting, its spread and the samples used.
 
     Raises:
-        NotDeterminedError: the acceleration varies too little on straight road, or the roll
-            or the yaw is less certain than :data:`MAX_STD_DEG`.
+        NotDeterminedError: the acceleration varies too little on straight road, the sensor
+            does not follow it (:data:`MIN_GAIN`), or the roll or the yaw is less certain than
+            :data:`MAX_STD_DEG`.
     """
     f = np.asarray(force, dtype=np.float64)
     a = np.asarray(accel, dtype=np.float64)
@@ -167,6 +173,11 @@ def fit_mounting(force: npt.ArrayLike, accel: npt.ArrayLike) -> MountingFit:
         straight = chosen
         rows, gain = _rows(f[straight], a[straight])
     f, a = f[straight], a[straight]
+    if not gain >= MIN_GAIN:  # nan too
+        raise NotDeterminedError(
+            f"the IMU's specific force follows the car's acceleration with a gain of "
+            f"{gain:.2f}, less than {MIN_GAIN} (is it the car's IMU, in the mapped unit?)"
+        )
     rpy = np.degrees(mount_rpy(rows))
     blocks = np.array_split(np.arange(a.size), BLOCKS)
     leave_out = []
