@@ -47,7 +47,7 @@ sys.path.insert(0, str(ROOT / 'src' / 'vd_common'))
 from vd_common.topics import SENSORS_IMU  # noqa: E402
 from vd_common.vehicle.estimation import load_estimation_vehicle  # noqa: E402
 from vd_common.vehicle.params import VehicleParams, default_vehicle_file, load_vehicle  # noqa: E402
-from vd_observer_node.inputs.rotation import mount_rotation  # noqa: E402
+from vd_observer_node.inputs.rotation import axis_angle_deg, mount_rotation  # noqa: E402
 from vd_observer_node.testing.devbag import sim_topics, write_topic_arrays_bag  # noqa: E402
 from vd_observer_node.tools.calibrate.cli import run_calibrate  # noqa: E402
 from vd_sim_node.vehicle.everyday import EverydaySettings, everyday_scenario  # noqa: E402
@@ -167,10 +167,8 @@ def _axes_off_deg(found: dict[str, Any] | None, true_rows: np.ndarray) -> str:
     """How far the learnt forward and lateral axes are from the true ones [deg]."""
     if found is None:
         return f'{"n.d.":>9} {"n.d.":>9}'
-    rows = np.array(mount_rotation(*np.radians(found['mount_rpy_deg'])))
-    off = [
-        np.degrees(np.arccos(np.clip(np.dot(rows[k], true_rows[k]), -1.0, 1.0))) for k in (0, 1)
-    ]
+    rows = mount_rotation(*np.radians(found['mount_rpy_deg']))
+    off = [axis_angle_deg(rows[k], true_rows[k]) for k in (0, 1)]
     return f'{off[0]:>9.2f} {off[1]:>9.2f}'
 
 

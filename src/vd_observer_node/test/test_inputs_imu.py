@@ -203,7 +203,7 @@ def test_the_sensor_s_own_vectors_for_learning_its_mounting() -> None:
     """`decode_imu_vectors` gives what the sensor measured, in its frame and SI units: the
     mounting is not applied (vd calibrate learns it), the unit and sign of the specific force
     are."""
-    from vd_observer_node.inputs.imu_vectors import decode_imu_vectors, has_three_axes
+    from vd_observer_node.inputs.decode import decode_imu_vectors, has_three_axes
 
     a, w = _sensor_vector(), _sensor_vector(BODY_RATE)
     spec = _mapping(type='sensor_msgs/msg/Imu', mount_rpy_deg=RPY_DEG, unit='g').imu

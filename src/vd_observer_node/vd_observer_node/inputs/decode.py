@@ -50,8 +50,10 @@ __all__ = [
     'brake_row',
     'decode_brake',
     'decode_engine',
+    'decode_imu_vectors',
     'decode_input',
     'has_header',
+    'has_three_axes',
     'input_stats',
 ]
 
@@ -91,10 +93,13 @@ def _per_message(
     spec: InputSpec,
     arrays: TopicArrays,
     extract: Callable[[Any, int], tuple[int, Sequence[float], bytes]],
+    width: int | None = None,
 ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.bytes_]]:
+    """Deserialize each message and ``extract`` its row (``width`` values, default the
+    input's)."""
     n = len(arrays.datas)
     stamps = np.empty(n, dtype=np.int64)
-    values = np.empty((n, spec.width), dtype=np.float64)
+    values = np.empty((n, spec.width if width is None else width), dtype=np.float64)
     frames: list[bytes] = []
     for k, data in enumerate(arrays.datas):
         msg = deserialize(data, spec.msgtype)
@@ -202,6 +207,60 @@ def _imu(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[float], by
         return stamp, [ax * x + ay * y + az * z, math.nan], frame
 
     return mounted
+
+
+def has_three_axes(spec: InputSpec) -> bool:
+    """True when the IMU input gives the three axes of its specific force (an Imu, an
+    AccelStamped, or a Float64MultiArray with the indices of x, y and z)."""
+    return spec.msgtype != FLOAT64_ARRAY or len(spec.indices) == 3
+
+
+def decode_imu_vectors(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
+    """Decode the IMU topic's messages to the sensor's own vectors, no mounting applied.
+
+    Learning the mounting (``vd calibrate``, `tools.calibrate.mounting`) needs what the sensor
+    itself measured, where `decode_input` gives the body's forward specific force and pitch
+    rate through the mapping's mounting.
+
+    Args:
+        spec: the mapping's ``imu`` input (its unit, scale and sign are applied to the
+            specific force).
+        arrays: the topic's raw messages, of type ``spec.msgtype``.
+
+    Returns:
+        values of shape (N, 6): the specific force (x, y, z) [m/s^2] and the angular rate
+        (x, y, z) [rad/s] in the sensor's frame, the rate nan where the type has none or the
+        Imu marks it unknown (REP 145: ``angular_velocity_covariance[0]`` = -1); stamps as
+        the replay takes them (header stamps; log times for a Float64MultiArray).
+
+    Raises:
+        MappingError: a Float64MultiArray with one element (already the forward specific
+            force: it has no axes to learn), or an index beyond the message.
+        BagFormatError: a message cannot be decoded.
+    """
+    if not has_three_axes(spec):
+        raise MappingError(
+            f'{spec.name}: one element of {spec.topic} is already the forward specific force; '
+            'its mounting needs the 3 axes (indices of x, y, z)'
+        )
+    array = _float64_array(spec)
+    unknown = [math.nan] * 3
+
+    def extract(msg: Any, log: int) -> tuple[int, Sequence[float], bytes]:
+        if spec.msgtype == FLOAT64_ARRAY:
+            stamp, xyz, frame = array(msg, log)
+            return stamp, [*xyz, *unknown], frame
+        a = msg.accel.linear if spec.msgtype == ACCEL_STAMPED else msg.linear_acceleration
+        rate = unknown
+        if spec.msgtype == IMU_TYPE and msg.angular_velocity_covariance[0] != -1.0:
+            w = msg.angular_velocity
+            rate = [float(w.x), float(w.y), float(w.z)]
+        row = [float(a.x), float(a.y), float(a.z), *rate]
+        return _stamp(msg.header), row, msg.header.frame_id.encode()
+
+    stamps, values, frames = _per_message(spec, arrays, extract, width=6)
+    values[:, :3] *= spec.factor * spec.sign[0]
+    return InputSeries(stamps, values, frames)
 
 
 def _gain(spec: InputSpec, radius: float | None) -> tuple[float, ...] | None:

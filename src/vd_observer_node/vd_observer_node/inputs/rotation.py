@@ -10,8 +10,9 @@ with its inverse (`tools.calibrate.mounting`).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
-__all__ = ['Rows', 'forward_axis', 'lateral_axis', 'mount_rotation', 'mount_rpy']
+__all__ = ['Rows', 'axis_angle_deg', 'forward_axis', 'lateral_axis', 'mount_rotation', 'mount_rpy']
 
 Vector = tuple[float, float, float]
 #: the rotation's three rows (the body's x, y and z axes in the sensor's frame)
@@ -51,3 +52,11 @@ def mount_rpy(rows: Rows) -> Vector:
         math.asin(max(-1.0, min(1.0, -r20))),
         math.atan2(r10, r00),
     )
+
+
+def axis_angle_deg(u: Sequence[float], v: Sequence[float]) -> float:
+    """The angle [deg] between two axes given as vectors (of any length), e.g. one row of two
+    mountings: what a mounting off by that much turns into the quantity read along it."""
+    dot = sum(a * b for a, b in zip(u, v, strict=True))
+    norms = math.sqrt(sum(a * a for a in u) * sum(b * b for b in v))
+    return math.degrees(math.acos(max(-1.0, min(1.0, dot / norms))))

@@ -266,8 +266,9 @@ class PipelineNode(Node):
             f'({vehicle_file}), torque source {self.torque_source}'
             + (f', inputs from {mapping.source}' if mapping.source else '')
         )
-        if unstated_mounting_note(mapping):
-            self.get_logger().warning(unstated_mounting_note(mapping))
+        mounting_note = unstated_mounting_note(mapping)
+        if mounting_note:
+            self.get_logger().warning(mounting_note)
         if self._situation_off is not None:
             # a configuration, not a fault: said once here, and as a value on /diagnostics
             self.get_logger().info(

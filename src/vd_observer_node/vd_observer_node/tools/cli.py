@@ -130,8 +130,9 @@ def _replay(args: argparse.Namespace) -> int:
     print(f'torque path: {path}')
     if report.imu:
         print(f'imu: {report.imu}')
-        if unstated_mounting_note(mapping):
-            print(f'  {unstated_mounting_note(mapping)}')
+        note = unstated_mounting_note(mapping)
+        if note:
+            print(f'  {note}')
     print(f'vehicle: {report.vehicle}')
     # the IMU fusion's are named as the mapping names them (imu.fusion.*)
     derived = {

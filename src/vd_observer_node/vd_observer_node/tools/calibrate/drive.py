@@ -30,8 +30,13 @@ from vd_common.topics import TRUTH, TRUTH_BODY_VELOCITY, TRUTH_SLOPE
 from vd_observer_node.bag.cdr_batch import decode_batch
 from vd_observer_node.bag.reader import BagReader, TopicArrays
 from vd_observer_node.bag.typestore import deserialize
-from vd_observer_node.inputs.decode import decode_brake, decode_engine, decode_input
-from vd_observer_node.inputs.imu_vectors import decode_imu_vectors, has_three_axes
+from vd_observer_node.inputs.decode import (
+    decode_brake,
+    decode_engine,
+    decode_imu_vectors,
+    decode_input,
+    has_three_axes,
+)
 from vd_observer_node.inputs.mapping import (
     GRADE_INPUT,
     NAVSATFIX,

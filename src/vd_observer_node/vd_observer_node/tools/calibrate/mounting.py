@@ -31,14 +31,13 @@ them as independent.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Final
 
 import numpy as np
 import numpy.typing as npt
 
-from vd_observer_node.inputs.rotation import Rows, mount_rpy
+from vd_observer_node.inputs.rotation import Rows, axis_angle_deg, mount_rpy
 from vd_observer_node.tools.calibrate.errors import NotDeterminedError
 
 __all__ = [
@@ -103,9 +102,7 @@ class MountingFit:
         finds it and as ``axis`` gives it (the same row of another mounting, e.g. the
         mapping's): what a wrong mounting turns into the forward specific force (row 0) or
         the pitch rate (row 1)."""
-        u = np.asarray(axis, dtype=np.float64)
-        cosine = float(np.dot(self.rows[row], u) / np.linalg.norm(u))
-        return math.degrees(math.acos(max(-1.0, min(1.0, cosine))))
+        return axis_angle_deg(self.rows[row], axis)
 
 
 def _rows(force: FloatArray, accel: FloatArray) -> tuple[Rows, float]:
