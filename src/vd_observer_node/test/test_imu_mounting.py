@@ -14,9 +14,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
+from vd_observer_node.inputs.errors import MountingNotDeterminedError
+from vd_observer_node.inputs.mounting import MAX_STD_DEG, fit_mounting
 from vd_observer_node.inputs.rotation import forward_axis, lateral_axis, mount_rotation, mount_rpy
-from vd_observer_node.tools.calibrate.errors import NotDeterminedError
-from vd_observer_node.tools.calibrate.mounting import MAX_STD_DEG, fit_mounting
 
 G = 9.81
 roll_or_yaw = st.floats(-179.0, 179.0)
@@ -94,7 +94,7 @@ def test_a_crossfall_reads_as_roll_only() -> None:
 
 def test_a_steady_drive_does_not_determine_it() -> None:
     force, accel = _drive()
-    with pytest.raises(NotDeterminedError, match=r'varies by 0\.05 m/s'):
+    with pytest.raises(MountingNotDeterminedError, match=r'varies by 0\.05 m/s'):
         fit_mounting(force, 0.05 * np.sign(np.sin(np.arange(accel.size))))
 
 
@@ -102,18 +102,20 @@ def test_a_short_rough_drive_is_refused_by_its_spread() -> None:
     """10 s with 0.2 m/s^2 of vibration left after the window: yaw +-1.3 deg (measured)."""
     force, accel = _drive(n=200)
     shake = np.random.default_rng(0).normal(0.0, 0.2, force.shape) * [1.0, 0.3, 1.0]
-    with pytest.raises(NotDeterminedError, match=f'less certain than the {MAX_STD_DEG} deg'):
+    with pytest.raises(
+        MountingNotDeterminedError, match=f'less certain than the {MAX_STD_DEG} deg'
+    ):
         fit_mounting(force + shake, accel)
 
 
 def test_a_sensor_that_does_not_follow_the_car_is_refused() -> None:
     """Another topic's vector, or g read as m/s^2: no mounting, no nan."""
     force, accel = _drive()
-    with pytest.raises(NotDeterminedError, match=r'gain of 0\.1\d, less than 0\.5'):
+    with pytest.raises(MountingNotDeterminedError, match=r'gain of 0\.1\d, less than 0\.5'):
         fit_mounting(force / G, accel)  # a unit of g mapped as m/s^2
     still = np.random.default_rng(1).normal(0.0, 0.05, force.shape)
     still[:, 2] += G
-    with pytest.raises(NotDeterminedError, match='gain of'):
+    with pytest.raises(MountingNotDeterminedError, match='gain of'):
         fit_mounting(still, accel)
 
 

@@ -4,7 +4,7 @@ tf's convention, ``R = Rz(yaw) Ry(pitch) Rx(roll)``, angles [rad] of the sensor'
 the body frame (REP 103: x forward, y left, z up; a positive pitch turns the nose down). A
 vector the sensor measures, ``v_s``, is ``R @ v_s`` in the body. The mapping's
 ``mount_rpy_deg`` is read with it (`mapping`), and ``vd calibrate`` states what it learnt
-with its inverse (`tools.calibrate.mounting`).
+with its inverse (`inputs.mounting`).
 """
 
 from __future__ import annotations

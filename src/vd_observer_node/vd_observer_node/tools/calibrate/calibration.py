@@ -19,6 +19,8 @@ from scipy.optimize import least_squares
 from vd_common.vehicle.estimation import EstimationVehicleParams
 
 from vd_observer_node.estimation.formulas import rolling_speed_factor
+from vd_observer_node.inputs.errors import MountingNotDeterminedError
+from vd_observer_node.inputs.mounting import MountingFit, fit_mounting
 from vd_observer_node.tools.calibrate.converter import (
     MIN_BIN_SAMPLES,
     MIN_PUMP_TORQUE_NM,
@@ -28,7 +30,6 @@ from vd_observer_node.tools.calibrate.converter import (
 from vd_observer_node.tools.calibrate.drive import GRID_HZ, WINDOW_S, CalibrationDrive
 from vd_observer_node.tools.calibrate.errors import NotDeterminedError
 from vd_observer_node.tools.calibrate.force_balance import fit_force_balance
-from vd_observer_node.tools.calibrate.mounting import MountingFit, fit_mounting
 from vd_observer_node.tools.calibrate.radius import (
     FittedValue,
     fit_rolling_radius,
@@ -184,7 +185,7 @@ def _mounting(drive: CalibrationDrive, out: Calibration) -> None:
         return
     try:
         fit = fit_mounting(drive.imu_force_mps2, drive.accel_mps2)
-    except NotDeterminedError as error:
+    except MountingNotDeterminedError as error:
         out.not_determined['imu.mount_rpy_deg'] = str(error)
         return
     out.mounting = fit

@@ -13,9 +13,9 @@ import os
 from pathlib import Path
 from typing import Any
 
+from vd_observer_node.inputs.mounting import MountingFit
 from vd_observer_node.tools.calibrate.calibration import Calibration
 from vd_observer_node.tools.calibrate.errors import CalibrationError
-from vd_observer_node.tools.calibrate.mounting import MountingFit
 
 __all__ = ['mounting_line', 'write_report']
 

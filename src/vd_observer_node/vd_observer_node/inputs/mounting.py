@@ -37,8 +37,8 @@ from typing import Final
 import numpy as np
 import numpy.typing as npt
 
+from vd_observer_node.inputs.errors import MountingNotDeterminedError
 from vd_observer_node.inputs.rotation import Rows, axis_angle_deg, mount_rpy
-from vd_observer_node.tools.calibrate.errors import NotDeterminedError
 
 __all__ = [
     'BLOCKS',
@@ -129,10 +129,11 @@ def _wrapped_deg(angles: FloatArray, centre: float) -> FloatArray:
 
 
 def _check_excitation(a: FloatArray, what: str) -> None:
-    """Raise NotDeterminedError where the acceleration ``a`` cannot show the forward axis."""
+    """Raise MountingNotDeterminedError where the acceleration ``a`` cannot show the forward
+    axis."""
     spread = float(np.std(a)) if a.size else 0.0
     if a.size < 2 * BLOCKS or spread < MIN_ACCEL_STD_MPS2:
-        raise NotDeterminedError(
+        raise MountingNotDeterminedError(
             f'the acceleration varies by {spread:.2f} m/s^2 (std) over {a.size} {what}, '
             f'less than the {MIN_ACCEL_STD_MPS2} m/s^2 that shows the forward axis'
         )
@@ -150,7 +151,7 @@ def fit_mounting(force: npt.ArrayLike, accel: npt.ArrayLike) -> MountingFit:
         The mounting, its spread and the samples used.
 
     Raises:
-        NotDeterminedError: the acceleration varies too little on straight road, the sensor
+        MountingNotDeterminedError: the acceleration varies too little on straight road, the sensor
             does not follow it (:data:`MIN_GAIN`), or the roll or the yaw is less certain than
             :data:`MAX_STD_DEG`.
     """
@@ -171,7 +172,7 @@ def fit_mounting(force: npt.ArrayLike, accel: npt.ArrayLike) -> MountingFit:
         rows, gain = _rows(f[straight], a[straight])
     f, a = f[straight], a[straight]
     if not gain >= MIN_GAIN:  # nan too
-        raise NotDeterminedError(
+        raise MountingNotDeterminedError(
             f"the IMU's specific force follows the car's acceleration with a gain of "
             f"{gain:.2f}, less than {MIN_GAIN} (is it the car's IMU, in the mapped unit?)"
         )
@@ -194,7 +195,7 @@ def fit_mounting(force: npt.ArrayLike, accel: npt.ArrayLike) -> MountingFit:
         samples=int(a.size),
     )
     if max(fit.std_deg[0], fit.std_deg[2]) > MAX_STD_DEG:
-        raise NotDeterminedError(
+        raise MountingNotDeterminedError(
             f'roll {fit.rpy_deg[0]:.1f} ± {fit.std_deg[0]:.1f} deg, yaw {fit.rpy_deg[2]:.1f} ± '
             f'{fit.std_deg[2]:.1f} deg: less certain than the {MAX_STD_DEG} deg the estimators '
             'need (too little acceleration and braking)'
