@@ -237,6 +237,6 @@ def test_an_imu_logged_ahead_of_the_wheels_in_tiny_blocks_equals_one_block(
             writer.add_topic(name, info.msgtype, info.qos_profiles_yaml)
         for log, topic, data in rows:
             writer.write(topic, data, log)
-    mapping = mapping_from_dict({'imu': {'topic': SENSORS_IMU, 'type': 'sensor_msgs/msg/Imu'}})
-    report = _check(bag, tmp_path, mapping=mapping)
+    imu = {'topic': SENSORS_IMU, 'type': 'sensor_msgs/msg/Imu', 'mount_rpy_deg': [0, 0, 0]}
+    report = _check(bag, tmp_path, mapping=mapping_from_dict({'imu': imu}))
     assert 'angular rate used on' in report.imu

@@ -256,22 +256,27 @@ def test_on_level_road_without_a_grade_reference(tmp_path: Path) -> None:
     assert fitted.rolling_resistance.c0 == pytest.approx(truth.rolling_resistance.c0, rel=0.20)
 
 
+def _turned_imu_bag(sim: object, tmp_path: Path) -> tuple[Path, np.ndarray]:
+    """The drive with its IMU written upside down, pitched -3 deg and turned 5 deg, and the
+    mounting [deg] to find: the everyday drive's IMU is itself pitched in the body (its
+    ``imu_mount_pitch``), so that pitch, then the rotation written."""
+    written = (180.0, -3.0, 5.0)
+    sim_pitch = _scenario(load_vehicle(default_vehicle_file())).sensors.imu_mount_pitch  # type: ignore[attr-defined]
+    rows = np.array(mount_rotation(0.0, sim_pitch, 0.0)) @ mount_rotation(*np.radians(written))
+    mounted = np.degrees(mount_rpy(tuple(map(tuple, rows))))
+    stamps = np.round(sim.t * 1e9).astype(np.int64)  # type: ignore[attr-defined]
+    bag = tmp_path / 'imu'
+    write_topic_arrays_bag(bag, stamps, sim_topics(sim, imu=True, imu_mount_rpy_deg=written))
+    return bag, mounted
+
+
 def test_the_imu_mounting_is_learnt_from_the_drive(
     drive: tuple[Path, VehicleParams, object], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """The simulator's IMU (its specific force and pitch rate on the sprung body, with the
     scenario's noise) written as a sensor mounted upside down, pitched and turned would read
-    it; the mapping does not state the mounting (so it is taken as level and straight). The
-    everyday drive's IMU is itself pitched in the body (its ``imu_mount_pitch``): the
-    mounting to find is that pitch, then the rotation written here."""
-    _, _, sim = drive
-    written = (180.0, -3.0, 5.0)
-    sim_pitch = _scenario(load_vehicle(default_vehicle_file())).sensors.imu_mount_pitch  # type: ignore[attr-defined]
-    rows = np.array(mount_rotation(0.0, sim_pitch, 0.0)) @ mount_rotation(*np.radians(written))
-    mounted = np.degrees(mount_rpy(tuple(map(tuple, rows))))
-    stamps = np.round(sim.t * 1e9).astype(np.int64)
-    bag = tmp_path / 'imu'
-    write_topic_arrays_bag(bag, stamps, sim_topics(sim, imu=True, imu_mount_rpy_deg=written))
+    it (`_turned_imu_bag`); the mapping does not state the mounting."""
+    bag, mounted = _turned_imu_bag(drive[2], tmp_path)
     mapping = tmp_path / 'mapping.yaml'
     mapping.write_text(
         yaml.safe_dump({'imu': {'topic': SENSORS_IMU, 'type': 'sensor_msgs/msg/Imu'}})
@@ -284,7 +289,7 @@ def test_the_imu_mounting_is_learnt_from_the_drive(
     error = (np.array(found['mount_rpy_deg']) - mounted + 180.0) % 360.0 - 180.0
     # measured: roll 0.08 deg, yaw 0.004 deg off; the pitch 0.91 deg, the body's squat in the
     # second order on a drive that brakes harder than it accelerates (module docstring of
-    # tools/calibrate/mounting.py; the fusion learns a pitch as its bias)
+    # inputs/mounting.py; the fusion learns a pitch as its bias)
     assert abs(error[0]) < 0.15 and abs(error[2]) < 0.05, error
     assert abs(error[1]) < 1.2, error
     assert found['std_deg'][0] < 0.05 and found['std_deg'][2] < 0.01  # 0.02, 0.0007 measured
@@ -292,3 +297,29 @@ def test_the_imu_mounting_is_learnt_from_the_drive(
     assert 'fitted imu.mount_rpy_deg: [' in printed
     assert "the mapping's imu.mount_rpy_deg puts the body's forward axis" in printed
     assert "the mapping's imu.mount_rpy_deg puts the body's lateral axis 175.0 deg" in printed
+
+
+def test_vd_replay_learns_the_imu_mounting_online(
+    drive: tuple[Path, VehicleParams, object], tmp_path: Path
+) -> None:
+    """The same upside-down, pitched and turned IMU replayed with a mapping that does not
+    state its mounting (#36 item 1): the replay learns it from the drive, as it goes, and
+    fuses the IMU from then on, what it gives is the same in tiny blocks as in one, and the
+    mounting is the one the drive shows."""
+    from vd_observer_node.inputs.mapping import mapping_from_dict
+    from vd_observer_node.tools.replay import replay_bag
+
+    bag, mounted = _turned_imu_bag(drive[2], tmp_path)
+    imu = {'topic': SENSORS_IMU, 'type': 'sensor_msgs/msg/Imu'}
+    mapping = mapping_from_dict({'imu': imu})
+    whole = replay_bag(bag, tmp_path / 'whole', mapping=mapping, progress=False)
+    tiny = replay_bag(bag, tmp_path / 'tiny', mapping=mapping, progress=False, block_messages=2000)
+    assert tiny.imu == whole.imu
+    assert 'mounting learnt: [' in whole.imu, whole.imu
+    text = whole.imu.split('mounting learnt: [')[1].split(']')[0]
+    learnt = np.array([float(a) for a in text.split(',')])
+    error = (learnt - mounted + 180.0) % 360.0 - 180.0
+    # measured: roll 0.08, pitch 0.95 (the squat), yaw 0.00 deg off; fused from 46 s on
+    assert abs(error[0]) < 0.3 and abs(error[2]) < 0.3, error
+    assert abs(error[1]) < 1.2, error
+    assert 'trusted after' in whole.imu, whole.imu

@@ -290,7 +290,11 @@ def test_replay_reads_the_mapped_imu_and_marks_the_slope_sources(tmp_path: Path)
     write_topic_arrays_bag(tmp_path / 'in', stamps, sim_topics(part, truth=False, imu=True))
     # the fusion's low-passes set as the cascade's reference values (unset, the replay follows
     # the bag's rate after 200 stamps: test_imu_input)
-    imu = {'topic': SENSORS_IMU, 'type': 'sensor_msgs/msg/Imu', 'fusion': REFERENCE_RATE_FOLLOWING}
+    # the simulator's IMU is aligned with the body (stated: else the mounting is learnt first)
+    imu = {
+        'topic': SENSORS_IMU, 'type': 'sensor_msgs/msg/Imu', 'mount_rpy_deg': [0, 0, 0],
+        'fusion': REFERENCE_RATE_FOLLOWING,
+    }  # fmt: skip
     mapping = mapping_from_dict({'imu': imu})
     # the slope filter set: left unset, the replay follows the bag's rate after 200 stamps
     # (rate_settings; tested in test_bag_replay)

@@ -203,11 +203,11 @@ def test_the_sensor_s_own_vectors_for_learning_its_mounting() -> None:
     """`decode_imu_vectors` gives what the sensor measured, in its frame and SI units: the
     mounting is not applied (vd calibrate learns it), the unit and sign of the specific force
     are."""
-    from vd_observer_node.inputs.decode import decode_imu_vectors, has_three_axes
+    from vd_observer_node.inputs.decode import decode_imu_vectors
 
     a, w = _sensor_vector(), _sensor_vector(BODY_RATE)
     spec = _mapping(type='sensor_msgs/msg/Imu', mount_rpy_deg=RPY_DEG, unit='g').imu
-    assert spec is not None and has_three_axes(spec)
+    assert spec is not None and spec.three_axes
     datas = [_imu_message(3_000, a / G, w), _imu_message(4_000, a / G, None)]
     series = decode_imu_vectors(spec, TopicArrays(spec.msgtype, np.array([1, 2]), datas))
     assert series.stamp_ns.tolist() == [3_000, 4_000]
@@ -221,6 +221,6 @@ def test_the_sensor_s_own_vectors_for_learning_its_mounting() -> None:
     np.testing.assert_allclose(series.values[0, :3], -a, atol=1e-12)
     assert series.stamp_ns.tolist() == [9]  # no header: the log time
     forward = _mapping(type='std_msgs/msg/Float64MultiArray', indices=[1]).imu
-    assert forward is not None and not has_three_axes(forward)
+    assert forward is not None and not forward.three_axes
     with pytest.raises(MappingError, match='needs the 3 axes'):
         decode_imu_vectors(forward, TopicArrays(forward.msgtype, np.array([9]), [message]))

@@ -53,7 +53,6 @@ __all__ = [
     'decode_imu_vectors',
     'decode_input',
     'has_header',
-    'has_three_axes',
     'input_stats',
 ]
 
@@ -209,16 +208,32 @@ def _imu(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[float], by
     return mounted
 
 
-def has_three_axes(spec: InputSpec) -> bool:
-    """True when the IMU input gives the three axes of its specific force (an Imu, an
-    AccelStamped, or a Float64MultiArray with the indices of x, y and z)."""
-    return spec.msgtype != FLOAT64_ARRAY or len(spec.indices) == 3
+def _imu_vectors(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[float], bytes]]:
+    """The sensor's own specific force (x, y, z) and angular rate (x, y, z), no mounting
+    applied (`decode_imu_vectors`); the rate nan where the type has none or the Imu marks it
+    unknown."""
+    array = _float64_array(spec)
+    unknown = [math.nan] * 3
+
+    def extract(msg: Any, log: int) -> tuple[int, Sequence[float], bytes]:
+        if spec.msgtype == FLOAT64_ARRAY:
+            stamp, xyz, frame = array(msg, log)
+            return stamp, [*xyz, *unknown], frame
+        a = msg.accel.linear if spec.msgtype == ACCEL_STAMPED else msg.linear_acceleration
+        rate = unknown
+        if spec.msgtype == IMU_TYPE and msg.angular_velocity_covariance[0] != -1.0:
+            w = msg.angular_velocity
+            rate = [float(w.x), float(w.y), float(w.z)]
+        row = [float(a.x), float(a.y), float(a.z), *rate]
+        return _stamp(msg.header), row, msg.header.frame_id.encode()
+
+    return extract
 
 
 def decode_imu_vectors(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
     """Decode the IMU topic's messages to the sensor's own vectors, no mounting applied.
 
-    Learning the mounting (``vd calibrate``, `tools.calibrate.mounting`) needs what the sensor
+    Learning the mounting (``vd calibrate``, `inputs.mounting`) needs what the sensor
     itself measured, where `decode_input` gives the body's forward specific force and pitch
     rate through the mapping's mounting.
 
@@ -238,27 +253,12 @@ def decode_imu_vectors(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
             force: it has no axes to learn), or an index beyond the message.
         BagFormatError: a message cannot be decoded.
     """
-    if not has_three_axes(spec):
+    if not spec.three_axes:
         raise MappingError(
             f'{spec.name}: one element of {spec.topic} is already the forward specific force; '
             'its mounting needs the 3 axes (indices of x, y, z)'
         )
-    array = _float64_array(spec)
-    unknown = [math.nan] * 3
-
-    def extract(msg: Any, log: int) -> tuple[int, Sequence[float], bytes]:
-        if spec.msgtype == FLOAT64_ARRAY:
-            stamp, xyz, frame = array(msg, log)
-            return stamp, [*xyz, *unknown], frame
-        a = msg.accel.linear if spec.msgtype == ACCEL_STAMPED else msg.linear_acceleration
-        rate = unknown
-        if spec.msgtype == IMU_TYPE and msg.angular_velocity_covariance[0] != -1.0:
-            w = msg.angular_velocity
-            rate = [float(w.x), float(w.y), float(w.z)]
-        row = [float(a.x), float(a.y), float(a.z), *rate]
-        return _stamp(msg.header), row, msg.header.frame_id.encode()
-
-    stamps, values, frames = _per_message(spec, arrays, extract, width=6)
+    stamps, values, frames = _per_message(spec, arrays, _imu_vectors(spec), width=6)
     values[:, :3] *= spec.factor * spec.sign[0]
     return InputSeries(stamps, values, frames)
 
@@ -271,13 +271,15 @@ def _gain(spec: InputSpec, radius: float | None) -> tuple[float, ...] | None:
     if factor == 1.0 and all(s == 1.0 for s in spec.sign):
         return None
     gain = tuple((factor * np.asarray(spec.sign, dtype=np.float64)).tolist())
-    return (gain[0], 1.0) if spec.name == IMU_INPUT else gain
+    if spec.name == IMU_INPUT:  # the mounting is learnt from the vectors (`learns_mounting`)
+        return (gain[0],) * 3 + (1.0,) * 3 if spec.learns_mounting else (gain[0], 1.0)
+    return gain
 
 
 def _extractor(spec: InputSpec) -> Callable[[Any, int], tuple[int, Sequence[float], bytes]]:
     """The per-message extractor of a standard type with variable-length fields."""
     if spec.name == IMU_INPUT:
-        return _imu(spec)
+        return _imu_vectors(spec) if spec.learns_mounting else _imu(spec)
     if spec.msgtype == JOINT_STATE:
         return _joint_state(spec)
     if spec.msgtype == FLOAT64_ARRAY:

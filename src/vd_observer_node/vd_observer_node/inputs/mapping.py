@@ -63,7 +63,8 @@ or one element that is already the body's forward specific force). ``mount_rpy_d
 sensor frame's fixed orientation in the body frame (REP 103: x forward, y left, z up; roll,
 pitch, yaw in degrees, applied as tf does, yaw then pitch then roll; positive pitch is nose
 down); the body's forward specific force is the first row of that rotation times the
-sensor's vector::
+sensor's vector. Without it, a sensor with three axes has its mounting learnt online
+(`mount_learner`) and is fused from then on::
 
     imu:
       topic: /imu
@@ -168,7 +169,6 @@ __all__ = [
     'load_input_mapping',
     'mapping_from_dict',
     'mapping_from_params',
-    'unstated_mounting_note',
 ]
 
 #: The cascade's inputs, in the order of a mapping file (wheel angles OR wheel speeds).
@@ -284,8 +284,8 @@ class InputSpec:
             sensor's frame (the second row of the mounting rotation): the body's pitch rate
             (nose down positive) is pitch_axis . (w_sx, w_sy, w_sz) of an Imu's
             ``angular_velocity``; () where the type carries no angular rate.
-        mount_stated: ``imu`` only: the mapping states ``mount_rpy_deg`` (else the sensor is
-            taken as aligned with the body, and `vd replay` says so).
+        mount_stated: ``imu`` only: the mapping states ``mount_rpy_deg`` (else, with three
+            axes, it is learnt online: `learns_mounting`).
         gear_offset: ``engine_torque`` only: added to the logged gear.
         signal: ``brake`` only: 'pressure' or 'switch'.
         fusion: ``imu`` only: settings of the IMU fusion for this sensor (field of
@@ -310,15 +310,28 @@ class InputSpec:
     fusion: tuple[tuple[str, float], ...] = ()
 
     @property
+    def three_axes(self) -> bool:
+        """``imu``: it gives the three axes of its specific force (an Imu, an AccelStamped, or
+        a Float64MultiArray with the indices of x, y and z)."""
+        return self.msgtype != FLOAT64_ARRAY or len(self.indices) == 3
+
+    @property
+    def learns_mounting(self) -> bool:
+        """``imu`` with three axes and no ``mount_rpy_deg``: the mounting is learnt online
+        (`mount_learner`)."""
+        return self.name == IMU_INPUT and not self.mount_stated and self.three_axes
+
+    @property
     def width(self) -> int:
         """Values per sample: 4 for the per-wheel inputs and the brake (its value of each
         wheel, or the switch), 1 for the body speed, 2 for the IMU (its forward specific
-        force and the body's pitch rate, nan where the sensor gives none), 4 for the engine
+        force and the body's pitch rate, nan where the sensor gives none; 6 where it
+        `learns_mounting`: the sensor's specific force and angular rate), 4 for the engine
         (torque, gear, engine speed, turbine speed)."""
         if self.name == ENGINE_INPUT:
             return 4
         if self.name == IMU_INPUT:
-            return 2
+            return 6 if self.learns_mounting else 2
         return 4 if self.name in _PER_WHEEL or self.name == BRAKE_INPUT else 1
 
 
@@ -766,17 +779,6 @@ def mapping_from_params(
             raise MappingError(f'{source}: {name}: expected {prefix}<input>.<key>')
         data.setdefault(parts[0], {})[parts[1]] = value
     return mapping_from_dict(data, source=source)
-
-
-def unstated_mounting_note(mapping: InputMapping) -> str:
-    """What to say of an IMU with three axes whose mounting the mapping does not state ('' for
-    any other mapping): it is taken as aligned with the body (`vd replay`, `pipeline_node`)."""
-    if mapping.imu is None or not mapping.imu.axis or mapping.imu.mount_stated:
-        return ''
-    return (
-        'the mapping states no imu.mount_rpy_deg: the sensor is taken as aligned with the '
-        'body (vd calibrate learns the mounting from a recorded drive; docs/calibrate.md)'
-    )
 
 
 def load_input_mapping(path: str | os.PathLike[str]) -> InputMapping:

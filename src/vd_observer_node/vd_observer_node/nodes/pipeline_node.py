@@ -87,6 +87,11 @@ from vd_observer_node.inputs.mapping import (
     BRAKE_INPUT,
     ENGINE_INPUT,
     InputSpec,
+)
+from vd_observer_node.inputs.mount_learner import (
+    learnt_line,
+    new_learner,
+    project_sample,
     unstated_mounting_note,
 )
 from vd_observer_node.nodes.node_params import (
@@ -258,6 +263,10 @@ class PipelineNode(Node):
             self._holds.append((spec.name, ImuHold(_HELD_WAIT)))
             self._oldest_before.append(None)
         self._imu_said = False  # the learnt bias logged once it is trusted
+        # the IMU's mounting where the mapping does not state it: learnt from the stamps
+        # estimated and the IMU's samples, as vd replay learns it (`mount_learner`)
+        self._mounting = new_learner(mapping, settings.vehicle.effective_radius)
+        self._mounting_said = False
         self._active = 0
         self._last_alerts = ''
         self.create_timer(1.0, self.publish_diagnostics)
@@ -266,7 +275,7 @@ class PipelineNode(Node):
             f'({vehicle_file}), torque source {self.torque_source}'
             + (f', inputs from {mapping.source}' if mapping.source else '')
         )
-        mounting_note = unstated_mounting_note(mapping)
+        mounting_note = unstated_mounting_note(mapping.imu)
         if mounting_note:
             self.get_logger().warning(mounting_note)
         if self._situation_off is not None:
@@ -295,6 +304,8 @@ class PipelineNode(Node):
                 return
             if stamped:
                 self.watch.stamped(topic, stamp, now - stamp)
+            if self._mounting is not None and spec.learns_mounting:
+                self._mounting.imu(stamp, row)
             self._pass(index, self._holds[index][1].sample((stamp * 1e-9, *row)))
 
         self.create_subscription(input_message_class(spec), topic, on_sample, STREAM_QOS, raw=True)
@@ -323,6 +334,8 @@ class PipelineNode(Node):
     def process(self, stamp_ns: int, m: dict[str, Any]) -> None:
         """A completed set of inputs: estimated now, or once the held inputs' samples of its
         stamp are known."""
+        if self._mounting is not None:
+            self._mounting.wheels(stamp_ns, m[self._wheels][1])
         self._hold(0, stamp_ns, dict(m) if self._holds else m, {})
 
     def _estimate(self, stamp_ns: int, m: dict[str, Any], held: dict[str, Any]) -> None:
@@ -333,6 +346,11 @@ class PipelineNode(Node):
         torques = m['wheel_torques'][1] if source == 'measured' else self._no_torque
         engine = m[ENGINE_INPUT][1] if source == 'engine' else None
         brake = m[BRAKE_INPUT][1] if BRAKE_INPUT in m else None
+        if self._mounting is not None:  # read through the mounting once it is learnt
+            held['imu'] = project_sample(self._mounting.learnt, held.get('imu'))
+            if self._mounting.learnt is not None and not self._mounting_said:
+                self._mounting_said = True
+                self.get_logger().info(f'IMU {learnt_line(self._mounting.learnt, "")}')
         t = stamp_ns * 1e-9
         if self._speed_samples is not None:
             self.chain.speed_samples(*self._speed_samples.take_one(stamp_ns))
@@ -535,6 +553,13 @@ class PipelineNode(Node):
                 'imu_trusted': learnt.trusted,
                 'imu_angular_rate_used': learnt.gyro,
             }
+        if self._mounting is not None:
+            mounted = self._mounting.learnt
+            imu_values['imu_mount_rpy_deg'] = (
+                'not learnt yet'
+                if mounted is None
+                else str([round(a, 2) for a in mounted.fit.rpy_deg])
+            )
         values = {
             'torque_source': self.torque_source,
             'wheel_lipschitz_in_use': wheel_lipschitz_value(self.chain.parts.wheels),

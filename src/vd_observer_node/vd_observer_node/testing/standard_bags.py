@@ -67,11 +67,15 @@ STANDARD_MAPPING: Final[dict[str, Any]] = {
     },
     'alignment': 'latest',
 }
-#: :data:`STANDARD_MAPPING` for ``CarSensors(imu_rate_hz=...)``: the IMU fused.
+#: :data:`STANDARD_MAPPING` for ``CarSensors(imu_rate_hz=...)``: the IMU fused (aligned with
+#: the body, as stated: unstated, its mounting would be learnt first)
 IMU_MAPPING: Final[dict[str, Any]] = {
     **STANDARD_MAPPING,
-    'imu': {'topic': '/imu', 'type': 'sensor_msgs/msg/Imu', 'unit': 'm/s^2'},
-}
+    'imu': {
+        'topic': '/imu', 'type': 'sensor_msgs/msg/Imu', 'unit': 'm/s^2',
+        'mount_rpy_deg': [0, 0, 0],
+    },
+}  # fmt: skip
 #: :data:`STANDARD_MAPPING` for ``CarSensors(torques_in_joint_states=True)``.
 JOINT_TORQUES: Final[dict[str, Any]] = {
     **STANDARD_MAPPING,

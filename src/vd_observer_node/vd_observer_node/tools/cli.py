@@ -87,8 +87,8 @@ def _replay(args: argparse.Namespace) -> int:
     from vd_observer_node.inputs.mapping import (
         default_mapping,
         load_input_mapping,
-        unstated_mounting_note,
     )
+    from vd_observer_node.inputs.mount_learner import unstated_mounting_note
     from vd_observer_node.tools.replay import replay_bag
     from vd_observer_node.tools.settings_file import SettingsFile, load_settings_file
 
@@ -130,7 +130,7 @@ def _replay(args: argparse.Namespace) -> int:
     print(f'torque path: {path}')
     if report.imu:
         print(f'imu: {report.imu}')
-        note = unstated_mounting_note(mapping)
+        note = unstated_mounting_note(mapping.imu)
         if note:
             print(f'  {note}')
     print(f'vehicle: {report.vehicle}')

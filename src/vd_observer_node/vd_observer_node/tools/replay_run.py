@@ -62,6 +62,7 @@ from vd_observer_node.inputs.mapping import (
     InputMapping,
     InputSpec,
 )
+from vd_observer_node.inputs.mount_learner import learnt_line, new_learner, project_held
 from vd_observer_node.tools.merged_writer import MergedWriter
 from vd_observer_node.tools.replay_topics import (
     estimate_topics,
@@ -271,6 +272,7 @@ class ReplayRun:
         # the held inputs (the IMU) are counted like the others (not aligned: held at each
         # stamp)
         self.held_gaps = {spec.name: GapStats(spec, max_gap) for spec in mapping.held_specs}
+        self.mounting = new_learner(mapping, self.vehicle.effective_radius)
         self.frame_id: str | None = None
         self.samples = 0
         self.sensor_messages = 0
@@ -315,6 +317,8 @@ class ReplayRun:
         series = self._decode(spec, arrays)
         self.held_gaps[spec.name].add(series.stamp_ns)
         stamps, values = series.stamp_ns, series.values
+        if self.mounting is not None and spec.learns_mounting:
+            self.mounting.imu_many(stamps, values)
         carry = self.held_carry.get(spec.name)
         if carry is not None:
             stamps = np.concatenate([carry[0], stamps])
@@ -329,6 +333,8 @@ class ReplayRun:
             out[have, 1:] = values[idx[have]]
             keep = max(int(idx[-1]), 0) if common.size else 0
             self.held_carry[spec.name] = (stamps[keep:], values[keep:])
+        if self.mounting is not None and spec.learns_mounting:
+            return project_held(self.mounting.learnt, out)
         return out
 
     def _follow_rate(self, wheel_stamps: list[int]) -> None:
@@ -439,6 +445,8 @@ class ReplayRun:
         wheel_torque = picked[2]['v'] if source == 'measured' else np.zeros((n, 4))
         engine = picked[2]['v'] if source == 'engine' else None
         brake = picked[3]['v'] if self.mapping.brake is not None and len(picked) > 3 else None
+        if self.mounting is not None:  # the stamps the chain estimates, before the IMU's
+            self.mounting.wheels_many(common, wheel_angle)
         held = self.held(arrays, common)
 
         def run(rows: slice) -> CascadeResult:
@@ -571,6 +579,13 @@ class ReplayRun:
         """`ReplayReport.imu` from the last block's result and the totals."""
         if not result.imu_bias.size:
             return ''
+        mounting = self.mounting  # the mounting learnt online, where it is
+        learnt = ''
+        if mounting is not None:
+            learnt = learnt_line(mounting.learnt, mounting.reason, self.first_stamp_s)
+            if mounting.learnt is None:  # the IMU was never read
+                return learnt
+            learnt = f'; {learnt}'
         bias = float(result.imu_bias[-1])
         mount = bias_pitch_deg(bias, self.vehicle.gravity)
         trusted = (
@@ -581,5 +596,5 @@ class ReplayRun:
         share = 100.0 * self.imu_gyro / self.samples if self.samples else 0.0
         return (
             f'angular rate used on {share:.1f} % of the stamps; bias {bias:+.3f} m/s^2 '
-            f'(a sensor pitched {mount:+.2f} deg, nose up +), {trusted}'
+            f'(a sensor pitched {mount:+.2f} deg, nose up +), {trusted}{learnt}'
         )

@@ -35,7 +35,6 @@ from vd_observer_node.inputs.decode import (
     decode_engine,
     decode_imu_vectors,
     decode_input,
-    has_three_axes,
 )
 from vd_observer_node.inputs.mapping import (
     GRADE_INPUT,
@@ -324,7 +323,7 @@ def read_drive(
         mapping.brake if mapping.brake is not None and mapping.brake.topic in topics else None
     )
     imu_spec = mapping.imu
-    if imu_spec is not None and (imu_spec.topic not in topics or not has_three_axes(imu_spec)):
+    if imu_spec is not None and (imu_spec.topic not in topics or not imu_spec.three_axes):
         imu_spec = None
     wanted = [mapping.wheels, speed_spec, grade_spec, engine_spec, brake_spec, imu_spec]
     if measured:
