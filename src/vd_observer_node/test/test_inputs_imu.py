@@ -224,3 +224,28 @@ def test_the_sensor_s_own_vectors_for_learning_its_mounting() -> None:
     assert forward is not None and not forward.three_axes
     with pytest.raises(MappingError, match='needs the 3 axes'):
         decode_imu_vectors(forward, TopicArrays(forward.msgtype, np.array([9]), [message]))
+
+
+def test_an_unstated_mounting_gives_the_sensor_s_six_values_live_and_from_a_bag() -> None:
+    """Without ``mount_rpy_deg`` the mounting is learnt online (`mount_learner`): every type
+    decodes to the sensor's own specific force in m/s^2 (whatever its unit) and angular rate,
+    no rotation, the live decoder as the bag's."""
+    a, w = _sensor_vector(), _sensor_vector(BODY_RATE)
+    nan3 = [math.nan] * 3
+    cases = [
+        ({'type': 'sensor_msgs/msg/Imu', 'unit': 'g'}, _imu_message(3_000, a / G, w), [*a, *w]),
+        ({'type': 'sensor_msgs/msg/Imu'}, _imu_message(3_000, a, None), [*a, *nan3]),
+        ({'type': 'geometry_msgs/msg/AccelStamped'}, _accel_message(3_000, a), [*a, *nan3]),
+        (
+            {'type': 'std_msgs/msg/Float64MultiArray', 'indices': [1, 2, 0], 'unit': 'g'},
+            _array_message([a[2] / G, a[0] / G, a[1] / G]),
+            [*a, *nan3],
+        ),
+    ]
+    for given, message, expected in cases:
+        spec = _mapping(**given).imu
+        assert spec is not None and spec.learns_mounting and spec.width == 6
+        _, _, row = InputDecoder(spec).decode(message, receive_ns=3_000)
+        np.testing.assert_allclose(row, expected, atol=1e-12)  # nan as nan
+        arrays = TopicArrays(spec.msgtype, np.array([3_000], dtype=np.int64), [message])
+        np.testing.assert_array_equal(decode_input(spec, arrays).values, [row])  # bit for bit
