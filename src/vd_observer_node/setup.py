@@ -35,7 +35,7 @@ setup(
             'recorder_node = vd_observer_node.nodes.entry_points:recorder_node',
             'player_node = vd_observer_node.nodes.entry_points:player_node',
             'pipeline_node = vd_observer_node.nodes.entry_points:pipeline_node',
-            'vd = vd_observer_node.tools.cli:main',
+            'vd = vd_observer_node.tools.cli:command',
         ],
     },
 )

@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from vd_observer_node.kernel._jit import STAMP_NAME, clear_stale_cache, sources_digest
 
 
@@ -105,3 +106,28 @@ def test_numba_finds_blas_without_scipy_linalg_and_scipy_linalg_still_works() ->
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == 'ok'
+
+
+@pytest.mark.parametrize('measured', [False, True])
+def test_numba_imports_coverage_only_where_coverage_is_measured(measured: bool) -> None:
+    """`_jit` imports numba without ``coverage`` (38 ms of a short replay's start where it is
+    installed), unless the process imported it first, as a coverage measurement does: numba
+    then reports jitted lines to it as always; and ``import coverage`` works afterwards."""
+    pytest.importorskip('coverage')
+    code = '\n'.join(
+        [
+            'import sys',
+            *(['import coverage'] if measured else []),
+            'import vd_observer_node.kernel._jit',
+            'from numba.misc import coverage_support',
+            "print(coverage_support.coverage_available, 'coverage' in sys.modules)",
+            'import coverage',
+            'print(coverage.Coverage is not None)',
+        ]
+    )
+    env = {**os.environ, 'VD_JIT': '1'}
+    done = subprocess.run(
+        [sys.executable, '-c', code], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == [str(measured), str(measured), 'True']

@@ -11,8 +11,11 @@ package (tests, uninstalled checkouts).
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
+import os
+import pickle
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +32,7 @@ __all__ = [
     'find_vd_msgs_dir',
     'message_class',
     'message_definition',
+    'parsed_vd_msgs',
     'register_definition',
     'serialize',
     'type_hash',
@@ -92,14 +96,62 @@ def find_vd_msgs_dir() -> Path:
 def vd_typestore() -> Typestore:
     """The shared typestore: ROS 2 Jazzy standard types + vd_msgs (built once)."""
     store = get_typestore(BASE_STORE)
-    folder = find_vd_msgs_dir()
-    types: dict[str, Any] = {}
-    for path in sorted(folder.glob('*.msg')):
-        types.update(
-            get_types_from_msg(path.read_text(encoding='utf-8'), f'vd_msgs/msg/{path.stem}')
-        )
-    store.register(types)
+    store.register(parsed_vd_msgs(find_vd_msgs_dir(), Path(__file__).parent / '__pycache__'))
     return store
+
+
+def _parser_digest() -> bytes:
+    """The bytes of rosbags' message parser and of the node types it builds: what, besides
+    the text, the parsed definitions depend on."""
+    import rosbags.interfaces
+    import rosbags.typesys.msg
+
+    digest = hashlib.sha256()
+    for module in (rosbags.typesys.msg, rosbags.interfaces):
+        digest.update(Path(str(module.__file__)).read_bytes())
+    return digest.digest()
+
+
+def parsed_vd_msgs(folder: Path, cache_dir: Path) -> dict[str, Any]:
+    """vd_msgs' definitions parsed by rosbags (`get_types_from_msg`), kept in ``cache_dir``.
+
+    rosbags' parser takes 0.1 s for vd_msgs' files, a tenth of a short `vd replay`'s start
+    and of every node's. The parsed definitions are kept under a name that digests the files'
+    text and rosbags' parser, and read back (1 ms) while both are unchanged; anything else (a
+    changed file, another rosbags, an unreadable or read-only cache) parses them anew.
+
+    Args:
+        folder: the ``*.msg`` files (`find_vd_msgs_dir`).
+        cache_dir: where the parsed definitions are kept (created if absent).
+
+    Returns:
+        The types as rosbags' ``Typestore.register`` takes them.
+    """
+    texts = [(p.stem, p.read_text(encoding='utf-8')) for p in sorted(folder.glob('*.msg'))]
+    digest = hashlib.sha256(_parser_digest())
+    digest.update(repr(texts).encode())
+    cache = cache_dir / f'vd_msgs_types.{digest.hexdigest()[:20]}.pickle'
+    try:
+        with cache.open('rb') as f:
+            kept = pickle.load(f)
+        if isinstance(kept, dict):
+            return kept
+    except Exception:  # absent, unreadable, or not what was written: parsed anew
+        pass
+    types: dict[str, Any] = {}
+    for stem, text in texts:
+        types.update(get_types_from_msg(text, f'vd_msgs/msg/{stem}'))
+    partial = cache.with_name(f'{cache.name}.{os.getpid()}')
+    try:
+        cache_dir.mkdir(exist_ok=True)
+        for stale in cache_dir.glob('vd_msgs_types.*.pickle'):
+            stale.unlink(missing_ok=True)
+        partial.write_bytes(pickle.dumps(types))
+        os.replace(partial, cache)  # whole or not at all for a process reading it
+    except OSError:  # a read-only install: parsed at each start
+        with contextlib.suppress(OSError):
+            partial.unlink(missing_ok=True)
+    return types
 
 
 def _require(msgtype: str) -> Typestore:

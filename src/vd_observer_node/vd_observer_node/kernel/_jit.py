@@ -58,6 +58,28 @@ def _load_blas_module_alone() -> None:
 
 _load_blas_module_alone()
 
+
+def _import_numba_without_coverage() -> None:
+    """Import numba without the ``coverage`` package where no coverage is being measured.
+
+    numba imports ``coverage`` whenever it is installed (``numba.misc.coverage_support``), to
+    report the lines of jitted code to a measurement running in the process: 38 ms of a short
+    `vd replay`'s start on this project's venv, where pytest-cov installs it. A process that
+    measures coverage imported it before numba (coverage starts before the code it measures),
+    and numba then finds it as always; otherwise numba is told it is absent, as it is on a
+    machine without it.
+    """
+    if 'coverage' in sys.modules or 'numba' in sys.modules:
+        return
+    sys.modules['coverage'] = None  # type: ignore[assignment]  # import coverage: ImportError
+    try:
+        import numba  # noqa: F401
+    finally:
+        del sys.modules['coverage']
+
+
+_import_numba_without_coverage()
+
 import numba  # noqa: E402 - after the BLAS module above
 import numpy as np  # noqa: E402
 
