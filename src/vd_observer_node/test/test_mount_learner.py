@@ -125,6 +125,19 @@ def test_a_drive_at_constant_speed_teaches_nothing_and_says_why() -> None:
     assert 'the acceleration varies by 0.00 m/s^2' in learner.reason
 
 
+def test_a_drive_that_never_shows_the_mounting_keeps_the_last_windows_only(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.setattr('vd_observer_node.inputs.mount_learner.MAX_WINDOWS', 60)
+    stamps, wheels, imu = _drive((180.0, 0.0, 0.0), seconds=60.0)
+    learner = MountingLearner(RADIUS, angles=False)
+    learner.wheels_many(stamps, np.full_like(wheels, 15.0 / RADIUS))
+    learner.imu_many(stamps, imu)
+    assert learner.learnt is None and 'varies by 0.00' in learner.reason
+    assert len(learner._speed) == 62  # 60 rows with both neighbours
+    assert learner._taken == 119  # complete windows of 60 s, fitted every FIT_EVERY still
+
+
 def test_a_sample_stamped_before_its_stream_s_open_window_is_left_out() -> None:
     learner = MountingLearner(RADIUS, angles=False)
     learner.wheels(2_000_000_000, (1.0,) * 4)

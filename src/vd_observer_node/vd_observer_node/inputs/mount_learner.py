@@ -41,6 +41,7 @@ from vd_observer_node.inputs.rotation import Rows
 
 __all__ = [
     'FIT_EVERY',
+    'MAX_WINDOWS',
     'MIN_WINDOWS',
     'WINDOW_S',
     'LearntMounting',
@@ -58,11 +59,14 @@ FloatArray = npt.NDArray[np.float64]
 #: [s] the windows' length: as ``vd calibrate``'s averaging window (long against the wheel
 #: speed's quantisation and the IMU's vibration, short against a braking)
 WINDOW_S: Final = 0.5
-_WINDOW_NS: Final = 500_000_000
+_WINDOW_NS: Final = round(WINDOW_S * 1e9)
 #: windows between two fits while none determines the mounting (5 s)
 FIT_EVERY: Final = 10
 #: the least windows a fit is tried on (20 s: the jackknife's 10 stretches of 2 s each)
 MIN_WINDOWS: Final = 40
+#: the most windows a fit rests on (the last 20 min): a drive that never shows the mounting
+#: (a long steady cruise) keeps neither its memory nor the fits' cost growing
+MAX_WINDOWS: Final = 2400
 
 
 @overload
@@ -161,6 +165,7 @@ class MountingLearner:
         self._complete = -1  # windows up to this one are closed on both streams (-1: none)
         self._force: list[FloatArray] = []  # each complete window's mean specific force
         self._speed: list[float] = []  # [m/s] its mean speed
+        self._taken = 0  # complete windows taken in (the fits are every FIT_EVERY of them)
 
     def wheels(self, stamp_ns: int, values: Sequence[float]) -> None:
         """A wheel stamp [ns] the chain estimates, with its wheels' values (shape (4,), [rad]
@@ -219,7 +224,10 @@ class MountingLearner:
             j = self._complete
             self._force.append(self._imu.closed.pop(j, nan3))
             self._speed.append(float(self._wheels.closed.pop(j, nan3[:1])[0]))
-            windows = len(self._speed) - 2  # the rows with both neighbours
+            if len(self._speed) > MAX_WINDOWS + 2:
+                del self._force[0], self._speed[0]
+            self._taken += 1
+            windows = self._taken - 2  # the rows with both neighbours
             if windows >= MIN_WINDOWS and windows % FIT_EVERY == 0:
                 self._fit(j)
                 if self.learnt is not None:
