@@ -76,6 +76,16 @@ def test_vd_jit_0_runs_the_same_source_uncompiled() -> None:
     assert out.stdout.split() == ['False', 'function', '2']
 
 
+def _compiled_python(code: str) -> str:
+    """What ``code`` prints in a new process with the kernels compiled (``VD_JIT=1``)."""
+    env = {**os.environ, 'VD_JIT': '1'}
+    done = subprocess.run(
+        [sys.executable, '-c', code], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
 def test_numba_finds_blas_without_scipy_linalg_and_scipy_linalg_still_works() -> None:
     """`_jit` loads scipy's BLAS module alone before numba looks for it (start-up of a short
     replay): a kernel loads without importing scipy.linalg, numba still says BLAS is there and
@@ -100,12 +110,7 @@ def test_numba_finds_blas_without_scipy_linalg_and_scipy_linalg_still_works() ->
             "print('ok')",
         ]
     )
-    env = {**os.environ, 'VD_JIT': '1'}
-    done = subprocess.run(
-        [sys.executable, '-c', code], capture_output=True, text=True, env=env, timeout=300
-    )
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == 'ok'
+    assert _compiled_python(code).strip() == 'ok'
 
 
 @pytest.mark.parametrize('measured', [False, True])
@@ -125,9 +130,4 @@ def test_numba_imports_coverage_only_where_coverage_is_measured(measured: bool) 
             'print(coverage.Coverage is not None)',
         ]
     )
-    env = {**os.environ, 'VD_JIT': '1'}
-    done = subprocess.run(
-        [sys.executable, '-c', code], capture_output=True, text=True, env=env, timeout=300
-    )
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.split() == [str(measured), str(measured), 'True']
+    assert _compiled_python(code).split() == [str(measured), str(measured), 'True']
