@@ -306,6 +306,7 @@ def test_vd_replay_learns_the_imu_mounting_online(
     state its mounting (#36 item 1): the replay learns it from the drive, as it goes, and
     fuses the IMU from then on, what it gives is the same in tiny blocks as in one, and the
     mounting is the one the drive shows."""
+    from vd_observer_node.bag.reader import BagReader
     from vd_observer_node.inputs.mapping import mapping_from_dict
     from vd_observer_node.tools.replay import replay_bag
 
@@ -315,6 +316,11 @@ def test_vd_replay_learns_the_imu_mounting_online(
     whole = replay_bag(bag, tmp_path / 'whole', mapping=mapping, progress=False)
     tiny = replay_bag(bag, tmp_path / 'tiny', mapping=mapping, progress=False, block_messages=2000)
     assert tiny.imu == whole.imu
+    written = [  # every message of both outputs, bytes and log times
+        [(m.topic, m.log_time_ns, bytes(m.data)) for m in BagReader(out).raw_messages()]
+        for out in (tmp_path / 'whole', tmp_path / 'tiny')
+    ]
+    assert written[0] == written[1]
     assert 'mounting learnt: [' in whole.imu, whole.imu
     text = whole.imu.split('mounting learnt: [')[1].split(']')[0]
     learnt = np.array([float(a) for a in text.split(',')])
