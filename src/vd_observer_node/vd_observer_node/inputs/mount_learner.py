@@ -257,8 +257,8 @@ def unstated_mounting_note(spec: InputSpec | None) -> str:
         return ''
     return (
         'the mapping states no imu.mount_rpy_deg: the mounting is learnt from the drive and '
-        'the IMU fused from then on (vd calibrate learns it from a recorded drive to state '
-        'it; docs/calibrate.md)'
+        'the IMU fused from then on; to fuse it from the first stamp, state the angles '
+        'learnt, or those vd calibrate learns from a whole recorded drive (docs/calibrate.md)'
     )
 
 
