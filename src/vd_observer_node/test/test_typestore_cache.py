@@ -61,3 +61,31 @@ def test_a_cache_that_cannot_be_written_parses_each_time(msgs: Path, tmp_path: P
     blocked = tmp_path / 'file'
     blocked.write_text('')  # a file where the cache folder would be
     assert parsed_vd_msgs(msgs, blocked / 'cache') == _parsed(msgs)
+
+
+def test_the_start_s_store_defines_its_types_as_jazzy_and_takes_the_rest_when_asked(
+    tmp_path: Path,
+) -> None:
+    """The store of a start (vd_msgs, `COMMON_TYPES` and what they are made of, kept beside
+    the bytecode) gives each of its types the definition and hash of Jazzy's store with
+    vd_msgs (the oracle); a type outside it brings in the rest of Jazzy's, in the same store.
+    Every type the input mapping supports is among those of a start."""
+    from rosbags.typesys import get_typestore
+    from vd_observer_node.inputs.mapping import SUPPORTED_TYPES
+
+    kept = typestore.kept_types(find_vd_msgs_dir(), tmp_path)
+    oracle = get_typestore(typestore.BASE_STORE)
+    oracle.register(_parsed(find_vd_msgs_dir()))
+    assert set(typestore.VD_MSG_TYPES) | set(typestore.COMMON_TYPES) <= set(kept)
+    assert all(kept[name] == oracle.fielddefs[name] for name in kept)
+    supported = {t for types in SUPPORTED_TYPES.values() for t in types}
+    assert supported <= set(kept), supported - set(kept)
+    store = typestore.vd_typestore()
+    for name in [*typestore.VD_MSG_TYPES, *typestore.COMMON_TYPES]:
+        assert typestore.message_definition(name) == oracle.generate_msgdef(name, 2)[0]
+        assert typestore.type_hash(name) == oracle.hash_rihs01(name)
+    assert typestore.message_class('sensor_msgs/msg/LaserScan').__msgtype__ == (
+        'sensor_msgs/msg/LaserScan'
+    )
+    assert typestore.vd_typestore() is store
+    assert set(oracle.fielddefs) <= set(store.fielddefs)

@@ -24,7 +24,7 @@ import numpy as np
 
 from vd_observer_node.bag.errors import BagFormatError, BagUsageError, UnknownMessageTypeError
 from vd_observer_node.bag.packed import PackedMessages
-from vd_observer_node.bag.typestore import vd_typestore
+from vd_observer_node.bag.typestore import store_with
 
 __all__ = [
     'BatchFields',
@@ -77,7 +77,7 @@ class BatchFields:
 
 
 def _flatten(msgtype: str, prefix: str) -> list[_Field]:
-    store = vd_typestore()
+    store = store_with(msgtype)
     if msgtype not in store.fielddefs:
         raise UnknownMessageTypeError(f'unknown message type {msgtype!r}')
     _, fields = store.fielddefs[msgtype]
@@ -110,7 +110,7 @@ def flat_fields(msgtype: str) -> tuple[_Field, ...]:
         UnknownMessageTypeError: the type is unknown, has no leading header, or holds
             strings/sequences (no fixed layout).
     """
-    store = vd_typestore()
+    store = store_with(msgtype)
     if msgtype not in store.fielddefs:
         raise UnknownMessageTypeError(f'unknown message type {msgtype!r}')
     _, fields = store.fielddefs[msgtype]

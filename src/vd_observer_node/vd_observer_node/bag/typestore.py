@@ -17,7 +17,7 @@ import hashlib
 import os
 import pickle
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
@@ -26,15 +26,18 @@ from vd_observer_node.bag.errors import BagFormatError, UnknownMessageTypeError
 
 __all__ = [
     'BASE_STORE',
+    'COMMON_TYPES',
     'VD_MSG_TYPES',
     'decoding_type',
     'deserialize',
     'find_vd_msgs_dir',
+    'kept_types',
     'message_class',
     'message_definition',
     'parsed_vd_msgs',
     'register_definition',
     'serialize',
+    'store_with',
     'type_hash',
     'vd_typestore',
 ]
@@ -92,12 +95,81 @@ def find_vd_msgs_dir() -> Path:
     )
 
 
+#: the standard types vd reads and writes itself (its sensors, the mapped inputs' types, the
+#: clock, the diagnostics); with vd_msgs and what they are made of, the store of a start
+#: holds these (`vd_typestore`), and takes the rest of Jazzy's when another is asked for
+COMMON_TYPES: Final = (
+    'diagnostic_msgs/msg/DiagnosticArray',
+    'geometry_msgs/msg/AccelStamped',
+    'geometry_msgs/msg/PoseStamped',
+    'geometry_msgs/msg/TwistStamped',
+    'nav_msgs/msg/Odometry',
+    'rosgraph_msgs/msg/Clock',
+    'sensor_msgs/msg/Imu',
+    'sensor_msgs/msg/JointState',
+    'sensor_msgs/msg/NavSatFix',
+    'std_msgs/msg/Float64MultiArray',
+)
+_CACHE_DIR: Final = Path(__file__).parent / '__pycache__'
+_whole: list[bool] = []  # [True] once the shared store holds every type of BASE_STORE
+
+
 @functools.cache
 def vd_typestore() -> Typestore:
-    """The shared typestore: ROS 2 Jazzy standard types + vd_msgs (built once)."""
-    store = get_typestore(BASE_STORE)
-    store.register(parsed_vd_msgs(find_vd_msgs_dir(), Path(__file__).parent / '__pycache__'))
+    """The shared typestore: ROS 2 Jazzy standard types + vd_msgs (built once).
+
+    At a start it holds vd_msgs and :data:`COMMON_TYPES` with what they are made of, read
+    from the definitions kept beside the bytecode (`kept_types`; importing rosbags' six
+    stores of ROS distributions took 0.06 s of every start); `store_with` adds the rest of
+    Jazzy's types the first time one of them is asked for.
+    """
+    kept = kept_types(find_vd_msgs_dir(), _CACHE_DIR)
+    store = get_typestore(Stores.EMPTY)
+    store.register({k: v for k, v in kept.items() if k not in store.fielddefs})
     return store
+
+
+def store_with(msgtype: str) -> Typestore:
+    """The shared typestore, with every Jazzy type in it if ``msgtype`` is not among those
+    of a start (a foreign bag's definitions are then registered only where Jazzy has none,
+    as always)."""
+    store = vd_typestore()
+    if msgtype not in store.fielddefs and not _whole:
+        full = get_typestore(BASE_STORE)
+        store.register({k: v for k, v in full.fielddefs.items() if k not in store.fielddefs})
+        _whole.append(True)
+    return store
+
+
+def kept_types(folder: Path, cache_dir: Path) -> dict[str, Any]:
+    """vd_msgs (`parsed_vd_msgs`) and :data:`COMMON_TYPES` with every type they are made
+    of, as rosbags' Jazzy store defines them; kept in ``cache_dir`` under a digest of the
+    rosbags stores' files and vd_msgs' text, read back while both are unchanged."""
+    import rosbags.typesys.stores
+
+    vd_types = parsed_vd_msgs(folder, cache_dir)
+    digest = hashlib.sha256(repr(sorted(vd_types.items())).encode())
+    for path in sorted(Path(str(rosbags.typesys.stores.__file__)).parent.glob('*.py')):
+        digest.update(path.read_bytes())
+    cache = cache_dir / f'vd_store_types.{digest.hexdigest()[:20]}.pickle'
+    try:
+        with cache.open('rb') as f:
+            kept = pickle.load(f)
+        if isinstance(kept, dict):
+            return kept
+    except Exception:  # absent, unreadable, or not what was written: built anew
+        pass
+    full = get_typestore(BASE_STORE)
+    full.register(vd_types)
+    wanted, types = [*vd_types, *COMMON_TYPES], {}
+    while wanted:  # the types named and every type their fields name
+        name = wanted.pop()
+        if name in types or name not in full.fielddefs:
+            continue
+        types[name] = full.fielddefs[name]
+        wanted.extend(t for t in full.fielddefs if t in repr(types[name]))
+    _keep(cache, 'vd_store_types', types)
+    return types
 
 
 def _parser_digest() -> bytes:
@@ -141,21 +213,27 @@ def parsed_vd_msgs(folder: Path, cache_dir: Path) -> dict[str, Any]:
     types: dict[str, Any] = {}
     for stem, text in texts:
         types.update(get_types_from_msg(text, f'vd_msgs/msg/{stem}'))
-    partial = cache.with_name(f'{cache.name}.{os.getpid()}')
-    try:
-        cache_dir.mkdir(exist_ok=True)
-        for stale in cache_dir.glob('vd_msgs_types.*.pickle'):
-            stale.unlink(missing_ok=True)
-        partial.write_bytes(pickle.dumps(types))
-        os.replace(partial, cache)  # whole or not at all for a process reading it
-    except OSError:  # a read-only install: parsed at each start
-        with contextlib.suppress(OSError):
-            partial.unlink(missing_ok=True)
+    _keep(cache, 'vd_msgs_types', types)
     return types
 
 
+def _keep(cache: Path, stem: str, types: dict[str, Any]) -> None:
+    """Write ``types`` to ``cache`` in place of the other ``stem.*.pickle`` (stale); a folder
+    that cannot be written (a read-only install) is left as it is."""
+    partial = cache.with_name(f'{cache.name}.{os.getpid()}')
+    try:
+        cache.parent.mkdir(exist_ok=True)
+        for stale in cache.parent.glob(f'{stem}.*.pickle'):
+            stale.unlink(missing_ok=True)
+        partial.write_bytes(pickle.dumps(types))
+        os.replace(partial, cache)  # whole or not at all for a process reading it
+    except OSError:
+        with contextlib.suppress(OSError):
+            partial.unlink(missing_ok=True)
+
+
 def _require(msgtype: str) -> Typestore:
-    store = vd_typestore()
+    store = store_with(msgtype)
     if msgtype not in store.fielddefs:
         raise UnknownMessageTypeError(f'unknown message type {msgtype!r}')
     return store
@@ -169,7 +247,7 @@ def register_definition(msgtype: str, definition: str) -> None:
     Raises:
         UnknownMessageTypeError: the definition does not parse.
     """
-    store = vd_typestore()
+    store = store_with(msgtype)
     if msgtype in store.fielddefs:
         return
     try:
@@ -200,7 +278,7 @@ def decoding_type(msgtype: str, definition: str) -> str:
     Raises:
         UnknownMessageTypeError: the definition does not parse.
     """
-    store = vd_typestore()
+    store = store_with(msgtype)
     if not definition or msgtype not in store.fielddefs:
         return msgtype
     try:
@@ -213,6 +291,7 @@ def decoding_type(msgtype: str, definition: str) -> str:
     digest = hashlib.sha256(definition.encode()).hexdigest()[:12]
     alias = f'{package}_legacy_{digest}/msg/{name}'
     if alias not in store.fielddefs:
+        store = store_with('')  # the bag's dependencies where Jazzy has none, as always
         extra = {k: v for k, v in types.items() if k != msgtype and k not in store.fielddefs}
         store.register({**extra, alias: types[msgtype]})
     return alias
