@@ -152,13 +152,9 @@ def kept_types(folder: Path, cache_dir: Path) -> dict[str, Any]:
     for path in sorted(Path(str(rosbags.typesys.stores.__file__)).parent.glob('*.py')):
         digest.update(path.read_bytes())
     cache = cache_dir / f'vd_store_types.{digest.hexdigest()[:20]}.pickle'
-    try:
-        with cache.open('rb') as f:
-            kept = pickle.load(f)
-        if isinstance(kept, dict):
-            return kept
-    except Exception:  # absent, unreadable, or not what was written: built anew
-        pass
+    kept = _kept(cache)
+    if kept is not None:
+        return kept
     full = get_typestore(BASE_STORE)
     full.register(vd_types)
     wanted, types = [*vd_types, *COMMON_TYPES], {}
@@ -203,18 +199,25 @@ def parsed_vd_msgs(folder: Path, cache_dir: Path) -> dict[str, Any]:
     digest = hashlib.sha256(_parser_digest())
     digest.update(repr(texts).encode())
     cache = cache_dir / f'vd_msgs_types.{digest.hexdigest()[:20]}.pickle'
-    try:
-        with cache.open('rb') as f:
-            kept = pickle.load(f)
-        if isinstance(kept, dict):
-            return kept
-    except Exception:  # absent, unreadable, or not what was written: parsed anew
-        pass
+    kept = _kept(cache)
+    if kept is not None:
+        return kept
     types: dict[str, Any] = {}
     for stem, text in texts:
         types.update(get_types_from_msg(text, f'vd_msgs/msg/{stem}'))
     _keep(cache, 'vd_msgs_types', types)
     return types
+
+
+def _kept(cache: Path) -> dict[str, Any] | None:
+    """The types `_keep` wrote to ``cache`` (None: absent, unreadable, or not what was
+    written: to be built anew)."""
+    try:
+        with cache.open('rb') as f:
+            kept = pickle.load(f)
+    except Exception:
+        return None
+    return kept if isinstance(kept, dict) else None
 
 
 def _keep(cache: Path, stem: str, types: dict[str, Any]) -> None:
