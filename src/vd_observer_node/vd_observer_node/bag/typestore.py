@@ -111,7 +111,6 @@ COMMON_TYPES: Final = (
     'std_msgs/msg/Float64MultiArray',
 )
 _CACHE_DIR: Final = Path(__file__).parent / '__pycache__'
-_whole: list[bool] = []  # [True] once the shared store holds every type of BASE_STORE
 
 
 @functools.cache
@@ -130,14 +129,19 @@ def vd_typestore() -> Typestore:
 
 
 def store_with(msgtype: str) -> Typestore:
-    """The shared typestore, with every Jazzy type in it if ``msgtype`` is not among those
-    of a start (a foreign bag's definitions are then registered only where Jazzy has none,
-    as always)."""
+    """The shared typestore, with every Jazzy type in it (`_whole_store`) if ``msgtype`` is
+    not among those of a start."""
     store = vd_typestore()
-    if msgtype not in store.fielddefs and not _whole:
-        full = get_typestore(BASE_STORE)
-        store.register({k: v for k, v in full.fielddefs.items() if k not in store.fielddefs})
-        _whole.append(True)
+    return store if msgtype in store.fielddefs else _whole_store()
+
+
+@functools.cache
+def _whole_store() -> Typestore:
+    """The shared typestore with the rest of Jazzy's types added (once): a foreign bag's
+    definitions are then registered only where Jazzy has none, as always."""
+    store = vd_typestore()
+    full = get_typestore(BASE_STORE)
+    store.register({k: v for k, v in full.fielddefs.items() if k not in store.fielddefs})
     return store
 
 
@@ -294,7 +298,7 @@ def decoding_type(msgtype: str, definition: str) -> str:
     digest = hashlib.sha256(definition.encode()).hexdigest()[:12]
     alias = f'{package}_legacy_{digest}/msg/{name}'
     if alias not in store.fielddefs:
-        store = store_with('')  # the bag's dependencies where Jazzy has none, as always
+        store = _whole_store()  # the bag's dependencies where Jazzy has none, as always
         extra = {k: v for k, v in types.items() if k != msgtype and k not in store.fielddefs}
         store.register({**extra, alias: types[msgtype]})
     return alias

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -92,13 +92,11 @@ def _per_message(
     spec: InputSpec,
     arrays: TopicArrays,
     extract: Callable[[Any, int], tuple[int, Sequence[float], bytes]],
-    width: int | None = None,
 ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.bytes_]]:
-    """Deserialize each message and ``extract`` its row (``width`` values, default the
-    input's)."""
+    """Deserialize each message and ``extract`` its row (``spec.width`` values)."""
     n = len(arrays.datas)
     stamps = np.empty(n, dtype=np.int64)
-    values = np.empty((n, spec.width if width is None else width), dtype=np.float64)
+    values = np.empty((n, spec.width), dtype=np.float64)
     frames: list[bytes] = []
     for k, data in enumerate(arrays.datas):
         msg = deserialize(data, spec.msgtype)
@@ -258,9 +256,8 @@ def decode_imu_vectors(spec: InputSpec, arrays: TopicArrays) -> InputSeries:
             f'{spec.name}: one element of {spec.topic} is already the forward specific force; '
             'its mounting needs the 3 axes (indices of x, y, z)'
         )
-    stamps, values, frames = _per_message(spec, arrays, _imu_vectors(spec), width=6)
-    values[:, :3] *= spec.factor * spec.sign[0]
-    return InputSeries(stamps, values, frames)
+    # the input as it is decoded where the mapping states no mounting (`learns_mounting`)
+    return decode_input(replace(spec, mount_stated=False), arrays)
 
 
 def _gain(spec: InputSpec, radius: float | None) -> tuple[float, ...] | None:

@@ -83,11 +83,7 @@ from vd_observer_node.estimation.rate_settings import RateMeter, follow_rate_hz
 from vd_observer_node.inputs.decode import InputDecoder, has_header
 from vd_observer_node.inputs.errors import MappingError
 from vd_observer_node.inputs.imu_hold import ImuHold
-from vd_observer_node.inputs.mapping import (
-    BRAKE_INPUT,
-    ENGINE_INPUT,
-    InputSpec,
-)
+from vd_observer_node.inputs.mapping import BRAKE_INPUT, ENGINE_INPUT, InputSpec
 from vd_observer_node.inputs.mount_learner import (
     learnt_line,
     new_learner,

@@ -85,10 +85,7 @@ def _repair(args: argparse.Namespace) -> int:
 def _replay(args: argparse.Namespace) -> int:
     from vd_common.settings_log import settings_line
 
-    from vd_observer_node.inputs.mapping import (
-        default_mapping,
-        load_input_mapping,
-    )
+    from vd_observer_node.inputs.mapping import default_mapping, load_input_mapping
     from vd_observer_node.inputs.mount_learner import unstated_mounting_note
     from vd_observer_node.tools.replay import replay_bag
     from vd_observer_node.tools.settings_file import SettingsFile, load_settings_file
